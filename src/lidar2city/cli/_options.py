@@ -1,0 +1,39 @@
+"""Options and helpers shared by several subcommands."""
+
+from __future__ import annotations
+
+import click
+
+__all__ = ["crs_option", "output_option", "progress"]
+
+crs_option = click.option(
+    "--crs", default=None, metavar="CRS",
+    help="CRS of the input (EPSG:xxxx, WKT or PROJ); overrides or supplies the file's own.",
+)
+
+
+def output_option(**kwargs):
+    return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+                        help="Output file.", **kwargs)
+
+
+def progress(iterable=None, *, length=None, label="", quiet=False):
+    """A click progress bar shown on a terminal only (never in pipes or CI logs)."""
+    import sys
+
+    if quiet or not sys.stderr.isatty():
+        class _Null:
+            def __enter__(self):
+                return self
+
+            def __exit__(self, *a):
+                return False
+
+            def update(self, n, current_item=None):
+                pass
+
+            def __iter__(self):
+                return iter(iterable)
+
+        return _Null()
+    return click.progressbar(iterable, length=length, label=label, file=sys.stderr)
