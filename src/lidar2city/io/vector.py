@@ -1,0 +1,210 @@
+"""Vector reading and writing (any OGR source) with pyogrio and shapely 2."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..datamodel import Footprints
+from ..errors import CRSError, EmptyInputError, FileFormatError, InputError
+from ._atomic import atomic_path, check_input_file
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["read_footprints", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
+           "to_local", "to_world"]
+
+
+def to_local(geoms, origin, xy_unit=1.0):
+    """Shift/scale shapely geometries from world (CRS units) to local metres."""
+    import shapely
+
+    o = np.asarray(origin, dtype=np.float64)
+    return shapely.transform(geoms, lambda c: (c - o[: c.shape[1]]) * xy_unit, include_z=False)
+
+
+def to_world(geoms, origin, xy_unit=1.0, z_unit=1.0):
+    """Inverse of :func:`to_local`; z (when present) is scaled by ``z_unit``."""
+    import shapely
+
+    o = np.asarray(origin, dtype=np.float64)
+    scale = np.array([xy_unit, xy_unit, z_unit])
+
+    def f(c):
+        d = c.shape[1]
+        return o[:d] + c / scale[:d]
+
+    has_z = np.any(shapely.has_z(np.atleast_1d(geoms)))
+    return shapely.transform(geoms, f, include_z=bool(has_z))
+
+
+def repair_polygonal(geom):
+    """Return ``(polygonal geometry or None, note)`` for one input geometry.
+
+    Repeated closing vertices are fine as they are; invalid rings are repaired
+    with :func:`shapely.make_valid` keeping the polygonal parts; non-polygonal
+    or empty input gives ``None`` with the reason.
+    """
+    import shapely
+    from shapely.geometry import MultiPolygon, Polygon
+
+    if geom is None or geom.is_empty:
+        return None, "empty geometry"
+    if geom.geom_type not in ("Polygon", "MultiPolygon"):
+        return None, f"not a polygon ({geom.geom_type})"
+    geom = shapely.remove_repeated_points(geom, 1e-9)
+    if geom.is_valid:
+        return geom, ""
+    fixed = shapely.make_valid(geom)
+    polys = [g for g in getattr(fixed, "geoms", [fixed]) if isinstance(g, (Polygon, MultiPolygon))]
+    parts = []
+    for g in polys:
+        parts.extend(getattr(g, "geoms", [g]))
+    parts = [p for p in parts if p.area > 0]
+    if not parts:
+        return None, "invalid ring that could not be repaired"
+    out = parts[0] if len(parts) == 1 else MultiPolygon(parts)
+    return out, f"repaired invalid ring ({shapely.is_valid_reason(geom)})"
+
+
+def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
+                    target_crs=None, bbox=None) -> tuple[Footprints, object]:
+    """Read building footprints from any OGR source into local metric coordinates.
+
+    Parameters
+    ----------
+    path : str or Path
+        GPKG, shapefile, GeoJSON, SQLite...
+    layer : str or int, optional
+        Layer to read (default: the first).
+    id_field : str, optional
+        Field holding the building identifier; default: the first of
+        ``identificatie``, ``identificatiebagpnd``, ``id``, ``fid``, ``OBJECTID``
+        present, else the feature id.
+    origin, xy_unit
+        Local frame of the point cloud (world origin in CRS units, metres per unit).
+    target_crs : pyproj.CRS, optional
+        CRS of the point cloud; footprints in another CRS are reprojected.
+    bbox : tuple, optional
+        (xmin, ymin, xmax, ymax) in the source's coordinates to read only part.
+
+    Returns
+    -------
+    footprints : Footprints
+        Geometries (Polygon/MultiPolygon, or None with ``attributes['_note']``
+        saying why), ids and the other fields.
+    crs : pyproj.CRS or None
+        The source's CRS.
+    """
+    import pyogrio
+    import shapely
+    from pyproj import CRS, Transformer
+
+    p = check_input_file(path)
+    try:
+        meta, fids, wkb, field_data = pyogrio.raw.read(
+            str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox)
+    except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
+        raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
+    n = len(wkb) if wkb is not None else 0
+    if n == 0:
+        raise EmptyInputError(f"{str(p)!r} holds no footprints")
+    src_crs = CRS.from_user_input(meta["crs"]) if meta.get("crs") else None
+    geoms = shapely.from_wkb(wkb)
+    if target_crs is not None and src_crs is not None and not src_crs.equals(target_crs, ignore_axis_order=True):
+        try:
+            tr = Transformer.from_crs(src_crs, target_crs, always_xy=True)
+        except Exception as exc:
+            raise CRSError(f"cannot transform footprints from {src_crs.name} to {target_crs.name}: {exc}") from None
+        geoms = shapely.transform(geoms, lambda c: np.column_stack(tr.transform(c[:, 0], c[:, 1])))
+    names = list(meta["fields"])
+    fields = {name: list(values) for name, values in zip(names, field_data, strict=True)}
+    if id_field is not None and id_field not in fields:
+        raise InputError(f"footprint id field {id_field!r} not found; fields: {', '.join(names)}")
+    if id_field is None:
+        id_field = next((f for f in ("identificatie", "identificatiebagpnd", "id", "fid", "OBJECTID")
+                         if f in fields), None)
+    ids = [str(v) for v in fields[id_field]] if id_field else [str(int(f)) for f in fids]
+    if len(set(ids)) != len(ids):
+        # keep them usable as unique CityJSON keys
+        seen: dict[str, int] = {}
+        unique = []
+        for i in ids:
+            seen[i] = seen.get(i, 0) + 1
+            unique.append(i if seen[i] == 1 else f"{i}-{seen[i]}")
+        ids = unique
+    out, notes = [], []
+    for g in geoms:
+        fixed, note = repair_polygonal(g)
+        out.append(fixed)
+        notes.append(note)
+        if note:
+            logger.info("footprint %s", note)
+    local = [None if g is None else to_local(g, origin, xy_unit) for g in out]
+    fields["_note"] = notes
+    return Footprints(local, ids, fields), src_crs
+
+
+@dataclass(eq=False)
+class VectorLayer:
+    """One layer to write: local geometries, per-feature fields, geometry type."""
+
+    name: str
+    geometries: list
+    fields: dict = field(default_factory=dict)
+    geometry_type: str = "MultiPolygon"
+
+
+def _field_array(values):
+    arr = np.asarray(values)
+    if arr.dtype.kind in "biuf":
+        return arr
+    if arr.dtype.kind == "U":
+        return arr.astype(object)
+    return np.array([None if v is None else (v if isinstance(v, (str, int, float)) else str(v))
+                     for v in values], dtype=object)
+
+
+def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=None,
+                 metadata=None) -> None:
+    """Write several layers into one vector file (GPKG default), atomically.
+
+    Geometries are local metric shapely objects; they are converted to world
+    coordinates in ``crs`` units.
+    """
+    import pyogrio
+    import shapely
+
+    if not layers:
+        raise InputError("nothing to write")
+    driver = driver or ("GPKG" if str(path).lower().endswith(".gpkg") else None)
+    with atomic_path(path) as tmp:
+        for i, lyr in enumerate(layers):
+            geoms = np.array(lyr.geometries, dtype=object)
+            world = to_world(geoms, origin, xy_unit, z_unit) if len(geoms) else geoms
+            wkb = shapely.to_wkb(world, output_dimension=3 if lyr.geometry_type.endswith("Z") or
+                                 lyr.geometry_type.endswith("25D") else 2)
+            names = list(lyr.fields)
+            values = [_field_array(lyr.fields[k]) for k in names]
+            for k, v in zip(names, values, strict=True):
+                if len(v) != len(geoms):
+                    raise InputError(f"field {k!r} has {len(v)} values for {len(geoms)} features")
+            pyogrio.raw.write(
+                str(tmp), wkb, values, names, layer=lyr.name, driver=driver,
+                geometry_type=lyr.geometry_type, crs=crs.to_wkt() if crs is not None else None,
+                append=i > 0, promote_to_multi=None,
+                dataset_metadata=metadata if i == 0 and driver == "GPKG" else None,
+            )
+
+
+def write_polygons(path, geometries, fields=None, *, origin, crs, xy_unit=1.0, layer="footprints",
+                   geometry_type="MultiPolygon") -> None:
+    """Write 2-D polygons (local metric shapely) with their fields to one layer."""
+    import shapely
+
+    geoms = [shapely.geometry.MultiPolygon([g]) if g is not None and g.geom_type == "Polygon" else g
+             for g in geometries]
+    write_layers(path, [VectorLayer(layer, geoms, dict(fields or {}), geometry_type)],
+                 origin=origin, crs=crs, xy_unit=xy_unit)
