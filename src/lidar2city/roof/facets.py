@@ -1,0 +1,374 @@
+"""Roof facet segmentation: region growing with plane fitting (z = a x + b y + c).
+
+References
+----------
+Main seed framework, step 2, eq. 1 (planar roof facets z = ax + by + c).
+Rabbani, T., van den Heuvel, F., Vosselman, G. (2006). Segmentation of point
+clouds using smoothness constraint. IAPRS 36(5).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Plane", "fit_plane", "local_normals", "segment_planes"]
+
+
+class Plane:
+    """A roof plane ``z = a x + b y + c`` fitted by least squares.
+
+    Use :meth:`from_points`; it returns a falsy :class:`Plane` with ``reason``
+    set when the points cannot define a plane.
+    """
+
+    __slots__ = ("a", "b", "c", "rms", "n", "reason")
+
+    def __init__(self, a=0.0, b=0.0, c=0.0, rms=np.inf, n=0, reason=""):
+        self.a, self.b, self.c, self.rms, self.n, self.reason = a, b, c, rms, n, reason
+
+    def __bool__(self):
+        return not self.reason
+
+    def __repr__(self):
+        return f"Plane(a={self.a:.4f}, b={self.b:.4f}, c={self.c:.3f}, rms={self.rms:.3f}, n={self.n})"
+
+    @classmethod
+    def from_points(cls, xyz):
+        """Least-squares plane of points (N, 3); falsy with a reason for < 3 or collinear points."""
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if len(xyz) < 3:
+            return cls(reason=f"too few points ({len(xyz)} < 3)")
+        p = fit_plane(xyz)
+        if p is None:
+            return cls(reason="points are collinear")
+        a, b, c = p
+        r = xyz[:, 2] - (a * xyz[:, 0] + b * xyz[:, 1] + c)
+        return cls(a, b, c, float(np.sqrt(np.mean(r * r))), len(xyz))
+
+    @property
+    def params(self) -> np.ndarray:
+        return np.array([self.a, self.b, self.c])
+
+    def z(self, xy) -> np.ndarray:
+        xy = np.asarray(xy, dtype=np.float64)
+        return self.a * xy[..., 0] + self.b * xy[..., 1] + self.c
+
+    def residuals(self, xyz) -> np.ndarray:
+        """Perpendicular (3-D) distances of points (N, 3) to the plane."""
+        xyz = np.asarray(xyz, dtype=np.float64)
+        return (xyz[:, 2] - self.z(xyz[:, :2])) / np.sqrt(1 + self.a ** 2 + self.b ** 2)
+
+    @property
+    def slope_deg(self) -> float:
+        return float(np.degrees(np.arctan(np.hypot(self.a, self.b))))
+
+    @property
+    def azimuth_deg(self) -> float:
+        """Direction the facet faces (down-slope), degrees clockwise from north (+y)."""
+        return float(np.degrees(np.arctan2(-self.a, -self.b)) % 360.0)
+
+
+def fit_plane(xyz) -> np.ndarray | None:
+    """Least-squares ``(a, b, c)`` of z = a x + b y + c, or None when degenerate."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    m = xyz.mean(axis=0)
+    d = xyz - m
+    A = np.array([[d[:, 0] @ d[:, 0], d[:, 0] @ d[:, 1]], [d[:, 0] @ d[:, 1], d[:, 1] @ d[:, 1]]])
+    rhs = np.array([d[:, 0] @ d[:, 2], d[:, 1] @ d[:, 2]])
+    det = A[0, 0] * A[1, 1] - A[0, 1] ** 2
+    if det <= 1e-12 * max(A[0, 0] * A[1, 1], 1e-300):
+        return None
+    a, b = np.linalg.solve(A, rhs)
+    return np.array([a, b, m[2] - a * m[0] - b * m[1]])
+
+
+def local_normals(xyz, neighbors) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (N, 3), z >= 0, and local RMS flatness (N,) from kNN index rows (N, k)."""
+    pts = xyz[neighbors]  # (N, k, 3)
+    centered = pts - pts.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centered, centered) / neighbors.shape[1]
+    w, v = np.linalg.eigh(cov)
+    normals = v[:, :, 0]
+    normals = normals * np.where(normals[:, 2:3] < 0, -1.0, 1.0)
+    return normals, np.sqrt(np.maximum(w[:, 0], 0.0))
+
+
+@njit(cache=True)
+def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
+    n, k = nbrs.shape
+    labels = np.full(n, -1, np.int64)
+    queue = np.empty(n, np.int64)
+    members = np.empty(n, np.int64)
+    next_label = 0
+    for s in order:
+        if labels[s] != -1 or not usable[s]:
+            continue
+        # seed plane from the seed's normal through the seed point
+        nx, ny, nz = normals[s, 0], normals[s, 1], normals[s, 2]
+        if nz < 1e-3:
+            continue
+        a = -nx / nz
+        b = -ny / nz
+        c = xyz[s, 2] - a * xyz[s, 0] - b * xyz[s, 1]
+        lab = next_label
+        labels[s] = lab
+        head, tail = 0, 1
+        queue[0] = s
+        count = 1
+        members[0] = s
+        sx = xyz[s, 0]
+        sy = xyz[s, 1]
+        sz = xyz[s, 2]
+        sxx = sx * sx
+        sxy = sx * sy
+        syy = sy * sy
+        sxz = sx * sz
+        syz = sy * sz
+        refit_at = 8
+        while head < tail:
+            i = queue[head]
+            head += 1
+            for t in range(k):
+                j = nbrs[i, t]
+                if labels[j] != -1 or not usable[j]:
+                    continue
+                # plane normal (-a, -b, 1) normalised
+                norm = np.sqrt(a * a + b * b + 1.0)
+                d = abs(xyz[j, 2] - (a * xyz[j, 0] + b * xyz[j, 1] + c)) / norm
+                if d > dist_tol:
+                    continue
+                cosang = (-a * normals[j, 0] - b * normals[j, 1] + normals[j, 2]) / norm
+                if cosang < cos_tol:
+                    continue
+                labels[j] = lab
+                queue[tail] = j
+                tail += 1
+                members[count] = j
+                count += 1
+                x, y, z = xyz[j, 0], xyz[j, 1], xyz[j, 2]
+                sx += x
+                sy += y
+                sz += z
+                sxx += x * x
+                sxy += x * y
+                syy += y * y
+                sxz += x * z
+                syz += y * z
+                if count >= refit_at:
+                    refit_at = int(count * 1.5) + 1
+                    mx, my, mz = sx / count, sy / count, sz / count
+                    cxx = sxx / count - mx * mx
+                    cxy = sxy / count - mx * my
+                    cyy = syy / count - my * my
+                    cxz = sxz / count - mx * mz
+                    cyz = syz / count - my * mz
+                    det = cxx * cyy - cxy * cxy
+                    if det > 1e-9:
+                        a = (cxz * cyy - cyz * cxy) / det
+                        b = (cyz * cxx - cxz * cxy) / det
+                        c = mz - a * mx - b * my
+        if count < min_points:
+            for m in range(count):
+                labels[members[m]] = -2  # tried, too small: may join a neighbour later
+        else:
+            next_label += 1
+    for i in range(n):
+        if labels[i] == -2:
+            labels[i] = -1
+    return labels, next_label
+
+
+def _refit(xyz, labels, n_labels, trim):
+    planes = np.zeros((n_labels, 3))
+    rms = np.zeros(n_labels)
+    for lab in range(n_labels):
+        sel = np.flatnonzero(labels == lab)
+        pts = xyz[sel]
+        p = fit_plane(pts)
+        for _ in range(2):
+            if p is None:
+                break
+            r = np.abs(pts[:, 2] - pts[:, :2] @ p[:2] - p[2]) / np.sqrt(1 + p[0] ** 2 + p[1] ** 2)
+            keep = r <= trim
+            if keep.all() or keep.sum() < 3:
+                break
+            p = fit_plane(pts[keep])
+        if p is None:
+            p = np.array([0.0, 0.0, float(np.median(pts[:, 2]))])
+        planes[lab] = p
+        r = (pts[:, 2] - pts[:, :2] @ p[:2] - p[2]) / np.sqrt(1 + p[0] ** 2 + p[1] ** 2)
+        rms[lab] = np.sqrt(np.mean(r * r))
+    return planes, rms
+
+
+def _point_plane_dist(xyz, planes):
+    """(N, K) perpendicular distances of points to planes."""
+    num = xyz[:, 2:3] - xyz[:, 0:1] * planes[:, 0] - xyz[:, 1:2] * planes[:, 1] - planes[:, 2]
+    return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
+
+
+def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge):
+    """Merge adjacent regions whose union still fits one plane (greedy, best pairs first)."""
+    n_labels = len(planes)
+    if n_labels < 2:
+        return labels, n_labels
+    li = labels[:, None].repeat(nbrs.shape[1], axis=1)
+    lj = labels[nbrs]
+    m = (li >= 0) & (lj >= 0) & (li != lj)
+    pairs = np.unique(np.sort(np.column_stack([li[m], lj[m]]), axis=1), axis=0)
+    parent = np.arange(n_labels)
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    normals = np.column_stack([-planes[:, 0], -planes[:, 1], np.ones(n_labels)])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) if len(pairs) else np.zeros(0)
+    for idx in np.argsort(-cos):
+        if cos[idx] < cos_merge:
+            break
+        a, b = find(pairs[idx, 0]), find(pairs[idx, 1])
+        if a == b:
+            continue
+        root = np.array([find(x) for x in range(n_labels)])
+        members = np.flatnonzero((labels >= 0) & np.isin(root[labels.clip(0)], [a, b]))
+        p = fit_plane(xyz[members])
+        if p is None:
+            continue
+        r = _point_plane_dist(xyz[members], p[None])[:, 0]
+        if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and np.quantile(r, 0.95) <= dist_tol:
+            parent[b] = a
+    roots = np.array([find(x) for x in range(n_labels)])
+    uniq, new = np.unique(roots, return_inverse=True)
+    out = np.where(labels >= 0, new[labels.clip(0)], -1)
+    return out, len(uniq)
+
+
+def _absorb_small(xyz, labels, planes, nbrs, dist_tol, small):
+    """Dissolve small facets whose points mostly fit an adjacent facet's plane (ridge slivers)."""
+    n_labels = len(planes)
+    counts = np.bincount(labels[labels >= 0], minlength=n_labels)
+    changed = False
+    for lab in np.argsort(counts):
+        if counts[lab] >= small or counts[lab] == 0:
+            continue
+        sel = np.flatnonzero(labels == lab)
+        adj = np.unique(labels[nbrs[sel]])
+        adj = adj[(adj >= 0) & (adj != lab) & (counts[adj] > counts[lab])]
+        if not len(adj):
+            continue
+        d = _point_plane_dist(xyz[sel], planes[adj])
+        best = d.argmin(axis=1)
+        if np.mean(d[np.arange(len(sel)), best] <= dist_tol) >= 0.8:
+            labels[sel] = np.where(d[np.arange(len(sel)), best] <= dist_tol, adj[best], -1)
+            counts[adj] += np.bincount(best, minlength=len(adj))
+            counts[lab] = 0
+            changed = True
+    if not changed:
+        return labels, n_labels
+    uniq = np.unique(labels[labels >= 0])
+    remap = np.full(n_labels, -1)
+    remap[uniq] = np.arange(len(uniq))
+    return np.where(labels >= 0, remap[labels.clip(0)], -1), len(uniq)
+
+
+def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
+                   min_area=1.0, merge_angle=10.0, wall_slope=75.0):
+    """Segment roof points into planar facets by region growing with plane fitting.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Building points of one building, local metres.
+    k : int
+        Neighbours per point for normals and growing.
+    dist_tol : float
+        Largest distance (m) of a point to its facet's plane; about 2-3 times the
+        data's elevation noise.
+    angle_tol : float
+        Largest angle (degrees) between a point's normal and the facet's.
+    min_points : int, optional
+        Smallest facet; default from ``min_area`` and the point density.
+    min_area : float
+        Smallest facet area (m2) used to derive ``min_points``.
+    merge_angle : float
+        Adjacent facets closer than this in orientation are merged when their
+        union still fits one plane within ``dist_tol``.
+    wall_slope : float
+        Points whose local normal is steeper than this (degrees) are walls, not roof.
+
+    Returns
+    -------
+    labels : ndarray of int, shape (N,)
+        Facet index 0..K-1, or -1 for points on no facet (walls, clutter).
+    planes : ndarray, shape (K, 3)
+        ``(a, b, c)`` of each facet's plane z = a x + b y + c.
+
+    References
+    ----------
+    Main seed framework, eq. 1; Rabbani et al. (2006).
+    """
+    from scipy.spatial import cKDTree
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InputError(f"xyz must have shape (N, 3), got {xyz.shape}")
+    n = len(xyz)
+    if n < 3:
+        return np.full(n, -1), np.zeros((0, 3))
+    k = int(min(k, n - 1))
+    center = xyz.mean(axis=0)
+    local = xyz - center
+    tree = cKDTree(local[:, :2])
+    _, nbrs = tree.query(local[:, :2], k=k + 1)
+    nbrs = np.asarray(nbrs, dtype=np.int64)
+    normals, flat = local_normals(local, nbrs)
+    if min_points is None:
+        hull_area = max(_area_estimate(local[:, :2]), 1.0)
+        density = n / hull_area
+        min_points = max(int(round(min_area * density)), 6)
+    usable = normals[:, 2] >= np.cos(np.radians(wall_slope))
+    order = np.argsort(flat, kind="stable")
+    labels, n_labels = _grow(local, nbrs[:, 1:], normals, order, usable,
+                             dist_tol, np.cos(np.radians(angle_tol)), int(min_points))
+    if n_labels == 0:
+        return labels, np.zeros((0, 3))
+    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, np.cos(np.radians(merge_angle)))
+    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    labels, n_labels = _absorb_small(local, labels, planes, nbrs[:, 1:], dist_tol, 3 * int(min_points))
+    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    # unassigned points join the nearest-fitting adjacent facet when close to its plane
+    un = np.flatnonzero(labels < 0)
+    if len(un) and n_labels:
+        d = _point_plane_dist(local[un], planes)
+        nb_labels = labels[nbrs[un, 1:]]
+        allowed = np.zeros_like(d, dtype=bool)
+        rows = np.repeat(np.arange(len(un)), nb_labels.shape[1])
+        cols = nb_labels.ravel()
+        ok = cols >= 0
+        allowed[rows[ok], cols[ok]] = True
+        d = np.where(allowed, d, np.inf)
+        best = d.argmin(axis=1)
+        take = d[np.arange(len(un)), best] <= dist_tol
+        labels[un[take]] = best[take]
+        planes, _ = _refit(local, labels, n_labels, dist_tol)
+    # back to the caller's frame: z = a (x - cx) + b (y - cy) + c + cz
+    out = planes.copy()
+    out[:, 2] = planes[:, 2] + center[2] - planes[:, 0] * center[0] - planes[:, 1] * center[1]
+    return labels, out
+
+
+def _area_estimate(xy, cell=0.5):
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    return len(np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1])) * cell * cell

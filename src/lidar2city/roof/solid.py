@@ -1,0 +1,243 @@
+"""A closed LoD2.2 solid from a roof partition: roof faces on their planes, walls, floor.
+
+Each face of a planar partition of the footprint carries a plane. Roof surfaces
+are the faces lifted onto their planes; where two adjacent faces are at
+different heights along their shared edge a vertical wall closes the gap (a
+step edge); the footprint boundary gets walls down to the ground; the floor is
+the footprint at ground height. Every vertical edge is split at every height
+level present at its vertex, so the shell is closed and 2-manifold, and every
+surface is planar by construction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..datamodel import Solid, Surface
+from ..errors import FitError
+
+__all__ = ["partition_solid", "split_crossings"]
+
+_KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
+
+
+def _key(p):
+    return (int(round(p[0] * _KEY)), int(round(p[1] * _KEY)))
+
+
+def _rings(poly):
+    """Exterior counter-clockwise then holes clockwise, as (m, 2) arrays without closing vertex."""
+    from shapely.geometry.polygon import orient
+
+    poly = orient(poly, 1.0)
+    out = [np.asarray(poly.exterior.coords)[:-1, :2]]
+    out += [np.asarray(r.coords)[:-1, :2] for r in poly.interiors]
+    return out
+
+
+def _z(plane, p):
+    return plane[0] * p[0] + plane[1] * p[1] + plane[2]
+
+
+def split_crossings(faces, planes, *, tol=1e-4):
+    """Insert a vertex where two adjacent faces' planes cross along their shared edge.
+
+    A wall between two faces is only a simple polygon when one face stays above
+    the other along the whole edge.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+    planes : ndarray, shape (len(faces), 3)
+        The plane of each face.
+
+    Returns
+    -------
+    list of list of ndarray
+        Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
+    """
+    rings = [_rings(f) for f in faces]
+    owner = {}
+    for fi, rs in enumerate(rings):
+        for r in rs:
+            for k in range(len(r)):
+                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    inserts = {}
+    for fi, rs in enumerate(rings):
+        for r in rs:
+            for k in range(len(r)):
+                p, q = r[k], r[(k + 1) % len(r)]
+                g = owner.get((_key(q), _key(p)))
+                if g is None or g < fi:
+                    continue
+                dp = _z(planes[fi], p) - _z(planes[g], p)
+                dq = _z(planes[fi], q) - _z(planes[g], q)
+                if (dp > tol and dq < -tol) or (dp < -tol and dq > tol):
+                    t = dp / (dp - dq)
+                    x = p + t * (q - p)
+                    inserts[(_key(p), _key(q))] = x
+                    inserts[(_key(q), _key(p))] = x
+    if not inserts:
+        return rings
+    out = []
+    for rs in rings:
+        new_rs = []
+        for r in rs:
+            pts = []
+            for k in range(len(r)):
+                p, q = r[k], r[(k + 1) % len(r)]
+                pts.append(p)
+                x = inserts.get((_key(p), _key(q)))
+                if x is not None:
+                    pts.append(x)
+            new_rs.append(np.asarray(pts))
+        out.append(new_rs)
+    return out
+
+
+def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=1e-3) -> Solid:
+    """Build the closed solid of a roof partition.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+        A partition of the footprint (shared edges with identical vertices).
+    planes : ndarray, shape (len(faces), 3)
+        Plane ``(a, b, c)`` of each face.
+    ground_z : float
+        Floor height (m).
+    min_height : float
+        A roof lower than ``ground_z + min_height`` anywhere is an error.
+    level_tol : float
+        Heights at one vertex closer than this are the same level.
+
+    Returns
+    -------
+    Solid
+        RoofSurface per face, WallSurface per wall piece, one GroundSurface.
+
+    Raises
+    ------
+    FitError
+        When a roof plane goes below the floor.
+    """
+    planes = np.asarray(planes, dtype=np.float64)
+    rings = split_crossings(faces, planes)
+    # heights of every face at its vertices
+    levels: dict = {}
+    for fi, rs in enumerate(rings):
+        for r in rs:
+            z = planes[fi, 0] * r[:, 0] + planes[fi, 1] * r[:, 1] + planes[fi, 2]
+            if np.any(z < ground_z + min_height):
+                raise FitError(f"roof plane {fi} goes below the floor ({z.min():.2f} < {ground_z:.2f} + {min_height})")
+            for p, zz in zip(r, z, strict=True):
+                levels.setdefault(_key(p), []).append(zz)
+    # directed edges and which face uses them
+    owner = {}
+    for fi, rs in enumerate(rings):
+        for r in rs:
+            for k in range(len(r)):
+                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    outer_edges = [e for e in owner if (e[1], e[0]) not in owner]
+    for e in outer_edges:
+        levels[e[0]].append(ground_z)
+        levels[e[1]].append(ground_z)
+    # unify levels per vertex
+    xy_of = {}
+    for fi, rs in enumerate(rings):
+        for r in rs:
+            for p in r:
+                xy_of[_key(p)] = p
+    level_sets = {}
+    for k, zs in levels.items():
+        zs = np.sort(np.asarray(zs))
+        groups = np.split(zs, np.flatnonzero(np.diff(zs) > level_tol) + 1)
+        level_sets[k] = np.array([g.mean() for g in groups])
+
+    verts: list = []
+    index: dict = {}
+
+    def vid(k, z):
+        zs = level_sets[k]
+        zi = int(np.argmin(np.abs(zs - z)))
+        key = (k, zi)
+        if key not in index:
+            index[key] = len(verts)
+            p = xy_of[k]
+            verts.append((p[0], p[1], zs[zi]))
+        return index[key], zi
+
+    surfaces = []
+    # roofs
+    for fi, rs in enumerate(rings):
+        ids = []
+        for r in rs:
+            ring = []
+            for p in r:
+                i, _ = vid(_key(p), _z(planes[fi], p))
+                ring.append(i)
+            ids.append(np.asarray(ring))
+        surfaces.append(Surface(ids, "RoofSurface"))
+
+    def stack(k, lo, hi):
+        """Vertex ids at vertex k from level index lo to hi inclusive (ascending or descending)."""
+        step = 1 if hi >= lo else -1
+        return [vid(k, level_sets[k][j])[0] for j in range(lo, hi + step, step)]
+
+    def level_index(k, z):
+        return int(np.argmin(np.abs(level_sets[k] - z)))
+
+    # walls: each directed edge (p -> q) of face f whose other side is lower (or outside)
+    for (kp, kq), fi in owner.items():
+        other = owner.get((kq, kp))
+        p, q = xy_of[kp], xy_of[kq]
+        zf_p, zf_q = level_index(kp, _z(planes[fi], p)), level_index(kq, _z(planes[fi], q))
+        if other is None:
+            zo_p, zo_q = level_index(kp, ground_z), level_index(kq, ground_z)
+        else:
+            zo_p = level_index(kp, _z(planes[other], p))
+            zo_q = level_index(kq, _z(planes[other], q))
+        # the wall belongs to the higher side (crossings were split away)
+        if zf_p < zo_p or zf_q < zo_q or (zf_p == zo_p and zf_q == zo_q):
+            continue
+        # seen from the lower side, the wall runs p(top) -> ... ; build: bottom p->q, up q, top q->p, down p
+        ring = stack(kq, zo_q, zf_q)  # up along q
+        ring += stack(kp, zf_p, zo_p)  # down along p
+        # the face's edge p -> q runs counter-clockwise around f (f on the left); the wall's
+        # outward normal points to the right of p -> q (towards the lower side): order
+        # q(bottom..top), p(top..bottom) is counter-clockwise seen from there.
+        ring = _dedupe(ring)
+        if len(ring) >= 3:
+            surfaces.append(Surface([np.asarray(ring)], "WallSurface"))
+    # floor: the outer directed edges reversed, chained into rings
+    nxt = {}
+    for kp, kq in outer_edges:
+        nxt[kq] = kp  # reversed: the floor faces down
+    floor_rings = []
+    seen = set()
+    for start in list(nxt):
+        if start in seen:
+            continue
+        ring, k = [], start
+        while k not in seen:
+            seen.add(k)
+            ring.append(vid(k, ground_z)[0])
+            k = nxt[k]
+        floor_rings.append(np.asarray(ring))
+    # exterior first: the ring enclosing the largest area (clockwise from above now)
+    def area(r):
+        xy = np.asarray([verts[i][:2] for i in r])
+        return 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+    floor_rings.sort(key=lambda r: area(r))  # most negative (largest clockwise) first
+    surfaces.insert(0, Surface(floor_rings, "GroundSurface"))
+    return Solid(np.asarray(verts), surfaces)
+
+
+def _dedupe(ring):
+    out = []
+    for i in ring:
+        if not out or out[-1] != i:
+            out.append(i)
+    if len(out) > 1 and out[0] == out[-1]:
+        out.pop()
+    return out
