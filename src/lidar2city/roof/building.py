@@ -142,6 +142,36 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels
     return face_labels, np.asarray(planes)
 
 
+def _clean_faces(faces, labels):
+    """Repair faces whose rings touch themselves (a hole pinched into the shell)."""
+    import shapely
+
+    # one micrometre grid for all faces (the solid's vertex key): shared vertices snap alike,
+    # and near-zero-width spikes collapse and vanish on both sides
+    snapped = shapely.set_precision(np.asarray(faces, dtype=object), 1e-6)
+    out_f, out_l = [], []
+    for f, lab in zip(snapped, labels, strict=True):
+        if f.is_empty:
+            continue
+        if f.geom_type != "Polygon":
+            parts = [g for g in shapely.get_parts(f) if g.geom_type == "Polygon" and g.area > 1e-9]
+            out_f += parts
+            out_l += [lab] * len(parts)
+            continue
+        rings = [f.exterior, *f.interiors]
+        pinched = any(len({tuple(np.round(c, 6)) for c in r.coords[:-1]}) != len(r.coords) - 1 for r in rings)
+        if f.is_valid and not pinched:
+            out_f.append(f)
+            out_l.append(lab)
+            continue
+        fixed = shapely.make_valid(shapely.buffer(f, 0) if not f.is_valid else f)
+        for g in shapely.get_parts(fixed):
+            if g.geom_type == "Polygon" and g.area > 1e-9:
+                out_f.append(g)
+                out_l.append(lab)
+    return out_f, np.asarray(out_l, dtype=np.int64)
+
+
 def _parts(footprint):
     return list(getattr(footprint, "geoms", [footprint]))
 
@@ -213,6 +243,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         n_int += info["intersection"]
         n_step += info["step"]
         moved += info["moved"]
+        faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
                                              pts, labels)
         solids.append(partition_solid(faces, planes[face_labels], ground_z, min_height=cfg.min_height / 2))
