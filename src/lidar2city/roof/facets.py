@@ -282,6 +282,49 @@ def _absorb_small(xyz, labels, planes, nbrs, dist_tol, small):
     return np.where(labels >= 0, remap[labels.clip(0)], -1), len(uniq)
 
 
+def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
+    """Give connected clusters of unassigned roof points a facet of their own.
+
+    Rough or curved patches (roof gardens, vaulted roofs, clutter) defeat region
+    growing; left unassigned they would be covered by a neighbour's plane far
+    from them. A cluster at least twice the smallest facet gets its least-squares
+    plane, or a horizontal one at its median height when no plane fits it.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    free = (labels < 0) & usable
+    if free.sum() < 2 * min_points:
+        return labels, planes
+    idx = np.flatnonzero(free)
+    pos = np.full(len(labels), -1)
+    pos[idx] = np.arange(len(idx))
+    rows = np.repeat(np.arange(len(idx)), nbrs.shape[1])
+    cols = pos[nbrs[idx].ravel()]
+    ok = cols >= 0
+    # only link points at similar heights (no jumps across steps)
+    dz = np.abs(xyz[idx[rows[ok]], 2] - xyz[idx[cols[ok]], 2])
+    link = dz < 3 * dist_tol
+    g = coo_matrix((np.ones(link.sum()), (rows[ok][link], cols[ok][link])), shape=(len(idx), len(idx)))
+    n_comp, comp = connected_components(g, directed=False)
+    sizes = np.bincount(comp, minlength=n_comp)
+    planes = list(planes)
+    labels = labels.copy()
+    for c in np.flatnonzero(sizes >= 2 * min_points):
+        members = idx[comp == c]
+        pts = xyz[members]
+        p = fit_plane(pts)
+        if p is not None:
+            r = _point_plane_dist(pts, p[None])[:, 0]
+            if np.sqrt(np.mean(r * r)) > 2 * dist_tol:
+                p = None
+        if p is None:
+            p = np.array([0.0, 0.0, float(np.median(pts[:, 2]))])
+        labels[members] = len(planes)
+        planes.append(p)
+    return labels, np.asarray(planes).reshape(-1, 3)
+
+
 def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
                    min_area=1.0, merge_angle=10.0, wall_slope=75.0):
     """Segment roof points into planar facets by region growing with plane fitting.
@@ -329,8 +372,10 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
     k = int(min(k, n - 1))
     center = xyz.mean(axis=0)
     local = xyz - center
-    tree = cKDTree(local[:, :2])
-    _, nbrs = tree.query(local[:, :2], k=k + 1)
+    # 3-D neighbours: 2-D ones mix stacked layers (a low roof under a high eave) and
+    # tilt their normals to walls
+    tree = cKDTree(local)
+    _, nbrs = tree.query(local, k=k + 1)
     nbrs = np.asarray(nbrs, dtype=np.int64)
     normals, flat = local_normals(local, nbrs)
     if min_points is None:
@@ -363,6 +408,8 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
         take = d[np.arange(len(un)), best] <= dist_tol
         labels[un[take]] = best[take]
         planes, _ = _refit(local, labels, n_labels, dist_tol)
+    labels, planes = _leftover_facets(local, labels, planes, nbrs[:, 1:], usable, dist_tol,
+                                      int(min_points))
     # back to the caller's frame: z = a (x - cx) + b (y - cy) + c + cz
     out = planes.copy()
     out[:, 2] = planes[:, 2] + center[2] - planes[:, 0] * center[0] - planes[:, 1] * center[1]
