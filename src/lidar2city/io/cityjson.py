@@ -36,7 +36,7 @@ from ._atomic import atomic_path, check_input_file
 logger = logging.getLogger(__name__)
 
 __all__ = ["CityModel", "cityjson_document", "cityjson_features", "write_cityjson",
-           "write_cityjsonseq", "read_cityjson", "object_solids", "SEMANTIC_TYPES"]
+           "write_cityjsonseq", "read_cityjson", "read_json_documents", "object_solids", "SEMANTIC_TYPES"]
 
 #: The semantic surface types written by lidar2city.
 SEMANTIC_TYPES = ("GroundSurface", "WallSurface", "RoofSurface")
@@ -318,6 +318,29 @@ def _apply_transform(vertices, transform):
     return v
 
 
+def read_json_documents(path) -> list[dict]:
+    """The raw JSON objects of a CityJSON file (one) or CityJSONSeq file (header + features).
+
+    Raises
+    ------
+    FileFormatError
+        When the file is not JSON / JSON Lines.
+    """
+    p = check_input_file(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{str(p)!r} cannot be read: {exc}") from None
+    try:
+        return [json.loads(text)]
+    except json.JSONDecodeError:
+        pass
+    try:
+        return [json.loads(line) for line in text.splitlines() if line.strip()]
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"{str(p)!r} is not JSON: {exc}") from None
+
+
 def read_cityjson(path) -> CityModel:
     """Read a CityJSON (1.0 / 1.1 / 2.0) or CityJSONSeq file.
 
@@ -327,19 +350,9 @@ def read_cityjson(path) -> CityModel:
         When the file is not JSON or not CityJSON.
     """
     p = check_input_file(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{str(p)!r} cannot be read: {exc}") from None
-    try:
-        doc = json.loads(text)
-        lines = None
-    except json.JSONDecodeError:
-        try:
-            lines = [json.loads(line) for line in text.splitlines() if line.strip()]
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{str(p)!r} is not JSON: {exc}") from None
-        doc = lines[0] if lines else {}
+    docs = read_json_documents(p)
+    doc = docs[0] if docs else {}
+    lines = docs if len(docs) > 1 else None
     if not isinstance(doc, dict) or doc.get("type") != "CityJSON":
         raise FileFormatError(f"{str(p)!r} is not a CityJSON file (no \"type\": \"CityJSON\")")
     transform = doc.get("transform")

@@ -53,7 +53,7 @@ def roof_height(z, statistic: float | str = 70.0) -> float:
 
 def ground_height(footprint, ground_xyz, *, percentile: float = 10.0, ring_width: float = 3.0,
                   wide_ring_width: float = 10.0, min_points: int = 3,
-                  building_z=None, fallback_z: float | None = None) -> tuple[float, str]:
+                  building_z=None, fallback_z=None) -> tuple[float, str]:
     """Ground height of a building: a low percentile of ground points around it.
 
     The fallback chain, in order: ground points in a ring of ``ring_width``
@@ -70,8 +70,8 @@ def ground_height(footprint, ground_xyz, *, percentile: float = 10.0, ring_width
         Percentile of the ground heights (3dfier uses the 10th).
     building_z : ndarray, shape (M,), optional
         Heights of the building's points, for the fourth fallback.
-    fallback_z : float, optional
-        Last resort height.
+    fallback_z : float or callable, optional
+        Last resort height (a callable is only called when needed).
 
     Returns
     -------
@@ -103,6 +103,8 @@ def ground_height(footprint, ground_xyz, *, percentile: float = 10.0, ring_width
             return float(np.percentile(g[inside, 2], percentile)), "inside footprint"
     if building_z is not None and len(building_z):
         return float(np.min(building_z)), "lowest building point"
+    if callable(fallback_z):
+        fallback_z = fallback_z()
     if fallback_z is not None and np.isfinite(fallback_z):
         return float(fallback_z), "fallback"
     return float("nan"), "none"

@@ -108,7 +108,7 @@ def _failed(result, reason, t0):
 
 
 def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Config | None = None,
-                         id: str = "", fallback_ground_z: float | None = None) -> BuildingResult:
+                         id: str = "", fallback_ground_z=None) -> BuildingResult:
     """LoD1.2 / LoD1.3 models of one building.
 
     Parameters
@@ -122,9 +122,10 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
     config : Lod1Config, optional
     id : str
         The footprint's identifier, kept as the ``footprint_id`` attribute.
-    fallback_ground_z : float, optional
+    fallback_ground_z : float or callable, optional
         Ground height used when no ground point and no building point gives one
-        (e.g. the area's ground level); recorded as ``ground_source``.
+        (e.g. the area's ground level; a callable is evaluated only then);
+        recorded as ``ground_source`` ``"fallback"``.
 
     Returns
     -------

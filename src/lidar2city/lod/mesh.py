@@ -7,10 +7,36 @@ triangles index the solid's own vertices.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
-__all__ = ["newell_normal", "plane_basis", "triangulate_polygon", "triangulate_surfaces",
-           "solid_triangles"]
+__all__ = ["dot3", "cross3", "plane_bases", "newell_normal", "plane_basis", "triangulate_polygon", "triangulate_surfaces",
+           "solid_mesh", "solid_triangles"]
+
+
+def dot3(a, b):
+    """Row-wise dot product over the last axis of (..., 3) arrays (fast for small arrays)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def cross3(a, b):
+    """Cross product over the last axis of (..., 3) arrays (fast for small arrays)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def plane_bases(normals):
+    """Vectorised :func:`plane_basis`: ``u, v`` of shape (F, 3) for normals (F, 3)."""
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.sqrt(dot3(n, n))[:, None]
+    zero = np.zeros(len(n))
+    near_x = np.abs(n[:, 0]) >= 0.9
+    u = np.where(near_x[:, None], np.column_stack([n[:, 2], zero, -n[:, 0]]),
+                 np.column_stack([zero, -n[:, 2], n[:, 1]]))
+    u = u / np.sqrt(dot3(u, u))[:, None]
+    return u, cross3(n, u)
 
 
 def newell_normal(points: np.ndarray) -> np.ndarray:
@@ -38,12 +64,14 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
 
 def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two orthonormal vectors ``u, v`` with ``u x v`` along ``normal``."""
-    n = np.asarray(normal, dtype=np.float64)
-    n = n / np.linalg.norm(n)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(helper, n)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+    nx, ny, nz = np.asarray(normal, dtype=np.float64) / np.sqrt(np.dot(normal, normal))
+    # u = helper x n with helper = x axis (or y axis when n is close to x)
+    if abs(nx) < 0.9:
+        u = np.array([0.0, -nz, ny])
+    else:
+        u = np.array([nz, 0.0, -nx])
+    u /= np.sqrt(u @ u)
+    v = np.array([ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]])
     return u, v
 
 
@@ -155,13 +183,34 @@ def triangulate_surfaces(vertices: np.ndarray, surfaces) -> tuple[np.ndarray, np
     return np.concatenate(tris), np.concatenate(faces)
 
 
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def solid_mesh(solid) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`triangulate_surfaces` of a solid, computed once per solid object.
+
+    Solids are treated as immutable (their dataclass is frozen): the cache is
+    keyed by the object and dropped with it.
+    """
+    try:
+        return _CACHE[solid]
+    except (KeyError, TypeError):
+        pass
+    out = triangulate_surfaces(solid.vertices, solid.surfaces)
+    try:
+        _CACHE[solid] = out
+    except TypeError:
+        pass
+    return out
+
+
 def solid_triangles(solids) -> np.ndarray:
     """Corner coordinates of the triangles of one or several solids, shape (T, 3, 3)."""
     if hasattr(solids, "vertices"):
         solids = [solids]
     out = []
     for s in solids:
-        t, _ = triangulate_surfaces(s.vertices, s.surfaces)
+        t, _ = solid_mesh(s)
         out.append(s.vertices[t])
     if not out:
         return np.zeros((0, 3, 3))

@@ -12,35 +12,41 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..lod.mesh import cross3, dot3
+
 __all__ = ["point_triangle_distance2", "point_mesh_distance", "rmse", "model_rmse",
            "footprint_coverage"]
 
 
-def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+_dot = dot3
+_cross = cross3
 
 
 def _segment_distance2(p, a, b):
     ab = b - a
     denom = _dot(ab, ab)
-    t = np.divide(_dot(p - a, ab), denom, out=np.zeros(len(p)), where=denom > 0)
+    num = _dot(p - a, ab)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(denom > 0, num / np.where(denom > 0, denom, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)
-    d = p - (a + t[:, None] * ab)
+    d = p - (a + t[..., None] * ab)
     return _dot(d, d)
 
 
 def point_triangle_distance2(p: np.ndarray, a: np.ndarray, b: np.ndarray,
                              c: np.ndarray) -> np.ndarray:
-    """Squared distance of points to triangles, pairwise (row i with row i).
+    """Squared distance of points to triangles (arrays broadcast together).
 
     Parameters
     ----------
-    p, a, b, c : ndarray, shape (K, 3)
-        Points and triangle corners.
+    p, a, b, c : ndarray, shape (..., 3)
+        Points and triangle corners; e.g. ``p`` (K, 3) with ``a, b, c`` (K, 3)
+        for row-wise pairs, or ``p[:, None]`` (N, 1, 3) with ``a`` (T, 3) for
+        all N x T pairs.
 
     Returns
     -------
-    ndarray, shape (K,)
+    ndarray, broadcast shape without the last axis
 
     Notes
     -----
@@ -49,32 +55,28 @@ def point_triangle_distance2(p: np.ndarray, a: np.ndarray, b: np.ndarray,
     point is on one of the three edges. Degenerate triangles reduce to the
     edge distances. Exact up to floating point.
     """
-    n = np.cross(b - a, c - a)
+    n = _cross(b - a, c - a)
     nn = _dot(n, n)
-    e0 = np.cross(b - a, p - a)
-    e1 = np.cross(c - b, p - b)
-    e2 = np.cross(a - c, p - c)
-    inside = (_dot(e0, n) >= 0) & (_dot(e1, n) >= 0) & (_dot(e2, n) >= 0) & (nn > 0)
-    dp = np.divide(_dot(p - a, n) ** 2, nn, out=np.full(len(p), np.inf), where=nn > 0)
+    inside = ((_dot(_cross(b - a, p - a), n) >= 0) & (_dot(_cross(c - b, p - b), n) >= 0)
+              & (_dot(_cross(a - c, p - c), n) >= 0) & (nn > 0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dp = np.where(nn > 0, _dot(p - a, n) ** 2 / np.where(nn > 0, nn, 1.0), np.inf)
     edges = np.minimum(np.minimum(_segment_distance2(p, a, b), _segment_distance2(p, b, c)),
                        _segment_distance2(p, c, a))
     return np.where(inside, dp, edges)
 
 
-def _brute(points, tris, chunk_pairs=2_000_000):
+def _brute(points, tris, chunk_pairs=1_000_000):
     """Exact nearest distance over all triangles, chunked over points."""
     n, t = len(points), len(tris)
     out = np.full(n, np.inf)
     if t == 0 or n == 0:
         return out
     step = max(1, chunk_pairs // t)
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    a, b, c = tris[None, :, 0], tris[None, :, 1], tris[None, :, 2]
     for s in range(0, n, step):
-        p = points[s:s + step]
-        m = len(p)
-        pp = np.repeat(p, t, axis=0)
-        d2 = point_triangle_distance2(pp, np.tile(a, (m, 1)), np.tile(b, (m, 1)), np.tile(c, (m, 1)))
-        out[s:s + m] = np.sqrt(d2.reshape(m, t).min(axis=1))
+        p = points[s:s + step, None, :]
+        out[s:s + len(p)] = np.sqrt(point_triangle_distance2(p, a, b, c).min(axis=1))
     return out
 
 
@@ -147,15 +149,23 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
     cnt = stop - start
     pair_p = np.repeat(pid, cnt)
     pair_t = tri_id[np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-    # a triangle spanning several cells appears once per cell: dedupe pairs
-    pk = np.unique(pair_p * t + pair_t)
-    pair_p, pair_t = pk // t, pk % t
+    # pairs are grouped by point (a triangle may repeat: harmless for a minimum)
     best = np.full(n, np.inf)
-    chunk = 4_000_000
-    for s in range(0, len(pair_p), chunk):
-        pp, tt = pair_p[s:s + chunk], pair_t[s:s + chunk]
-        d2 = point_triangle_distance2(points[pp], tris[tt, 0], tris[tt, 1], tris[tt, 2])
-        np.minimum.at(best, pp, d2)
+    chunk = 2_000_000
+    bounds = np.searchsorted(pair_p, np.arange(0, n + 1))
+    s = 0
+    while s < n:
+        e = int(np.searchsorted(bounds, bounds[s] + chunk, side="right")) - 1
+        e = min(max(e, s + 1), n)
+        lo_i, hi_i = bounds[s], bounds[e]
+        if hi_i > lo_i:
+            pp, tt = pair_p[lo_i:hi_i], pair_t[lo_i:hi_i]
+            d2 = point_triangle_distance2(points[pp], tris[tt, 0], tris[tt, 1], tris[tt, 2])
+            starts = bounds[s:e] - lo_i
+            has = bounds[s + 1:e + 1] > bounds[s:e]
+            red = np.minimum.reduceat(d2, np.minimum(starts, len(d2) - 1))
+            best[s:e] = np.where(has, red, np.inf)
+        s = e
     best = np.sqrt(best)
     far = best > cell
     if far.any():

@@ -266,11 +266,13 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             x0, y0, x1, y1 = g.bounds
             bi = bgrid.query(x0, y0, x1, y1)
             gi = ggrid.query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
-            fallback = None
-            wide = ggrid.query(x0 - area_radius, y0 - area_radius, x1 + area_radius,
-                               y1 + area_radius)
-            if len(wide):
-                fallback = float(np.percentile(gxyz[wide, 2], cfg.ground_percentile))
+            def fallback(x0=x0, y0=y0, x1=x1, y1=y1):
+                # the area's ground level: ground points within 50 m
+                wide = ggrid.query(x0 - area_radius, y0 - area_radius, x1 + area_radius,
+                                   y1 + area_radius)
+                return (float(np.percentile(gxyz[wide, 2], cfg.ground_percentile))
+                        if len(wide) else None)
+
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback)
         if notes[i]:

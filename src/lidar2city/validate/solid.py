@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lod.mesh import newell_normal, plane_basis, triangulate_surfaces
+from ..lod.mesh import cross3, dot3, newell_normal, plane_bases, plane_basis, solid_mesh
 
 __all__ = ["CODES", "Issue", "check_solid", "solid_error_codes", "parts_overlap", "solid_volume"]
 
@@ -156,6 +156,39 @@ def _polygon_checks(verts, rings, i, issues, planarity_tolerance):
             issues.append(Issue(code, i, reason))
 
 
+def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance):
+    """Batched checks of single-ring faces with the same vertex count."""
+    import shapely
+
+    R = np.stack([rings_per_face[i][0] for i in faces])
+    P = verts[R]                                       # (F, k, 3)
+    k = R.shape[1]
+    bad = np.zeros(len(faces), dtype=bool)
+    if k > 3:
+        c = P.mean(axis=1, keepdims=True)
+        _, _, vt = np.linalg.svd(P - c, full_matrices=False)
+        dist = np.abs(dot3(P - c, vt[:, None, -1, :])).max(axis=1)
+        for f in np.flatnonzero(dist > planarity_tolerance):
+            issues.append(Issue(203, int(faces[f]), f"vertex {dist[f]:.4f} m from the plane"))
+            bad[f] = True
+    Q = np.roll(P, -1, axis=1)
+    nw = np.stack([np.sum((P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), axis=1),
+                   np.sum((P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]), axis=1),
+                   np.sum((P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]), axis=1)], axis=1)
+    area2 = np.sqrt(dot3(nw, nw))
+    for f in np.flatnonzero(~bad & (area2 < 1e-10)):
+        issues.append(Issue(104, int(faces[f]), "ring collapses to a line (zero area)"))
+        bad[f] = True
+    if k > 3:
+        ok = ~bad
+        if ok.any():
+            u, v = plane_bases(nw[ok])
+            P2 = np.stack([dot3(P[ok], u[:, None, :]), dot3(P[ok], v[:, None, :])], axis=-1)
+            simple = shapely.is_simple(shapely.linearrings(P2))
+            for f in np.flatnonzero(ok)[~simple]:
+                issues.append(Issue(104, int(faces[f]), "ring self-intersects"))
+
+
 def solid_volume(vertices, surfaces) -> float:
     """Signed volume of a closed shell (positive when faces point outward).
 
@@ -172,9 +205,6 @@ def solid_volume(vertices, surfaces) -> float:
 
 def _edge_checks(rings_per_face, issues):
     """Closedness, manifoldness, orientation consistency, connectivity. True if all pass."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     src, dst, face = [], [], []
     for f, rings in enumerate(rings_per_face):
         for r in rings:
@@ -205,14 +235,22 @@ def _edge_checks(rings_per_face, issues):
         faces = np.unique(fc[np.isin(inv, np.flatnonzero(same))])
         issues.append(Issue(307, int(faces[0]), f"{int(same.sum())} edge(s) used twice in the same "
                                                 f"direction (faces {', '.join(map(str, faces[:6]))})"))
-    # connectivity of faces through shared edges
+    # connectivity of faces through shared edges (min-label propagation)
     order = np.argsort(inv, kind="stable")
     inv_s, fc_s = inv[order], fc[order]
     same_edge = inv_s[1:] == inv_s[:-1]
-    nf = len(rings_per_face)
-    g = coo_matrix((np.ones(int(same_edge.sum())), (fc_s[:-1][same_edge], fc_s[1:][same_edge])),
-                   shape=(nf, nf))
-    ncomp, _ = connected_components(g, directed=False)
+    fa, fb = fc_s[:-1][same_edge], fc_s[1:][same_edge]
+    label = np.arange(len(rings_per_face))
+    for _ in range(len(label)):
+        m = np.minimum(label[fa], label[fb])
+        new = label.copy()
+        np.minimum.at(new, fa, m)
+        np.minimum.at(new, fb, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    ncomp = len(np.unique(label))
     if ncomp > 1:
         ok = False
         issues.append(Issue(305, None, f"{ncomp} disconnected pieces"))
@@ -221,18 +259,18 @@ def _edge_checks(rings_per_face, issues):
 
 def _segments_cross_triangles(p, q, a, b, c, eps):
     """Row-wise: does segment p-q cross triangle abc properly (not just touch)?"""
-    n = np.cross(b - a, c - a)
-    nl = np.linalg.norm(n, axis=1)
+    n = cross3(b - a, c - a)
+    nl = np.sqrt(dot3(n, n))
     good = nl > 0
     n = n / np.where(good, nl, 1.0)[:, None]
-    dp = np.einsum("ij,ij->i", p - a, n)
-    dq = np.einsum("ij,ij->i", q - a, n)
+    dp = dot3(p - a, n)
+    dq = dot3(q - a, n)
     cross = good & (((dp > eps) & (dq < -eps)) | ((dp < -eps) & (dq > eps)))
     t = np.divide(dp, dp - dq, out=np.zeros_like(dp), where=cross)
     x = p + t[:, None] * (q - p)
-    s0 = np.einsum("ij,ij->i", np.cross(b - a, x - a), n)
-    s1 = np.einsum("ij,ij->i", np.cross(c - b, x - b), n)
-    s2 = np.einsum("ij,ij->i", np.cross(a - c, x - c), n)
+    s0 = dot3(cross3(b - a, x - a), n)
+    s1 = dot3(cross3(c - b, x - b), n)
+    s2 = dot3(cross3(a - c, x - c), n)
     scale = np.maximum(nl, 1e-30)
     tol = eps * np.sqrt(scale)
     inside = (s0 > tol) & (s1 > tol) & (s2 > tol)
@@ -253,11 +291,11 @@ def _candidate_pairs(lo, hi, tol):
     return i[keep], j[keep]
 
 
-def _self_intersections(verts, rings_per_face, tol):
+def _self_intersections(verts, rings_per_face, tol, mesh):
     """Face pairs whose triangles cross, or coplanar faces that overlap."""
     import shapely
 
-    tris, face = triangulate_surfaces(verts, rings_per_face)
+    tris, face = mesh
     if len(tris) < 2:
         return []
     corners = verts[tris]
@@ -346,15 +384,22 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
         rings_per_face.append(_ring_checks(rings, i, issues))
     if issues:
         return issues
+    simple: dict[int, list] = {}
     for i, rings in enumerate(rings_per_face):
-        _polygon_checks(verts, rings, i, issues, planarity_tolerance)
+        if len(rings) == 1:
+            simple.setdefault(len(rings[0]), []).append(i)
+        else:
+            _polygon_checks(verts, rings, i, issues, planarity_tolerance)
+    for _, faces in sorted(simple.items()):
+        _simple_faces_checks(verts, rings_per_face, np.array(faces), issues, planarity_tolerance)
     if issues:
         return issues
     if len(rings_per_face) < 4:
         return [Issue(301, None, f"{len(rings_per_face)} polygons")]
     if not _edge_checks(rings_per_face, issues):
         return issues
-    inter = _self_intersections(verts, rings_per_face, overlap_tolerance)
+    tris, face = solid_mesh(solid)
+    inter = _self_intersections(verts, rings_per_face, overlap_tolerance, (remap[tris], face))
     if inter:
         pairs = ", ".join(f"{a}-{b}" for a, b in inter[:5])
         issues.append(Issue(306, inter[0][0], f"{len(inter)} intersecting face pair(s): {pairs}"))
@@ -383,7 +428,7 @@ def parts_overlap(solids, *, tolerance: float = 0.001) -> list[tuple[int, int]]:
 
     feet, zr = [], []
     for s in solids:
-        tris, _ = triangulate_surfaces(s.vertices, s.surfaces)
+        tris, _ = solid_mesh(s)
         c = s.vertices[tris][:, :, :2]
         n = (c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1]) - \
             (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1])
