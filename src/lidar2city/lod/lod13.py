@@ -11,6 +11,8 @@ footprint, so the parts tile it exactly: no gap, no overlap, shared walls.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 __all__ = ["height_regions", "height_parts"]
@@ -112,7 +114,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
         Raster georeferencing (local metres, north up).
     """
     from rasterio.features import rasterize
-    from rasterio.transform import from_origin
+    from affine import Affine
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -122,9 +124,11 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     cols = int(np.ceil((x1 - x0) / cell)) + 1
     rows = int(np.ceil((y1 - y0) / cell)) + 1
     y_top = y0 + rows * cell
-    transform = from_origin(x0, y_top, cell, cell)
-    mask = rasterize([(footprint, 1)], out_shape=(rows, cols), transform=transform,
-                     all_touched=True, fill=0, dtype="uint8").astype(bool)
+    transform = Affine(cell, 0.0, x0, 0.0, -cell, y_top)  # north up, rows from the top
+    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        mask = rasterize([(footprint, 1)], out_shape=(rows, cols), transform=transform,
+                         all_touched=True, fill=0, dtype="uint8").astype(bool)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     c = np.clip(np.floor((xyz[:, 0] - x0) / cell).astype(np.int64), 0, cols - 1)
     r = np.clip(np.floor((y_top - xyz[:, 1]) / cell).astype(np.int64), 0, rows - 1)
@@ -180,8 +184,11 @@ def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 3.0, min_ar
     if k <= 1:
         return [footprint]
     polys = [[] for _ in range(k)]
-    for geom, value in shapes(labels.astype(np.int32), mask=labels >= 0, transform=transform,
-                              connectivity=4):
+    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        found = list(shapes(labels.astype(np.int32), mask=labels >= 0, transform=transform,
+                            connectivity=4))
+    for geom, value in found:
         polys[int(value)].append(shapely.geometry.shape(geom))
     regions = [shapely.union_all(p) if len(p) > 1 else p[0] for p in polys if p]
     regions = list(shapely.coverage_simplify(np.array(regions, dtype=object), 0.75 * cell,

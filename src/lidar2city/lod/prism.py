@@ -53,7 +53,7 @@ def clean_polygon(polygon, *, grid: float = 0.0):
 
     if polygon is None or polygon.is_empty:
         return []
-    g = polygon
+    g = polygon if polygon.is_valid else shapely.make_valid(polygon)
     if grid > 0:
         g = shapely.set_precision(g, grid)
     if not g.is_valid:
