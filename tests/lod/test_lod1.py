@@ -5,8 +5,15 @@ from hypothesis import strategies as st
 from shapely.geometry import MultiPolygon, Polygon, box
 
 from lidar2city.errors import ConfigError, InputError
-from lidar2city.lod import (Lod1Config, height_parts, lod12_solid, lod12_solids, prism_solid,
-                            reconstruct_building, roof_height)
+from lidar2city.lod import (
+    Lod1Config,
+    height_parts,
+    lod12_solid,
+    lod12_solids,
+    prism_solid,
+    reconstruct_building,
+    roof_height,
+)
 from lidar2city.validate import check_solid
 from lidar2city.validate.solid import solid_volume
 

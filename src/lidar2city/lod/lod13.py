@@ -113,8 +113,8 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     transform : affine.Affine
         Raster georeferencing (local metres, north up).
     """
-    from rasterio.features import rasterize
     from affine import Affine
+    from rasterio.features import rasterize
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components

@@ -63,8 +63,8 @@ def evaluate_buildings(model, xyz, *, origin, unit_scale=(1.0, 1.0, 1.0), footpr
     """
     import shapely
 
-    from ..metrics.model import footprint_coverage, point_mesh_distance, rmse
     from ..lod.mesh import solid_triangles
+    from ..metrics.model import footprint_coverage, point_mesh_distance, rmse
     from ..tools.reconstruct import PointGrid
     from ..validate.solid import check_solid
 
@@ -74,7 +74,7 @@ def evaluate_buildings(model, xyz, *, origin, unit_scale=(1.0, 1.0, 1.0), footpr
     feet = {b: model_footprint(s) for b, s in solids.items()}
     rows = []
     if footprints is None:
-        targets = [(b, feet[b], b) for b in ids]
+        targets = [(b, feet[b], b, "own") for b in ids]
     else:
         objs = [b for b in ids if feet[b] is not None]
         tree = shapely.STRtree([feet[b] for b in objs])
@@ -101,11 +101,11 @@ def evaluate_buildings(model, xyz, *, origin, unit_scale=(1.0, 1.0, 1.0), footpr
                 if best < min_iou:
                     match = None
                 how = "overlap" if match else ""
-            targets.append((fid, g, match))
+            targets.append((fid, g, match, how))
             if match is None:
                 logger.info("footprint %s: no matching building in the model", fid)
-    for name, foot, obj in targets:
-        row = {"id": name, "object": obj, "points": 0, "rmse": None, "coverage": None,
+    for name, foot, obj, how in targets:
+        row = {"id": name, "object": obj, "match": how, "points": 0, "rmse": None, "coverage": None,
                "valid": None, "errors": ""}
         if obj is None or foot is None or not solids.get(obj):
             row["errors"] = "no model"

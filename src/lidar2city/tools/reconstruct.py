@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -208,6 +208,9 @@ def load_footprints(path, cloud, *, id_field=None, layer=None):
     hi = cloud.xyz[:, :2].max(axis=0)
     area = shapely.box(lo[0], lo[1], hi[0], hi[1])
     keep = [i for i, g in enumerate(fps.geometries) if g is None or g.intersects(area)]
+    if not keep:
+        raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
+                              "point cloud's extent (check both CRSs)")
     if len(keep) < len(fps):
         logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
     return Footprints([fps.geometries[i] for i in keep], [fps.ids[i] for i in keep],
@@ -219,7 +222,8 @@ def _chunk_order(geometries, chunk):
     import shapely
 
     cent = np.array([[np.nan, np.nan] if g is None or g.is_empty else
-                     shapely.get_coordinates(g.envelope).mean(axis=0) for g in geometries])
+                     shapely.get_coordinates(g.envelope).mean(axis=0) for g in geometries],
+                    dtype=np.float64).reshape(-1, 2)
     cent = np.nan_to_num(cent, nan=0.0)
     key = np.floor(cent / chunk).astype(np.int64)
     return np.lexsort((key[:, 0], key[:, 1]))
@@ -364,7 +368,7 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
         geoms = [_face_multipolygon(r.solids[lod] if lod in r.solids else r.parts[lod])
                  for r in rows]
         layers.append(VectorLayer(f"lod{lod.replace('.', '')}", geoms,
-                                  {"id": [str(r.id) for r in rows]}, "MultiPolygonZ"))
+                                  {"id": [str(r.id) for r in rows]}, "MultiPolygon Z"))
     meta = {"lidar2city_configuration": json.dumps(configuration or {})}
     write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
                  z_unit=cloud.z_unit, metadata=meta)
