@@ -66,17 +66,65 @@ def point_triangle_distance2(p: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.where(inside, dp, edges)
 
 
-def _brute(points, tris, chunk_pairs=1_000_000):
-    """Exact nearest distance over all triangles, chunked over points."""
+def _unique_edges(tris):
+    """Distinct edges (E, 2, 3) of triangles (T, 3, 3), by exact corner coordinates."""
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    # orient each edge so that its lexicographically smaller end comes first
+    a, b = e[:, 0], e[:, 1]
+    gt = (a[:, 0] > b[:, 0]) | ((a[:, 0] == b[:, 0]) & ((a[:, 1] > b[:, 1]) |
+                                                          ((a[:, 1] == b[:, 1]) & (a[:, 2] > b[:, 2]))))
+    e = np.where(gt[:, None, None], e[:, ::-1], e)
+    return np.unique(e.reshape(len(e), 6), axis=0).reshape(-1, 2, 3)
+
+
+def _brute(points, tris, chunk_pairs=2_000_000):
+    """Exact nearest distance over all triangles (dense, via matrix products).
+
+    The nearest point of a mesh is either the orthogonal projection on a
+    triangle whose interior it falls in, or a point of an edge; so the
+    distance is the minimum of the plane distances of the triangles whose
+    (in-plane) edge half-spaces contain the point and of the distances to
+    every distinct edge. Every term is an affine function of the point, so
+    they come from ``(N, 3) @ (3, T)`` products.
+    """
     n, t = len(points), len(tris)
     out = np.full(n, np.inf)
     if t == 0 or n == 0:
         return out
-    step = max(1, chunk_pairs // t)
-    a, b, c = tris[None, :, 0], tris[None, :, 1], tris[None, :, 2]
+    centre = tris.reshape(-1, 3).mean(axis=0)  # keeps squared terms small
+    tr = tris - centre
+    pts = points - centre
+    a, b, c = tr[:, 0], tr[:, 1], tr[:, 2]
+    nrm = cross3(b - a, c - a)
+    nn = dot3(nrm, nrm)
+    ok = nn > 0
+    nrm, nn, a, b, c = nrm[ok], nn[ok], a[ok], b[ok], c[ok]
+    # in-plane edge normals pointing inside: m_i = n x (v_{i+1} - v_i)
+    ms = [cross3(nrm, b - a), cross3(nrm, c - b), cross3(nrm, a - c)]
+    cs = [dot3(ms[0], a), dot3(ms[1], b), dot3(ms[2], c)]
+    pn = dot3(a, nrm)
+    edges = _unique_edges(tr)
+    ea, eb = edges[:, 0], edges[:, 1] - edges[:, 0]
+    ll = dot3(eb, eb)
+    ll_safe = np.where(ll > 0, ll, 1.0)
+    ea_eb = dot3(ea, eb)
+    ea2 = dot3(ea, ea)
+    cols = max(len(nrm), len(ea), 1)
+    step = max(1, chunk_pairs // cols)
     for s in range(0, n, step):
-        p = points[s:s + step, None, :]
-        out[s:s + len(p)] = np.sqrt(point_triangle_distance2(p, a, b, c).min(axis=1))
+        p = pts[s:s + step]
+        best = np.full(len(p), np.inf)
+        if len(nrm):
+            inside = ((p @ ms[0].T >= cs[0]) & (p @ ms[1].T >= cs[1]) & (p @ ms[2].T >= cs[2]))
+            dp = (p @ nrm.T - pn) ** 2 / nn
+            best = np.where(inside, dp, np.inf).min(axis=1)
+        pe = p @ eb.T - ea_eb                             # (p - a) . ab
+        tt = np.clip(pe / ll_safe, 0.0, 1.0)
+        p2 = dot3(p, p)[:, None]
+        pa2 = p2 - 2.0 * (p @ ea.T) + ea2                 # |p - a|^2
+        d2 = pa2 - 2.0 * tt * pe + tt * tt * ll
+        best = np.minimum(best, np.maximum(d2, 0.0).min(axis=1))
+        out[s:s + len(p)] = np.sqrt(best)
     return out
 
 
@@ -121,12 +169,14 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
     lo = tris.min(axis=1)
     hi = tris.max(axis=1)
     if cell is None:
-        ext = np.median(np.max(hi[:, :2] - lo[:, :2], axis=1))
-        cell = float(max(ext, 1.0))
+        ext = float(np.median(np.max(hi[:, :2] - lo[:, :2], axis=1)))
+        span = np.ptp(points[:, :2], axis=0)
+        per_cell = np.sqrt(max(float(span[0] * span[1]), 1e-6) * 256.0 / n)
+        cell = float(max(2.0 * ext, per_cell, 0.5))
     origin = np.minimum(lo[:, :2].min(axis=0), points[:, :2].min(axis=0)) - cell
     top = np.maximum(hi[:, :2].max(axis=0), points[:, :2].max(axis=0)) + cell
     nx, ny = (np.floor((top - origin) / cell).astype(np.int64) + 1)
-    # triangle -> cells covered by its bbox (CSR)
+    # triangle -> cells covered by its bbox (CSR sorted by cell key)
     i0 = np.floor((lo[:, :2] - origin) / cell).astype(np.int64)
     i1 = np.floor((hi[:, :2] - origin) / cell).astype(np.int64)
     spans = (i1 - i0 + 1)
@@ -138,34 +188,23 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
     key = cx * ny + cy
     order = np.argsort(key, kind="stable")
     key, tri_id = key[order], tri_id[order]
-    # point -> 3 x 3 neighbourhood keys
+    # points grouped by cell; each group against the triangles of its 3 x 3 block
     pc = np.floor((points[:, :2] - origin) / cell).astype(np.int64)
-    offs = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
-    nb = (pc[:, None, 0] + offs[None, :, 0]) * ny + (pc[:, None, 1] + offs[None, :, 1])
-    nb = nb.ravel()
-    pid = np.repeat(np.arange(n), 9)
-    start = np.searchsorted(key, nb, side="left")
-    stop = np.searchsorted(key, nb, side="right")
-    cnt = stop - start
-    pair_p = np.repeat(pid, cnt)
-    pair_t = tri_id[np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-    # pairs are grouped by point (a triangle may repeat: harmless for a minimum)
+    pkey = pc[:, 0] * ny + pc[:, 1]
+    porder = np.argsort(pkey, kind="stable")
+    uk, gstart = np.unique(pkey[porder], return_index=True)
+    gstop = np.r_[gstart[1:], n]
+    offs = np.array([dx * ny + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
     best = np.full(n, np.inf)
-    chunk = 2_000_000
-    bounds = np.searchsorted(pair_p, np.arange(0, n + 1))
-    s = 0
-    while s < n:
-        e = int(np.searchsorted(bounds, bounds[s] + chunk, side="right")) - 1
-        e = min(max(e, s + 1), n)
-        lo_i, hi_i = bounds[s], bounds[e]
-        if hi_i > lo_i:
-            pp, tt = pair_p[lo_i:hi_i], pair_t[lo_i:hi_i]
-            d2 = point_triangle_distance2(points[pp], tris[tt, 0], tris[tt, 1], tris[tt, 2])
-            starts = bounds[s:e] - lo_i
-            has = bounds[s + 1:e + 1] > bounds[s:e]
-            red = np.minimum.reduceat(d2, np.minimum(starts, len(d2) - 1))
-            best[s:e] = np.where(has, red, np.inf)
-        s = e
+    for k, a0, a1 in zip(uk, gstart, gstop, strict=True):
+        nb = k + offs
+        st = np.searchsorted(key, nb, side="left")
+        sp = np.searchsorted(key, nb, side="right")
+        if not np.any(sp > st):
+            continue
+        cand = np.unique(np.concatenate([tri_id[x:y] for x, y in zip(st, sp, strict=True)]))
+        idx = porder[a0:a1]
+        best[idx] = _brute(points[idx], tris[cand]) ** 2
     best = np.sqrt(best)
     far = best > cell
     if far.any():
