@@ -161,3 +161,26 @@ def test_translation_does_not_change_the_model(dx, dy, dz):
     assert b["roof_height"] - a["roof_height"] == pytest.approx(dz, abs=2e-3)
     assert b["rmse_lod12"] == pytest.approx(a["rmse_lod12"], abs=2e-3)
     assert b["valid"]
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(st.floats(2, 30), min_size=4, max_size=4), st.integers(0, 2**31 - 1))
+def test_lod13_parts_tile_the_footprint_exactly(levels, seed):
+    import shapely
+
+    rng = np.random.default_rng(seed)
+    fp = Polygon([(0, 0), (17.3, 0), (17.3, 6.1), (9.2, 6.1), (9.2, 14.7), (0, 14.7)])
+    cx, cy = rng.uniform(2, 15), rng.uniform(2, 12)
+
+    def z(xy):
+        q = (xy[:, 0] > cx).astype(int) + 2 * (xy[:, 1] > cy).astype(int)
+        return np.asarray(levels)[q] + rng.normal(0, 0.1, len(xy))
+
+    pts = _grid_points(fp, z, 0.4)
+    parts = height_parts(fp, pts, cell=0.5, step=3.0, min_area=5.0, grid=0.001)
+    union = shapely.union_all(parts, grid_size=0.001)
+    assert abs(union.area - fp.area) < 1e-3
+    assert abs(sum(p.area for p in parts) - fp.area) < 1e-3
+    assert union.symmetric_difference(fp).area < 1e-3
+    for p in parts:
+        assert check_solid(prism_solid(p, 0.0, 40.0, grid=0.001)) == []

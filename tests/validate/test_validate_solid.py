@@ -76,22 +76,41 @@ def test_non_manifold_edge():
     assert 303 in solid_error_codes(Solid(s.vertices, [*s.surfaces, extra, extra]))
 
 
+def _triangulated(s):
+    from lidar2city.lod.mesh import solid_mesh
+
+    tris, face = solid_mesh(s)
+    return Solid(s.vertices, [Surface([t], s.surfaces[f].semantic) for t, f in zip(tris, face, strict=True)])
+
+
 def test_self_intersecting_shell():
-    # a closed, consistently oriented triangle mesh (octahedron) with one apex
-    # pushed through the opposite half
-    v = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]])
-    tris = [(0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4), (1, 0, 5), (2, 1, 5), (3, 2, 5), (0, 3, 5)]
-    oct_ = Solid(v, [Surface([np.array(t)], "WallSurface") for t in tris])
-    assert check_solid(oct_) == []
-    v2 = v.copy()
-    v2[4] = [0.2, 0.1, -2.0]  # top apex below the bottom one
-    codes = solid_error_codes(Solid(v2, oct_.surfaces))
-    assert 306 in codes or 307 in codes
-    # two closed boxes joined into one shell through an overlap
+    tri = _triangulated(cube())
+    assert check_solid(tri) == []
+    # push a roof corner through the floor: still closed, manifold and consistently
+    # oriented, but roof triangles now cross floor triangles
+    v = tri.vertices.copy()
+    i = np.flatnonzero((v == [1, 1, 1]).all(axis=1))[0]
+    v[i] = [0.5, 0.5, -1.0]
+    assert solid_error_codes(Solid(v, tri.surfaces)) == [306]
+    # two closed boxes in one shell
     a, b = prism_solid(box(0, 0, 2, 2), 0, 2), prism_solid(box(1, 1, 3, 3), 0, 2)
     joined = Solid(np.vstack([a.vertices, b.vertices]),
                    a.surfaces + [Surface([r + 8 for r in f.rings], f.semantic) for f in b.surfaces])
     assert 305 in solid_error_codes(joined)
+
+
+def test_coplanar_overlapping_faces_are_found():
+    from lidar2city.lod.mesh import triangulate_surfaces
+    from lidar2city.validate.solid import _self_intersections
+
+    v = np.array([[0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1],
+                  [1, 1, 1], [3, 1, 1], [3, 3, 1], [1, 3, 1],
+                  [2, 0, 1.0], [4, 0, 1], [4, 2, 1]], dtype=float)
+    overlapping = [[np.array([0, 1, 2, 3])], [np.array([4, 5, 6, 7])]]
+    touching = [[np.array([0, 1, 2, 3])], [np.array([1, 9, 10, 2])]]
+    for rings, expected in ((overlapping, [(0, 1)]), (touching, [])):
+        mesh = triangulate_surfaces(v, rings)
+        assert _self_intersections(v, rings, 0.001, mesh) == expected
 
 
 def test_parts_overlap():

@@ -247,6 +247,8 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
         ``progress(done, total, result)`` after each building.
     """
     from ..lod.lod1 import Lod1Config, reconstruct_building
+    from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
+    from ..validate import solid as _solid  # noqa: F401
 
     cfg = config or Lod1Config()
     if building is None or ground is None:
