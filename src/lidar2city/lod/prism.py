@@ -24,8 +24,9 @@ def _ring_coords(ring, grid: float) -> np.ndarray:
         c = c[:-1]
     if len(c) == 0:
         return c
-    # drop consecutive (and closing) vertices closer than the grid
-    tol = max(grid, 1e-9)
+    # drop consecutive (and closing) vertices closer than 2.5 grid steps, so that a
+    # validator snapping vertices at the grid size (val3dity: 1 mm) cannot merge them
+    tol = max(2.5 * grid, 1e-9)
     step = np.hypot(*(c - np.roll(c, 1, axis=0)).T)  # distance to the previous vertex
     if len(c) > 1:
         c = c[step >= tol] if np.any(step >= tol) else c[:1]
@@ -77,7 +78,8 @@ def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -
     ground_z, roof_z : float
         Heights of the bottom and the top; ``roof_z > ground_z``.
     grid : float
-        Vertices closer than this are merged (see :func:`clean_polygon`).
+        Output precision (see :func:`clean_polygon`); consecutive vertices
+        closer than 2.5 times this are merged.
 
     Returns
     -------
