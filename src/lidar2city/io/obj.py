@@ -1,0 +1,111 @@
+"""Wavefront OBJ export of building models.
+
+One ``o`` object per building (``o <building id>``) and, for LoD1.3, one per
+part (``o <building id>-part<k>``), with a ``g`` group per semantic surface
+type (``g RoofSurface``...). Faces are triangles oriented outward (normals
+by the right-hand rule). Vertices are shared within the file.
+
+Coordinates: world coordinates in CRS units (``local=False``, the default,
+written with millimetre precision: the same numbers as the CityJSON), or,
+with ``local=True``, relative to the origin given in the header comment
+``# origin X Y Z`` (convenient for viewers working in single precision).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..datamodel import Solid
+from ._atomic import atomic_path
+
+__all__ = ["write_obj", "read_obj"]
+
+
+def _objects(results, lod):
+    for r in results:
+        if lod in r.solids and r.solids[lod] is not None:
+            s = r.solids[lod]
+            yield str(r.id), [s] if isinstance(s, Solid) else list(s)
+        elif lod in r.parts:
+            for k, p in enumerate(r.parts[lod]):
+                yield f"{r.id}-part{k + 1}", [p]
+
+
+def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod: str = "1.2",
+              local: bool = False, precision: int = 3) -> None:
+    """Write the ``lod`` models of ``results`` to an OBJ file, atomically.
+
+    Parameters
+    ----------
+    results : sequence of BuildingResult
+    origin : array_like, shape (3,)
+        World coordinates of the local origin (CRS units).
+    xy_unit, z_unit : float
+        Metres per CRS unit.
+    lod : str
+        ``"1.2"`` (the Building's solid) or ``"1.3"`` (one object per part).
+    local : bool
+        Write coordinates relative to ``origin`` (see module doc).
+    """
+    from ..lod.mesh import triangulate_surfaces
+
+    origin = np.asarray(origin, dtype=np.float64).reshape(3)
+    unit = np.array([xy_unit, xy_unit, z_unit])
+    step = 10.0 ** (-precision)
+    blocks, chunks, count = [], [], 0
+    for name, solids in _objects(results, lod):
+        groups: dict[str, list] = {}
+        for s in solids:
+            world = np.asarray(s.vertices) / unit + (0.0 if local else origin)
+            q = np.round(world / step).astype(np.int64)
+            idx = np.arange(count, count + len(q))
+            chunks.append(q)
+            count += len(q)
+            tris, face = triangulate_surfaces(s.vertices, s.surfaces)
+            for t, f in zip(tris, face, strict=True):
+                groups.setdefault(s.surfaces[f].semantic or "Surface", []).append(idx[t])
+        blocks.append((name, groups))
+    if chunks:
+        allq = np.concatenate(chunks)
+        uniq, inverse = np.unique(allq, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+    else:
+        uniq, inverse = np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as f:
+        f.write(f"# lidar2city LoD{lod} buildings\n")
+        if local:
+            f.write(f"# origin {origin[0]:.{precision}f} {origin[1]:.{precision}f} "
+                    f"{origin[2]:.{precision}f}\n")
+        fmt = f"v %.{precision}f %.{precision}f %.{precision}f\n"
+        f.write("".join(fmt % tuple(v) for v in uniq * step))
+        for name, groups in blocks:
+            f.write(f"o {name}\n")
+            for sem, tris in groups.items():
+                f.write(f"g {sem}\n")
+                faces = inverse[np.array(tris)] + 1
+                f.write("".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+
+
+def read_obj(path):
+    """Read an OBJ file's vertices and faces: ``(vertices (N, 3), {object: [faces]})``.
+
+    Faces are lists of 0-based vertex indices; meant for checks and tests.
+    """
+    from ._atomic import check_input_file
+
+    p = check_input_file(path)
+    verts, objects, current = [], {}, None
+    with open(p, encoding="utf-8") as f:
+        for line in f:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "v":
+                verts.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "o":
+                current = " ".join(parts[1:])
+                objects.setdefault(current, [])
+            elif parts[0] == "f":
+                objects.setdefault(current, []).append(
+                    [int(tok.split("/")[0]) - 1 for tok in parts[1:]])
+    return np.array(verts, dtype=np.float64).reshape(-1, 3), objects

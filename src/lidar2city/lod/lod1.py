@@ -1,0 +1,258 @@
+"""LoD1.2 and LoD1.3 buildings from a footprint and the points around it.
+
+:func:`reconstruct_building` is pure and independent per building (a batch
+maps it over footprints in any order, on any worker): it sees only the
+building points and ground points near its footprint, and never raises for a
+bad building: the result's ``status`` is ``"failed"`` with a ``reason``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import field
+from ..datamodel import BuildingResult
+from ..errors import ConfigError, InputError
+from .heights import ROOF_STATISTICS, ground_height, roof_height
+from .lod13 import height_parts
+from .prism import clean_polygon, prism_solid
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Lod1Config", "LODS", "reconstruct_building"]
+
+#: LoDs this module builds.
+LODS = ("1.2", "1.3")
+
+
+@dataclass(frozen=True)
+class Lod1Config:
+    """Configuration of the ``[lod1]`` stage (LoD1.2 / LoD1.3 prisms)."""
+
+    lods: tuple = field(("1.2",), "LoDs to build: \"1.2\" (one prism) and/or \"1.3\" "
+                        "(one prism per roof-height part).")
+    roof_statistic: float | str = field(
+        70.0, "Roof height: percentile (0-100) of the building points inside the footprint "
+        "(3DBAG: 70), or \"mean\" (minimises the vertical RMSE), \"median\", \"max\".")
+    ground_percentile: float = field(10.0, "Ground height: percentile of the ground points "
+                                     "around the footprint.")
+    ground_ring: float = field(3.0, "Width (m) of the ring around the footprint where ground "
+                               "points are taken.")
+    ground_wide_ring: float = field(10.0, "Wider ring (m) used when the first holds too few "
+                                    "ground points.")
+    min_ground_points: int = field(3, "Ground points needed in a ring to use it.")
+    min_points: int = field(10, "Building points needed inside a footprint.")
+    min_height: float = field(0.5, "Smallest roof height above ground (m) for a model.")
+    lod13_cell: float = field(0.5, "Raster cell (m) of the LoD1.3 height regions.")
+    lod13_step: float = field(3.0, "Height jump (m) between neighbouring cells that splits "
+                              "LoD1.3 parts.")
+    lod13_min_area: float = field(10.0, "LoD1.3 parts smaller than this (m2) join a neighbour.")
+    coverage_cell: float = field(1.0, "Cell (m) for the share of the footprint without points.")
+    precision: float = field(0.001, "Vertex grid (m): footprints are snapped to it so the "
+                             "written (quantised) model is the validated one.")
+    building_classes: tuple = field((6,), "Point classes that are building points.")
+    ground_classes: tuple = field((2,), "Point classes that are ground points.")
+    validate: bool = field(True, "Check every solid (closed, planar, oriented...) and record "
+                           "the result per building.")
+
+    def __post_init__(self):
+        lods = tuple(str(v) for v in self.lods)
+        bad = [v for v in lods if v not in LODS]
+        if bad or not lods:
+            raise ConfigError(f"lod1.lods: {bad or lods!r}; allowed: {', '.join(LODS)}")
+        object.__setattr__(self, "lods", lods)
+        s = self.roof_statistic
+        if isinstance(s, str):
+            if s not in ROOF_STATISTICS:
+                raise ConfigError(f"lod1.roof_statistic: {s!r}; use a percentile 0-100 or one of "
+                                  f"{', '.join(ROOF_STATISTICS)}")
+        elif isinstance(s, bool) or not 0 <= float(s) <= 100:
+            raise ConfigError(f"lod1.roof_statistic: {s!r} is not a percentile in [0, 100]")
+        if not 0 <= self.ground_percentile <= 100:
+            raise ConfigError(f"lod1.ground_percentile: {self.ground_percentile} not in [0, 100]")
+        for name in ("lod13_cell", "coverage_cell", "lod13_step"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"lod1.{name}: must be > 0, got {getattr(self, name)}")
+        for name in ("ground_ring", "ground_wide_ring", "lod13_min_area", "precision",
+                     "min_height"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"lod1.{name}: must be >= 0, got {getattr(self, name)}")
+        if self.min_points < 1:
+            raise ConfigError(f"lod1.min_points: must be >= 1, got {self.min_points}")
+        object.__setattr__(self, "building_classes", tuple(int(c) for c in self.building_classes))
+        object.__setattr__(self, "ground_classes", tuple(int(c) for c in self.ground_classes))
+
+    @property
+    def search_radius(self) -> float:
+        """How far (m) around a footprint points are needed."""
+        return max(self.ground_ring, self.ground_wide_ring, self.lod13_cell)
+
+    def replace(self, **changes) -> Lod1Config:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+def _failed(result, reason, t0):
+    result.status = "failed"
+    result.reason = reason
+    result.solids.clear()
+    result.parts.clear()
+    result.attributes["valid"] = False
+    result.attributes["reconstruction_time"] = round(time.perf_counter() - t0, 4)
+    return result
+
+
+def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Config | None = None,
+                         id: str = "", fallback_ground_z=None) -> BuildingResult:
+    """LoD1.2 / LoD1.3 models of one building.
+
+    Parameters
+    ----------
+    footprint : shapely Polygon or MultiPolygon
+        Local metric coordinates (as the points).
+    building_xyz : ndarray, shape (N, 3)
+        Building points near the footprint (points outside it are ignored).
+    ground_xyz : ndarray, shape (M, 3)
+        Ground points near the footprint (within ``config.search_radius``).
+    config : Lod1Config, optional
+    id : str
+        The footprint's identifier, kept as the ``footprint_id`` attribute.
+    fallback_ground_z : float or callable, optional
+        Ground height used when no ground point and no building point gives one
+        (e.g. the area's ground level; a callable is evaluated only then);
+        recorded as ``ground_source`` ``"fallback"``.
+
+    Returns
+    -------
+    BuildingResult
+        ``solids["1.2"]``: a Solid (a list of Solids, i.e. a MultiSolid, for a
+        multi-part footprint); ``parts["1.3"]``: one Solid per roof-height part.
+        ``attributes``: ``footprint_id``, ``roof_height``, ``roof_height_min``,
+        ``roof_height_max``, ``ground_height``, ``ground_source``,
+        ``point_count``, ``point_density`` (pts/m2), ``no_data_fraction``,
+        ``rmse_lod12`` / ``rmse_lod13`` (3-D point-to-model distance, m),
+        ``lod13_parts``, ``valid``, ``validity_errors``,
+        ``reconstruction_time`` (s). On failure ``status == "failed"`` and
+        ``reason`` says why; this function does not raise for bad input.
+
+    References
+    ----------
+    Peters R., Dukai B., Vitalis S., van Liempt J., Stoter J. (2022) Automated
+    3D reconstruction of LoD2 and LoD1 models for all 10 million buildings of
+    the Netherlands. PE&RS 88(3):165-170 (3DBAG: LoD1.2 at the 70th percentile,
+    LoD1.3 height steps).
+    """
+    import shapely
+
+    cfg = config or Lod1Config()
+    t0 = time.perf_counter()
+    result = BuildingResult(id=str(id), footprint=footprint)
+    result.attributes["footprint_id"] = str(id)
+    try:
+        if footprint is None or getattr(footprint, "is_empty", True):
+            return _failed(result, "invalid footprint: empty or missing geometry", t0)
+        if footprint.geom_type not in ("Polygon", "MultiPolygon"):
+            return _failed(result, f"invalid footprint: {footprint.geom_type} is not a polygon", t0)
+        polys = clean_polygon(footprint, grid=cfg.precision)
+        if not polys:
+            reason = shapely.is_valid_reason(footprint) if not footprint.is_valid else "zero area"
+            return _failed(result, f"invalid footprint: {reason}", t0)
+        fp = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+        result.footprint = fp
+        area = float(fp.area)
+        bxyz = np.asarray(building_xyz, dtype=np.float64).reshape(-1, 3)
+        gxyz = np.asarray(ground_xyz, dtype=np.float64).reshape(-1, 3)
+        if len(bxyz):
+            shapely.prepare(fp)
+            x0, y0, x1, y1 = fp.bounds
+            box = (bxyz[:, 0] >= x0) & (bxyz[:, 0] <= x1) & (bxyz[:, 1] >= y0) & (bxyz[:, 1] <= y1)
+            idx = np.flatnonzero(box)
+            idx = idx[shapely.contains_xy(fp, bxyz[idx, 0], bxyz[idx, 1])]
+            inside = bxyz[idx]
+        else:
+            inside = bxyz
+        n = len(inside)
+        result.attributes["point_count"] = n
+        result.attributes["point_density"] = round(n / area, 3) if area > 0 else 0.0
+        from ..metrics.model import footprint_coverage, model_rmse
+
+        result.attributes["no_data_fraction"] = round(
+            1.0 - footprint_coverage(fp, inside[:, :2], cell=cfg.coverage_cell), 4)
+        if n == 0:
+            return _failed(result, "no points", t0)
+        if n < cfg.min_points:
+            return _failed(result, f"too few points ({n} < {cfg.min_points})", t0)
+        z = inside[:, 2]
+        roof = roof_height(z, cfg.roof_statistic)
+        ground, source = ground_height(
+            fp, gxyz, percentile=cfg.ground_percentile, ring_width=cfg.ground_ring,
+            wide_ring_width=cfg.ground_wide_ring, min_points=cfg.min_ground_points,
+            building_z=z, fallback_z=fallback_ground_z)
+        result.attributes.update(
+            roof_height=round(roof, 3), roof_height_min=round(float(z.min()), 3),
+            roof_height_max=round(float(z.max()), 3),
+            ground_height=round(ground, 3) if np.isfinite(ground) else None,
+            ground_source=source)
+        if not np.isfinite(ground):
+            return _failed(result, "no ground height (no ground points, no fallback)", t0)
+        if roof - ground < cfg.min_height:
+            return _failed(result, f"roof {roof:.2f} m is less than {cfg.min_height} m above "
+                                   f"ground {ground:.2f} m", t0)
+        issues: list[int] = []
+        if "1.2" in cfg.lods:
+            solids = [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
+            result.solids["1.2"] = solids[0] if len(solids) == 1 else solids
+            result.attributes["rmse_lod12"] = round(model_rmse(inside, solids), 4)
+            if cfg.validate:
+                issues += _codes(solids)
+        if "1.3" in cfg.lods:
+            parts = _lod13(polys, inside, ground, cfg)
+            result.parts["1.3"] = parts
+            result.attributes["lod13_parts"] = len(parts)
+            result.attributes["rmse_lod13"] = round(model_rmse(inside, parts), 4)
+            if cfg.validate:
+                issues += _codes(parts)
+        if cfg.validate:
+            result.attributes["valid"] = not issues
+            result.attributes["validity_errors"] = " ".join(str(c) for c in sorted(set(issues)))
+        result.attributes["reconstruction_time"] = round(time.perf_counter() - t0, 4)
+        return result
+    except Exception as exc:  # a batch never dies on one building
+        logger.debug("building %s failed", id, exc_info=True)
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        kind = "invalid footprint" if isinstance(exc, InputError) else "error"
+        return _failed(result, f"{kind}: {msg}", t0)
+
+
+def _codes(solids) -> list[int]:
+    from ..validate.solid import solid_error_codes
+
+    out: list[int] = []
+    for s in solids:
+        out += solid_error_codes(s)
+    return out
+
+
+def _lod13(polys, inside, ground, cfg) -> list:
+    """Prisms of the roof-height parts of each footprint polygon."""
+    import shapely
+
+    solids = []
+    for poly in polys:
+        sel = shapely.contains_xy(poly, inside[:, 0], inside[:, 1])
+        pts = inside[sel]
+        parts = height_parts(poly, pts, cell=cfg.lod13_cell, step=cfg.lod13_step,
+                             min_area=cfg.lod13_min_area, grid=cfg.precision)
+        for part in parts:
+            in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
+            zz = pts[in_part, 2] if in_part.sum() >= 1 else pts[:, 2]
+            if len(zz) == 0:
+                zz = inside[:, 2]
+            h = max(roof_height(zz, cfg.roof_statistic), ground + cfg.min_height)
+            solids.append(prism_solid(part, ground, h, grid=cfg.precision))
+    return solids

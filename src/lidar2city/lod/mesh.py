@@ -1,0 +1,217 @@
+"""Triangulation of planar polygon surfaces (with holes) into index triangles.
+
+Shared by the validator (self-intersection tests), the model metrics (point
+to mesh distances) and the OBJ writer. No new vertices are created: the
+triangles index the solid's own vertices.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+
+__all__ = ["dot3", "cross3", "plane_bases", "newell_normal", "plane_basis", "triangulate_polygon", "triangulate_surfaces",
+           "solid_mesh", "solid_triangles"]
+
+
+def dot3(a, b):
+    """Row-wise dot product over the last axis of (..., 3) arrays (fast for small arrays)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def cross3(a, b):
+    """Cross product over the last axis of (..., 3) arrays (fast for small arrays)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def plane_bases(normals):
+    """Vectorised :func:`plane_basis`: ``u, v`` of shape (F, 3) for normals (F, 3)."""
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.sqrt(dot3(n, n))[:, None]
+    zero = np.zeros(len(n))
+    near_x = np.abs(n[:, 0]) >= 0.9
+    u = np.where(near_x[:, None], np.column_stack([n[:, 2], zero, -n[:, 0]]),
+                 np.column_stack([zero, -n[:, 2], n[:, 1]]))
+    u = u / np.sqrt(dot3(u, u))[:, None]
+    return u, cross3(n, u)
+
+
+def newell_normal(points: np.ndarray) -> np.ndarray:
+    """Area-weighted normal of a closed ring (Newell's method), not normalised.
+
+    Parameters
+    ----------
+    points : ndarray, shape (K, 3)
+        Ring vertices without the repeated closing vertex.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Twice the vector area: its length is twice the (projected) area, its
+        direction follows the right-hand rule on the ring order.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    q = np.roll(p, -1, axis=0)
+    return np.array([
+        np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
+        np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
+        np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1])),
+    ])
+
+
+def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two orthonormal vectors ``u, v`` with ``u x v`` along ``normal``."""
+    nx, ny, nz = np.asarray(normal, dtype=np.float64) / np.sqrt(np.dot(normal, normal))
+    # u = helper x n with helper = x axis (or y axis when n is close to x)
+    if abs(nx) < 0.9:
+        u = np.array([0.0, -nz, ny])
+    else:
+        u = np.array([nz, 0.0, -nx])
+    u /= np.sqrt(u @ u)
+    v = np.array([ny * u[2] - nz * u[1], nz * u[0] - nx * u[2], nx * u[1] - ny * u[0]])
+    return u, v
+
+
+def _fan_ok(p2: np.ndarray) -> bool:
+    """True when a single 2-D ring (CCW) is strictly convex, so a fan triangulates it."""
+    d1 = np.roll(p2, -1, axis=0) - p2
+    d2 = np.roll(d1, -1, axis=0)
+    cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    return bool(np.all(cross > 0))
+
+
+def triangulate_polygon(vertices: np.ndarray, rings) -> np.ndarray:
+    """Triangles (vertex index triples) covering a planar polygon with holes.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (M, 3)
+    rings : list of ndarray of int
+        Exterior ring first (orientation defines the normal), then holes.
+
+    Returns
+    -------
+    ndarray, shape (T, 3), int64
+        Triangles oriented like the exterior ring (same normal direction).
+        Empty for a degenerate polygon (zero area, fewer than 3 vertices).
+
+    Notes
+    -----
+    Triangles and quadrilaterals that are convex are fanned; anything else is
+    projected on its plane (Newell normal) and triangulated by GEOS's
+    constrained Delaunay triangulation, which adds no vertex.
+    """
+    import shapely
+
+    rings = [np.asarray(r, dtype=np.int64) for r in rings]
+    ext = rings[0]
+    if len(ext) < 3:
+        return np.zeros((0, 3), dtype=np.int64)
+    n = newell_normal(vertices[ext])
+    area2 = np.linalg.norm(n)
+    if not np.isfinite(area2) or area2 < 1e-12:
+        return np.zeros((0, 3), dtype=np.int64)
+    if len(rings) == 1 and len(ext) == 3:
+        return ext.reshape(1, 3).copy()
+    u, v = plane_basis(n)
+    allidx = np.concatenate(rings)
+    p2 = np.column_stack([vertices[allidx] @ u, vertices[allidx] @ v])
+    if len(rings) == 1 and _fan_ok(p2):
+        k = len(ext)
+        return np.column_stack([np.full(k - 2, ext[0]), ext[1:-1], ext[2:]])
+    offsets = np.cumsum([0] + [len(r) for r in rings])
+    shell = p2[offsets[0]:offsets[1]]
+    holes = [p2[offsets[i]:offsets[i + 1]] for i in range(1, len(rings))]
+    try:
+        poly = shapely.Polygon(shell, holes)
+        if not poly.is_valid:
+            poly = shapely.make_valid(poly)
+        tris = shapely.get_parts(shapely.constrained_delaunay_triangles(poly))
+    except Exception:  # GEOS failures on degenerate input
+        return np.zeros((0, 3), dtype=np.int64)
+    tris = tris[shapely.get_type_id(tris) == 3]
+    if len(tris) == 0:
+        return np.zeros((0, 3), dtype=np.int64)
+    coords = shapely.get_coordinates(tris).reshape(len(tris), -1, 2)[:, :3]
+    lookup = {(float(a), float(b)): int(i) for (a, b), i in zip(p2, allidx, strict=True)}
+    out = np.empty((len(tris), 3), dtype=np.int64)
+    keep = np.ones(len(tris), dtype=bool)
+    for t in range(len(tris)):
+        for j in range(3):
+            idx = lookup.get((float(coords[t, j, 0]), float(coords[t, j, 1])))
+            if idx is None:  # make_valid moved a vertex: fall back to the nearest one
+                d = np.sum((p2 - coords[t, j]) ** 2, axis=1)
+                idx = int(allidx[np.argmin(d)])
+            out[t, j] = idx
+        if len(set(out[t])) < 3:
+            keep[t] = False
+    out = out[keep]
+    c = coords[keep]
+    signed = ((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
+              - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
+    flip = signed < 0
+    out[flip] = out[flip][:, ::-1]
+    return out
+
+
+def triangulate_surfaces(vertices: np.ndarray, surfaces) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate every surface of a boundary.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (M, 3)
+    surfaces : sequence of :class:`~lidar2city.datamodel.Surface` or of ring lists
+
+    Returns
+    -------
+    triangles : ndarray, shape (T, 3), int64
+    face : ndarray, shape (T,), int64
+        Index of the surface each triangle comes from.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    tris, faces = [], []
+    for i, s in enumerate(surfaces):
+        rings = s.rings if hasattr(s, "rings") else s
+        t = triangulate_polygon(vertices, rings)
+        tris.append(t)
+        faces.append(np.full(len(t), i, dtype=np.int64))
+    if not tris:
+        return np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate(tris), np.concatenate(faces)
+
+
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def solid_mesh(solid) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`triangulate_surfaces` of a solid, computed once per solid object.
+
+    Solids are treated as immutable (their dataclass is frozen): the cache is
+    keyed by the object and dropped with it.
+    """
+    try:
+        return _CACHE[solid]
+    except (KeyError, TypeError):
+        pass
+    out = triangulate_surfaces(solid.vertices, solid.surfaces)
+    try:
+        _CACHE[solid] = out
+    except TypeError:
+        pass
+    return out
+
+
+def solid_triangles(solids) -> np.ndarray:
+    """Corner coordinates of the triangles of one or several solids, shape (T, 3, 3)."""
+    if hasattr(solids, "vertices"):
+        solids = [solids]
+    out = []
+    for s in solids:
+        t, _ = solid_mesh(s)
+        out.append(s.vertices[t])
+    if not out:
+        return np.zeros((0, 3, 3))
+    return np.concatenate(out)

@@ -1,0 +1,438 @@
+"""``reconstruct``: point cloud tiles (+ footprints) to LoD1 buildings in a file.
+
+The job, for any number of tiles and buildings:
+
+1. read the tiles as one area (:func:`lidar2city.io.las.read_points`);
+2. split building and ground points by class (:func:`point_roles`);
+3. read the footprints into the same local frame (:func:`load_footprints`);
+4. index the points on a grid and give each building exactly the points within
+   its footprint's bounding box plus ``search_radius`` metres, so a result
+   does not depend on tiling, chunking or order (buildings are visited chunk
+   by chunk, spatially, for locality), and call the pure per-building
+   :func:`lidar2city.lod.reconstruct_building` (a Dask engine can map it);
+5. write CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`).
+
+``progress(done, total, result)`` is called after every building.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import EmptyInputError, InputError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["FORMATS", "ReconstructSummary", "PointGrid", "format_from_name", "lod1_config",
+           "point_roles", "load_footprints", "reconstruct_buildings", "write_buildings",
+           "reconstruct"]
+
+#: output format name -> file name endings that select it.
+FORMATS = {
+    "cityjson": (".city.json", ".json"),
+    "cityjsonseq": (".city.jsonl", ".jsonl"),
+    "obj": (".obj",),
+    "gpkg": (".gpkg",),
+}
+
+
+def format_from_name(path, fmt=None) -> str:
+    """The output format: ``fmt`` if given, else from the file name's ending."""
+    if fmt is not None:
+        fmt = fmt.lower()
+        if fmt not in FORMATS:
+            raise InputError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+        return fmt
+    name = str(path).lower()
+    for f, endings in FORMATS.items():
+        if any(name.endswith(e) for e in endings):
+            if f == "cityjson" and name.endswith(".jsonl"):
+                continue
+            return f
+    raise InputError(f"cannot tell the format of {str(path)!r} from its name; use --format "
+                     f"({', '.join(FORMATS)}) or a name ending in .city.json, .city.jsonl, "
+                     ".obj or .gpkg")
+
+
+@dataclass
+class ReconstructSummary:
+    """What a reconstruct run did."""
+
+    output: str
+    total: int = 0
+    done: int = 0
+    failed: int = 0
+    invalid: int = 0
+    reasons: Counter = field(default_factory=Counter)
+    seconds: float = 0.0
+    lods: tuple = ()
+    format: str = ""
+
+    def lines(self) -> list[str]:
+        out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
+               f"{self.failed} failed, {self.invalid} invalid, in {self.seconds:.2f} s -> "
+               f"{self.output} ({self.format})"]
+        for reason, n in self.reasons.most_common():
+            out.append(f"  failed: {n} x {reason}")
+        return out
+
+
+class PointGrid:
+    """A uniform 2-D grid index over points: which points fall in a bounding box.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, 2)
+    cell : float
+        Cell size (metres).
+    """
+
+    def __init__(self, xy, cell: float = 10.0):
+        self.xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        self.cell = float(cell)
+        if len(self.xy) == 0:
+            self.lo = np.zeros(2)
+            self.shape = (1, 1)
+            self.order = np.zeros(0, dtype=np.int64)
+            self.starts = np.zeros(2, dtype=np.int64)
+            return
+        self.lo = self.xy.min(axis=0)
+        ij = np.floor((self.xy - self.lo) / self.cell).astype(np.int64)
+        self.shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+        key = ij[:, 0] * self.shape[1] + ij[:, 1]
+        self.order = np.argsort(key, kind="stable")
+        counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
+        self.starts = np.concatenate([[0], np.cumsum(counts)])
+
+    def query(self, xmin, ymin, xmax, ymax) -> np.ndarray:
+        """Indices of the points inside the box (bounds included), sorted."""
+        if len(self.order) == 0:
+            return np.zeros(0, dtype=np.int64)
+        i0, j0 = np.floor((np.array([xmin, ymin]) - self.lo) / self.cell).astype(np.int64)
+        i1, j1 = np.floor((np.array([xmax, ymax]) - self.lo) / self.cell).astype(np.int64)
+        i0, j0 = max(i0, 0), max(j0, 0)
+        i1, j1 = min(i1, self.shape[0] - 1), min(j1, self.shape[1] - 1)
+        if i0 > i1 or j0 > j1:
+            return np.zeros(0, dtype=np.int64)
+        rows = np.arange(i0, i1 + 1)
+        a = self.starts[rows * self.shape[1] + j0]
+        b = self.starts[rows * self.shape[1] + j1 + 1]
+        cnt = b - a
+        idx = self.order[np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        p = self.xy[idx]
+        keep = (p[:, 0] >= xmin) & (p[:, 0] <= xmax) & (p[:, 1] >= ymin) & (p[:, 1] <= ymax)
+        return np.sort(idx[keep])
+
+
+def lod1_config(config=None, *, lods=None):
+    """``(Lod1Config, resolved configuration dict)`` from None, a dict, a TOML path or a config.
+
+    ``lods`` (e.g. from ``--lod``) overrides the file's ``lod1.lods``.
+    """
+    import tomllib
+
+    from ..config import STAGES, build_stage, load_config, resolved_dict
+    from ..errors import ConfigError, FileFormatError
+    from ..lod.lod1 import Lod1Config
+
+    if isinstance(config, Lod1Config):
+        cfg, others = config, {}
+    else:
+        if config is None:
+            data = {}
+        elif isinstance(config, dict):
+            data = dict(config)
+        else:
+            p = Path(config)
+            try:
+                data = tomllib.loads(p.read_text(encoding="utf-8"))
+            except FileNotFoundError:
+                raise FileFormatError(f"{str(p)!r}: no such config file") from None
+            except tomllib.TOMLDecodeError as exc:
+                raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
+        section = data.pop("lod1", {})
+        if not isinstance(section, dict):
+            raise ConfigError("[lod1] must be a table of options")
+        others = load_config(data) if (data or STAGES) else {}
+        others.pop("lod1", None)
+        cfg = build_stage("lod1", section, cls=Lod1Config)
+    if lods:
+        cfg = cfg.replace(lods=tuple(lods))
+    resolved = resolved_dict({**others, "lod1": cfg})
+    return cfg, resolved
+
+
+def point_roles(cloud, config):
+    """Boolean masks ``(building, ground)`` of the cloud's points.
+
+    Uses the classification the input carries (ASPRS 6 building, 2 ground by
+    default; ``config.building_classes`` / ``ground_classes``).
+
+    Raises
+    ------
+    InputError
+        When the input has no building class. (Plug-in point: classify the
+        points here once :mod:`lidar2city.classify` exists.)
+    """
+    cls = cloud.get("classification")
+    if cls is None or not np.isin(cls, config.building_classes).any():
+        raise InputError("input has no building class: run lidar2city classify first")
+    return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes)
+
+
+def load_footprints(path, cloud, *, id_field=None, layer=None):
+    """Footprints in the cloud's local frame, restricted to those meeting the points' extent.
+
+    Raises
+    ------
+    InputError
+        Without footprints. (Plug-in point: footprints from the points once
+        :mod:`lidar2city.footprints` exists.)
+    """
+    import shapely
+
+    from ..datamodel import Footprints
+    from ..io.vector import read_footprints
+
+    if path is None:
+        raise InputError("--footprints is required for now")
+    fps, _ = read_footprints(path, layer=layer, id_field=id_field, origin=cloud.origin[:2],
+                             xy_unit=cloud.xy_unit, target_crs=cloud.crs)
+    lo = cloud.xyz[:, :2].min(axis=0)
+    hi = cloud.xyz[:, :2].max(axis=0)
+    area = shapely.box(lo[0], lo[1], hi[0], hi[1])
+    keep = [i for i, g in enumerate(fps.geometries) if g is None or g.intersects(area)]
+    if not keep:
+        raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
+                              "point cloud's extent (check both CRSs)")
+    if len(keep) < len(fps):
+        logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
+    return Footprints([fps.geometries[i] for i in keep], [fps.ids[i] for i in keep],
+                      {k: [v[i] for i in keep] for k, v in fps.attributes.items()})
+
+
+def _chunk_order(geometries, chunk):
+    """Building indices grouped by square chunks of ``chunk`` metres (row by row)."""
+    import shapely
+
+    cent = np.array([[np.nan, np.nan] if g is None or g.is_empty else
+                     shapely.get_coordinates(g.envelope).mean(axis=0) for g in geometries],
+                    dtype=np.float64).reshape(-1, 2)
+    cent = np.nan_to_num(cent, nan=0.0)
+    key = np.floor(cent / chunk).astype(np.int64)
+    return np.lexsort((key[:, 0], key[:, 1]))
+
+
+def reconstruct_buildings(cloud, footprints, *, config=None, building=None, ground=None,
+                          chunk: float = 250.0, progress=None) -> list:
+    """LoD1 models of every footprint (results in footprint order).
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    footprints : Footprints
+        Same local frame as ``cloud``.
+    config : Lod1Config, optional
+    building, ground : ndarray of bool, shape (N,), optional
+        Point roles; default from the classification (:func:`point_roles`).
+    chunk : float
+        Side (m) of the spatial chunks buildings are visited in.
+    progress : callable, optional
+        ``progress(done, total, result)`` after each building.
+    """
+    from ..lod.lod1 import Lod1Config, reconstruct_building
+    from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
+    from ..validate import solid as _solid  # noqa: F401
+
+    cfg = config or Lod1Config()
+    if building is None or ground is None:
+        building, ground = point_roles(cloud, cfg)
+    bxyz = cloud.xyz[building]
+    gxyz = cloud.xyz[ground]
+    bgrid = PointGrid(bxyz[:, :2], cell=10.0)
+    ggrid = PointGrid(gxyz[:, :2], cell=10.0)
+    radius = cfg.search_radius
+    area_radius = 50.0
+    total = len(footprints)
+    results = [None] * total
+    notes = footprints.attributes.get("_note", [""] * total)
+    for done, i in enumerate(_chunk_order(footprints.geometries, chunk), start=1):
+        g = footprints.geometries[i]
+        fid = footprints.ids[i]
+        if g is None or g.is_empty:
+            res = reconstruct_building(None, np.zeros((0, 3)), np.zeros((0, 3)), config=cfg, id=fid)
+            res.reason = f"invalid footprint: {notes[i] or 'empty geometry'}"
+        else:
+            x0, y0, x1, y1 = g.bounds
+            bi = bgrid.query(x0, y0, x1, y1)
+            gi = ggrid.query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
+            def fallback(x0=x0, y0=y0, x1=x1, y1=y1):
+                # the area's ground level: ground points within 50 m
+                wide = ggrid.query(x0 - area_radius, y0 - area_radius, x1 + area_radius,
+                                   y1 + area_radius)
+                return (float(np.percentile(gxyz[wide, 2], cfg.ground_percentile))
+                        if len(wide) else None)
+
+            res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
+                                       fallback_ground_z=fallback)
+        if notes[i]:
+            res.attributes["footprint_note"] = notes[i]
+        results[i] = res
+        if progress is not None:
+            progress(done, total, res)
+    return results
+
+
+def _fields_for_output(footprints):
+    return {k: v for k, v in footprints.attributes.items() if not k.startswith("_")}
+
+
+def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attributes=None,
+                    lods=("1.2",)) -> str:
+    """Write results in the format chosen by ``fmt`` or the file name; returns the format."""
+    fmt = format_from_name(path, fmt)
+    title = f"lidar2city LoD{'+'.join(lods)} buildings"
+    common = dict(origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
+                  configuration=configuration, attributes=attributes, title=title)
+    if fmt == "cityjson":
+        from ..io.cityjson import write_cityjson
+
+        write_cityjson(path, results, **common)
+    elif fmt == "cityjsonseq":
+        from ..io.cityjson import write_cityjsonseq
+
+        write_cityjsonseq(path, results, **common)
+    elif fmt == "obj":
+        from ..io.obj import write_obj
+
+        write_obj(path, results, origin=cloud.origin, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
+                  lod=lods[0])
+    elif fmt == "gpkg":
+        _write_gpkg(path, results, cloud, attributes=attributes, configuration=configuration,
+                    lods=lods)
+    return fmt
+
+
+def _face_multipolygon(solids):
+    """Every face of ``solids`` as one 3-D MultiPolygon (local metres)."""
+    import shapely
+
+    from ..datamodel import Solid
+
+    if isinstance(solids, Solid):
+        solids = [solids]
+    polys = []
+    for s in solids:
+        v = np.asarray(s.vertices)
+        for surf in s.surfaces:
+            rings = [v[np.asarray(r)] for r in surf.rings]
+            polys.append(shapely.Polygon(rings[0], rings[1:]))
+    return shapely.MultiPolygon(polys) if polys else None
+
+
+def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lods=("1.2",)):
+    import json
+
+    from ..io.vector import VectorLayer, write_layers
+
+    keys = []
+    for r in results:
+        for k in r.attributes:
+            if k not in keys:
+                keys.append(k)
+    fields = {"id": [str(r.id) for r in results], "status": [r.status for r in results],
+              "reason": [r.reason for r in results]}
+    for k, v in (attributes or {}).items():
+        if k not in fields:
+            fields[k] = list(v)
+    for k in keys:
+        vals = [r.attributes.get(k) for r in results]
+        if all(v is None or isinstance(v, (bool, np.bool_)) for v in vals):
+            vals = [None if v is None else int(v) for v in vals]
+        elif all(v is None or isinstance(v, (int, float, np.number)) for v in vals):
+            vals = np.array([np.nan if v is None else float(v) for v in vals])
+        else:
+            vals = [None if v is None else str(v) for v in vals]
+        fields[k] = vals
+    import shapely
+
+    foot = [shapely.MultiPolygon(shapely.get_parts(r.footprint)) if r.footprint is not None
+            and not r.footprint.is_empty else None for r in results]
+    layers = [VectorLayer("footprints", foot, fields, "MultiPolygon")]
+    for lod in lods:
+        rows = [r for r in results if (lod in r.solids or lod in r.parts)]
+        geoms = [_face_multipolygon(r.solids[lod] if lod in r.solids else r.parts[lod])
+                 for r in rows]
+        layers.append(VectorLayer(f"lod{lod.replace('.', '')}", geoms,
+                                  {"id": [str(r.id) for r in rows]}, "MultiPolygon Z"))
+    meta = {"lidar2city_configuration": json.dumps(configuration or {})}
+    write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
+                 z_unit=cloud.z_unit, metadata=meta)
+
+
+def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
+                id_field=None, layer=None, progress=None) -> ReconstructSummary:
+    """Read tiles and footprints, reconstruct every building, write ``output``.
+
+    Parameters
+    ----------
+    inputs : path or sequence of paths
+        LAS/LAZ tiles, read as one area.
+    output : path
+        ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
+    footprints : path
+        Any OGR vector source with building polygons.
+    lods : sequence of {"1.2", "1.3"}, optional
+        Overrides ``[lod1] lods`` of the configuration.
+    crs : str, optional
+        CRS of the tiles when they carry none (or to override theirs).
+    config : path, dict or Lod1Config, optional
+        Run configuration (TOML).
+    progress : callable, optional
+        ``progress(done, total, result)``.
+
+    Returns
+    -------
+    ReconstructSummary
+    """
+    from ..io.las import read_points
+
+    t0 = time.perf_counter()
+    fmt = format_from_name(output, fmt)
+    cfg, resolved = lod1_config(config, lods=lods)
+    cloud = read_points(inputs, crs=crs)
+    cloud.require_points()
+    if cloud.crs is None:
+        logger.warning("the input has no CRS: the output will have no reference system "
+                       "(pass --crs EPSG:xxxx)")
+    building, ground = point_roles(cloud, cfg)
+    fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
+    results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
+                                    progress=progress)
+    write_buildings(output, results, cloud, fmt=fmt, configuration=resolved,
+                    attributes=_fields_for_output(fps), lods=cfg.lods)
+    summary = ReconstructSummary(str(output), total=len(results), lods=cfg.lods, format=fmt)
+    for r in results:
+        if r.ok:
+            summary.done += 1
+            if r.attributes.get("valid") is False:
+                summary.invalid += 1
+        else:
+            summary.failed += 1
+            summary.reasons[_reason_kind(r.reason)] += 1
+    summary.seconds = time.perf_counter() - t0
+    return summary
+
+
+def _reason_kind(reason: str) -> str:
+    """A reason without its numbers, to count failures by kind."""
+    import re
+
+    return re.sub(r"-?\d+(\.\d+)?", "N", reason)
+

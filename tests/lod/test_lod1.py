@@ -1,0 +1,186 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import MultiPolygon, Polygon, box
+
+from lidar2city.errors import ConfigError, InputError
+from lidar2city.lod import (
+    Lod1Config,
+    height_parts,
+    lod12_solid,
+    lod12_solids,
+    prism_solid,
+    reconstruct_building,
+    roof_height,
+)
+from lidar2city.validate import check_solid
+from lidar2city.validate.solid import solid_volume
+
+
+def _grid_points(poly, z, spacing=0.5):
+    import shapely
+    x0, y0, x1, y1 = poly.bounds
+    gx, gy = np.meshgrid(np.arange(x0 + spacing / 2, x1, spacing), np.arange(y0 + spacing / 2, y1, spacing))
+    xy = np.column_stack([gx.ravel(), gy.ravel()])
+    xy = xy[shapely.contains_xy(poly, xy[:, 0], xy[:, 1])]
+    zz = z(xy) if callable(z) else np.full(len(xy), float(z))
+    return np.column_stack([xy, zz])
+
+
+def _ground_ring(poly, z=0.0):
+    ring = poly.buffer(2.0).difference(poly)
+    return _grid_points(ring, z, 0.5)
+
+
+def test_box_prism_is_valid_closed_and_has_its_volume():
+    s = prism_solid(box(0, 0, 4, 3), 1.0, 6.0)
+    assert len(s.vertices) == 8 and len(s.surfaces) == 6
+    assert [x.semantic for x in s.surfaces[:2]] == ["GroundSurface", "RoofSurface"]
+    assert check_solid(s) == []
+    assert solid_volume(s.vertices, s.surfaces) == pytest.approx(4 * 3 * 5)
+
+
+def test_prism_with_hole_has_walls_for_the_hole():
+    poly = Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(3, 3), (3, 6), (6, 6), (6, 3)]])
+    s = prism_solid(poly, 0.0, 3.0)
+    assert sum(x.semantic == "WallSurface" for x in s.surfaces) == 8
+    assert len(s.surfaces[0].rings) == 2
+    assert check_solid(s) == []
+    assert solid_volume(s.vertices, s.surfaces) == pytest.approx((100 - 9) * 3)
+
+
+def test_multipolygon_gives_one_solid_per_part():
+    mp = MultiPolygon([box(0, 0, 1, 1), box(3, 0, 4, 2)])
+    solids = lod12_solids(mp, 0.0, 2.0)
+    assert len(solids) == 2
+    with pytest.raises(InputError):
+        lod12_solid(mp, 0.0, 2.0)
+    with pytest.raises(InputError):
+        prism_solid(box(0, 0, 1, 1), 2.0, 1.0)
+
+
+def test_repeated_and_near_vertices_are_dropped():
+    poly = Polygon([(0, 0), (5, 0), (5, 0.0000001), (5, 5), (0, 5), (0, 5)])
+    s = lod12_solid(poly, 0.0, 1.0, grid=0.001)
+    assert len(s.vertices) == 8
+    assert check_solid(s) == []
+
+
+def test_flat_roof_building_exact():
+    fp = box(0, 0, 10, 8)
+    pts = _grid_points(fp, 12.0)
+    r = reconstruct_building(fp, pts, _ground_ring(fp, 2.0), id="a")
+    assert r.ok, r.reason
+    a = r.attributes
+    assert a["roof_height"] == pytest.approx(12.0)
+    assert a["ground_height"] == pytest.approx(2.0)
+    assert a["ground_source"] == "ring"
+    assert a["rmse_lod12"] == pytest.approx(0.0, abs=1e-9)
+    assert a["point_count"] == len(pts)
+    assert a["point_density"] == pytest.approx(len(pts) / 80.0, rel=1e-3)
+    assert a["no_data_fraction"] == 0.0
+    assert a["valid"] is True and a["footprint_id"] == "a"
+
+
+def test_roof_statistic_options():
+    z = np.arange(101.0)
+    assert roof_height(z, 70) == pytest.approx(70.0)
+    assert roof_height(z, "mean") == pytest.approx(50.0)
+    with pytest.raises(InputError):
+        roof_height(z, "mode")
+    with pytest.raises(ConfigError, match="lod1.roof_statistic"):
+        Lod1Config(roof_statistic=150)
+    with pytest.raises(ConfigError, match="lod1.lods"):
+        Lod1Config(lods=("2.2",))
+
+
+def test_failures_have_reasons_and_never_raise():
+    fp = box(0, 0, 10, 10)
+    g = _ground_ring(fp)
+    assert reconstruct_building(fp, np.zeros((0, 3)), g).reason == "no points"
+    r = reconstruct_building(fp, np.array([[5, 5, 3.0]] * 3), g)
+    assert r.status == "failed" and r.reason == "too few points (3 < 10)"
+    assert reconstruct_building(None, np.zeros((0, 3)), g).reason.startswith("invalid footprint")
+    from shapely.geometry import LineString
+    assert "not a polygon" in reconstruct_building(LineString([(0, 0), (1, 1)]), g, g).reason
+    bow = Polygon([(0, 0), (10, 10), (10, 0), (0, 10)])  # bow tie: repaired into two parts
+    r = reconstruct_building(bow, _grid_points(box(0, 0, 10, 10), 5.0), g)
+    assert r.ok and isinstance(r.solids["1.2"], list) and len(r.solids["1.2"]) == 2
+    # roof below the ground: failed with the heights in the reason
+    r = reconstruct_building(fp, _grid_points(fp, 0.2), g)
+    assert r.status == "failed" and "above ground" in r.reason
+
+
+def test_ground_fallbacks():
+    fp = box(0, 0, 10, 10)
+    pts = _grid_points(fp, 8.0)
+    r = reconstruct_building(fp, pts, np.zeros((0, 3)), fallback_ground_z=lambda: 1.5)
+    # no ground point: lowest building point comes before the area fallback
+    assert r.attributes["ground_source"] == "lowest building point"
+    far = _ground_ring(box(-8, -8, 18, 18).difference(box(-5, -5, 15, 15)).envelope.difference(fp))
+    r = reconstruct_building(fp, pts, far[np.hypot(*(far[:, :2] - 5).T) > 9])
+    assert r.attributes["ground_source"] in ("ring", "wide ring")
+
+
+def test_lod13_two_heights_tile_the_footprint():
+    fp = box(0, 0, 20, 12)
+    pts = _grid_points(fp, lambda xy: np.where(xy[:, 0] < 8, 15.0, 6.0))
+    cfg = Lod1Config(lods=("1.2", "1.3"))
+    r = reconstruct_building(fp, pts, _ground_ring(fp), config=cfg)
+    assert r.ok
+    parts = r.parts["1.3"]
+    assert len(parts) == 2
+    tops = sorted(float(p.vertices[:, 2].max()) for p in parts)
+    assert tops == pytest.approx([6.0, 15.0])
+    assert all(check_solid(p) == [] for p in parts)
+    vol = sum(solid_volume(p.vertices, p.surfaces) for p in parts)
+    assert vol == pytest.approx(8 * 12 * 15 + 12 * 12 * 6, rel=1e-6)
+    assert r.attributes["rmse_lod13"] < 1e-6 < r.attributes["rmse_lod12"]
+
+
+def test_lod13_sloped_roof_stays_one_part_and_small_parts_merge():
+    fp = box(0, 0, 12, 10)
+    gable = _grid_points(fp, lambda xy: 10 - 0.8 * np.abs(xy[:, 1] - 5))
+    assert len(height_parts(fp, gable, step=3.0)) == 1
+    chimney = gable.copy()
+    near = (np.abs(chimney[:, 0] - 6) < 0.6) & (np.abs(chimney[:, 1] - 5) < 0.6)
+    chimney[near, 2] += 5
+    assert len(height_parts(fp, chimney, step=3.0, min_area=10.0)) == 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4), st.floats(-50, 50))
+def test_translation_does_not_change_the_model(dx, dy, dz):
+    fp = Polygon([(0, 0), (9, 0), (9, 4), (4, 4), (4, 8), (0, 8)])
+    pts = _grid_points(fp, lambda xy: 7 + 0.3 * xy[:, 0])
+    g = _ground_ring(fp, 0.0)
+    from shapely import affinity
+    a = reconstruct_building(fp, pts, g).attributes
+    b = reconstruct_building(affinity.translate(fp, dx, dy), pts + [dx, dy, dz], g + [dx, dy, dz]).attributes
+    assert b["roof_height"] - a["roof_height"] == pytest.approx(dz, abs=2e-3)
+    assert b["rmse_lod12"] == pytest.approx(a["rmse_lod12"], abs=2e-3)
+    assert b["valid"]
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(st.floats(2, 30), min_size=4, max_size=4), st.integers(0, 2**31 - 1))
+def test_lod13_parts_tile_the_footprint_exactly(levels, seed):
+    import shapely
+
+    rng = np.random.default_rng(seed)
+    fp = Polygon([(0, 0), (17.3, 0), (17.3, 6.1), (9.2, 6.1), (9.2, 14.7), (0, 14.7)])
+    cx, cy = rng.uniform(2, 15), rng.uniform(2, 12)
+
+    def z(xy):
+        q = (xy[:, 0] > cx).astype(int) + 2 * (xy[:, 1] > cy).astype(int)
+        return np.asarray(levels)[q] + rng.normal(0, 0.1, len(xy))
+
+    pts = _grid_points(fp, z, 0.4)
+    parts = height_parts(fp, pts, cell=0.5, step=3.0, min_area=5.0, grid=0.001)
+    union = shapely.union_all(parts, grid_size=0.001)
+    assert abs(union.area - fp.area) < 1e-3
+    assert abs(sum(p.area for p in parts) - fp.area) < 1e-3
+    assert union.symmetric_difference(fp).area < 1e-3
+    for p in parts:
+        assert check_solid(prism_solid(p, 0.0, 40.0, grid=0.001)) == []

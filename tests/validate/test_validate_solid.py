@@ -1,0 +1,137 @@
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import MultiPoint, box
+
+from lidar2city.datamodel import Solid, Surface
+from lidar2city.lod.prism import clean_polygon, prism_solid
+from lidar2city.validate import check_solid, parts_overlap, solid_error_codes
+
+
+def cube():
+    return prism_solid(box(0, 0, 1, 1), 0.0, 1.0)
+
+
+def replace_surface(s, i, rings):
+    surfaces = list(s.surfaces)
+    surfaces[i] = Surface(rings, surfaces[i].semantic)
+    return Solid(s.vertices, surfaces)
+
+
+def test_cube_is_valid():
+    assert check_solid(cube()) == []
+
+
+def test_flipped_face_is_wrongly_oriented():
+    s = cube()
+    flipped = replace_surface(s, 3, [s.surfaces[3].rings[0][::-1]])
+    assert solid_error_codes(flipped) == [307]
+
+
+def test_all_faces_flipped_is_wrongly_oriented():
+    s = cube()
+    inv = Solid(s.vertices, [Surface([r[::-1] for r in f.rings], f.semantic) for f in s.surfaces])
+    assert solid_error_codes(inv) == [307]
+
+
+def test_removed_face_is_not_closed():
+    s = cube()
+    assert solid_error_codes(Solid(s.vertices, s.surfaces[:-1])) == [302]
+
+
+def test_non_planar_face():
+    s = cube()
+    v = s.vertices.copy()
+    v[s.surfaces[1].rings[0][0], 2] += 0.1  # lift one roof corner: roof and two walls bend
+    codes = solid_error_codes(Solid(v, s.surfaces))
+    assert codes == [203]
+    # within the tolerance it passes
+    v = s.vertices.copy()
+    v[s.surfaces[1].rings[0][0], 2] += 0.004
+    assert solid_error_codes(Solid(v, s.surfaces)) == []
+
+
+def test_degenerate_faces():
+    s = cube()
+    r = s.surfaces[1].rings[0]
+    assert solid_error_codes(replace_surface(s, 1, [np.r_[r, r[-1]]])) == [102]
+    assert solid_error_codes(replace_surface(s, 1, [r[:2]])) == [101]
+    bow = r[[0, 2, 1, 3]]  # bow tie ring
+    assert 104 in solid_error_codes(replace_surface(s, 1, [bow]))
+
+
+def test_inner_ring_checks():
+    # roof with a hole outside its outer ring
+    s = prism_solid(box(0, 0, 4, 4), 0.0, 2.0)
+    v = np.vstack([s.vertices, [[10, 10, 2], [10, 11, 2], [11, 11, 2]]])
+    n = len(s.vertices)
+    roof = s.surfaces[1].rings[0]
+    bad = replace_surface(Solid(v, s.surfaces), 1, [roof, np.array([n, n + 1, n + 2])])
+    assert 206 in solid_error_codes(bad)
+
+
+def test_non_manifold_edge():
+    s = cube()
+    extra = Surface([s.surfaces[2].rings[0][::-1]], "WallSurface")
+    assert 303 in solid_error_codes(Solid(s.vertices, [*s.surfaces, extra, extra]))
+
+
+def _triangulated(s):
+    from lidar2city.lod.mesh import solid_mesh
+
+    tris, face = solid_mesh(s)
+    return Solid(s.vertices, [Surface([t], s.surfaces[f].semantic) for t, f in zip(tris, face, strict=True)])
+
+
+def test_self_intersecting_shell():
+    tri = _triangulated(cube())
+    assert check_solid(tri) == []
+    # push a roof corner through the floor: still closed, manifold and consistently
+    # oriented, but roof triangles now cross floor triangles
+    v = tri.vertices.copy()
+    i = np.flatnonzero((v == [1, 1, 1]).all(axis=1))[0]
+    v[i] = [0.5, 0.5, -1.0]
+    assert solid_error_codes(Solid(v, tri.surfaces)) == [306]
+    # two closed boxes in one shell
+    a, b = prism_solid(box(0, 0, 2, 2), 0, 2), prism_solid(box(1, 1, 3, 3), 0, 2)
+    joined = Solid(np.vstack([a.vertices, b.vertices]),
+                   a.surfaces + [Surface([r + 8 for r in f.rings], f.semantic) for f in b.surfaces])
+    assert 305 in solid_error_codes(joined)
+
+
+def test_coplanar_overlapping_faces_are_found():
+    from lidar2city.lod.mesh import triangulate_surfaces
+    from lidar2city.validate.solid import _self_intersections
+
+    v = np.array([[0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1],
+                  [1, 1, 1], [3, 1, 1], [3, 3, 1], [1, 3, 1],
+                  [2, 0, 1.0], [4, 0, 1], [4, 2, 1]], dtype=float)
+    overlapping = [[np.array([0, 1, 2, 3])], [np.array([4, 5, 6, 7])]]
+    touching = [[np.array([0, 1, 2, 3])], [np.array([1, 9, 10, 2])]]
+    for rings, expected in ((overlapping, [(0, 1)]), (touching, [])):
+        mesh = triangulate_surfaces(v, rings)
+        assert _self_intersections(v, rings, 0.001, mesh) == expected
+
+
+def test_parts_overlap():
+    a, b, c = (prism_solid(box(0, 0, 2, 2), 0, 3), prism_solid(box(2, 0, 4, 2), 0, 5),
+               prism_solid(box(1, 1, 3, 3), 0, 4))
+    assert parts_overlap([a, b]) == []
+    assert parts_overlap([a, b, c]) == [(0, 2), (1, 2)]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 100), st.floats(0, 100)), min_size=3, max_size=30),
+       st.floats(-10, 10), st.floats(0.5, 50))
+def test_prisms_of_random_polygons_are_valid(points, z0, h):
+    poly = MultiPoint(points).convex_hull.buffer(-0.1).buffer(0.1)
+    if poly.geom_type != "Polygon" or poly.area < 1:
+        return
+    # a non-convex footprint: carve a notch
+    x0, y0, x1, y1 = poly.bounds
+    notched = poly.difference(box((x0 + x1) / 2, y0 - 1, x1 + 1, (y0 + y1) / 2))
+    for part in clean_polygon(notched, grid=0.001):
+        if part.area < 0.01:
+            continue
+        s = prism_solid(part, z0, z0 + h, grid=0.001)
+        assert check_solid(s) == [], part.wkt
