@@ -30,7 +30,10 @@ from .errors import ConfigError, FileFormatError
 __all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict", "field"]
 
 #: stage name -> "module:Class" of its frozen dataclass.
-STAGES: dict[str, str] = {}
+STAGES: dict[str, str] = {
+    "lod1": "lidar2city.lod.lod1:Lod1Config",
+    "lod22": "lidar2city.roof.building:Lod22Config",
+}
 
 
 def field(default, doc: str, **kwargs):

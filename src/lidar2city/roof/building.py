@@ -142,13 +142,13 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels
     return face_labels, np.asarray(planes)
 
 
-def _clean_faces(faces, labels):
+def _clean_faces(faces, labels, precision=1e-3):
     """Repair faces whose rings touch themselves (a hole pinched into the shell)."""
     import shapely
 
-    # one micrometre grid for all faces (the solid's vertex key): shared vertices snap alike,
-    # and near-zero-width spikes collapse and vanish on both sides
-    snapped = shapely.set_precision(np.asarray(faces, dtype=object), 1e-6)
+    # one millimetre grid for all faces (what the CityJSON transform keeps): shared vertices
+    # snap alike, and near-zero-width spikes collapse and vanish on both sides
+    snapped = shapely.set_precision(np.asarray(faces, dtype=object), precision)
     out_f, out_l = [], []
     for f, lab in zip(snapped, labels, strict=True):
         if f.is_empty:
@@ -159,7 +159,7 @@ def _clean_faces(faces, labels):
             out_l += [lab] * len(parts)
             continue
         rings = [f.exterior, *f.interiors]
-        pinched = any(len({tuple(np.round(c, 6)) for c in r.coords[:-1]}) != len(r.coords) - 1 for r in rings)
+        pinched = any(len({tuple(np.round(c, 4)) for c in r.coords[:-1]}) != len(r.coords) - 1 for r in rings)
         if f.is_valid and not pinched:
             out_f.append(f)
             out_l.append(lab)
@@ -170,6 +170,46 @@ def _clean_faces(faces, labels):
                 out_f.append(g)
                 out_l.append(lab)
     return out_f, np.asarray(out_l, dtype=np.int64)
+
+
+def _nonmanifold_points(solid):
+    """2-D positions of vertical edges shared by more than two surfaces (saddle vertices)."""
+    from collections import Counter
+
+    count = Counter()
+    for surf in solid.surfaces:
+        for ring in surf.rings:
+            r = list(ring)
+            for a, b in zip(r, r[1:] + r[:1], strict=True):
+                count[(min(a, b), max(a, b))] += 1
+    bad = [e for e, n in count.items() if n > 2]
+    return np.unique(np.round(solid.vertices[[e[0] for e in bad], :2], 6), axis=0)
+
+
+def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
+    """The partition's solid; at a saddle vertex (alternating heights around it, where four
+    walls would share a vertical edge) the face at the intermediate height takes its
+    longest-shared neighbour's plane, until the shell is 2-manifold."""
+    import shapely
+
+    face_labels = np.array(face_labels, copy=True)
+    for _ in range(max_rounds):
+        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+        bad = _nonmanifold_points(solid)
+        if not len(bad):
+            return solid
+        p = bad[0]
+        at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
+        z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
+        mid = [i for i, zz in zip(at, z, strict=True) if z.min() + 1e-3 < zz < z.max() - 1e-3]
+        victim = min(mid or at, key=lambda i: faces[i].area)
+        neigh = [(faces[victim].boundary.intersection(faces[j].boundary).length, j)
+                 for j in range(len(faces)) if j != victim and face_labels[j] != face_labels[victim]]
+        neigh = [t for t in neigh if t[0] > 0]
+        if not neigh:
+            return solid
+        face_labels[victim] = face_labels[max(neigh)[1]]
+    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
 
 
 def _parts(footprint):
@@ -246,7 +286,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
                                              pts, labels)
-        solids.append(partition_solid(faces, planes[face_labels], ground_z, min_height=cfg.min_height / 2))
+        solids.append(_manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2))
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
         roof_planes += [planes[k] for k in face_labels]

@@ -203,6 +203,9 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
             w = c[k] - c[k - 1]
             if abs(u[0] * w[1] - u[1] * w[0]) > 1e-6 * np.hypot(*u) * np.hypot(*w):
                 fixed_keys.add(_key(c[k]))
+    from shapely.geometry import Point
+
+    outline = union.boundary
     moves = {}
     fixed_pts = np.array(sorted(fixed_keys), dtype=float) / _KEY if fixed_keys else None
     for k, lines in inter_lines.items():
@@ -235,6 +238,8 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
             d = np.hypot(*(fixed_pts - target).T)
             if d.min() <= snap:
                 target = fixed_pts[d.argmin()]  # onto the footprint corner itself
+        if outline.distance(Point(p)) < 1e-6 and outline.distance(Point(target)) > 1e-6:
+            continue  # a vertex on the footprint outline slides along it, never off it
         if np.hypot(*(target - p)) <= max_shift:
             moves[k] = target
     info["moved"] = len(moves)

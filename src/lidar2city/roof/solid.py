@@ -39,7 +39,7 @@ def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
 
-def split_crossings(faces, planes, *, tol=1e-4):
+def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
     """Insert a vertex where two adjacent faces' planes cross along their shared edge.
 
     A wall between two faces is only a simple polygon when one face stays above
@@ -50,6 +50,10 @@ def split_crossings(faces, planes, *, tol=1e-4):
     faces : list of shapely Polygon
     planes : ndarray, shape (len(faces), 3)
         The plane of each face.
+    tol : float
+        Height differences below this (m) count as equal (the solid's level tolerance).
+    min_gap : float
+        No vertex is inserted closer than this (m) to an edge's end.
 
     Returns
     -------
@@ -75,6 +79,8 @@ def split_crossings(faces, planes, *, tol=1e-4):
                 if (dp > tol and dq < -tol) or (dp < -tol and dq > tol):
                     t = dp / (dp - dq)
                     x = p + t * (q - p)
+                    if min(np.hypot(*(x - p)), np.hypot(*(x - q))) < min_gap:
+                        continue  # the levels at that end merge instead
                     inserts[(_key(p), _key(q))] = x
                     inserts[(_key(q), _key(p))] = x
     if not inserts:
@@ -95,7 +101,7 @@ def split_crossings(faces, planes, *, tol=1e-4):
     return out
 
 
-def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=1e-3) -> Solid:
+def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
     """Build the closed solid of a roof partition.
 
     Parameters
@@ -122,7 +128,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=1e-3) 
         When a roof plane goes below the floor.
     """
     planes = np.asarray(planes, dtype=np.float64)
-    rings = split_crossings(faces, planes)
+    rings = split_crossings(faces, planes, tol=level_tol)
     # heights of every face at its vertices
     levels: dict = {}
     for fi, rs in enumerate(rings):
