@@ -12,7 +12,7 @@ from ._options import crs_option, output_option, progress
 @output_option()
 @click.option("--footprints", type=click.Path(dir_okay=False), default=None,
               help="Building footprints (any OGR source: GPKG, SHP, GeoJSON...).")
-@click.option("--lod", "lods", multiple=True, type=click.Choice(["1.2", "1.3"]),
+@click.option("--lod", "lods", multiple=True, type=click.Choice(["1.2", "1.3", "2.2"]),
               help="LoD to build (repeat for both); default from the config, else 1.2.")
 @crs_option
 @click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
@@ -23,12 +23,13 @@ from ._options import crs_option, output_option, progress
 @click.option("--layer", default=None, help="Footprint layer (default: the first).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
 def command(inputs, output, footprints, lods, crs, config, fmt, id_field, layer, quiet):
-    """Build LoD1 buildings from point cloud tiles INPUTS (read as one area).
+    """Build 3D buildings from point cloud tiles INPUTS (read as one area).
 
-    One prism per footprint (LoD1.2: roof at a percentile of the building
-    points, ground at a low percentile of the ground points around it) or one
-    per roof-height part (LoD1.3). Every footprint gets a model or a stated
-    reason. Output: .city.json (CityJSON 2.0), .city.jsonl, .obj or .gpkg.
+    LoD1.2: one prism per footprint (roof at a percentile of the building
+    points, ground at a low percentile of the ground points around it);
+    LoD1.3: one prism per roof-height part; LoD2.2: roof facets, ridges and
+    steps, one closed solid per footprint. Every footprint gets a model or a
+    stated reason. Output: .city.json (CityJSON 2.0), .city.jsonl, .obj or .gpkg.
     """
     from ..tools.reconstruct import reconstruct
 

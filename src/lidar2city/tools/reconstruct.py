@@ -131,9 +131,11 @@ class PointGrid:
 
 
 def lod1_config(config=None, *, lods=None):
-    """``(Lod1Config, resolved configuration dict)`` from None, a dict, a TOML path or a config.
+    """``(Lod1Config, resolved configuration dict, other stages)`` from None, a dict, a TOML
+    path or a config.
 
-    ``lods`` (e.g. from ``--lod``) overrides the file's ``lod1.lods``.
+    ``lods`` (e.g. from ``--lod``) overrides the file's ``lod1.lods``; "2.2" is built by
+    the ``lod22`` stage on top of LoD1.2 (which gives its ground height and its fallback).
     """
     import tomllib
 
@@ -163,9 +165,10 @@ def lod1_config(config=None, *, lods=None):
         others.pop("lod1", None)
         cfg = build_stage("lod1", section, cls=Lod1Config)
     if lods:
-        cfg = cfg.replace(lods=tuple(lods))
+        lod1_lods = tuple(v for v in lods if v != "2.2") or ("1.2",)
+        cfg = cfg.replace(lods=lod1_lods)
     resolved = resolved_dict({**others, "lod1": cfg})
-    return cfg, resolved
+    return cfg, resolved, others
 
 
 def point_roles(cloud, config):
@@ -230,7 +233,7 @@ def _chunk_order(geometries, chunk):
 
 
 def reconstruct_buildings(cloud, footprints, *, config=None, building=None, ground=None,
-                          chunk: float = 250.0, progress=None) -> list:
+                          chunk: float = 250.0, progress=None, lod22=None) -> list:
     """LoD1 models of every footprint (results in footprint order).
 
     Parameters
@@ -245,6 +248,8 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
         Side (m) of the spatial chunks buildings are visited in.
     progress : callable, optional
         ``progress(done, total, result)`` after each building.
+    lod22 : Lod22Config, optional
+        Also build LoD2.2 roofs (:func:`lidar2city.roof.building.reconstruct_lod22`).
     """
     from ..lod.lod1 import Lod1Config, reconstruct_building
     from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
@@ -281,12 +286,44 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
 
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback)
+            if lod22 is not None and res.ok:
+                m = lod22.overhang
+                add_lod22(res, g, bxyz[bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)], lod22)
         if notes[i]:
             res.attributes["footprint_note"] = notes[i]
         results[i] = res
         if progress is not None:
             progress(done, total, res)
     return results
+
+
+def add_lod22(result, footprint, building_xyz, config) -> None:
+    """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
+
+    The LoD1.2 ground height is the floor. When no roof can be fitted the LoD1.2
+    prism stands in for LoD2.2 and ``lod22_fallback`` says why: every footprint
+    keeps a valid solid.
+    """
+    from ..errors import AlgorithmError
+    from ..roof.building import reconstruct_lod22
+    from ..validate.solid import check_solid
+
+    ground_z = result.attributes.get("ground_height")
+    try:
+        out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config)
+        issues = [i for s in out.solids for i in check_solid(s)]
+        if issues:
+            raise AlgorithmError(f"LoD2.2 solid invalid ({issues[0].code})")
+    except AlgorithmError as exc:
+        lod12 = result.solids.get("1.2")
+        if lod12 is None:
+            result.attributes["lod22_fallback"] = str(exc)
+            return
+        result.solids["2.2"] = lod12
+        result.attributes["lod22_fallback"] = f"LoD1.2 prism: {exc}"
+        return
+    result.solids["2.2"] = out.solids[0] if len(out.solids) == 1 else out.solids
+    result.attributes.update(out.attributes)
 
 
 def _fields_for_output(footprints):
@@ -388,8 +425,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
     footprints : path
         Any OGR vector source with building polygons.
-    lods : sequence of {"1.2", "1.3"}, optional
-        Overrides ``[lod1] lods`` of the configuration.
+    lods : sequence of {"1.2", "1.3", "2.2"}, optional
+        LoDs to write; overrides ``[lod1] lods`` of the configuration.
     crs : str, optional
         CRS of the tiles when they carry none (or to override theirs).
     config : path, dict or Lod1Config, optional
@@ -405,7 +442,9 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
 
     t0 = time.perf_counter()
     fmt = format_from_name(output, fmt)
-    cfg, resolved = lod1_config(config, lods=lods)
+    cfg, resolved, others = lod1_config(config, lods=lods)
+    want = tuple(lods) if lods else cfg.lods
+    lod22 = others.get("lod22") if "2.2" in want else None
     cloud = read_points(inputs, crs=crs)
     cloud.require_points()
     if cloud.crs is None:
@@ -414,10 +453,13 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     building, ground = point_roles(cloud, cfg)
     fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
     results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
-                                    progress=progress)
+                                    progress=progress, lod22=lod22)
+    for r in results:  # LoD1 built only as the base of LoD2.2 is not written
+        for lod in [k for k in r.solids if k not in want]:
+            del r.solids[lod]
     write_buildings(output, results, cloud, fmt=fmt, configuration=resolved,
-                    attributes=_fields_for_output(fps), lods=cfg.lods)
-    summary = ReconstructSummary(str(output), total=len(results), lods=cfg.lods, format=fmt)
+                    attributes=_fields_for_output(fps), lods=want)
+    summary = ReconstructSummary(str(output), total=len(results), lods=want, format=fmt)
     for r in results:
         if r.ok:
             summary.done += 1
