@@ -1,21 +1,13 @@
 """Building regions on a grid: point spacing, a smooth building field, regions.
 
-The building field is the minimum of two smooth measures in [0, 1], whose 0.5
-iso-line is the outline (traced to a fraction of a cell, so there is no
-half-cell bias as with the pixel edges of an occupancy mask):
-
-* the *building fraction* (:func:`building_fraction`): the share of building
-  points among all points around a cell, interpolated into cells without
-  points by normalised convolution (Knutsson & Westin 1993). It decides
-  between roof and ground / vegetation where both were measured, and bridges
-  the gaps between scan lines;
-* the *density ratio* (:func:`density_ratio`): the smoothed building-point
-  density over its local plateau (the maximum within a window). A roof is
-  measured wherever it is (it is the top surface), so a strip without points
-  beside a roof is a laser shadow of the ground, not roof: the density ratio
-  puts the outline where the roof points stop (the half-density line of a
-  smoothed step) instead of half-way across the shadow, which is where the
-  fraction alone would put it.
+The building field is the share of building points among all points around
+each cell (:func:`building_fraction`), by normalised convolution (Knutsson &
+Westin 1993), with cells far from any point counted as "not building" (a roof
+is the top surface and is measured wherever it is, so a laser shadow or open
+water beside it is not roof). Its 0.5 iso-line is the outline, traced to a
+fraction of a cell (no half-cell bias as with the pixel edges of an
+occupancy mask); gaps between scan lines take the value of the points around
+them.
 """
 
 from __future__ import annotations
@@ -29,8 +21,7 @@ from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Grid", "point_spacing", "building_fraction", "density_ratio", "building_field",
-           "building_regions"]
+__all__ = ["Grid", "point_spacing", "building_fraction", "building_regions"]
 
 
 @dataclass(frozen=True)
@@ -100,94 +91,63 @@ def point_spacing(xy, *, cell: float = 2.0) -> float:
     return float(np.sqrt(occupied * cell * cell / len(xy)))
 
 
-def building_fraction(grid: Grid, building_xy, other_xy, *, sigma: float) -> np.ndarray:
-    """Smooth share of building points around each cell, in [0, 1].
+def building_fraction(grid: Grid, building_xy, other_xy, *, sigma: float,
+                      void_distance: float) -> np.ndarray:
+    """Smooth share of building points around each cell, in [0, 1] (the building field).
+
+    Normalised convolution of the points by class, with *void* cells counted as
+    non-building: ``F = G*b / G*(b + o + v)``, where ``b`` and ``o`` are the
+    building and other points per cell and ``v`` gives every cell farther than
+    ``void_distance`` from any point the typical count of a measured cell.
 
     Parameters
     ----------
     grid : Grid
     building_xy, other_xy : ndarray, shape (N, 2) and (M, 2)
-        Building points and every other point (ground, vegetation...). Points
-        of several returns are counted once each.
+        Building points and every other point (ground, vegetation...).
     sigma : float
-        Gaussian standard deviation (m) of the normalised convolution; about
-        the largest gap between points to bridge (scan-line gaps).
+        Gaussian standard deviation (m); about the largest gap between points
+        to bridge (scan-line gaps).
+    void_distance : float
+        Cells farther than this (m) from every point are void (a laser shadow,
+        open water, outside the data): a roof is the top surface and is
+        measured wherever it is, so a void is evidence of "not roof". Gaps
+        narrower than twice this distance (between scan lines) are bridged.
 
     Returns
     -------
     ndarray, shape ``grid.shape``
-        ``G*b / G*(b + o)``; far from any point (less than 5 % of the typical
-        smoothed density) the field is the building count smoothed over the
-        typical density, so it falls to 0 away from the data. Without
-        non-building points the field is the smoothed building density over
-        its typical value (the half-density line is then the outline).
+        0 where no building point is near.
+
+    Notes
+    -----
+    Between building and other points the 0.5 iso-line lies half-way between
+    the last building point and the first other point: no half-cell bias as
+    with the pixel edges of an occupancy mask. Beside a void it lies about
+    ``void_distance / 2`` beyond the last building point, instead of half-way
+    across a wide shadow.
 
     References
     ----------
     Knutsson, H., Westin, C.-F. (1993). Normalized and differential convolution.
     CVPR 1993, 515-523.
     """
-    from scipy.ndimage import gaussian_filter
+    from scipy import ndimage as ndi
 
     if not sigma > 0:
         raise InputError(f"sigma must be > 0, got {sigma}")
+    if not void_distance > 0:
+        raise InputError(f"void_distance must be > 0, got {void_distance}")
+    b = grid.count(building_xy)
+    o = grid.count(other_xy) if len(other_xy) else np.zeros(grid.shape)
+    a = b + o
+    occupied = a > 0
+    typical = float(np.median(a[occupied])) if occupied.any() else 1.0
+    void = ndi.distance_transform_edt(~occupied) * grid.cell > void_distance
     s = sigma / grid.cell
-    b = gaussian_filter(grid.count(building_xy), s, mode="constant")
-    a = b + gaussian_filter(grid.count(other_xy), s, mode="constant") if len(other_xy) else b.copy()
-    # typical smoothed density inside the data (median over well-covered cells)
-    covered = a[a > 0]
-    typical = float(np.median(covered)) if len(covered) else 1.0
-    floor = 0.05 * typical
-    if len(other_xy) == 0:
-        return np.clip(b / typical, 0.0, 1.0)
-    return np.where(a > floor, b / np.maximum(a, floor), np.clip(b / typical, 0.0, 1.0))
-
-
-def density_ratio(grid: Grid, building_xy, *, sigma: float, window: float) -> np.ndarray:
-    """Smoothed building-point density over its local plateau, in [0, 1].
-
-    Parameters
-    ----------
-    grid : Grid
-    building_xy : ndarray, shape (N, 2)
-    sigma : float
-        Gaussian standard deviation (m); must smooth out the scan-line pattern
-        (about twice the point spacing).
-    window : float
-        Width (m) of the square in which the local plateau (maximum smoothed
-        density) is taken; a few times ``sigma``, so that strip overlaps with
-        double density do not move the outline.
-
-    Returns
-    -------
-    ndarray, shape ``grid.shape``
-        ``D / max(max_window(D), D_typ / 2)`` where ``D`` is the smoothed
-        density and ``D_typ`` the median of ``D`` over cells above 20 % of its
-        maximum; the floor keeps isolated stray points low.
-    """
-    from scipy import ndimage as ndi
-
-    if not sigma > 0 or not window > 0:
-        raise InputError(f"sigma and window must be > 0, got {sigma}, {window}")
-    d = ndi.gaussian_filter(grid.count(building_xy), sigma / grid.cell, mode="constant")
-    if not d.any():
-        return d
-    typical = float(np.median(d[d > 0.2 * d.max()]))
-    r = max(1, int(round(window / 2 / grid.cell)))
-    plateau = np.maximum(ndi.maximum_filter(d, size=2 * r + 1), 0.5 * typical)
-    return np.clip(d / plateau, 0.0, 1.0)
-
-
-def building_field(grid: Grid, building_xy, other_xy, *, sigma: float, fraction_sigma: float,
-                   window: float) -> np.ndarray:
-    """The building field: ``min(density_ratio, building_fraction)``, in [0, 1].
-
-    See the module docstring; parameters as in :func:`density_ratio`
-    (``sigma``, ``window``) and :func:`building_fraction` (``fraction_sigma``).
-    """
-    dens = density_ratio(grid, building_xy, sigma=sigma, window=window)
-    frac = building_fraction(grid, building_xy, other_xy, sigma=fraction_sigma)
-    return np.minimum(dens, frac)
+    gb = ndi.gaussian_filter(b, s, mode="constant")
+    ga = ndi.gaussian_filter(a + typical * void, s, mode="constant", cval=typical)
+    return np.clip(gb / np.maximum(ga, 1e-12), 0.0, 1.0)
 
 
 def building_regions(field, cell: float, *, level: float = 0.5, min_area: float = 4.0,
