@@ -35,7 +35,7 @@ import numpy as np
 from ..config import field as cfield
 from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
 from .grid import Grid, building_fraction, building_regions, point_spacing
-from .regularizers import REGULARIZERS, mean_deviation, vertex_count
+from .regularizers import REGULARIZERS
 from .regularizers import require as require_regularizer
 from .trace import simplify_polygon, trace_regions
 
@@ -62,11 +62,15 @@ class FootprintsConfig:
         None, "Douglas-Peucker tolerance (m); default the cell; 0 disables.")
     regularize: Literal["none", "snake"] = cfield("none", "Outline regulariser: none or snake.")
     snake_cell: float | None = cfield(
-        None, "Grid cell (m) of the snake's candidate positions; default half the cell.")
+        None, "Grid cell (m) of the snake's candidate positions; default the cell.")
     snake_window: int = cfield(2, "Snake search half-window w (cells): (2w+1)^2 states per vertex.")
+    snake_threshold: float | None = cfield(
+        None, "Snake threshold T (m): an edge whose smaller x/y extent (building frame) is within "
+        "T is pulled onto the building axes, others stay oblique; default 2 x snake_window x "
+        "snake_cell, the largest misalignment the search window can correct.")
 
     def __post_init__(self):
-        for name in ("cell", "sigma", "void_distance", "snake_cell"):
+        for name in ("cell", "sigma", "void_distance", "snake_cell", "snake_threshold"):
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise ConfigError(f"footprints.{name}: must be > 0, got {v}")
@@ -90,8 +94,9 @@ class Footprint:
     ``status`` is ``"ok"`` or ``"unregularised"`` (the regulariser failed for
     this building: ``reason`` says why and ``polygon`` is the simplified
     outline); ``attributes`` holds ``area`` (m2), ``direction`` (degrees,
-    dominant direction modulo 90), ``n_vertices``, ``type_iv`` (snake type IV
-    operations), ``mean_deviation`` (m), ``n_points`` (building points inside).
+    dominant direction modulo 90), ``n_vertices``, ``type_i`` .. ``type_iv``
+    (snake graph reductions of each type), ``mean_deviation`` (m), ``n_points``
+    (building points inside).
     """
 
     polygon: object
@@ -109,7 +114,7 @@ def grid_lengths(spacing: float, *, cell=None, sigma=None, void_distance=None, s
         "sigma": sigma if sigma is not None else spacing,
         "void_distance": void_distance if void_distance is not None else spacing,
         "simplify": simplify if simplify is not None else cell,
-        "snake_cell": snake_cell if snake_cell is not None else 0.5 * cell,
+        "snake_cell": snake_cell if snake_cell is not None else cell,
     }
 
 
@@ -124,7 +129,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        min_hole_area: float = 4.0, edge_offset: float = 0.0,
                        simplify: float | None = None, regularize: str = "none",
                        snake_cell: float | None = None, snake_window: int = 2,
-                       callback=None) -> list[Footprint]:
+                       snake_threshold: float | None = None, callback=None) -> list[Footprint]:
     """Building footprints (one polygon per building block, with courtyards) from classified points.
 
     Parameters
@@ -138,7 +143,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         Class of building points.
     cell, sigma, void_distance, simplify, snake_cell : float, optional
         Lengths in metres; defaults from the building point spacing ``s``:
-        ``1.5 s``, ``s``, ``s``, ``cell``, ``cell / 2``
+        ``1.5 s``, ``s``, ``s``, ``cell``, ``cell``
         (see the module docstring).
     min_area, min_hole_area : float
         Smallest building and smallest courtyard kept (m2).
@@ -148,6 +153,11 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         A key of :data:`~lidar2city.footprints.regularizers.REGULARIZERS`.
     snake_window : int
         Half-window (cells of ``snake_cell``) of the snake's candidate positions.
+    snake_threshold : float, optional
+        The snake's T (m) separating edges to align from oblique ones (eq. 4);
+        default ``2 * snake_window * snake_cell``: moving both ends of an edge by
+        at most the window, the snake can straighten an edge whose smaller
+        extent is up to that, not more.
     callback : callable, optional
         Called as ``callback(done, total)`` after each building.
 
@@ -179,7 +189,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     FootprintsConfig(building_class=building_class, cell=cell, sigma=sigma,
                      void_distance=void_distance, min_area=min_area,
                      min_hole_area=min_hole_area, edge_offset=edge_offset, simplify=simplify,
-                     regularize=regularize, snake_cell=snake_cell, snake_window=snake_window)
+                     regularize=regularize, snake_cell=snake_cell, snake_window=snake_window,
+                     snake_threshold=snake_threshold)
     xy = xyz[:, :2]
     is_b = cls == building_class
     bxy, oxy = xy[is_b], xy[~is_b]
@@ -203,6 +214,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     point_counts = np.bincount(labels[bi, bj], minlength=int(labels.max()) + 1)
 
     regularizer = REGULARIZERS[regularize]
+    threshold = (snake_threshold if snake_threshold is not None
+                 else 2.0 * snake_window * L["snake_cell"])
     require_regularizer(regularize)  # fail early, once, when it is not installed
     out: list[Footprint] = []
     for n_done, (label, poly) in enumerate(traced, start=1):
@@ -210,25 +223,28 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        min_area)
         for part in parts:
             simple = simplify_polygon(part, L["simplify"])
-            status, reason = "ok", ""
             try:
-                reg, info = regularizer(simple, cell=L["snake_cell"], window=snake_window)
+                reg, info = regularizer(part, simplified=simple, cell=L["snake_cell"],
+                                        window=snake_window, tolerance=L["simplify"],
+                                        t_adjust=threshold)
                 if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
                     raise AlgorithmError("the regulariser returned no valid polygon")
             except AlgorithmError as exc:
-                status, reason = "unregularised", str(exc)
-                logger.info("footprint %d kept unregularised: %s", len(out), exc)
-                reg, info = REGULARIZERS["none"](simple)
+                reg, info = REGULARIZERS["none"](part, simplified=simple)
+                info.update(status="unregularised", reason=str(exc))
+            if info["status"] != "ok":
+                logger.info("footprint %d kept unregularised: %s", len(out), info["reason"])
             attrs = {
                 "area": float(reg.area),
                 "direction": float(info["direction"]),
-                "n_vertices": int(info.get("n_vertices", vertex_count(reg))),
-                "type_iv": int(info.get("reductions", {}).get("IV", 0)),
-                "mean_deviation": float(info.get("mean_deviation", mean_deviation(reg, simple))),
+                "n_vertices": int(info["n_vertices"]),
+                "mean_deviation": float(info["mean_deviation"]),
                 "n_points": int(point_counts[label]) if len(parts) == 1 else
                 int(np.count_nonzero(_contains(part, bxy))),
+                **{f"type_{t.lower()}": int(info["reductions"].get(t, 0))
+                   for t in ("I", "II", "III", "IV")},
             }
-            out.append(Footprint(reg, status, reason, attrs))
+            out.append(Footprint(reg, info["status"], info["reason"], attrs))
         if callback is not None:
             callback(n_done, len(traced))
     return out

@@ -1,11 +1,13 @@
 """Footprint outline regularisers: a name -> function dict (``REGULARIZERS``).
 
-Every regulariser takes a simplified polygon (local metres) and keyword
-options and returns ``(polygon, info)`` where ``info`` holds ``direction``
-(degrees, the building's dominant direction modulo 90), ``n_vertices``,
-``reductions`` (dict of the snake's type "I".."IV" operation counts; zeros
-when no snake ran) and ``mean_deviation`` (m, mean distance of the output
-vertices from the input outline).
+Every regulariser is called as ``f(traced, simplified=..., cell=..., window=...,
+tolerance=...)`` with the traced outline (a polygon, local metres) and its
+Douglas–Peucker simplification, and returns ``(polygon, info)``. ``info``
+holds ``direction`` (degrees, the building's dominant direction modulo 90),
+``n_vertices``, ``reductions`` (dict of the snake's type "I".."IV" operation
+counts; zeros when no snake ran), ``mean_deviation`` (m, mean distance from the
+output outline to the traced one), ``status`` ("ok" or "unregularised") and
+``reason``.
 """
 
 from __future__ import annotations
@@ -50,23 +52,30 @@ def vertex_count(polygon) -> int:
     return int(sum(len(r.coords) - 1 for r in shapely.get_rings(polygon)))
 
 
-def mean_deviation(polygon, reference) -> float:
-    """Mean distance (m) from the vertices of ``polygon`` to the boundary of ``reference``."""
+def mean_deviation(polygon, reference, *, step: float = 0.25) -> float:
+    """Mean distance (m) from the boundary of ``polygon`` to the boundary of ``reference``.
+
+    The boundary is sampled every ``step`` metres (vertices included).
+    """
     import shapely
 
-    pts = shapely.points(shapely.get_coordinates(polygon))
+    dense = shapely.segmentize(polygon.boundary, step)
+    pts = shapely.points(shapely.get_coordinates(dense))
     if not len(pts):
         return 0.0
     return float(np.mean(shapely.distance(pts, reference.boundary)))
 
 
-def regularize_none(polygon, **_ignored):
-    """No regularisation: the polygon as it is, with its descriptive ``info``."""
-    return polygon, {
-        "direction": outline_direction(polygon),
-        "n_vertices": vertex_count(polygon),
+def regularize_none(traced, *, simplified=None, **_ignored):
+    """No regularisation: the simplified outline (or ``traced``) with its descriptive ``info``."""
+    poly = simplified if simplified is not None else traced
+    return poly, {
+        "direction": outline_direction(poly),
+        "n_vertices": vertex_count(poly),
         "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
-        "mean_deviation": 0.0,
+        "mean_deviation": mean_deviation(poly, traced),
+        "status": "ok",
+        "reason": "",
     }
 
 
@@ -86,26 +95,56 @@ def require(name: str) -> None:
         _snake()
 
 
-def regularize_snake(polygon, *, cell: float, window: int, **kwargs):
+def regularize_snake(traced, *, cell: float, window: int, tolerance: float | None = None,
+                     simplified=None, **kwargs):
     """The exact 2-D snake (graph reduction) with direction and deviation energies.
 
-    Calls :func:`lidar2city.regularize.snake.regularize_polygon`, imported here
-    so that the footprint package works without it.
+    Calls :func:`lidar2city.regularize.snake.regularize_polygon` (imported here,
+    so the footprint package works without it) on the *traced* outline, which
+    simplifies it with ``tolerance`` and measures the deviation energy against
+    it. ``kwargs`` the installed function does not take (``t_adjust``...) are
+    left out. When the snake falls back (no valid result) the status is
+    "unregularised" and the simplified outline is kept.
 
     Raises
     ------
     DependencyError
         When the snake regulariser is not part of this installation.
+
+    References
+    ----------
+    Kass, Witkin, Terzopoulos (1988) for snakes; the graph-reduction solver and
+    energies (eqs. 4-6) of :mod:`lidar2city.regularize.snake`.
     """
+    import inspect
+
     regularize_polygon = _snake()
-    out, info = regularize_polygon(polygon, cell=cell, window=window, **kwargs)
-    info = dict(info)
-    info.setdefault("direction", outline_direction(out))
-    info.setdefault("n_vertices", vertex_count(out))
-    info.setdefault("reductions", {"I": 0, "II": 0, "III": 0, "IV": 0})
-    if "mean_deviation" not in info:
-        info["mean_deviation"] = mean_deviation(out, polygon)
-    return out, info
+    accepted = inspect.signature(regularize_polygon).parameters
+    if tolerance is not None:
+        kwargs["simplify_tolerance"] = tolerance
+    dropped = sorted(k for k in kwargs if k not in accepted)
+    if dropped:
+        logger.debug("regularize_polygon takes no %s; left out", ", ".join(dropped))
+    kwargs = {k: v for k, v in kwargs.items() if k in accepted}
+    out, raw = regularize_polygon(traced, cell=cell, window=window, **kwargs)
+    raw = dict(raw)
+    if raw.get("status", "regularized") not in ("regularized", "ok") or out is None:
+        fallback, info = regularize_none(traced, simplified=simplified)
+        info["status"] = "unregularised"
+        info["reason"] = str(raw.get("reason", "the snake fell back"))
+        info["reductions"] = dict(raw.get("reductions", info["reductions"]))
+        return fallback, info
+    direction = raw.get("direction_deg", raw.get("direction"))
+    deviation = raw.get("mean_deviation_m", raw.get("mean_deviation"))
+    return out, {
+        "direction": float(np.mod(direction, 90.0)) if direction is not None
+        else outline_direction(out),
+        "n_vertices": vertex_count(out),
+        "reductions": {t: int(raw.get("reductions", {}).get(t, 0)) for t in ("I", "II", "III", "IV")},
+        "mean_deviation": float(deviation) if deviation is not None else mean_deviation(out, traced),
+        "status": "ok",
+        "reason": "",
+    }
 
 
 #: Regularisers by name (the CLI choice and the ``footprints.regularize`` config value).

@@ -15,8 +15,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["footprints_job", "load_footprints_config", "FIELDS"]
 
 #: Output fields per building, in order.
-FIELDS = ("id", "area", "direction", "n_vertices", "type_iv", "mean_deviation", "n_points",
-          "status", "reason")
+FIELDS = ("id", "area", "direction", "n_vertices", "mean_deviation", "n_points",
+          "type_i", "type_ii", "type_iii", "type_iv", "status", "reason")
 
 
 def load_footprints_config(path=None, **overrides):
@@ -91,7 +91,8 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
     Returns
     -------
     dict
-        ``buildings``, ``area`` (m2), ``unregularised`` count, ``points``, ``output``.
+        ``buildings``, ``area`` (m2), ``unregularised`` count, ``points``,
+        ``reductions`` (total snake operations by type), ``output``.
     """
     from ..footprints import FootprintsConfig, extract_footprints
     from ..io.las import read_points
@@ -111,7 +112,7 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
     geoms = [shapely.MultiPolygon([f.polygon]) for f in fps]
     fields = {
         "id": [f"b{i + 1:05d}" for i in range(len(fps))],
-        **{k: [f.attributes[k] for f in fps] for k in FIELDS[1:7]},
+        **{k: [f.attributes[k] for f in fps] for k in FIELDS[1:-2]},
         "status": [f.status for f in fps],
         "reason": [f.reason for f in fps],
     }
@@ -127,5 +128,7 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
         "area": float(sum(f.attributes["area"] for f in fps)),
         "unregularised": sum(f.status != "ok" for f in fps),
         "points": len(cloud),
+        "reductions": {t: int(sum(f.attributes[f"type_{t.lower()}"] for f in fps))
+                       for t in ("I", "II", "III", "IV")},
         "output": str(output),
     }
