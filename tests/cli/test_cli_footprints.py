@@ -111,3 +111,27 @@ def test_footprints_snake_missing(runner, tmp_path):
                               "--regularize", "snake"])
     assert res.exit_code == 1
     assert "snake regulariser" in res.output
+
+
+def test_cli_choices_are_the_regularizers():
+    from lidar2city.cli.footprints import REGULARIZER_NAMES
+    from lidar2city.footprints import REGULARIZERS
+
+    assert set(REGULARIZER_NAMES) == set(REGULARIZERS)
+
+
+def test_footprints_metadata_holds_the_resolved_config(runner, tmp_path):
+    import json
+
+    import pyogrio
+
+    from lidar2city.cli.main import cli
+
+    _tile(tmp_path / "t.laz")
+    out = tmp_path / "fp.gpkg"
+    assert runner.invoke(cli, ["footprints", str(tmp_path / "t.laz"), "-o", str(out)]).exit_code == 0
+    meta = pyogrio.read_info(out)["dataset_metadata"]
+    assert json.loads(meta["lidar2city_config"])["footprints"]["regularize"] == "none"
+    resolved = json.loads(meta["lidar2city_footprints_resolved"])
+    assert resolved["point_spacing"] == pytest.approx(0.3, rel=0.05)
+    assert resolved["cell"] == pytest.approx(1.5 * resolved["point_spacing"], rel=1e-3)

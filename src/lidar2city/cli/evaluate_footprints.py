@@ -62,6 +62,10 @@ def command(pred, reference, crs, min_iou, extent, hull_margin, as_json):
                f"recall {o['recall']:.3f}")
     click.echo(f"  IoU           mean of matches {o['mean_iou']:.3f}  mean best per reference "
                f"{o['mean_best_iou']:.3f}")
-    click.echo(f"  Hausdorff     mean {o['hausdorff_mean']:.2f} m  median {o['hausdorff_median']:.2f} m")
+    if o["hausdorff_mean"] is None:
+        click.echo("  Hausdorff     no match")
+    else:
+        click.echo(f"  Hausdorff     mean {o['hausdorff_mean']:.2f} m  median "
+                   f"{o['hausdorff_median']:.2f} m (matched pairs)")
     click.echo(f"  alignment     {100 * rep['alignment']['aligned_share']:.1f} % of outline length "
                "within 3 deg of the dominant axes")

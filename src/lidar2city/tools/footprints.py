@@ -123,8 +123,16 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
     }
     from .. import __version__
 
+    from ..footprints import grid_lengths, point_spacing
+
+    spacing = point_spacing(cloud.xyz[cls == cfg.building_class, :2])
+    lengths = grid_lengths(spacing, cell=cfg.cell, sigma=cfg.sigma,
+                           void_distance=cfg.void_distance, simplify=cfg.simplify,
+                           snake_cell=cfg.snake_cell)
     meta = {"lidar2city_version": __version__,
-            "lidar2city_config": json.dumps({"footprints": dataclasses.asdict(cfg)})}
+            "lidar2city_config": json.dumps({"footprints": dataclasses.asdict(cfg)}),
+            "lidar2city_footprints_resolved": json.dumps(
+                {"point_spacing": round(spacing, 4), **{k: round(v, 4) for k, v in lengths.items()}})}
     write_layers(output, [VectorLayer("footprints", geoms, fields, "MultiPolygon")],
                  origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
                  z_unit=cloud.z_unit, metadata=meta)
