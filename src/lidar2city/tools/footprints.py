@@ -122,7 +122,6 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
         "reason": [f.reason for f in fps],
     }
     from .. import __version__
-
     from ..footprints import grid_lengths, point_spacing
 
     spacing = point_spacing(cloud.xyz[cls == cfg.building_class, :2])
