@@ -24,8 +24,9 @@ REGULARIZER_NAMES = ("none", "snake")
 def command(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset):
     """Building footprints from classified LAS/LAZ tiles INPUTS into a GeoPackage.
 
-    One polygon per building block (holes for courtyards) with area, dominant
-    direction, vertex count, snake type IV count, mean deviation and point count.
+    One polygon per building block (holes for courtyards), in the input CRS,
+    with area (m2), dominant direction (deg), vertex count, mean deviation (m),
+    point count and the snake's reduction counts (type_i .. type_iv).
     """
     from ..tools.footprints import footprints_job, load_footprints_config
     from ._options import progress
