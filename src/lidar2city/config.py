@@ -31,6 +31,7 @@ __all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict
 
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
+    "footprints": "lidar2city.footprints:FootprintsConfig",
     "lod1": "lidar2city.lod.lod1:Lod1Config",
     "lod22": "lidar2city.roof.building:Lod22Config",
 }

@@ -44,3 +44,10 @@ def test_pixel_metrics_exact():
     assert m["producers_accuracy"] == 1.0
     # kappa by hand: po = .9, pe = .6*.5 + .4*.5 = .5
     assert m["kappa"] == pytest.approx(0.8)
+
+
+def test_axis_alignment_multipolygon():
+    from shapely.geometry import MultiPolygon
+
+    rect = affinity.rotate(box(0, 0, 20, 10), 12, origin=(0, 0))
+    assert axis_alignment([MultiPolygon([rect])])["aligned_share"] == pytest.approx(1.0)

@@ -125,7 +125,7 @@ def match_objects(pred, ref, *, min_iou=0.5) -> dict:
 def _edges(geom):
     import shapely
 
-    rings = shapely.get_rings(geom)
+    rings = shapely.get_rings(shapely.get_parts(geom))
     segs = []
     for ring in rings:
         c = np.asarray(ring.coords)[:, :2]

@@ -1,0 +1,256 @@
+"""Building footprints from classified points: regions, outlines, simplification, regularisation.
+
+Pipeline (all grid lengths derive from the point spacing ``s`` of the
+building points unless given):
+
+1. building field on a grid of ``cell = 1.5 s`` (:func:`..grid.building_fraction`):
+   the building share among all points (normalised convolution, ``sigma = s``),
+   cells farther than ``void_distance = s`` from any point (with the default cell:
+   every cell without a point) counting as not building;
+2. regions ``field >= 0.5``, 8-connected; holes under ``min_hole_area`` filled,
+   regions under ``min_area`` dropped;
+3. the 0.5 iso-line of the field around each region (marching squares, sub-cell);
+4. an optional ``edge_offset`` (negative shrinks: LiDAR sees roof edges, which
+   overhang the walls that cadastral footprints such as the Dutch BGT draw; on
+   the Delft AHN3 tile the traced outlines lie about 0.2-0.3 m outside the BGT
+   walls, while on synthetic scans without overhang they are unbiased to 0.03 m,
+   so the default is 0: the outline the LiDAR sees);
+5. Douglas–Peucker with ``simplify = cell``, vertices refitted to the lines
+   through the traced outline (:func:`..trace.simplify_polygon`);
+6. a regulariser from :data:`..regularizers.REGULARIZERS`.
+
+Row houses sharing walls form one block: points alone do not show party walls.
+The per-area quality does not depend on it; per-object matching against a
+cadastre that splits the block does.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..config import field as cfield
+from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
+from .grid import Grid, building_fraction, building_regions, point_spacing
+from .regularizers import REGULARIZERS
+from .regularizers import require as require_regularizer
+from .trace import simplify_polygon, trace_regions
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["FootprintsConfig", "Footprint", "extract_footprints", "grid_lengths"]
+
+
+@dataclass(frozen=True)
+class FootprintsConfig:
+    """Options of stage ``footprints`` (the keywords of :func:`extract_footprints`)."""
+
+    building_class: int = cfield(6, "ASPRS class of building points.")
+    cell: float | None = cfield(None, "Grid cell (m); default 1.5 x the building point spacing.")
+    sigma: float | None = cfield(
+        None, "Gaussian sigma (m) of the building share; default the point spacing.")
+    void_distance: float | None = cfield(
+        None, "Cells farther (m) from any point count as not building; default the spacing.")
+    min_area: float = cfield(4.0, "Smallest building kept (m2).")
+    min_hole_area: float = cfield(4.0, "Smallest courtyard kept as a hole (m2).")
+    edge_offset: float = cfield(
+        0.0, "Outline offset (m) after tracing; negative shrinks (roof overhang over the walls).")
+    simplify: float | None = cfield(
+        None, "Douglas-Peucker tolerance (m); default the cell; 0 disables.")
+    regularize: Literal["none", "snake"] = cfield("none", "Outline regulariser: none or snake.")
+    snake_cell: float | None = cfield(
+        None, "Grid cell (m) of the snake's candidate positions; default the cell.")
+    snake_window: int = cfield(2, "Snake search half-window w (cells): (2w+1)^2 states per vertex.")
+    snake_threshold: float | None = cfield(
+        None, "Snake threshold T (m): an edge whose smaller x/y extent (building frame) is within "
+        "T is pulled onto the building axes, others stay oblique; default 2 x snake_window x "
+        "snake_cell, the largest misalignment the search window can correct.")
+
+    def __post_init__(self):
+        for name in ("cell", "sigma", "void_distance", "snake_cell", "snake_threshold"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise ConfigError(f"footprints.{name}: must be > 0, got {v}")
+        for name in ("min_area", "min_hole_area"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"footprints.{name}: must be >= 0, got {getattr(self, name)}")
+        if self.simplify is not None and self.simplify < 0:
+            raise ConfigError(f"footprints.simplify: must be >= 0, got {self.simplify}")
+        if self.regularize not in REGULARIZERS:
+            raise ConfigError(f"footprints.regularize: {self.regularize!r} is not one of "
+                              f"{', '.join(map(repr, REGULARIZERS))}")
+        if self.snake_window < 1:
+            raise ConfigError(f"footprints.snake_window: must be >= 1, got {self.snake_window}")
+
+
+@dataclass(frozen=True, eq=False)
+class Footprint:
+    """One extracted building footprint.
+
+    ``polygon`` is a shapely Polygon in the local metric frame of the points;
+    ``status`` is ``"ok"`` or ``"unregularised"`` (the regulariser failed for
+    this building: ``reason`` says why and ``polygon`` is the simplified
+    outline); ``attributes`` holds ``area`` (m2), ``direction`` (degrees,
+    dominant direction modulo 90), ``n_vertices``, ``type_i`` .. ``type_iv``
+    (snake graph reductions of each type), ``mean_deviation`` (m), ``n_points``
+    (building points inside).
+    """
+
+    polygon: object
+    status: str = "ok"
+    reason: str = ""
+    attributes: dict = field(default_factory=dict)
+
+
+def grid_lengths(spacing: float, *, cell=None, sigma=None, void_distance=None, simplify=None,
+                 snake_cell=None) -> dict:
+    """Resolve the grid lengths (m) from the point spacing where they are not given."""
+    cell = cell if cell is not None else 1.5 * spacing
+    return {
+        "cell": cell,
+        "sigma": sigma if sigma is not None else spacing,
+        "void_distance": void_distance if void_distance is not None else spacing,
+        "simplify": simplify if simplify is not None else cell,
+        "snake_cell": snake_cell if snake_cell is not None else cell,
+    }
+
+
+def _parts(geom, min_area):
+    return [g for g in getattr(geom, "geoms", [geom])
+            if g.geom_type == "Polygon" and g.area >= max(min_area, 1e-9)]
+
+
+def extract_footprints(xyz, classification, *, building_class: int = 6, cell: float | None = None,
+                       sigma: float | None = None, void_distance: float | None = None,
+                       min_area: float = 4.0,
+                       min_hole_area: float = 4.0, edge_offset: float = 0.0,
+                       simplify: float | None = None, regularize: str = "none",
+                       snake_cell: float | None = None, snake_window: int = 2,
+                       snake_threshold: float | None = None, callback=None) -> list[Footprint]:
+    """Building footprints (one polygon per building block, with courtyards) from classified points.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3) or (N, 2)
+        Local metric coordinates of all points (building and others: the other
+        points tell where the building stops).
+    classification : ndarray of int, shape (N,)
+        ASPRS classes.
+    building_class : int
+        Class of building points.
+    cell, sigma, void_distance, simplify, snake_cell : float, optional
+        Lengths in metres; defaults from the building point spacing ``s``:
+        ``1.5 s``, ``s``, ``s``, ``cell``, ``cell``
+        (see the module docstring).
+    min_area, min_hole_area : float
+        Smallest building and smallest courtyard kept (m2).
+    edge_offset : float
+        Offset (m) of the traced outline; negative shrinks.
+    regularize : {"none", "snake"}
+        A key of :data:`~lidar2city.footprints.regularizers.REGULARIZERS`.
+    snake_window : int
+        Half-window (cells of ``snake_cell``) of the snake's candidate positions.
+    snake_threshold : float, optional
+        The snake's T (m) separating edges to align from oblique ones (eq. 4);
+        default ``2 * snake_window * snake_cell``: moving both ends of an edge by
+        at most the window, the snake can straighten an edge whose smaller
+        extent is up to that, not more.
+    callback : callable, optional
+        Called as ``callback(done, total)`` after each building.
+
+    Returns
+    -------
+    list of Footprint
+        In a deterministic order (grid scan order of the regions).
+
+    Raises
+    ------
+    InputError
+        For arrays of the wrong shape or an unknown regulariser.
+    EmptyInputError
+        When no point has ``building_class``.
+
+    Examples
+    --------
+    >>> fps = extract_footprints(cloud.xyz, cloud.get("classification"))  # doctest: +SKIP
+    >>> [f.attributes["area"] for f in fps]  # doctest: +SKIP
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    cls = np.asarray(classification)
+    if xyz.ndim != 2 or xyz.shape[1] not in (2, 3):
+        raise InputError(f"xyz must have shape (N, 3) or (N, 2), got {xyz.shape}")
+    if cls.shape != (len(xyz),):
+        raise InputError(f"classification has shape {cls.shape}, expected ({len(xyz)},)")
+    if regularize not in REGULARIZERS:
+        raise InputError(f"regularize must be one of {', '.join(REGULARIZERS)}, got {regularize!r}")
+    FootprintsConfig(building_class=building_class, cell=cell, sigma=sigma,
+                     void_distance=void_distance, min_area=min_area,
+                     min_hole_area=min_hole_area, edge_offset=edge_offset, simplify=simplify,
+                     regularize=regularize, snake_cell=snake_cell, snake_window=snake_window,
+                     snake_threshold=snake_threshold)
+    xy = xyz[:, :2]
+    is_b = cls == building_class
+    bxy, oxy = xy[is_b], xy[~is_b]
+    if len(bxy) < 3:
+        raise EmptyInputError(f"no building points (class {building_class}) in the input")
+    spacing = point_spacing(bxy)
+    L = grid_lengths(spacing, cell=cell, sigma=sigma, void_distance=void_distance,
+                     simplify=simplify, snake_cell=snake_cell)
+    logger.info("building point spacing %.3f m; cell %.3f m, sigma %.3f m, void %.2f m",
+                spacing, L["cell"], L["sigma"], L["void_distance"])
+    pad = int(np.ceil((3 * L["sigma"] + L["void_distance"]) / L["cell"])) + 2
+    grid = Grid.around(bxy, L["cell"], pad=pad)
+    inside = ((oxy[:, 0] >= grid.x0) & (oxy[:, 1] >= grid.y0)
+              & (oxy[:, 0] < grid.x0 + grid.shape[1] * grid.cell)
+              & (oxy[:, 1] < grid.y0 + grid.shape[0] * grid.cell))
+    fld = building_fraction(grid, bxy, oxy[inside], sigma=L["sigma"],
+                            void_distance=L["void_distance"])
+    labels, _ = building_regions(fld, L["cell"], min_area=min_area, min_hole_area=min_hole_area)
+    traced = trace_regions(fld, labels, grid, min_hole_area=min_hole_area)
+    bi, bj = grid.index(bxy)
+    point_counts = np.bincount(labels[bi, bj], minlength=int(labels.max()) + 1)
+
+    regularizer = REGULARIZERS[regularize]
+    threshold = (snake_threshold if snake_threshold is not None
+                 else 2.0 * snake_window * L["snake_cell"])
+    require_regularizer(regularize)  # fail early, once, when it is not installed
+    out: list[Footprint] = []
+    for n_done, (label, poly) in enumerate(traced, start=1):
+        parts = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,
+                       min_area)
+        for part in parts:
+            simple = simplify_polygon(part, L["simplify"])
+            try:
+                reg, info = regularizer(part, simplified=simple, cell=L["snake_cell"],
+                                        window=snake_window, tolerance=L["simplify"],
+                                        t_adjust=threshold)
+                if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
+                    raise AlgorithmError("the regulariser returned no valid polygon")
+            except AlgorithmError as exc:
+                reg, info = REGULARIZERS["none"](part, simplified=simple)
+                info.update(status="unregularised", reason=str(exc))
+            if info["status"] != "ok":
+                logger.info("footprint %d kept unregularised: %s", len(out), info["reason"])
+            attrs = {
+                "area": float(reg.area),
+                "direction": float(info["direction"]),
+                "n_vertices": int(info["n_vertices"]),
+                "mean_deviation": float(info["mean_deviation"]),
+                "n_points": int(point_counts[label]) if len(parts) == 1 else
+                int(np.count_nonzero(_contains(part, bxy))),
+                **{f"type_{t.lower()}": int(info["reductions"].get(t, 0))
+                   for t in ("I", "II", "III", "IV")},
+            }
+            out.append(Footprint(reg, info["status"], info["reason"], attrs))
+        if callback is not None:
+            callback(n_done, len(traced))
+    return out
+
+
+def _contains(polygon, xy):
+    import shapely
+
+    return shapely.contains_xy(polygon, xy[:, 0], xy[:, 1])

@@ -1,0 +1,154 @@
+"""Footprint outline regularisers: a name -> function dict (``REGULARIZERS``).
+
+Every regulariser is called as ``f(traced, simplified=..., cell=..., window=...,
+tolerance=...)`` with the traced outline (a polygon, local metres) and its
+Douglas–Peucker simplification, and returns ``(polygon, info)``. ``info``
+holds ``direction`` (degrees, the building's dominant direction modulo 90),
+``n_vertices``, ``reductions`` (dict of the snake's type "I".."IV" operation
+counts; zeros when no snake ran), ``mean_deviation`` (m, mean distance from the
+output outline to the traced one), ``status`` ("ok" or "unregularised") and
+``reason``.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..errors import DependencyError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["REGULARIZERS", "regularize_none", "regularize_snake", "outline_direction",
+           "vertex_count", "mean_deviation", "require"]
+
+
+def outline_direction(polygon) -> float:
+    """Dominant direction (degrees in [0, 90)) of a polygon's edges, modulo 90 degrees.
+
+    The length-weighted circular mean of the edge angles taken four times
+    (angles modulo 90 degrees map to one direction), as a light estimate for
+    outlines that are not regularised.
+    """
+    import shapely
+
+    total = np.zeros(2)
+    for ring in shapely.get_rings(polygon):
+        c = np.asarray(ring.coords)[:, :2]
+        d = np.diff(c, axis=0)
+        length = np.hypot(d[:, 0], d[:, 1])
+        ang = 4.0 * np.arctan2(d[:, 1], d[:, 0])
+        total += np.array([(length * np.cos(ang)).sum(), (length * np.sin(ang)).sum()])
+    if not total.any():
+        return 0.0
+    return float(np.mod(np.degrees(np.arctan2(total[1], total[0])) / 4.0, 90.0))
+
+
+def vertex_count(polygon) -> int:
+    """Number of distinct vertices over all rings (closing vertices not counted)."""
+    import shapely
+
+    return int(sum(len(r.coords) - 1 for r in shapely.get_rings(polygon)))
+
+
+def mean_deviation(polygon, reference, *, step: float = 0.25) -> float:
+    """Mean distance (m) from the boundary of ``polygon`` to the boundary of ``reference``.
+
+    The boundary is sampled every ``step`` metres (vertices included).
+    """
+    import shapely
+
+    dense = shapely.segmentize(polygon.boundary, step)
+    pts = shapely.points(shapely.get_coordinates(dense))
+    if not len(pts):
+        return 0.0
+    return float(np.mean(shapely.distance(pts, reference.boundary)))
+
+
+def regularize_none(traced, *, simplified=None, **_ignored):
+    """No regularisation: the simplified outline (or ``traced``) with its descriptive ``info``."""
+    poly = simplified if simplified is not None else traced
+    return poly, {
+        "direction": outline_direction(poly),
+        "n_vertices": vertex_count(poly),
+        "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
+        "mean_deviation": mean_deviation(poly, traced),
+        "status": "ok",
+        "reason": "",
+    }
+
+
+def _snake():
+    try:
+        from ..regularize.snake import regularize_polygon
+    except ImportError as exc:
+        raise DependencyError(
+            "the snake regulariser (lidar2city.regularize.snake) is not available in this "
+            f"installation ({exc}); use --regularize none") from None
+    return regularize_polygon
+
+
+def require(name: str) -> None:
+    """Raise :class:`~lidar2city.errors.DependencyError` if regulariser ``name`` cannot run."""
+    if name == "snake":
+        _snake()
+
+
+def regularize_snake(traced, *, cell: float, window: int, tolerance: float | None = None,
+                     simplified=None, **kwargs):
+    """The exact 2-D snake (graph reduction) with direction and deviation energies.
+
+    Calls :func:`lidar2city.regularize.snake.regularize_polygon` (imported here,
+    so the footprint package works without it) on the *traced* outline, which
+    simplifies it with ``tolerance`` and measures the deviation energy against
+    it. ``kwargs`` the installed function does not take (``t_adjust``...) are
+    left out. When the snake falls back (no valid result) the status is
+    "unregularised" and the simplified outline is kept.
+
+    Raises
+    ------
+    DependencyError
+        When the snake regulariser is not part of this installation.
+
+    References
+    ----------
+    Kass, Witkin, Terzopoulos (1988) for snakes; the graph-reduction solver and
+    energies (eqs. 4-6) of :mod:`lidar2city.regularize.snake`.
+    """
+    import inspect
+
+    regularize_polygon = _snake()
+    accepted = inspect.signature(regularize_polygon).parameters
+    if tolerance is not None:
+        kwargs["simplify_tolerance"] = tolerance
+    dropped = sorted(k for k in kwargs if k not in accepted)
+    if dropped:
+        logger.debug("regularize_polygon takes no %s; left out", ", ".join(dropped))
+    kwargs = {k: v for k, v in kwargs.items() if k in accepted}
+    out, raw = regularize_polygon(traced, cell=cell, window=window, **kwargs)
+    raw = dict(raw)
+    if raw.get("status", "regularized") not in ("regularized", "ok") or out is None:
+        fallback, info = regularize_none(traced, simplified=simplified)
+        info["status"] = "unregularised"
+        info["reason"] = str(raw.get("reason", "the snake fell back"))
+        info["reductions"] = dict(raw.get("reductions", info["reductions"]))
+        return fallback, info
+    direction = raw.get("direction_deg", raw.get("direction"))
+    deviation = raw.get("mean_deviation_m", raw.get("mean_deviation"))
+    return out, {
+        "direction": float(np.mod(direction, 90.0)) if direction is not None
+        else outline_direction(out),
+        "n_vertices": vertex_count(out),
+        "reductions": {t: int(raw.get("reductions", {}).get(t, 0)) for t in ("I", "II", "III", "IV")},
+        "mean_deviation": float(deviation) if deviation is not None else mean_deviation(out, traced),
+        "status": "ok",
+        "reason": "",
+    }
+
+
+#: Regularisers by name (the CLI choice and the ``footprints.regularize`` config value).
+REGULARIZERS = {
+    "none": regularize_none,
+    "snake": regularize_snake,
+}
