@@ -269,6 +269,21 @@ def _refit_ring(ring: np.ndarray, ref: np.ndarray, *, max_dist: float, max_shift
     return new
 
 
+def _repair(poly, keep: float = 0.95):
+    """Largest valid piece of an invalid polygon, or None if it loses > 5 % of the area."""
+    fixed = shapely.make_valid(poly)
+    parts = [g for g in getattr(fixed, "geoms", [fixed]) if isinstance(g, shapely.Polygon)]
+    parts += [q for g in getattr(fixed, "geoms", []) if isinstance(g, shapely.MultiPolygon) for q in g.geoms]
+    if not parts:
+        return None
+    total = sum(g.area for g in parts)
+    best = max(parts, key=lambda g: g.area)
+    if total <= 0 or best.area < keep * total or best.area < keep * abs(shapely.Polygon(poly.exterior).area):
+        return None
+    best = shapely.simplify(best, 0.0)  # drops collinear vertices added at crossings
+    return best if isinstance(best, shapely.Polygon) and best.is_valid and not best.is_empty else None
+
+
 def _open_ring(ring) -> np.ndarray:
     xy = np.asarray(ring.coords, dtype=np.float64)[:, :2]
     return xy[:-1] if len(xy) > 1 and np.array_equal(xy[0], xy[-1]) else xy
@@ -325,7 +340,8 @@ def regularize_polygon(
         fallback), ``direction_deg``, ``n_vertices`` (of the result),
         ``n_vertices_in`` (snake vertices), ``reductions`` (type I–IV counts),
         ``energy``, ``mean_deviation_m`` (mean distance of the result's
-        boundary to the input boundary), ``holes_dropped``, ``time_s``.
+        boundary to the input boundary), ``holes_dropped``, ``repaired``
+        (crossing vertices were untangled, keeping the main piece), ``time_s``.
 
     Raises
     ------
@@ -350,7 +366,7 @@ def regularize_polygon(
     info: dict = {"status": "fallback", "reason": "", "direction_deg": None,
                   "n_vertices": len(polygon.exterior.coords) - 1,
                   "n_vertices_in": 0, "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
-                  "energy": None, "mean_deviation_m": 0.0, "holes_dropped": 0}
+                  "energy": None, "mean_deviation_m": 0.0, "holes_dropped": 0, "repaired": False}
 
     def done(result):
         info["time_s"] = time.perf_counter() - t0
@@ -394,15 +410,15 @@ def regularize_polygon(
     shell = from_frame(frame_rings[0], direction, pivot)
     result = shapely.Polygon(shell, [from_frame(h, direction, pivot) for h in frame_rings[1:]])
     if not result.is_valid:
-        # A courtyard that touches or crosses the outline after snapping: try without it.
-        ok_holes = [h for h in result.interiors if shapely.Polygon(shell).contains(shapely.Polygon(h))]
-        retry = shapely.Polygon(shell, ok_holes)
-        if retry.is_valid and len(ok_holes) < len(holes):
-            info["holes_dropped"] += len(holes) - len(ok_holes)
-            result = retry
-        else:
+        # The snake has no topology constraint: vertices may cross (a small loop at a
+        # spike, a courtyard touching the outline). Repair, and keep the main piece if
+        # it holds nearly all the area.
+        repaired = _repair(result)
+        if repaired is None:
             info["reason"] = f"regularised outline invalid ({shapely.is_valid_reason(result)})"
             return done(polygon)
+        info["repaired"] = True
+        result = repaired
     info["status"] = "regularized"
     info["n_vertices"] = len(result.exterior.coords) - 1 + sum(len(r.coords) - 1 for r in result.interiors)
     info["mean_deviation_m"] = _mean_deviation(result, polygon, cell / 2)

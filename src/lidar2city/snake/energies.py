@@ -190,7 +190,7 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
     return np.where(adjustable & ~aligned, np.hypot(d[..., 0], d[..., 1]), 0.0)
 
 
-def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: float = 0.5) -> np.ndarray:
+def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: float = 1.0) -> np.ndarray:
     """E_Dis of every candidate pair (eq. 5), in square metres.
 
     Parameters
@@ -198,8 +198,8 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
     p_u, p_v : ndarray, shapes (d_u, 2), (d_v, 2)
         Candidate positions (grid units).
     raster : DistanceRaster
-        From :func:`distance_raster`; samples outside it read the distance at
-        its border plus their distance to it.
+        From :func:`distance_raster`; samples outside it read its border
+        (make its margin cover the candidate windows).
     cell : float
         Cell size (m).
     step : float
@@ -210,20 +210,25 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
     ndarray, shape (d_u, d_v)
     """
     dt, origin, scale = raster
-    p0 = np.asarray(p_u, dtype=np.float64)[:, None, :] * scale
-    p1 = np.asarray(p_v, dtype=np.float64)[None, :, :] * scale
-    p0, p1 = np.broadcast_arrays(p0, p1)
-    pts, length, n = _sample(p0, p1, step)
-    ij = np.round(pts).astype(np.int64) - np.asarray(origin, dtype=np.int64)
-    hi = np.array(dt.shape) - 1
-    clipped = np.clip(ij, 0, hi)
-    outside = np.abs(ij - clipped).max(axis=-1)
-    dist = dt[clipped[..., 0], clipped[..., 1]] + outside
-    # Trapezoid rule along the segment: integral of distance ds, distances in cells.
-    w = np.full(n, 1.0 / (n - 1))
-    w[[0, -1]] *= 0.5
-    mean = dist @ w
-    return mean * length * (cell / scale) ** 2
+    p0 = np.asarray(p_u, dtype=np.float64) * scale - origin  # raster coordinates
+    p1 = np.asarray(p_v, dtype=np.float64) * scale - origin
+    d = p1[None, :, :] - p0[:, None, :]  # (d_u, d_v, 2)
+    length = np.hypot(d[..., 0], d[..., 1])
+    n = max(int(np.ceil(float(length.max(initial=0.0)) / step)), 1) + 1
+    t = np.linspace(0.0, 1.0, n)
+    h, w = dt.shape
+    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster.
+    ix = np.floor(p0[:, None, None, 0] + 0.5 + t * d[..., None, 0]).astype(np.intp)
+    iy = np.floor(p0[:, None, None, 1] + 0.5 + t * d[..., None, 1]).astype(np.intp)
+    np.clip(ix, 0, h - 1, out=ix)
+    np.clip(iy, 0, w - 1, out=iy)
+    ix *= w
+    ix += iy
+    dist = dt.ravel()[ix]  # (d_u, d_v, n), raster cells
+    # Trapezoid rule along the segment: integral of distance ds.
+    wts = np.full(n, 1.0 / (n - 1))
+    wts[[0, -1]] *= 0.5
+    return (dist @ wts) * length * (cell / scale) ** 2
 
 
 def edge_energy_tables(

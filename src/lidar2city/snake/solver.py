@@ -63,7 +63,7 @@ _BROADCAST_LIMIT = 2_000_000
 #: Largest table (elements) the solver will build; denser graphs raise FitError.
 _MAX_TABLE = 50_000_000
 #: Type IV candidate pairs examined when the irreducible part is large.
-_MAX_PAIRS = 40
+_MAX_PAIRS = 16
 
 
 @dataclass(frozen=True)
@@ -186,6 +186,7 @@ class _Structure:
         self.adj: dict[int, set] = {v: set() for v in range(n)}
         self.active: set[int] = set(range(n))
         self.heap: list[tuple[int, int]] = []
+        self.conditioned: set[int] = set()
 
     def copy(self) -> _Structure:
         new = _Structure.__new__(_Structure)
@@ -194,6 +195,7 @@ class _Structure:
         new.adj = {v: set(s) for v, s in self.adj.items()}
         new.active = set(self.active)
         new.heap = list(self.heap)
+        new.conditioned = set(self.conditioned)
         return new
 
     def add(self, scope: frozenset) -> None:
@@ -218,7 +220,16 @@ class _Structure:
                 heapq.heappush(self.heap, (self.weight(v), v))
 
     def pop_reducible(self) -> int | None:
-        """Next vertex to reduce by I–III (degree <= 2, smallest table), or None."""
+        """Next vertex to reduce by I–III (degree <= 2, smallest table), or None.
+
+        A vertex removed by type IV whose tables now span at most two other
+        vertices (its part of the graph is reduced) is minimised out first:
+        carrying its axis further would only multiply later tables.
+        """
+        for a in sorted(self.conditioned):
+            if len(self.union(a)) <= 3:
+                self.conditioned.discard(a)
+                return a
         while self.heap:
             w, v = heapq.heappop(self.heap)
             if v not in self.active or len(self.adj[v]) > 2:
@@ -248,6 +259,7 @@ class _Structure:
 
     def condition(self, a: int) -> None:
         """Type IV: ``a`` leaves the active graph; its tables keep its axis."""
+        self.conditioned.add(a)
         self.push(sorted(self._deactivate(a)))
 
     def _deactivate(self, v: int) -> set:
@@ -266,15 +278,29 @@ class _Structure:
 
         return min(self.active, key=key)
 
-    def rollout(self) -> int:
-        """Work (table elements) to finish: I–III, else min-weight elimination, then type IV vertices."""
+    def component(self, v: int) -> set[int]:
+        """Active vertices connected to ``v``."""
+        seen, todo = {v}, [v]
+        while todo:
+            x = todo.pop()
+            for y in self.adj[x]:
+                if y not in seen:
+                    seen.add(y)
+                    todo.append(y)
+        return seen
+
+    def rollout(self, bound: float = np.inf) -> float:
+        """Work (table elements) to finish the active graph (I–III, else min-weight
+        elimination), then the type IV vertices; ``inf`` once above ``bound``."""
         work = 0
         while self.active:
             v = self.pop_reducible()
             if v is None:
                 v = self.min_weight()
             work += self.eliminate(v)[1]
-        for v in sorted(self.scopes):
+            if work > bound:
+                return np.inf
+        for v in sorted(self.conditioned):
             work += self.eliminate(v)[1]
         return work
 
@@ -374,35 +400,43 @@ class _Reducer:
     def _choose(self):
         """Pick the next move when every active vertex has degree >= 3.
 
-        Candidates are type IV on a pair of vertices and (unless the strategy
-        is ``"paper"``) the general elimination of the min-weight vertex. Each
-        is simulated on the structure and the reduction finished with a fixed
-        policy (I–III, else min-weight elimination); the move with the least
-        total work wins, ties going to type IV. As the simulation replays the
-        solver's own order, re-planning at each stuck point never does worse
-        than the plan it replaces.
+        Within the connected part of the graph holding the min-weight vertex,
+        the candidates are type IV on a pair of vertices and (unless the
+        strategy is ``"paper"``) the general elimination of that vertex. Each
+        is simulated on the structure and the reduction of that part finished
+        with a fixed policy (I–III, else min-weight elimination); the move with
+        the least total work wins, ties going to type IV. As the simulation
+        replays the solver's own order, re-planning at each stuck point never
+        does worse than the plan it replaces.
         """
         st = self.struct
-        alive = sorted(st.active)
+        v = st.min_weight()
+        comp = st.component(v)
+
+        def restricted():
+            sim = st.copy()
+            sim.active = set(comp)
+            return sim
+
         best = None
         if self.strategy != "paper":
-            v = st.min_weight()
-            sim = st.copy()
+            sim = restricted()
             w0 = sim.eliminate(v)[1]
             best = (w0 + sim.rollout(), 1, ("VE", v))
+        alive = sorted(comp)
         if len(alive) <= 8:
             pairs = list(itertools.combinations(alive, 2))
         else:
-            deg = {v: len(st.adj[v]) for v in alive}
+            deg = {x: len(st.adj[x]) for x in alive}
             pairs = sorted(
-                ((u, v) for u in alive for v in st.adj[u] if u < v),
+                ((x, y) for x in alive for y in st.adj[x] if x < y),
                 key=lambda p: (-(deg[p[0]] + deg[p[1]]), p),
             )[:_MAX_PAIRS]
         for a, c in pairs:
-            sim = st.copy()
+            sim = restricted()
             sim.condition(a)
             sim.condition(c)
-            score = (sim.rollout(), 0, ("IV", a, c))
+            score = (sim.rollout(np.inf if best is None else best[0]), 0, ("IV", a, c))
             if best is None or score[:2] < best[:2]:
                 best = score
         return best[2]
@@ -414,7 +448,8 @@ class _Reducer:
         while st.active:
             v = st.pop_reducible()
             if v is not None:
-                self._eliminate(v, kinds[len(st.adj[v])])
+                kind = kinds[len(st.adj[v])] if v in st.active else None
+                self._eliminate(v, kind)
                 continue
             move = self._choose()
             if move[0] == "IV":
