@@ -78,6 +78,28 @@ def test_courtyard_is_kept_and_solved_in_one_graph():
     assert info["reductions"]["IV"] == 0 and info["reductions"]["II"] >= 2
 
 
+@pytest.mark.parametrize("deg", [0.0, 23.0, 37.0])
+def test_raster_traced_outline(deg):
+    """A staircase outline traced from a 0.5 m raster comes back straight, in its own frame."""
+    from rasterio import features
+    from rasterio.transform import Affine
+
+    truth = shapely.affinity.rotate(
+        shapely.Polygon([(0, 0), (18, 0), (18, 7), (10, 7), (10, 12), (0, 12)]), deg, origin=(0, 0)
+    )
+    minx, miny, maxx, maxy = truth.bounds
+    tr = Affine(0.5, 0, minx - 2, 0, -0.5, maxy + 2)
+    shape = (int((maxy - miny + 4) / 0.5), int((maxx - minx + 4) / 0.5))
+    mask = features.rasterize([truth], out_shape=shape, transform=tr).astype(np.uint8)
+    traced = max((shapely.geometry.shape(g) for g, _ in features.shapes(mask, mask=mask > 0, transform=tr)),
+                 key=lambda g: g.area)
+    out, info = regularize_polygon(traced)
+    d = abs(info["direction_deg"] - deg) % 90
+    assert min(d, 90 - d) < 0.5
+    assert aligned_fraction(out, np.radians(info["direction_deg"]), tol_deg=0.01) == pytest.approx(1.0)
+    assert iou(out, truth) > 0.97
+
+
 def test_fallback_and_errors():
     with pytest.raises(InputError, match="Polygon"):
         regularize_polygon(shapely.box(0, 0, 1, 1).boundary)
@@ -187,7 +209,10 @@ def test_delft_bgt_perturbed_targets(data):
     frac = float(np.sum(np.array(aligned) * lengths) / lengths.sum())
     assert frac >= 0.8, frac
     assert np.mean(ious) >= 0.9, np.mean(ious)
-    # Oblique walls stay oblique: not more aligned than the BGT itself by a wide margin
-    # on the polygons that have real oblique walls.
-    oblique = np.array(bgt_aligned) < 0.9
-    assert np.mean(np.array(aligned)[oblique]) < 0.97
+    # Oblique walls stay oblique: on the BGT polygons with > 10 % oblique walls, most of
+    # that oblique length survives.
+    obl = np.array(bgt_aligned) < 0.9
+    bgt_len = np.array([t.length for t, _ in pairs])
+    share_bgt = 1 - np.sum(np.array(bgt_aligned)[obl] * bgt_len[obl]) / bgt_len[obl].sum()
+    share_out = 1 - np.sum(np.array(aligned)[obl] * lengths[obl]) / lengths[obl].sum()
+    assert share_out >= 0.6 * share_bgt, (share_out, share_bgt)
