@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lidar2city.config import build_stage
 from lidar2city.errors import ConfigError, EmptyInputError, InputError
@@ -216,3 +218,42 @@ def test_delft_bgt_perturbed_targets(data):
     share_bgt = 1 - np.sum(np.array(bgt_aligned)[obl] * bgt_len[obl]) / bgt_len[obl].sum()
     share_out = 1 - np.sum(np.array(aligned)[obl] * lengths[obl]) / lengths[obl].sum()
     assert share_out >= 0.6 * share_bgt, (share_out, share_bgt)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.floats(6, 40), st.floats(6, 30), st.floats(0, 90), st.integers(0, 2**31 - 1),
+    st.sampled_from(["rect", "L", "U"]),
+)
+def test_result_is_a_valid_closed_polygon_near_the_input(w, h, deg, seed, kind):
+    rng = np.random.default_rng(seed)
+    if kind == "rect":
+        base = shapely.box(0, 0, w, h)
+    elif kind == "L":
+        base = shapely.Polygon([(0, 0), (w, 0), (w, h / 2), (w / 2, h / 2), (w / 2, h), (0, h)])
+    else:
+        base = shapely.Polygon([(0, 0), (w, 0), (w, h), (2 * w / 3, h), (2 * w / 3, h / 3),
+                                (w / 3, h / 3), (w / 3, h), (0, h)])
+    truth = shapely.affinity.rotate(base, deg, origin=(0, 0))
+    noisy = shapely.make_valid(jitter(truth, 0.1, rng))
+    if not isinstance(noisy, shapely.Polygon):
+        return
+    out, info = regularize_polygon(noisy)
+    assert isinstance(out, shapely.Polygon) and out.is_valid and not out.is_empty
+    ring = shapely.get_coordinates(out.exterior)
+    assert np.array_equal(ring[0], ring[-1])
+    assert iou(out, noisy) > 0.85
+    if info["status"] == "regularized":
+        assert info["mean_deviation_m"] < 0.5
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (100.0, -37.5), (-2.5, 1e4)])
+def test_translation_by_grid_steps_translates_the_result(shift):
+    rng = np.random.default_rng(9)
+    truth = shapely.affinity.rotate(shapely.Polygon([(0, 0), (18, 0), (18, 7), (10, 7), (10, 12), (0, 12)]),
+                                    23, origin=(0, 0))
+    noisy = jitter(truth, 0.1, rng)
+    a, ia = regularize_polygon(noisy, direction=np.radians(23))
+    b, ib = regularize_polygon(shapely.affinity.translate(noisy, *shift), direction=np.radians(23))
+    assert shapely.hausdorff_distance(shapely.affinity.translate(a, *shift), b) < 1e-6
+    assert ia["reductions"] == ib["reductions"]
