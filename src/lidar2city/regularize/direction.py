@@ -197,6 +197,10 @@ def _profile_score(pts, w, angles, binw):
     kernel density, largest when walls project onto single lines, and
     strictly decreasing as they spread (no plateau within one coarse bin).
     """
+    chunk = max(1, 2_000_000 // max(len(pts), 1))
+    if len(angles) > chunk:  # bound memory: angles in chunks
+        return np.concatenate([_profile_score(pts, w, angles[i : i + chunk], binw)
+                               for i in range(0, len(angles), chunk)])
     fine = binw / 4
     c, s = np.cos(angles), np.sin(angles)
     out = np.zeros(len(angles))

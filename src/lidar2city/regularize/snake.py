@@ -28,7 +28,7 @@ import numpy as np
 import shapely
 
 from ..config import field
-from ..errors import ConfigError, EmptyInputError, InputError
+from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
 from ..snake.energies import (
     candidate_positions,
     distance_raster,
@@ -379,6 +379,7 @@ def regularize_polygon(
         direction = dominant_direction(polygon, method="profile", profile_bin=cell / 2)
     info["direction_deg"] = float(np.degrees(direction))
     rings = [_open_ring(simple.exterior)] + [_open_ring(r) for r in simple.interiors]
+    info["holes_dropped"] = sum(1 for r in rings[1:] if len(r) < 3)
     rings = [rings[0]] + [r for r in rings[1:] if len(r) >= 3]
     if len(rings[0]) < 3:
         info["reason"] = "outline degenerate after simplification"
@@ -391,19 +392,26 @@ def regularize_polygon(
         for s, k in zip(starts, sizes, strict=True)
     ])
     t, c = _defaults(cell, t_adjust, c_dir)
-    grid, pivot, sol = _frame_solve(xy, edges, segments_of(polygon), cell=cell, window=window,
-                                    direction=direction, t_adjust=t, c_dir=c, c_dis=c_dis,
-                                    c_move=c_move, fixed=None, strategy=strategy)
+    try:
+        grid, pivot, sol = _frame_solve(xy, edges, segments_of(polygon), cell=cell, window=window,
+                                        direction=direction, t_adjust=t, c_dir=c, c_dis=c_dis,
+                                        c_move=c_move, fixed=None, strategy=strategy)
+    except AlgorithmError as exc:  # pragma: no cover - rings always reduce by I-III
+        info["reason"] = f"snake failed: {exc}"
+        return done(polygon)
     info.update(n_vertices_in=int(len(xy)), reductions=dict(sol.reductions), energy=float(sol.energy))
     cleaned = [_clean_ring(grid[s : s + k]) for s, k in zip(starts, sizes, strict=True)]
     if len(cleaned[0]) < 3:
         info["reason"] = "outline collapsed"
         return done(polygon)
     holes = [h for h in cleaned[1:] if len(h) >= 3]
-    info["holes_dropped"] = len(cleaned) - 1 - len(holes)
+    info["holes_dropped"] += len(cleaned) - 1 - len(holes)
     frame_rings = [cleaned[0] * cell] + [h * cell for h in holes]
     if refine:
-        line = shapely.segmentize(polygon.boundary, max_segment_length=cell / 4)
+        # Reference points every cell / 4 (at most ~2e6 point-edge pairs in the refit).
+        k = sum(len(r) for r in frame_rings)
+        spacing = max(cell / 4, polygon.boundary.length * k / 2e6)
+        line = shapely.segmentize(polygon.boundary, max_segment_length=spacing)
         ref = to_frame(shapely.get_coordinates(line), direction, pivot)
         frame_rings = [_refit_ring(r, ref, max_dist=(window + 1) * cell, max_shift=(window + 1) * cell)
                        for r in frame_rings]

@@ -43,6 +43,11 @@ from scipy import ndimage
 
 from ..errors import InputError
 
+#: Largest distance raster (cells) before ``subdivide`` is reduced.
+_RASTER_BUDGET = 8_000_000
+#: Largest number of samples (candidate pairs x points) read at once.
+_SAMPLE_BUDGET = 1_000_000
+
 __all__ = [
     "window_offsets",
     "candidate_positions",
@@ -131,6 +136,7 @@ def distance_raster(segments_grid, *, margin: int, subdivide: int = 4) -> Distan
         (1); a finer raster (default 4) keeps a noisy traced outline from
         filling a band of whole cells where every candidate reads distance 0,
         so the deviation energy still prefers the middle of the noise.
+        Halved (down to 1) while the raster would exceed 8e6 cells.
 
     Returns
     -------
@@ -143,7 +149,10 @@ def distance_raster(segments_grid, *, margin: int, subdivide: int = 4) -> Distan
         raise InputError(f"segments_grid must have shape (m, 2, 2) with m > 0, got {seg.shape}")
     if int(subdivide) != subdivide or subdivide < 1:
         raise InputError(f"subdivide must be a positive integer, got {subdivide}")
+    extent = np.ptp(seg.reshape(-1, 2), axis=0) + 2 * margin + 1
     scale = int(subdivide)
+    while scale > 1 and float(np.prod(extent * scale)) > _RASTER_BUDGET:
+        scale //= 2  # very large outlines: a coarser raster, bounded memory
     seg = seg * scale
     margin = int(margin) * scale
     step = 0.25
@@ -160,7 +169,7 @@ def distance_raster(segments_grid, *, margin: int, subdivide: int = 4) -> Distan
     pts = seg[which, 0] + t[:, None] * d[which]
     ij = np.round(pts).astype(np.int64) - lo
     mask[ij[:, 0], ij[:, 1]] = True
-    dt = ndimage.distance_transform_cdt(~mask, metric="chessboard").astype(np.float64)
+    dt = ndimage.distance_transform_cdt(~mask, metric="chessboard").astype(np.int32)
     return DistanceRaster(dt, lo, scale)
 
 
@@ -215,6 +224,12 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
     d = p1[None, :, :] - p0[:, None, :]  # (d_u, d_v, 2)
     length = np.hypot(d[..., 0], d[..., 1])
     n = max(int(np.ceil(float(length.max(initial=0.0)) / step)), 1) + 1
+    rows = max(1, _SAMPLE_BUDGET // (n * len(p1)))
+    if rows < len(p0):  # long edges: bound memory by chunks of candidates of u
+        return np.concatenate([
+            deviation_energy(p_u[i : i + rows], p_v, raster, cell=cell, step=step)
+            for i in range(0, len(p0), rows)
+        ])
     t = np.linspace(0.0, 1.0, n)
     h, w = dt.shape
     # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster.
