@@ -257,3 +257,29 @@ def test_translation_by_grid_steps_translates_the_result(shift):
     b, ib = regularize_polygon(shapely.affinity.translate(noisy, *shift), direction=np.radians(23))
     assert shapely.hausdorff_distance(shapely.affinity.translate(a, *shift), b) < 1e-6
     assert ia["reductions"] == ib["reductions"]
+
+
+def test_batch_never_dies_on_one_building():
+    from lidar2city.regularize import regularize_polygons
+
+    rng = np.random.default_rng(5)
+    good = jitter(shapely.box(0, 0, 12, 8), 0.1, rng)
+    multi = shapely.MultiPolygon([jitter(shapely.box(0, 0, 10, 6), 0.1, rng),
+                                  jitter(shapely.box(20, 0, 30, 6), 0.1, rng)])
+    outs, infos = regularize_polygons([good, shapely.Polygon(), multi, shapely.box(0, 0, 1, 1).boundary])
+    assert [i["status"] for i in infos] == ["regularized", "error", "regularized", "error"]
+    assert isinstance(outs[2], shapely.MultiPolygon) and len(outs[2].geoms) == 2
+    assert infos[2]["n_vertices"] == 8
+    with pytest.raises(InputError, match="cell"):
+        regularize_polygons([good], cell=-1)
+
+
+def test_per_edge_direction_weights():
+    # A triangle: with the direction energy off on the hypotenuse it stays where the data is.
+    xy = np.array([[0.0, 0.0], [6.0, 0.3], [0.2, 0.6]])
+    edges = [(0, 1), (1, 2), (2, 0)]
+    new, _ = adjust_planar_graph(xy, edges, direction=0.0, c_dir=[1.0, 0.0, 1.0])
+    assert new[0, 1] == pytest.approx(new[1, 1])  # first edge horizontal
+    assert new[2, 0] == pytest.approx(new[0, 0])  # third edge vertical
+    with pytest.raises(InputError, match="c_dir"):
+        adjust_planar_graph(xy, edges, c_dir=[1.0, 2.0])

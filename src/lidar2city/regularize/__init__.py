@@ -1,7 +1,7 @@
 """Footprint and topology regularisation: building direction and the 2-D snake."""
 
 from .direction import aligned_fraction, dominant_direction, from_frame, segments_of, to_frame
-from .snake import SnakeConfig, adjust_planar_graph, regularize_polygon
+from .snake import SnakeConfig, adjust_planar_graph, regularize_polygon, regularize_polygons
 
 __all__ = [
     "SnakeConfig",
@@ -10,6 +10,7 @@ __all__ = [
     "dominant_direction",
     "from_frame",
     "regularize_polygon",
+    "regularize_polygons",
     "segments_of",
     "to_frame",
 ]

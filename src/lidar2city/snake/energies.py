@@ -253,7 +253,7 @@ def edge_energy_tables(
     *,
     cell: float,
     t_adjust: float,
-    c_dir: float,
+    c_dir,
     c_dis: float,
 ) -> list[np.ndarray]:
     """``C_Dir E_Dir + C_Dis E_Dis`` (eq. 6) for every edge: the solver's edge tables.
@@ -265,19 +265,24 @@ def edge_energy_tables(
     edges : array of int, shape (m, 2)
     raster : DistanceRaster
         From :func:`distance_raster`.
-    cell, t_adjust, c_dir, c_dis : float
-        Cell size (m), adjustability threshold ``T`` (m), weights.
+    cell, t_adjust, c_dis : float
+        Cell size (m), adjustability threshold ``T`` (m), deviation weight.
+    c_dir : float or array of float, shape (m,)
+        Direction weight, one for all edges or one per edge (0 switches the
+        direction energy off for an edge, e.g. the hip edges of a roof).
 
     Returns
     -------
     list of ndarray, shape (d_u, d_v) each
     """
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
     out = []
-    for u, v in np.asarray(edges, dtype=np.int64).reshape(-1, 2):
+    for (u, v), wd in zip(edges, weights, strict=True):
         pu, pv = candidates[u], candidates[v]
         e = c_dis * deviation_energy(pu, pv, raster, cell=cell)
-        if c_dir:
-            e = e + c_dir * direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
+        if wd:
+            e = e + wd * direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
         out.append(e)
     return out
 
