@@ -348,7 +348,9 @@ def regularize_polygon(
         ``n_vertices_in`` (snake vertices), ``reductions`` (type I–IV counts),
         ``energy``, ``mean_deviation_m`` (mean distance of the result's
         boundary to the input boundary), ``holes_dropped``, ``repaired``
-        (crossing vertices were untangled, keeping the main piece), ``time_s``.
+        (crossing vertices were untangled, keeping the main piece),
+        ``refined`` (the offset refit was kept; it is dropped when it would
+        make the outline invalid), ``time_s``.
 
     Raises
     ------
@@ -373,7 +375,8 @@ def regularize_polygon(
     info: dict = {"status": "fallback", "reason": "", "direction_deg": None,
                   "n_vertices": len(polygon.exterior.coords) - 1,
                   "n_vertices_in": 0, "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
-                  "energy": None, "mean_deviation_m": 0.0, "holes_dropped": 0, "repaired": False}
+                  "energy": None, "mean_deviation_m": 0.0, "holes_dropped": 0, "repaired": False,
+                  "refined": False}
 
     def done(result):
         info["time_s"] = time.perf_counter() - t0
@@ -414,26 +417,36 @@ def regularize_polygon(
     holes = [h for h in cleaned[1:] if len(h) >= 3]
     info["holes_dropped"] += len(cleaned) - 1 - len(holes)
     frame_rings = [cleaned[0] * cell] + [h * cell for h in holes]
+    tries = [frame_rings]
     if refine:
         # Reference points every cell / 4 (at most ~2e6 point-edge pairs in the refit).
         k = sum(len(r) for r in frame_rings)
         spacing = max(cell / 4, polygon.boundary.length * k / 2e6)
         line = shapely.segmentize(polygon.boundary, max_segment_length=spacing)
         ref = to_frame(shapely.get_coordinates(line), direction, pivot)
-        frame_rings = [_refit_ring(r, ref, max_dist=(window + 1) * cell, max_shift=(window + 1) * cell)
-                       for r in frame_rings]
-    shell = from_frame(frame_rings[0], direction, pivot)
-    result = shapely.Polygon(shell, [from_frame(h, direction, pivot) for h in frame_rings[1:]])
-    if not result.is_valid:
+        refined = [_refit_ring(r, ref, max_dist=(window + 1) * cell, max_shift=(window + 1) * cell)
+                   for r in frame_rings]
+        tries.insert(0, refined)
+    shapes = [shapely.Polygon(from_frame(t[0], direction, pivot), [from_frame(h, direction, pivot) for h in t[1:]])
+              for t in tries]
+    result, used = None, None
+    for k, g in enumerate(shapes):
+        if g.is_valid:
+            result, used = g, k
+            break
+    if result is None:
         # The snake has no topology constraint: vertices may cross (a small loop at a
         # spike, a courtyard touching the outline). Repair, and keep the main piece if
         # it holds nearly all the area.
-        repaired = _repair(result)
-        if repaired is None:
-            info["reason"] = f"regularised outline invalid ({shapely.is_valid_reason(result)})"
+        for k, g in enumerate(shapes):
+            result, used = _repair(g), k
+            if result is not None:
+                break
+        if result is None:
+            info["reason"] = f"regularised outline invalid ({shapely.is_valid_reason(shapes[0])})"
             return done(polygon)
         info["repaired"] = True
-        result = repaired
+    info["refined"] = bool(refine and used == 0)
     info["status"] = "regularized"
     info["n_vertices"] = len(result.exterior.coords) - 1 + sum(len(r.coords) - 1 for r in result.interiors)
     info["mean_deviation_m"] = _mean_deviation(result, polygon, cell / 2)
