@@ -283,3 +283,12 @@ def test_per_edge_direction_weights():
     assert new[2, 0] == pytest.approx(new[0, 0])  # third edge vertical
     with pytest.raises(InputError, match="c_dir"):
         adjust_planar_graph(xy, edges, c_dir=[1.0, 2.0])
+
+
+def test_coincident_vertices_reported():
+    # Two vertices 0.2 m apart on a wall collapse onto one grid position.
+    xy = np.array([[0.0, 0.0], [10.0, 0.1], [10.1, 0.3], [10.0, 6.0], [0.0, 6.1]])
+    edges = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 0)]
+    new, info = adjust_planar_graph(xy, edges, direction=0.0)
+    assert [1, 2] in info["coincident"]
+    np.testing.assert_array_equal(new[1], new[2])

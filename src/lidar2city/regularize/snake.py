@@ -153,7 +153,9 @@ def adjust_planar_graph(
     info : dict
         ``direction`` (radians), ``direction_deg``, ``energy``, ``reductions``,
         ``states`` (candidate index per vertex, 0 = snapped input position),
-        ``moved`` (number of vertices whose snapped position changed).
+        ``moved`` (number of vertices whose snapped position changed),
+        ``coincident`` (groups of vertex indices that ended at the same
+        position: edges between them collapsed; merge them if needed).
 
     Raises
     ------
@@ -207,8 +209,18 @@ def adjust_planar_graph(
         "reductions": dict(sol.reductions),
         "states": sol.states,
         "moved": int(np.count_nonzero(sol.states[~fixed_arr] != 0)),
+        "coincident": _coincident(new),
     }
     return new, info
+
+
+def _coincident(xy: np.ndarray) -> list[list[int]]:
+    """Groups (size >= 2) of vertices at identical positions."""
+    if len(xy) < 2:
+        return []
+    _, inverse, counts = np.unique(xy, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    return [np.flatnonzero(inverse == g).tolist() for g in np.flatnonzero(counts > 1)]
 
 
 def _clean_ring(g: np.ndarray) -> np.ndarray:
