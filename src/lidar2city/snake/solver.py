@@ -1,0 +1,547 @@
+"""Exact minimisation of a pairwise energy on a graph by graph reduction.
+
+The energy of a labelling ``s`` (one state per vertex) is
+
+.. math:: E_G(s) = \\sum_v E_V(v, s_v) + \\sum_{e=(u,v)} E_E(e, s_u, s_v)
+
+(Yan et al. 2015, eq. 1). Dynamic programming along a contour (the classic
+snake) is generalised to any graph by four reduction operations that each
+remove vertices or edges while keeping the minimum of ``E_G``:
+
+* **type I** — a vertex of degree 2 is eliminated into a new edge between its
+  two neighbours; the new edge table is
+  ``min_j E(u, v)[i, j] + E_V(v, j) + E(v, w)[j, k]`` and a look-up table
+  keeps the best ``j`` per ``(i, k)`` (eq. 2);
+* **type II** — parallel edges are merged by summing their tables;
+* **type III** — a vertex of degree 1 is eliminated into its neighbour's vertex
+  energy, ``E_V(u, i) += min_j E(u, v)[i, j] + E_V(v, j)`` (eq. 3), with a
+  look-up table;
+* **type IV** — when no vertex has degree <= 2, a pair of vertices ``a, c`` is
+  removed: for every pair of their states ``(i, k)`` the energies of their
+  edges are pushed into their neighbours' vertex energies (eqs. 7–10) and the
+  reduced graph is solved; the best pair wins.
+
+Type IV is not enumerated with a Python loop. Every energy table is kept
+with one axis per vertex it depends on (its *scope*); removing ``a`` and ``c``
+by type IV takes them out of the graph whose degrees drive the reductions, but
+the tables that touched them keep their axes. Those axes are the batch of the
+``d_a x d_c`` conditioned sub-problems: numpy broadcasting carries all of them
+through the remaining reductions at once, and only the tables that actually
+see ``a`` or ``c`` grow. When the graph is reduced, a last minimisation over
+the joint tables of the removed vertices picks the best pair, and the look-up
+tables are back-tracked in reverse order (each is indexed by the states of its
+scope, known by then).
+
+Beyond the paper, and still exact: when all vertices have degree >= 3 the
+solver may instead eliminate one vertex into a table over its neighbours
+(min-sum variable elimination, counted as ``"VE"``). Which move is taken is
+decided by simulating, on the graph structure alone, the whole remaining
+reduction after each candidate (type IV on each candidate pair, or the
+min-weight elimination) and keeping the cheapest; type IV wins ties. With
+``strategy="paper"`` only type IV is used.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import FitError, InputError
+
+__all__ = ["SnakeSolution", "minimize_energy", "graph_energy"]
+
+logger = logging.getLogger(__name__)
+
+#: Size (elements) above which a min-plus product is computed state by state
+#: of the eliminated vertex instead of in one broadcast (bounds memory).
+_BROADCAST_LIMIT = 2_000_000
+#: Largest table (elements) the solver will build; denser graphs raise FitError.
+_MAX_TABLE = 50_000_000
+#: Type IV candidate pairs examined when the irreducible part is large.
+_MAX_PAIRS = 16
+
+
+@dataclass(frozen=True)
+class SnakeSolution:
+    """Result of :func:`minimize_energy`.
+
+    Attributes
+    ----------
+    states : ndarray of int, shape (n,)
+        The minimising state of every vertex.
+    energy : float
+        ``E_G(states)``, recomputed from the input energies.
+    reductions : dict
+        How many operations of each type were applied: keys ``"I"``, ``"II"``,
+        ``"III"``, ``"IV"`` (always present).
+    """
+
+    states: np.ndarray
+    energy: float
+    reductions: dict = field(default_factory=dict)
+
+
+def _as_float_array(value, name: str, ndim: int) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a numeric {ndim}-D array") from None
+    if arr.ndim != ndim:
+        raise InputError(f"{name} must be {ndim}-D, got shape {arr.shape}")
+    if arr.size == 0:
+        raise InputError(f"{name} must not be empty, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} must hold finite values only")
+    return arr
+
+
+def _validate(vertex_energies, edges, edge_energies):
+    if isinstance(vertex_energies, np.ndarray) and vertex_energies.ndim == 2:
+        vertex_energies = list(vertex_energies)
+    try:
+        n = len(vertex_energies)
+    except TypeError:
+        raise InputError("vertex_energies must be a sequence of 1-D arrays") from None
+    unary = [_as_float_array(e, f"vertex_energies[{v}]", 1) for v, e in enumerate(vertex_energies)]
+    dims = np.array([len(u) for u in unary], dtype=np.int64)
+    try:
+        edge_arr = np.asarray(edges)
+    except (TypeError, ValueError):
+        raise InputError("edges must be a sequence of (u, v) index pairs") from None
+    if edge_arr.size == 0:
+        edge_arr = np.zeros((0, 2), dtype=np.int64)
+    if edge_arr.ndim != 2 or edge_arr.shape[1] != 2:
+        raise InputError(f"edges must have shape (m, 2), got {edge_arr.shape}")
+    if edge_arr.dtype == bool or not np.issubdtype(edge_arr.dtype, np.integer):
+        raise InputError(f"edges must hold integer vertex indices, got dtype {edge_arr.dtype}")
+    edge_arr = edge_arr.astype(np.int64)
+    if len(edge_arr) and (edge_arr.min() < 0 or edge_arr.max() >= n):
+        raise InputError(f"edges: vertex indices must be in [0, {n}), got {edge_arr.min()}..{edge_arr.max()}")
+    loops = np.flatnonzero(edge_arr[:, 0] == edge_arr[:, 1])
+    if len(loops):
+        raise InputError(f"edges[{loops[0]}] is a self-loop ({edge_arr[loops[0], 0]}); u != v is required")
+    try:
+        m = len(edge_energies)
+    except TypeError:
+        raise InputError("edge_energies must be a sequence of 2-D arrays") from None
+    if m != len(edge_arr):
+        raise InputError(f"edge_energies has {m} tables for {len(edge_arr)} edges")
+    tables = []
+    for k, ((u, v), t) in enumerate(zip(edge_arr, edge_energies, strict=True)):
+        arr = _as_float_array(t, f"edge_energies[{k}]", 2)
+        if arr.shape != (dims[u], dims[v]):
+            raise InputError(
+                f"edge_energies[{k}] must have shape (d_u, d_v) = ({dims[u]}, {dims[v]}) "
+                f"for edge ({u}, {v}), got {arr.shape}"
+            )
+        tables.append(arr)
+    return unary, dims, edge_arr, tables
+
+
+def graph_energy(states, vertex_energies, edges, edge_energies) -> float:
+    """Total energy ``E_G`` of a labelling (Yan et al. 2015, eq. 1).
+
+    Parameters
+    ----------
+    states : array of int, shape (n,)
+    vertex_energies, edges, edge_energies
+        As for :func:`minimize_energy`.
+    """
+    states = np.asarray(states, dtype=np.int64)
+    total = 0.0
+    for v, e in enumerate(vertex_energies):
+        total += float(np.asarray(e, dtype=np.float64)[states[v]])
+    for (u, v), t in zip(edges, edge_energies, strict=True):
+        total += float(np.asarray(t, dtype=np.float64)[states[u], states[v]])
+    return total
+
+
+def _prod(dims, scope) -> int:
+    out = 1
+    for x in scope:
+        out *= int(dims[x])
+    return out
+
+
+class _Structure:
+    """The graph structure of a reduction in progress (no energies).
+
+    ``scopes[v]`` holds the scopes (frozensets of vertices) of the energy
+    tables that involve ``v``; ``adj`` is the graph among the *active*
+    vertices (neither eliminated nor removed by type IV). The next vertex to
+    reduce by I–III is the one of degree <= 2 whose elimination builds the
+    smallest table (a lazy heap keyed by table size, then vertex index), so a
+    copy simulates exactly what the solver will do. Used by the solver itself
+    and, copied, to plan type IV / elimination choices.
+    """
+
+    def __init__(self, dims, n: int):
+        self.dims = dims
+        self.scopes: dict[int, set] = {v: set() for v in range(n)}
+        self.adj: dict[int, set] = {v: set() for v in range(n)}
+        self.active: set[int] = set(range(n))
+        self.heap: list[tuple[int, int]] = []
+        self.conditioned: set[int] = set()
+
+    def copy(self) -> _Structure:
+        new = _Structure.__new__(_Structure)
+        new.dims = self.dims
+        new.scopes = {v: set(s) for v, s in self.scopes.items()}
+        new.adj = {v: set(s) for v, s in self.adj.items()}
+        new.active = set(self.active)
+        new.heap = list(self.heap)
+        new.conditioned = set(self.conditioned)
+        return new
+
+    def add(self, scope: frozenset) -> None:
+        """Register a table over ``scope``."""
+        act = [x for x in scope if x in self.active]
+        for x in scope:
+            self.scopes[x].add(scope)
+        for i, a in enumerate(act):
+            for b in act[i + 1:]:
+                self.adj[a].add(b)
+                self.adj[b].add(a)
+
+    def union(self, v: int) -> frozenset:
+        return frozenset().union(*self.scopes[v]) if self.scopes[v] else frozenset((v,))
+
+    def weight(self, v: int) -> int:
+        return _prod(self.dims, self.union(v))
+
+    def push(self, vertices) -> None:
+        for v in vertices:
+            if v in self.active and len(self.adj[v]) <= 2:
+                heapq.heappush(self.heap, (self.weight(v), v))
+
+    def pop_reducible(self) -> int | None:
+        """Next vertex to reduce by I–III (degree <= 2, smallest table), or None.
+
+        A vertex removed by type IV whose tables now span at most two other
+        vertices (its part of the graph is reduced) is minimised out first:
+        carrying its axis further would only multiply later tables.
+        """
+        for a in sorted(self.conditioned):
+            if len(self.union(a)) <= 3:
+                self.conditioned.discard(a)
+                return a
+        while self.heap:
+            w, v = heapq.heappop(self.heap)
+            if v not in self.active or len(self.adj[v]) > 2:
+                continue
+            now = self.weight(v)
+            if now != w:
+                heapq.heappush(self.heap, (now, v))
+                continue
+            return v
+        return None
+
+    def eliminate(self, v: int) -> tuple[frozenset, int]:
+        """Remove ``v``; return the scope of the new table and the work (elements)."""
+        old = self.scopes.pop(v)
+        union = frozenset().union(*old) if old else frozenset((v,))
+        work = _prod(self.dims, union)
+        for s in old:
+            for x in s:
+                if x != v:
+                    self.scopes[x].discard(s)
+        nb = self._deactivate(v)
+        new = union - {v}
+        if new:
+            self.add(new)
+        self.push(sorted(nb | (new & self.active)))
+        return new, work
+
+    def condition(self, a: int) -> None:
+        """Type IV: ``a`` leaves the active graph; its tables keep its axis."""
+        self.conditioned.add(a)
+        self.push(sorted(self._deactivate(a)))
+
+    def _deactivate(self, v: int) -> set:
+        self.active.discard(v)
+        nb = self.adj.pop(v, set())
+        for x in nb:
+            self.adj[x].discard(v)
+        return nb
+
+    def min_weight(self) -> int:
+        """Active vertex whose elimination makes the smallest table (then least fill)."""
+        def key(v):
+            nb = list(self.adj[v])
+            fill = sum(1 for i, a in enumerate(nb) for b in nb[i + 1:] if b not in self.adj[a])
+            return (self.weight(v), fill, v)
+
+        return min(self.active, key=key)
+
+    def component(self, v: int) -> set[int]:
+        """Active vertices connected to ``v``."""
+        seen, todo = {v}, [v]
+        while todo:
+            x = todo.pop()
+            for y in self.adj[x]:
+                if y not in seen:
+                    seen.add(y)
+                    todo.append(y)
+        return seen
+
+    def rollout(self, bound: float = np.inf) -> float:
+        """Work (table elements) to finish the active graph (I–III, else min-weight
+        elimination), then the type IV vertices; ``inf`` once above ``bound``."""
+        work = 0
+        while self.active:
+            v = self.pop_reducible()
+            if v is None:
+                v = self.min_weight()
+            work += self.eliminate(v)[1]
+            if work > bound:
+                return np.inf
+        for v in sorted(self.conditioned):
+            work += self.eliminate(v)[1]
+        return work
+
+
+def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
+    """Minimum (and argmin) over ``axis`` of the broadcast sum of ``arrays``."""
+    size = int(np.prod(shape, dtype=np.int64))
+    if size <= _BROADCAST_LIMIT:
+        total = arrays[0]
+        for a in arrays[1:]:
+            total = total + a
+        total = np.broadcast_to(total, shape)
+        arg = total.argmin(axis=axis)
+        best = np.take_along_axis(total, np.expand_dims(arg, axis), axis=axis)
+        return np.squeeze(best, axis=axis), arg
+    # Large table: run over the eliminated vertex's states, keeping a running minimum.
+    out_shape = shape[:axis] + shape[axis + 1:]
+    best = np.full(out_shape, np.inf)
+    arg = np.zeros(out_shape, dtype=np.int64)
+    for j in range(shape[axis]):
+        cand = np.zeros(())
+        for a in arrays:
+            cand = cand + np.take(a, j if a.shape[axis] > 1 else 0, axis=axis)
+        cand = np.broadcast_to(cand, out_shape)
+        better = cand < best
+        np.copyto(best, cand, where=better)
+        arg[better] = j
+    return best, arg
+
+
+class _Reducer:
+    """Energy tables keyed by their (sorted) vertex scope, plus the operation log.
+
+    A table over scope ``(x0, x1, ...)`` has one axis per vertex, in that order.
+    Pairwise tables are the edges of the snake, 1-vertex tables the vertex
+    energies. After a type IV operation the tables that touched a removed
+    vertex keep its axis: they are the batch of conditioned sub-problems.
+    """
+
+    def __init__(self, unary, dims, edges, tables, strategy="auto"):
+        self.n = len(unary)
+        self.dims = dims
+        self.strategy = strategy
+        self.struct = _Structure(dims, self.n)
+        self.tables: dict[tuple, np.ndarray] = {}
+        self.ops: list = []
+        self.conditioned: list[int] = []
+        self.counts = {"I": 0, "II": 0, "III": 0, "IV": 0, "VE": 0}
+        for v, u in enumerate(unary):
+            self._add((v,), u)
+        for (u, v), t in zip(edges, tables, strict=True):
+            u, v = int(u), int(v)
+            if u > v:
+                u, v, t = v, u, t.T
+            self._add((u, v), t)
+
+    def _add(self, scope: tuple, table: np.ndarray) -> None:
+        if scope in self.tables:
+            if len(scope) >= 2:  # type II: merge parallel edges (sum their tables)
+                self.counts["II"] += 1
+            self.tables[scope] = self.tables[scope] + table
+            return
+        self.struct.add(frozenset(scope))
+        self.tables[scope] = table
+
+    def _eliminate(self, v: int, kind: str | None) -> list[int]:
+        """Min out ``v`` (types I, III, isolated, or general elimination)."""
+        nb = sorted(self.struct.adj.get(v, ()))
+        old = [tuple(sorted(s)) for s in self.struct.scopes[v]]
+        new, _ = self.struct.eliminate(v)
+        union = tuple(sorted(new | {v}))
+        shape = tuple(int(self.dims[x]) for x in union)
+        if _prod(self.dims, new) > _MAX_TABLE:
+            raise FitError(
+                f"graph too dense for exact minimisation: a table over {len(new)} vertices "
+                f"({_prod(self.dims, new)} entries) would be needed"
+            )
+        arrays = []
+        for s in old:
+            arr = self.tables.pop(s)
+            arrays.append(arr.reshape(tuple(int(self.dims[x]) if x in s else 1 for x in union)))
+        axis = union.index(v)
+        best, arg = _min_over(arrays, axis, shape)
+        scope = tuple(x for x in union if x != v)
+        self.ops.append((v, scope, arg))
+        if scope:
+            if scope in self.tables:
+                if len(scope) >= 2:  # type II: the new edge is parallel to an old one
+                    self.counts["II"] += 1
+                self.tables[scope] = self.tables[scope] + best
+            else:
+                self.tables[scope] = best
+        if kind is not None:
+            self.counts[kind] += 1
+        return nb
+
+    def _choose(self):
+        """Pick the next move when every active vertex has degree >= 3.
+
+        Within the connected part of the graph holding the min-weight vertex,
+        the candidates are type IV on a pair of vertices and (unless the
+        strategy is ``"paper"``) the general elimination of that vertex. Each
+        is simulated on the structure and the reduction of that part finished
+        with a fixed policy (I–III, else min-weight elimination); the move with
+        the least total work wins, ties going to type IV. As the simulation
+        replays the solver's own order, re-planning at each stuck point never
+        does worse than the plan it replaces.
+        """
+        st = self.struct
+        v = st.min_weight()
+        comp = st.component(v)
+
+        def restricted():
+            sim = st.copy()
+            sim.active = set(comp)
+            return sim
+
+        best = None
+        if self.strategy != "paper":
+            sim = restricted()
+            w0 = sim.eliminate(v)[1]
+            best = (w0 + sim.rollout(), 1, ("VE", v))
+        alive = sorted(comp)
+        if len(alive) <= 8:
+            pairs = list(itertools.combinations(alive, 2))
+        else:
+            deg = {x: len(st.adj[x]) for x in alive}
+            pairs = sorted(
+                ((x, y) for x in alive for y in st.adj[x] if x < y),
+                key=lambda p: (-(deg[p[0]] + deg[p[1]]), p),
+            )[:_MAX_PAIRS]
+        for a, c in pairs:
+            sim = restricted()
+            sim.condition(a)
+            sim.condition(c)
+            score = (sim.rollout(np.inf if best is None else best[0]), 0, ("IV", a, c))
+            if best is None or score[:2] < best[:2]:
+                best = score
+        return best[2]
+
+    def reduce(self) -> None:
+        st = self.struct
+        st.push(range(self.n))
+        kinds = {0: None, 1: "III", 2: "I"}
+        while st.active:
+            v = st.pop_reducible()
+            if v is not None:
+                kind = kinds[len(st.adj[v])] if v in st.active else None
+                self._eliminate(v, kind)
+                continue
+            move = self._choose()
+            if move[0] == "IV":
+                _, a, c = move
+                logger.debug("type IV on %d, %d (%d active)", a, c, len(st.active))
+                st.condition(a)
+                st.condition(c)
+                self.conditioned += [a, c]
+                self.counts["IV"] += 1
+            else:
+                _, v = move
+                logger.debug("general elimination of %d (degree %d)", v, len(st.adj[v]))
+                self._eliminate(v, "VE")
+        # Enumerate the states of the type IV vertices: min over their joint tables.
+        for a in sorted(st.scopes):
+            self._eliminate(a, None)
+
+    def backtrack(self) -> np.ndarray:
+        states = np.zeros(self.n, dtype=np.int64)
+        for v, scope, arg in reversed(self.ops):
+            states[v] = arg[tuple(states[x] for x in scope)]
+        return states
+
+
+def minimize_energy(
+    vertex_energies: Sequence,
+    edges: Sequence,
+    edge_energies: Sequence,
+    *,
+    strategy: str = "auto",
+) -> SnakeSolution:
+    """Global minimum of a pairwise graph energy by graph reduction.
+
+    Parameters
+    ----------
+    vertex_energies : sequence of ndarray, each shape (d_v,)
+        ``E_V(v, i)``: energy of vertex ``v`` in state ``i``.
+    edges : sequence of (int, int), shape (m, 2)
+        Vertex index pairs ``(u, v)``, ``u != v``; parallel edges are allowed.
+    edge_energies : sequence of ndarray, each shape (d_u, d_v)
+        ``E_E(e, i, j)`` for edge ``e = (u, v)``, indexed ``[state_u, state_v]``.
+    strategy : {"auto", "paper"}
+        What to do when no vertex has degree <= 2. ``"paper"``: always a
+        type IV operation (the pair chosen by simulating the rest of the
+        reduction). ``"auto"`` (default): type IV or, when cheaper, the general
+        elimination of the vertex that makes the smallest table (min-weight
+        variable elimination, beyond the paper, counted as ``"VE"``); the
+        choice compares the total work of both plans simulated to the end.
+
+    Returns
+    -------
+    SnakeSolution
+        ``states`` (shape (n,)), ``energy`` (recomputed from the inputs) and
+        ``reductions`` (counts of operations ``"I"``, ``"II"``, ``"III"``,
+        ``"IV"`` and ``"VE"``).
+
+    Raises
+    ------
+    InputError
+        Shapes inconsistent, an index out of range, a self-loop, a
+        non-finite energy, an unknown strategy.
+    FitError
+        The graph is so dense that an exact solution needs a table of more
+        than 5e7 entries.
+
+    Notes
+    -----
+    Exact on any graph (planar or not, disconnected, with parallel edges):
+    every operation preserves the minimum, type IV by exhaustive (batched)
+    enumeration of the removed pair's states. The cost is polynomial for
+    graphs reducible by I–III (series–parallel components, i.e. trees, cycles
+    and nested cycles) and grows with ``(d_a d_c)`` per nested type IV.
+
+    References
+    ----------
+    Yan, J., Zhang, K., Zhang, C., Chen, S.-C., Narasimhan, G. (2015).
+    Automatic construction of 3-D building model from airborne LIDAR data
+    through 2-D snake algorithm. IEEE TGRS 53(1), 3–14. Eqs. 1–3 and 7–10.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sol = minimize_energy([np.array([0., 1.]), np.array([1., 0.])],
+    ...                       [(0, 1)], [np.array([[0., 5.], [5., 0.]])])
+    >>> sol.states.tolist(), sol.energy
+    ([0, 0], 1.0)
+    """
+    if strategy not in ("auto", "paper"):
+        raise InputError(f"strategy must be 'auto' or 'paper', got {strategy!r}")
+    unary, dims, edge_arr, tables = _validate(vertex_energies, edges, edge_energies)
+    reducer = _Reducer(unary, dims, edge_arr, tables, strategy=strategy)
+    reducer.reduce()
+    states = reducer.backtrack()
+    energy = graph_energy(states, unary, edge_arr, tables)
+    return SnakeSolution(states=states, energy=energy, reductions=dict(reducer.counts))

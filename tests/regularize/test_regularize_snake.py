@@ -1,0 +1,294 @@
+"""Footprint / planar-graph regularisation with the 2-D snake."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lidar2city.config import build_stage
+from lidar2city.errors import ConfigError, EmptyInputError, InputError
+from lidar2city.regularize import (
+    SnakeConfig,
+    adjust_planar_graph,
+    aligned_fraction,
+    dominant_direction,
+    regularize_polygon,
+)
+
+
+def edge_angles_deg(poly, frame_deg):
+    xy = shapely.get_coordinates(poly.exterior)
+    d = np.diff(xy, axis=0)
+    return (np.degrees(np.arctan2(d[:, 1], d[:, 0])) - frame_deg) % 90
+
+
+def jitter(poly, sigma, rng, spacing=1.0):
+    dense = shapely.segmentize(poly, spacing)
+    rings = [shapely.get_coordinates(r)[:-1] for r in [dense.exterior, *dense.interiors]]
+    rings = [r + rng.normal(0, sigma, r.shape) for r in rings]
+    return shapely.Polygon(rings[0], rings[1:])
+
+
+def iou(a, b):
+    return a.intersection(b).area / a.union(b).area
+
+
+def test_rotated_rectangle_comes_back_square_at_30_degrees():
+    rng = np.random.default_rng(0)
+    truth = shapely.affinity.rotate(shapely.box(0, 0, 20, 10), 30, origin=(0, 0))
+    noisy = jitter(truth, 0.1, rng)
+    out, info = regularize_polygon(noisy)
+    assert info["status"] == "regularized"
+    assert len(out.exterior.coords) - 1 == 4
+    assert info["direction_deg"] == pytest.approx(30.0, abs=0.5)
+    ang = edge_angles_deg(out, info["direction_deg"])
+    assert np.all(np.minimum(ang, 90 - ang) < 1e-6)  # exactly parallel / perpendicular
+    assert iou(out, truth) > 0.96
+    assert info["mean_deviation_m"] < 0.3
+    assert {"I", "II", "III", "IV"} <= set(info["reductions"])
+
+
+def test_oblique_wall_stays_oblique():
+    rng = np.random.default_rng(1)
+    # A 24 x 12 block with a 6 m x 6 m 45-degree cut corner.
+    truth = shapely.Polygon([(0, 0), (24, 0), (24, 6), (18, 12), (0, 12)])
+    out, info = regularize_polygon(jitter(truth, 0.08, rng), direction=0.0)
+    xy = shapely.get_coordinates(out.exterior)
+    d = np.diff(xy, axis=0)
+    length = np.hypot(d[:, 0], d[:, 1])
+    ang = np.degrees(np.arctan2(d[:, 1], d[:, 0])) % 180
+    oblique = np.minimum(np.abs(ang - 45), np.abs(ang - 135)) < 5
+    assert length[oblique].sum() == pytest.approx(6 * np.sqrt(2), rel=0.15)
+    assert iou(out, truth) > 0.95
+
+
+def test_courtyard_is_kept_and_solved_in_one_graph():
+    rng = np.random.default_rng(2)
+    truth = shapely.Polygon(
+        [(0, 0), (30, 0), (30, 20), (0, 20)], [[(10, 6), (20, 6), (20, 14), (10, 14)]]
+    )
+    truth = shapely.affinity.rotate(truth, 12, origin=(0, 0))
+    out, info = regularize_polygon(jitter(truth, 0.1, rng))
+    assert info["status"] == "regularized"
+    assert len(out.interiors) == 1
+    assert iou(out, truth) > 0.95
+    assert aligned_fraction(out, np.radians(info["direction_deg"]), tol_deg=0.01) == pytest.approx(1.0)
+    # Two rings: the solver saw two cycles (reduced by types I and II only).
+    assert info["reductions"]["IV"] == 0 and info["reductions"]["II"] >= 2
+
+
+@pytest.mark.parametrize("deg", [0.0, 23.0, 37.0])
+def test_raster_traced_outline(deg):
+    """A staircase outline traced from a 0.5 m raster comes back straight, in its own frame."""
+    from rasterio import features
+    from rasterio.transform import Affine
+
+    truth = shapely.affinity.rotate(
+        shapely.Polygon([(0, 0), (18, 0), (18, 7), (10, 7), (10, 12), (0, 12)]), deg, origin=(0, 0)
+    )
+    minx, miny, maxx, maxy = truth.bounds
+    tr = Affine(0.5, 0, minx - 2, 0, -0.5, maxy + 2)
+    shape = (int((maxy - miny + 4) / 0.5), int((maxx - minx + 4) / 0.5))
+    mask = features.rasterize([truth], out_shape=shape, transform=tr).astype(np.uint8)
+    traced = max((shapely.geometry.shape(g) for g, _ in features.shapes(mask, mask=mask > 0, transform=tr)),
+                 key=lambda g: g.area)
+    out, info = regularize_polygon(traced)
+    d = abs(info["direction_deg"] - deg) % 90
+    assert min(d, 90 - d) < 0.5
+    assert aligned_fraction(out, np.radians(info["direction_deg"]), tol_deg=0.01) == pytest.approx(1.0)
+    assert iou(out, truth) > 0.97
+
+
+def test_fallback_and_errors():
+    with pytest.raises(InputError, match="Polygon"):
+        regularize_polygon(shapely.box(0, 0, 1, 1).boundary)
+    with pytest.raises(EmptyInputError):
+        regularize_polygon(shapely.Polygon())
+    with pytest.raises(InputError, match="cell"):
+        regularize_polygon(shapely.box(0, 0, 5, 5), cell=0)
+    # A sliver thinner than the simplification tolerance degenerates: input returned.
+    sliver = shapely.Polygon([(0, 0), (10, 0), (10, 0.05)])
+    out, info = regularize_polygon(sliver, simplify_tolerance=0.5)
+    assert info["status"] == "fallback" and info["reason"]
+    assert out.equals(sliver)
+
+
+def test_input_not_mutated_and_deterministic():
+    rng = np.random.default_rng(3)
+    noisy = jitter(shapely.box(0, 0, 15, 9), 0.1, rng)
+    before = shapely.get_coordinates(noisy).copy()
+    a, _ = regularize_polygon(noisy)
+    b, _ = regularize_polygon(noisy)
+    assert a.equals_exact(b, 0)
+    np.testing.assert_array_equal(shapely.get_coordinates(noisy), before)
+
+
+def test_adjust_planar_graph_hip_roof_with_fixed_outline():
+    # Hip roof topology: outline corners (fixed) and two ridge ends of degree 3.
+    corners = np.array([[0, 0], [16, 0], [16, 8], [0, 8]], dtype=float)
+    ridge = np.array([[4.3, 4.4], [11.8, 3.7]])  # noisy ridge, truth y = 4
+    xy = np.vstack([corners, ridge])
+    edges = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (0, 4), (3, 4), (1, 5), (2, 5)]
+    truth_segments = np.array([
+        [[0, 0], [16, 0]], [[16, 0], [16, 8]], [[16, 8], [0, 8]], [[0, 8], [0, 0]],
+        [[4, 4], [12, 4]], [[0, 0], [4, 4]], [[0, 8], [4, 4]], [[16, 0], [12, 4]], [[16, 8], [12, 4]],
+    ], dtype=float)
+    fixed = np.array([True] * 4 + [False] * 2)
+    new, info = adjust_planar_graph(xy, edges, original_segments=truth_segments, direction=0.0,
+                                    fixed=fixed)
+    np.testing.assert_array_equal(new[:4], corners)
+    assert new[4, 1] == pytest.approx(new[5, 1])  # ridge exactly horizontal
+    assert new[4, 1] == pytest.approx(4.0)
+    np.testing.assert_allclose(new[4:], [[4, 4], [12, 4]], atol=0.51)
+    # The ridge ends have degree 3: the graph is not reducible by I-III alone.
+    assert info["reductions"]["IV"] + info["reductions"].get("VE", 0) >= 1
+
+
+def test_adjust_planar_graph_validates():
+    xy = np.zeros((3, 2))
+    with pytest.raises(InputError, match="edges"):
+        adjust_planar_graph(xy, [(0, 3)])
+    with pytest.raises(InputError, match="vertices_xy"):
+        adjust_planar_graph(np.zeros((3, 3)), [(0, 1)])
+    with pytest.raises(InputError, match="fixed"):
+        adjust_planar_graph(np.array([[0, 0], [5, 0.2], [5, 5.0]]), [(0, 1), (1, 2)], fixed=[True])
+
+
+def test_config_stage():
+    cfg = build_stage("snake", {"cell": 0.25, "window": 3}, cls=SnakeConfig)
+    assert cfg.cell == 0.25 and cfg.window == 3 and cfg.strategy == "auto"
+    with pytest.raises(ConfigError, match="snake.cell"):
+        SnakeConfig(cell=-1.0)
+    with pytest.raises(ConfigError, match="snake.window"):
+        SnakeConfig(window=1.5)
+    # Field names are the keywords of regularize_polygon.
+    import inspect
+
+    params = inspect.signature(regularize_polygon).parameters
+    import dataclasses
+
+    assert {f.name for f in dataclasses.fields(SnakeConfig)} <= set(params)
+
+
+def perturbed_bgt(data, rng, radius=0.3, spacing=0.5):
+    """Delft BGT footprints, densified and each vertex moved uniformly within ``radius`` m."""
+    import pyogrio
+
+    _, _, wkb, _ = pyogrio.raw.read(data / "delft" / "footprints_bgt.gpkg")
+    polys = shapely.from_wkb(wkb)
+    origin = shapely.get_coordinates(polys).min(axis=0)
+    out = []
+    for p in polys:
+        p = shapely.transform(p, lambda c: c - origin)
+        dense = shapely.segmentize(p, spacing)
+        rings = []
+        for r in [dense.exterior, *dense.interiors]:
+            xy = shapely.get_coordinates(r)[:-1]
+            rad = radius * np.sqrt(rng.random(len(xy)))
+            th = rng.random(len(xy)) * 2 * np.pi
+            rings.append(xy + np.stack([rad * np.cos(th), rad * np.sin(th)], axis=1))
+        noisy = shapely.make_valid(shapely.Polygon(rings[0], rings[1:]))
+        if not isinstance(noisy, shapely.Polygon):
+            noisy = max((g for g in noisy.geoms if isinstance(g, shapely.Polygon)), key=lambda g: g.area)
+        out.append((p, noisy))
+    return out
+
+
+def test_delft_bgt_perturbed_targets(data):
+    rng = np.random.default_rng(2026)
+    pairs = perturbed_bgt(data, rng)
+    lengths, aligned, ious, bgt_aligned = [], [], [], []
+    for truth, noisy in pairs:
+        out, info = regularize_polygon(noisy)
+        ious.append(iou(out, truth))
+        lengths.append(out.length)
+        aligned.append(aligned_fraction(out, dominant_direction(out), tol_deg=3.0))
+        bgt_aligned.append(aligned_fraction(truth, tol_deg=3.0))
+    lengths = np.array(lengths)
+    frac = float(np.sum(np.array(aligned) * lengths) / lengths.sum())
+    assert frac >= 0.8, frac
+    assert np.mean(ious) >= 0.9, np.mean(ious)
+    # Oblique walls stay oblique: on the BGT polygons with > 10 % oblique walls, most of
+    # that oblique length survives.
+    obl = np.array(bgt_aligned) < 0.9
+    bgt_len = np.array([t.length for t, _ in pairs])
+    share_bgt = 1 - np.sum(np.array(bgt_aligned)[obl] * bgt_len[obl]) / bgt_len[obl].sum()
+    share_out = 1 - np.sum(np.array(aligned)[obl] * lengths[obl]) / lengths[obl].sum()
+    assert share_out >= 0.6 * share_bgt, (share_out, share_bgt)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.floats(6, 40), st.floats(6, 30), st.floats(0, 90), st.integers(0, 2**31 - 1),
+    st.sampled_from(["rect", "L", "U"]),
+)
+def test_result_is_a_valid_closed_polygon_near_the_input(w, h, deg, seed, kind):
+    rng = np.random.default_rng(seed)
+    if kind == "rect":
+        base = shapely.box(0, 0, w, h)
+    elif kind == "L":
+        base = shapely.Polygon([(0, 0), (w, 0), (w, h / 2), (w / 2, h / 2), (w / 2, h), (0, h)])
+    else:
+        base = shapely.Polygon([(0, 0), (w, 0), (w, h), (2 * w / 3, h), (2 * w / 3, h / 3),
+                                (w / 3, h / 3), (w / 3, h), (0, h)])
+    truth = shapely.affinity.rotate(base, deg, origin=(0, 0))
+    noisy = shapely.make_valid(jitter(truth, 0.1, rng))
+    if not isinstance(noisy, shapely.Polygon):
+        return
+    out, info = regularize_polygon(noisy)
+    assert isinstance(out, shapely.Polygon) and out.is_valid and not out.is_empty
+    ring = shapely.get_coordinates(out.exterior)
+    assert np.array_equal(ring[0], ring[-1])
+    assert iou(out, noisy) > 0.85
+    if info["status"] == "regularized":
+        assert info["mean_deviation_m"] < 0.5
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (100.0, -37.5), (-2.5, 1e4)])
+def test_translation_by_grid_steps_translates_the_result(shift):
+    rng = np.random.default_rng(9)
+    truth = shapely.affinity.rotate(shapely.Polygon([(0, 0), (18, 0), (18, 7), (10, 7), (10, 12), (0, 12)]),
+                                    23, origin=(0, 0))
+    noisy = jitter(truth, 0.1, rng)
+    a, ia = regularize_polygon(noisy, direction=np.radians(23))
+    b, ib = regularize_polygon(shapely.affinity.translate(noisy, *shift), direction=np.radians(23))
+    assert shapely.hausdorff_distance(shapely.affinity.translate(a, *shift), b) < 1e-6
+    assert ia["reductions"] == ib["reductions"]
+
+
+def test_batch_never_dies_on_one_building():
+    from lidar2city.regularize import regularize_polygons
+
+    rng = np.random.default_rng(5)
+    good = jitter(shapely.box(0, 0, 12, 8), 0.1, rng)
+    multi = shapely.MultiPolygon([jitter(shapely.box(0, 0, 10, 6), 0.1, rng),
+                                  jitter(shapely.box(20, 0, 30, 6), 0.1, rng)])
+    outs, infos = regularize_polygons([good, shapely.Polygon(), multi, shapely.box(0, 0, 1, 1).boundary])
+    assert [i["status"] for i in infos] == ["regularized", "error", "regularized", "error"]
+    assert isinstance(outs[2], shapely.MultiPolygon) and len(outs[2].geoms) == 2
+    assert infos[2]["n_vertices"] == 8
+    with pytest.raises(InputError, match="cell"):
+        regularize_polygons([good], cell=-1)
+
+
+def test_per_edge_direction_weights():
+    # A triangle: with the direction energy off on the hypotenuse it stays where the data is.
+    xy = np.array([[0.0, 0.0], [6.0, 0.3], [0.2, 0.6]])
+    edges = [(0, 1), (1, 2), (2, 0)]
+    new, _ = adjust_planar_graph(xy, edges, direction=0.0, c_dir=[1.0, 0.0, 1.0])
+    assert new[0, 1] == pytest.approx(new[1, 1])  # first edge horizontal
+    assert new[2, 0] == pytest.approx(new[0, 0])  # third edge vertical
+    with pytest.raises(InputError, match="c_dir"):
+        adjust_planar_graph(xy, edges, c_dir=[1.0, 2.0])
+
+
+def test_coincident_vertices_reported():
+    # Two vertices 0.2 m apart on a wall collapse onto one grid position.
+    xy = np.array([[0.0, 0.0], [10.0, 0.1], [10.1, 0.3], [10.0, 6.0], [0.0, 6.1]])
+    edges = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 0)]
+    new, info = adjust_planar_graph(xy, edges, direction=0.0)
+    assert [1, 2] in info["coincident"]
+    np.testing.assert_array_equal(new[1], new[2])
