@@ -1,0 +1,1 @@
+"""Quality metrics: ground-filter errors, classification scores, geometric errors."""
