@@ -146,15 +146,18 @@ def _deep_clusters(xyz, block, depth, percentile, reach):
     r, c = cell_of(xyz[:, :2], spec)
     flat = r * w + c
     z = xyz[:, 2]
-    zr = z - z.min()
-    order = np.argsort(flat * (zr.max() * 2.0 + 1.0) + zr, kind="stable")
+    # sort (block, height) as one int64 key: heights in centimetres
+    zc = np.round((z - z.min()) * 100.0).astype(np.int64)
+    span = int(zc.max()) + 1
+    keys = np.sort(flat * span + zc)
+    sorted_z = (keys % span) / 100.0 + z.min()
     counts = np.bincount(flat, minlength=h * w)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     level = np.full(h * w, np.inf)
     occupied = counts > 0
     pick = starts[occupied] + np.floor(
         (counts[occupied] - 1) * percentile / 100.0 + 0.5).astype(np.int64)
-    level[occupied] = z[order[pick]]
+    level[occupied] = sorted_z[pick]
     level = level.reshape(h, w)
     if reach:
         level = erode_square(level, 2 * reach + 1)

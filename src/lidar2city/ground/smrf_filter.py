@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._grid import (
+    bilinear_weights,
     gradient_magnitude,
     grid_spec,
     inpaint,
@@ -63,22 +64,26 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     if len(pts) == 0:
         raise InputError("no points to build a surface from")
     spec = grid_spec(pts[:, :2], cell=cell, bounds=bounds)
-    zmin = min_surface(pts, spec)
+    # float32 heights relative to the lowest point: exact to well below 1 mm
+    base = float(np.min(pts[:, 2]))
+    zmin = min_surface(pts, spec, base=base, dtype=np.float32)
     empty = np.isnan(zmin)
     zfilled = inpaint(zmin)
     max_radius = max(int(np.ceil(window / cell)), 1)
     objects = np.zeros(spec.shape, dtype=bool)
     last = zfilled
     for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
-        objects |= (last - opened) > slope * radius * cell
+        step = last - opened
+        objects |= step > np.float32(slope * radius * cell)
         last = opened
-    provisional = np.where(objects | empty, np.nan, zmin)
+    provisional = np.where(objects | empty, np.float32(np.nan), zmin)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
         logger.warning("SMRF judged every cell object; using the opened surface")
         surface = last
     else:
         surface = inpaint(provisional)
+    surface = surface.astype(np.float64) + base
     return surface, objects, spec
 
 
@@ -152,9 +157,9 @@ def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 18.0,
     surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
                                     exclude=outliers)
     grad = gradient_magnitude(surface, cell)
-    xy = xyz[:, :2]
-    ref = sample_bilinear(surface, spec, xy)
-    tol = threshold + scalar * sample_bilinear(grad, spec, xy)
+    weights = bilinear_weights(spec, xyz[:, :2])
+    ref = sample_bilinear(surface, spec, weights=weights)
+    tol = threshold + scalar * sample_bilinear(grad, spec, weights=weights)
     ground = np.abs(xyz[:, 2] - ref) <= tol
     ground &= ~outliers
     logger.debug("smrf: %d of %d points ground, %d low outliers", int(ground.sum()), n,
