@@ -22,7 +22,8 @@ def command(pred, reference, as_json):
 
     e = evaluate_ground_files(pred, reference)
     if as_json:
-        click.echo(json.dumps(e, indent=2))
+        clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in e.items()}
+        click.echo(json.dumps(clean, indent=2))
         return
     ref_ground = e["ground_ground"] + e["ground_object"]
     ref_object = e["object_ground"] + e["object_object"]

@@ -128,8 +128,8 @@ def mean_surface(xyz, spec: GridSpec) -> np.ndarray:
     return grid.reshape(spec.shape)
 
 
-def _relax(values, unknown, iterations):
-    """Jacobi relaxation of the Laplace equation on ``unknown`` cells (known cells fixed)."""
+def _relax(values, unknown, iterations, omega=1.6):
+    """Red-black SOR relaxation of Laplace's equation on ``unknown`` cells (known fixed)."""
     h, w = values.shape
     if not unknown.any():
         return values
@@ -140,22 +140,29 @@ def _relax(values, unknown, iterations):
     c0, c1 = max(cols[0] - 1, 0), min(cols[-1] + 2, w)
     v = values[r0:r1, c0:c1]
     u = unknown[r0:r1, c0:c1]
+    parity = (np.add.outer(np.arange(r0, r1), np.arange(c0, c1)) % 2).astype(bool)
+    colours = (u & ~parity, u & parity)
     p = np.empty((v.shape[0] + 2, v.shape[1] + 2), dtype=values.dtype)
+    om = values.dtype.type(omega)
     for _ in range(iterations):
-        p[1:-1, 1:-1] = v
-        p[0, 1:-1] = v[0]
-        p[-1, 1:-1] = v[-1]
-        p[1:-1, 0] = v[:, 0]
-        p[1:-1, -1] = v[:, -1]
-        avg = p[:-2, 1:-1] + p[2:, 1:-1]
-        avg += p[1:-1, :-2]
-        avg += p[1:-1, 2:]
-        avg *= 0.25
-        np.copyto(v, avg, where=u)
+        for colour in colours:
+            p[1:-1, 1:-1] = v
+            p[0, 1:-1] = v[0]
+            p[-1, 1:-1] = v[-1]
+            p[1:-1, 0] = v[:, 0]
+            p[1:-1, -1] = v[:, -1]
+            avg = p[:-2, 1:-1] + p[2:, 1:-1]
+            avg += p[1:-1, :-2]
+            avg += p[1:-1, 2:]
+            avg *= 0.25
+            avg -= v
+            avg *= om
+            avg += v
+            np.copyto(v, avg, where=colour)
     return values
 
 
-def inpaint(grid, *, iterations: int = 12) -> np.ndarray:
+def inpaint(grid, *, iterations: int = 10) -> np.ndarray:
     """Fill NaN cells of ``grid`` with a smooth (approximately harmonic) surface.
 
     Known cells are kept exactly. The unknown cells solve Laplace's equation
@@ -197,6 +204,23 @@ def inpaint(grid, *, iterations: int = 12) -> np.ndarray:
     return _inpaint(grid, known, iterations)
 
 
+def _upsample2(coarse, h, w):
+    """Bilinear upsampling of a grid of 2 x 2 blocks back to (h, w) cells."""
+    ch, cw = coarse.shape
+
+    def axis(n, m):
+        f = np.clip((np.arange(n) - 0.5) / 2.0, 0.0, m - 1)
+        i0 = np.minimum(f.astype(np.int64), max(m - 2, 0))
+        return i0, np.minimum(i0 + 1, m - 1), (f - i0).astype(coarse.dtype)
+
+    r0, r1, ty = axis(h, ch)
+    c0, c1, tx = axis(w, cw)
+    top = coarse[r0]
+    bottom = coarse[r1]
+    rows = top + (bottom - top) * ty[:, None]
+    return rows[:, c0] + (rows[:, c1] - rows[:, c0]) * tx[None, :]
+
+
 def _inpaint(grid, known, iterations):
     h, w = grid.shape
     out = np.where(known, grid, 0.0)
@@ -216,7 +240,7 @@ def _inpaint(grid, known, iterations):
     with np.errstate(invalid="ignore", divide="ignore"):
         coarse = np.where(cs > 0, vs / np.maximum(cs, 1), np.nan)
     coarse_filled = _inpaint(coarse, cs > 0, iterations)
-    up = np.repeat(np.repeat(coarse_filled, 2, axis=0), 2, axis=1)[:h, :w]
+    up = _upsample2(coarse_filled, h, w)
     unknown = ~known
     out[unknown] = up[unknown]
     return _relax(out, unknown, iterations)

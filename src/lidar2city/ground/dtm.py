@@ -70,7 +70,7 @@ class Dtm:
 
 
 def dtm_from_ground(xyz, ground, *, cell: float = 1.0, bounds=None,
-                    iterations: int = 12) -> Dtm:
+                    iterations: int = 10) -> Dtm:
     """Grid the ground points into a gap-free terrain model.
 
     Each cell holding ground points takes their mean height; cells without
