@@ -78,7 +78,7 @@ class GroundConfig:
     method: Literal["smrf", "pmf"] = field("smrf", "ground filter: smrf (Pingel 2013) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
     slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf, 0.3 for pmf")
-    window: float = field(18.0, "smrf: largest opening radius (m); wider objects survive")
+    window: float = field(24.0, "smrf: largest opening radius (m); wider objects survive")
     scalar: float = field(1.25, "smrf: extra tolerance (m) per unit of terrain slope")
     threshold: float = field(0.5, "smrf: height tolerance (m) around the provisional terrain")
     max_window: float = field(33.0, "pmf: largest window side (m)")

@@ -129,7 +129,11 @@ def mean_surface(xyz, spec: GridSpec) -> np.ndarray:
 
 
 def _relax(values, unknown, iterations, omega=1.6):
-    """Red-black SOR relaxation of Laplace's equation on ``unknown`` cells (known fixed)."""
+    """Red-black SOR relaxation of Laplace's equation on ``unknown`` cells (known fixed).
+
+    Outside the grid the values are replicated from the edge (zero-gradient
+    boundary), so holes touching the border are filled smoothly too.
+    """
     h, w = values.shape
     if not unknown.any():
         return values
@@ -138,27 +142,27 @@ def _relax(values, unknown, iterations, omega=1.6):
     cols = np.flatnonzero(unknown.any(axis=0))
     r0, r1 = max(rows[0] - 1, 0), min(rows[-1] + 2, h)
     c0, c1 = max(cols[0] - 1, 0), min(cols[-1] + 2, w)
-    v = values[r0:r1, c0:c1]
     u = unknown[r0:r1, c0:c1]
+    p = np.empty((r1 - r0 + 2, c1 - c0 + 2), dtype=values.dtype)
+    v = p[1:-1, 1:-1]  # a view: updates land in the padded array directly
+    v[...] = values[r0:r1, c0:c1]
     parity = (np.add.outer(np.arange(r0, r1), np.arange(c0, c1)) % 2).astype(bool)
     colours = (u & ~parity, u & parity)
-    p = np.empty((v.shape[0] + 2, v.shape[1] + 2), dtype=values.dtype)
-    om = values.dtype.type(omega)
+    quarter = values.dtype.type(omega / 4.0)
+    keep = values.dtype.type(1.0 - omega)
     for _ in range(iterations):
         for colour in colours:
-            p[1:-1, 1:-1] = v
             p[0, 1:-1] = v[0]
             p[-1, 1:-1] = v[-1]
             p[1:-1, 0] = v[:, 0]
             p[1:-1, -1] = v[:, -1]
-            avg = p[:-2, 1:-1] + p[2:, 1:-1]
-            avg += p[1:-1, :-2]
-            avg += p[1:-1, 2:]
-            avg *= 0.25
-            avg -= v
-            avg *= om
-            avg += v
-            np.copyto(v, avg, where=colour)
+            new = p[:-2, 1:-1] + p[2:, 1:-1]
+            new += p[1:-1, :-2]
+            new += p[1:-1, 2:]
+            new *= quarter
+            new += keep * v
+            np.copyto(v, new, where=colour)
+    values[r0:r1, c0:c1] = v
     return values
 
 
@@ -295,20 +299,26 @@ def open_square(a, size: int) -> np.ndarray:
     return dilate_square(erode_square(a, size), size)
 
 
+def _triple(a, axis, op):
+    """Extreme of each cell and its two neighbours along ``axis`` (edges: the two present)."""
+    a = np.moveaxis(a, axis, 0)
+    out = np.empty_like(a)
+    if a.shape[0] == 1:
+        out[...] = a
+        return np.moveaxis(out, 0, axis)
+    pair = op(a[:-1], a[1:])
+    op(pair[:-1], pair[1:], out=out[1:-1])
+    out[0] = pair[0]
+    out[-1] = pair[-1]
+    return np.moveaxis(out, 0, axis)
+
+
 def _unit_step(a, square: bool, maximum: bool) -> np.ndarray:
     """One 3 x 3 square or cross (4-neighbour) erosion / dilation step."""
     op = np.maximum if maximum else np.minimum
+    b = _triple(a, 0, op)
     if square:
-        b = a.copy()
-        op(b[1:], a[:-1], out=b[1:])
-        op(b[:-1], a[1:], out=b[:-1])
-        c = b.copy()
-        op(c[:, 1:], b[:, :-1], out=c[:, 1:])
-        op(c[:, :-1], b[:, 1:], out=c[:, :-1])
-        return c
-    b = a.copy()
-    op(b[1:], a[:-1], out=b[1:])
-    op(b[:-1], a[1:], out=b[:-1])
+        return _triple(b, 1, op)
     op(b[:, 1:], a[:, :-1], out=b[:, 1:])
     op(b[:, :-1], a[:, 1:], out=b[:, :-1])
     return b

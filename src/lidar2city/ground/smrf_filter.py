@@ -29,7 +29,7 @@ def _check_positive(**values):
             raise InputError(f"{name} must be a number > 0, got {value!r}")
 
 
-def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 18.0,
+def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
                  exclude=None, bounds=None):
     """The provisional bare-earth surface of SMRF and the cells judged object.
 
@@ -87,7 +87,7 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     return surface, objects, spec
 
 
-def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 18.0,
+def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
          scalar: float = 1.25, threshold: float = 0.5, outlier_radius: float = 5.0,
          outlier_depth: float = 1.5) -> np.ndarray:
     """Ground points by the Simple Morphological Filter.
