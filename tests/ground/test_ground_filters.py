@@ -275,3 +275,16 @@ def test_samp11_smrf_total_error(data):
     assert e["kappa"] > 0.78
     e = ground_errors(pmf(xyz), ref)
     assert e["total"] < 0.14
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 60), st.floats(0.1, 200.0), st.integers(0, 10_000),
+       st.sampled_from(sorted(GROUND_METHODS)))
+def test_any_small_cloud_gives_a_mask(n, extent, seed, method):
+    """Degenerate shapes (one point, a line, a tiny patch) never crash; the lowest point is ground."""
+    rng = np.random.default_rng(seed)
+    xyz = rng.uniform(0, extent, (n, 3)) * np.array([1.0, rng.choice([0.0, 1.0]), 0.1])
+    mask = ground_mask(xyz, method=method)
+    assert mask.shape == (n,) and mask.dtype == bool
+    if n < 4:
+        assert mask[np.argmin(xyz[:, 2])]
