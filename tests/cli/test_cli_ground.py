@@ -164,9 +164,8 @@ def test_evaluate_ground(runner, tmp_path):
     assert "points" in msg
 
 
-@pytest.mark.slow
 def test_ground_cli_on_isprs_samp21(runner, tmp_path, data):
-    """Real ISPRS sample through the CLI and back through evaluate (measured 1.8 %)."""
+    """Real ISPRS sample through the CLI and back through evaluate (measured 1.3 %)."""
     ref = data / "isprs" / "reference" / "samp21-utm.laz"
     out = tmp_path / "s21.laz"
     res = runner.invoke(_cli(), ["ground", str(ref), "-o", str(out), "--dtm", str(tmp_path / "d.tif")])
@@ -178,3 +177,8 @@ def test_ground_cli_on_isprs_samp21(runner, tmp_path, data):
     e = json.loads(res.output)
     assert e["points"] == 12960
     assert e["total"] < 0.03 and e["kappa"] > 0.9
+
+
+def test_evaluate_group_lists_ground(runner):
+    res = runner.invoke(_cli(), ["evaluate", "--help"])
+    assert res.exit_code == 0 and "ground" in res.output

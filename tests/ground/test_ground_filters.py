@@ -261,7 +261,7 @@ def test_dtm_world_transform():
 # ------------------------------------------------------------------ real data
 
 def test_samp11_smrf_total_error(data):
-    """ISPRS samp11 (steep urban slopes): measured 9.1 % total error with the defaults."""
+    """ISPRS samp11 (steep urban slopes): measured 9.2 % total error, kappa 81 % with the defaults; PMF 12.2 %."""
     import laspy
 
     from lidar2city.metrics.ground import ground_errors
@@ -288,3 +288,29 @@ def test_any_small_cloud_gives_a_mask(n, extent, seed, method):
     assert mask.shape == (n,) and mask.dtype == bool
     if n < 4:
         assert mask[np.argmin(xyz[:, 2])]
+
+
+@pytest.mark.slow
+def test_isprs_mean_total_error_target(data):
+    """The issue's target: mean total error <= 4 % over the ISPRS samples, one parameter set.
+
+    Measured with the defaults: SMRF 3.56 % (kappa 89.3 %), PMF 4.57 %.
+    """
+    import laspy
+
+    from lidar2city.metrics.ground import ground_errors
+
+    paths = sorted((data / "isprs" / "reference").glob("samp*-utm.laz"))
+    assert len(paths) == 7
+    totals = {"smrf": [], "pmf": []}
+    for path in paths:
+        las = laspy.read(path)
+        xyz = np.column_stack([las.x, las.y, las.z])
+        xyz -= np.floor(xyz.min(axis=0))
+        ref = np.asarray(las.classification) == 2
+        for method in totals:
+            cfg = GroundConfig(method=method)
+            totals[method].append(ground_errors(ground_mask(xyz, method=method, **cfg.method_params()),
+                                                ref)["total"])
+    assert np.mean(totals["smrf"]) <= 0.038
+    assert np.mean(totals["pmf"]) <= 0.048
