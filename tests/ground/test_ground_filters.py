@@ -250,6 +250,21 @@ def test_dtm_bounds_and_errors():
         dtm_from_ground(xyz, np.array([True]))
 
 
+def test_dtm_raster_round_trip():
+    xyz, truth = _town(np.random.default_rng(11), terrain=lambda xy: 0.05 * xy[:, 1])
+    dtm = dtm_from_ground(xyz, truth, cell=2.0)
+    origin = np.array([84800.0, 447400.0, -2.0])
+    feet = 0.3048
+    arr = dtm.world_heights(origin[2], feet)
+    arr[3, 4] = np.nan  # a nodata cell gets filled
+    back = type(dtm).from_raster(arr, dtm.world_transform(origin, feet), origin,
+                                 xy_unit=feet, z_unit=feet)
+    assert (back.x0, back.y_top, back.cell) == pytest.approx((dtm.x0, dtm.y_top, dtm.cell))
+    np.testing.assert_allclose(back.array, dtm.array, atol=0.05)
+    assert not back.measured[3, 4]
+    np.testing.assert_allclose(height_above_ground(xyz, back), height_above_ground(xyz, dtm), atol=0.05)
+
+
 def test_dtm_world_transform():
     xyz = np.array([[0.5, 0.5, 1.0], [10.5, 5.5, 2.0]])
     dtm = dtm_from_ground(xyz, np.array([True, True]), cell=1.0)

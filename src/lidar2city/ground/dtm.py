@@ -68,6 +68,41 @@ class Dtm:
         """Heights in CRS vertical units (``origin_z + z / z_unit``)."""
         return origin_z + self.array / z_unit
 
+    @classmethod
+    def from_raster(cls, array, transform, origin, *, xy_unit: float = 1.0,
+                    z_unit: float = 1.0) -> Dtm:
+        """A local metric DTM from a north-up raster in world units (e.g. a DTM GeoTIFF).
+
+        Parameters
+        ----------
+        array : ndarray, shape (H, W)
+            Heights in CRS vertical units, NaN for nodata (filled by inpainting).
+        transform : affine.Affine
+            Pixel-to-world transform (no rotation, square pixels).
+        origin : array_like, shape (3,)
+            The local origin (world coordinates) of the point cloud to pair with.
+        xy_unit, z_unit : float
+            Metres per CRS unit.
+
+        Raises
+        ------
+        InputError
+            Rotated or non-square pixels, or no valid cell.
+        """
+        t = transform
+        if t.b != 0 or t.d != 0 or t.a <= 0 or t.e >= 0 or not np.isclose(t.a, -t.e):
+            raise InputError("the raster must be north-up with square pixels")
+        arr = np.asarray(array, dtype=np.float64)
+        if arr.ndim != 2:
+            raise InputError(f"the raster must be one band (H, W), got shape {arr.shape}")
+        measured = np.isfinite(arr)
+        if not measured.any():
+            raise EmptyInputError("the terrain raster has no valid cell")
+        origin = np.asarray(origin, dtype=np.float64)
+        local = (arr - origin[2]) * z_unit
+        return cls(inpaint(local), float((t.c - origin[0]) * xy_unit),
+                   float((t.f - origin[1]) * xy_unit), float(t.a * xy_unit), measured)
+
 
 def dtm_from_ground(xyz, ground, *, cell: float = 1.0, bounds=None,
                     iterations: int = 10) -> Dtm:
