@@ -127,6 +127,23 @@ def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
     InputError
         Wrong shape, NaN coordinates or non-positive parameters.
 
+    Notes
+    -----
+    The disks are octagons built from 3 x 3 square and cross steps (axial and
+    diagonal radii within 3 %). Pingel's progressive scheme opens the previous
+    opening; for this family of structuring elements that equals opening the
+    minimum surface by each radius directly (granulometry), so the erosions
+    are shared and one pass costs O(window^2 / cell^2) grid operations. The
+    grid is padded with +inf (outside ignored): an object cut by the tile edge
+    needs about twice its in-tile depth as radius, so low objects touching the
+    edge may stay ground; process tiles with a buffer to avoid that.
+
+    Defaults: Pingel's, except ``window`` 24 m instead of 18 m: the mean
+    ISPRS total error is flat for windows of 24-40 m on the seven reference
+    samples (3.56 % vs 3.64 % at 18 m) and larger windows remove buildings up
+    to about 48 m across. With these defaults: mean total error 3.56 %, mean
+    kappa 89.3 % over samp11, 12, 21, 31, 41, 51, 61.
+
     References
     ----------
     Pingel, T. J., Clarke, K. C., McBride, W. A. (2013). An improved simple
