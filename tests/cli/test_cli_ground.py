@@ -182,3 +182,11 @@ def test_ground_cli_on_isprs_samp21(runner, tmp_path, data):
 def test_evaluate_group_lists_ground(runner):
     res = runner.invoke(_cli(), ["evaluate", "--help"])
     assert res.exit_code == 0 and "ground" in res.output
+
+
+def test_cli_method_choice_matches_registry():
+    """The CLI lists the methods literally (no numpy at start-up); keep it in sync."""
+    from lidar2city.cli.ground import METHODS
+    from lidar2city.ground import GROUND_METHODS
+
+    assert tuple(sorted(GROUND_METHODS)) == METHODS
