@@ -117,6 +117,9 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     if dtm_path is not None:
         from ..io.raster import Raster
 
+        if cloud.crs is None:
+            logger.warning("%s has no CRS: the DTM is written without one (pass --crs)",
+                           tile.path)
         dtm = dtm_from_ground(cloud.xyz, mask, cell=cfg.dtm_cell)
         raster = Raster(dtm.world_heights(cloud.origin[2], cloud.z_unit),
                         dtm.world_transform(cloud.origin, cloud.xy_unit), cloud.crs)
