@@ -32,6 +32,7 @@ __all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
     "footprints": "lidar2city.footprints:FootprintsConfig",
+    "ground": "lidar2city.ground:GroundConfig",
     "lod1": "lidar2city.lod.lod1:Lod1Config",
     "lod22": "lidar2city.roof.building:Lod22Config",
 }

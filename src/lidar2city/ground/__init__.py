@@ -1,0 +1,111 @@
+"""Ground filtering: which points are bare earth, and terrain models from them.
+
+Methods (:data:`GROUND_METHODS`): ``"smrf"`` (Pingel et al. 2013, the
+default) and ``"pmf"`` (Zhang et al. 2003). Both set low outliers aside
+first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
+into a gap-free terrain model and :func:`height_above_ground` reads it back
+at points.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..config import field
+from ..errors import ConfigError, InputError
+from .dtm import Dtm, dtm_from_ground, height_above_ground
+from .outliers import low_outliers
+from .pmf_filter import pmf, pmf_windows
+from .smrf_filter import smrf, smrf_surface
+
+__all__ = [
+    "GROUND_METHODS",
+    "GroundConfig",
+    "ground_mask",
+    "smrf",
+    "smrf_surface",
+    "pmf",
+    "pmf_windows",
+    "low_outliers",
+    "Dtm",
+    "dtm_from_ground",
+    "height_above_ground",
+]
+
+#: method name -> ground filter ``f(xyz, **params) -> bool mask``.
+GROUND_METHODS = {"smrf": smrf, "pmf": pmf}
+
+#: per-method default of the shared ``slope`` option.
+_SLOPE_DEFAULTS = {"smrf": 0.15, "pmf": 0.3}
+
+
+def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
+    """Ground points of ``xyz`` (N, 3) by ``method`` (see :data:`GROUND_METHODS`).
+
+    ``params`` are the method's keyword arguments; unknown ones raise.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+
+    Raises
+    ------
+    InputError
+        Unknown method or parameter, bad coordinates.
+    """
+    try:
+        fn = GROUND_METHODS[method]
+    except KeyError:
+        raise InputError(
+            f"method must be one of {', '.join(sorted(GROUND_METHODS))}, got {method!r}"
+        ) from None
+    accepted = set(inspect.signature(fn).parameters) - {"xyz"}
+    unknown = sorted(set(params) - accepted)
+    if unknown:
+        raise InputError(f"{method} has no parameter {unknown[0]!r}; known: "
+                         f"{', '.join(sorted(accepted))}")
+    return fn(xyz, **params)
+
+
+@dataclass(frozen=True)
+class GroundConfig:
+    """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
+
+    method: Literal["smrf", "pmf"] = field("smrf", "ground filter: smrf (Pingel 2013) or pmf (Zhang 2003)")
+    cell: float = field(1.0, "grid cell size of the filter (m)")
+    slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf, 0.3 for pmf")
+    window: float = field(24.0, "smrf: largest opening radius (m); wider objects survive")
+    scalar: float = field(1.25, "smrf: extra tolerance (m) per unit of terrain slope")
+    threshold: float = field(0.5, "smrf: height tolerance (m) around the provisional terrain")
+    max_window: float = field(33.0, "pmf: largest window side (m)")
+    initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
+    max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
+    exponential: bool = field(True, "pmf: exponentially (else linearly) growing windows")
+    outlier_radius: float = field(5.0, "low outliers: neighbourhood cell size (m)")
+    outlier_depth: float = field(1.5, "low outliers: depth below all neighbours (m)")
+    dtm_cell: float = field(1.0, "cell size of the DTM written with --dtm (m)")
+
+    def __post_init__(self):
+        if self.method not in GROUND_METHODS:
+            raise ConfigError(f"ground.method: {self.method!r} is not one of "
+                              f"{', '.join(sorted(GROUND_METHODS))}")
+        for name in ("cell", "window", "threshold", "max_window", "initial_distance",
+                     "max_distance", "outlier_radius", "outlier_depth", "dtm_cell"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"ground.{name}: must be > 0, got {getattr(self, name)!r}")
+        if self.slope is not None and not self.slope > 0:
+            raise ConfigError(f"ground.slope: must be > 0, got {self.slope!r}")
+        if self.scalar < 0:
+            raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
+
+    def method_params(self) -> dict:
+        """Keyword arguments of the chosen method's function."""
+        values = asdict(self)
+        if values["slope"] is None:
+            values["slope"] = _SLOPE_DEFAULTS[self.method]
+        accepted = set(inspect.signature(GROUND_METHODS[self.method]).parameters)
+        return {k: v for k, v in values.items() if k in accepted}
