@@ -191,6 +191,12 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                         wall_lines.setdefault(_key(a), []).append(ln)
     # footprint outline segments are walls too
     union = shapely.union_all(faces)
+    face_count: dict = {}
+    for f in faces:
+        for ring in [f.exterior, *f.interiors]:
+            for p in np.asarray(ring.coords)[:-1]:
+                face_count[_key(p)] = face_count.get(_key(p), 0) + 1
+    redundant = set()  # straight-outline vertices inside one face carry nothing and block moves
     for ring in shapely.get_rings(union):
         c = np.asarray(ring.coords)[:-1]
         for k in range(len(c)):
@@ -203,6 +209,8 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
             w = c[k] - c[k - 1]
             if abs(u[0] * w[1] - u[1] * w[0]) > 1e-6 * np.hypot(*u) * np.hypot(*w):
                 fixed_keys.add(_key(c[k]))
+            elif face_count.get(_key(c[k]), 0) == 1:
+                redundant.add(_key(c[k]))
     from shapely.geometry import Point
 
     outline = union.boundary
@@ -252,7 +260,7 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                 pts = []
                 for p in np.asarray(ring.coords)[:-1]:
                     k = _key(p)
-                    if drop_interior and k in interior_of_intersection:
+                    if (drop_interior and k in interior_of_intersection) or k in redundant:
                         continue
                     q = moves.get(k, p)
                     if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
