@@ -255,7 +255,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     t0 = time.perf_counter()
     xyz = np.asarray(building_xyz, dtype=np.float64)
     solids, attrs = [], {}
-    n_planes, type4, n_int, n_step, moved = 0, 0, 0, 0, 0
+    n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes = [], []
     for poly in _parts(footprint):
         near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
@@ -276,8 +276,10 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
         faces, face_labels = part.faces, part.face_labels
         if cfg.snake:
-            faces, info_snake = _snake_adjust(faces, face_labels, poly, cell=cell, direction=d)
+            faces, info_snake = _snake_adjust(faces, poly, part.raw_chains, cell=cell / 2, direction=d,
+                                              window=3)
             type4 += info_snake.get("IV", 0)
+            snake_fallbacks += bool(info_snake.get("snake_fallback"))
         faces, info = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                        max_shift=cfg.max_shift)
         n_int += info["intersection"]
@@ -301,12 +303,72 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         intersection_edges=n_int,
         step_edges=n_step,
         type_iv=type4,
+        snake_fallback=snake_fallbacks,
         lod22_time=round(time.perf_counter() - t0, 4),
     )
     return Lod22Result(solids, attrs)
 
 
-def _snake_adjust(faces, face_labels, footprint, *, cell, direction):
-    """Hook for the 2-D snake over the whole roof topology (seed step 5)."""
-    return faces, {}
+def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
+    """The 2-D snake over the whole roof topology graph at once (seed step 5).
+
+    The inner vertices of the partition move to the global minimum of
+    E = C_Dir E_Dir + C_Dis E_Dis (:func:`lidar2city.regularize.snake.adjust_planar_graph`);
+    the footprint outline stays fixed (it is the given boundary). The deviation
+    energy is measured against the raw label-grid boundaries. When the moved
+    graph is no longer a partition of the footprint the faces are kept as they were.
+
+    Returns ``(faces, info)`` with the solver's reduction counts in ``info``.
+    """
+    import shapely
+    from shapely.geometry import Polygon
+
+    from ..regularize.snake import adjust_planar_graph
+    from .refine import _key, _remove_spikes
+
+    keys, xy, edges = {}, [], set()
+    for f in faces:
+        for ring in [f.exterior, *f.interiors]:
+            c = np.asarray(ring.coords)[:-1]
+            ids = []
+            for p in c:
+                k = _key(p)
+                if k not in keys:
+                    keys[k] = len(xy)
+                    xy.append(p)
+                ids.append(keys[k])
+            for a, b in zip(ids, ids[1:] + ids[:1], strict=True):
+                if a != b:
+                    edges.add((min(a, b), max(a, b)))
+    xy = np.asarray(xy, dtype=np.float64)
+    outline = footprint.boundary
+    fixed = shapely.distance(outline, shapely.points(xy)) < 1e-6
+    if fixed.all() or not raw_chains:
+        return faces, {}
+    e = np.array(sorted(edges), dtype=np.int64)
+    e = e[~(fixed[e[:, 0]] & fixed[e[:, 1]])]
+    segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in raw_chains if len(c) > 1])
+    new, info = adjust_planar_graph(xy, e, original_segments=segs, cell=cell, window=window,
+                                    direction=direction, fixed=fixed)
+    out = []
+    for f in faces:
+        rings = []
+        for ring in [f.exterior, *f.interiors]:
+            pts = [new[keys[_key(p)]] for p in np.asarray(ring.coords)[:-1]]
+            dedup = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+            if len(dedup) > 1 and np.hypot(*(dedup[0] - dedup[-1])) < 1e-9:
+                dedup.pop()
+            rings.append(_remove_spikes(dedup))
+        if len(rings[0]) < 3:
+            continue  # a face the snake collapsed
+        out.append(Polygon(rings[0], [r for r in rings[1:] if len(r) >= 3]))
+    total = footprint.area
+    ok = (len(out) == len(faces) and all(f.is_valid and f.area > 1e-6 for f in out)
+          and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
+          and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
+    red = dict(info.get("reductions", {}))
+    if not ok:
+        logger.debug("snake adjustment broke the roof partition; keeping the simplified one")
+        return faces, {**red, "snake_fallback": True}
+    return out, red
 

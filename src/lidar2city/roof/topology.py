@@ -237,6 +237,7 @@ class RoofPartition:
     planes: np.ndarray
     chains: list
     chain_pairs: list
+    raw_chains: list = None
 
 
 def _extend_to_boundary(chain, boundary, max_ext):
@@ -366,10 +367,11 @@ def roof_partition(footprint, xy, labels, planes, *, cell=0.5, simplify=None, mi
     grid = label_grid(footprint, xy, labels, cell=cell, min_cells=min_cells)
     raw, pairs = boundary_chains(grid)
     boundary = footprint.boundary
-    chains, chain_pairs = [], []
+    chains, chain_pairs, raw_inner = [], [], []
     for c, p in zip(raw, pairs, strict=True):
         if -1 in p:
             continue  # the footprint itself is the outer boundary
+        raw_inner.append(c)
         closed = len(c) > 3 and np.allclose(c[0], c[-1])
         if closed:
             s = shapely.Polygon(c).simplify(simplify, preserve_topology=True)
@@ -382,4 +384,5 @@ def roof_partition(footprint, xy, labels, planes, *, cell=0.5, simplify=None, mi
             chains.append(s)
         chain_pairs.append(p)
     faces, face_labels = partition_faces(footprint, chains, grid, min_area=min_face_area)
-    return RoofPartition(footprint, faces, face_labels, np.asarray(planes, dtype=float), chains, chain_pairs)
+    return RoofPartition(footprint, faces, face_labels, np.asarray(planes, dtype=float), chains,
+                         chain_pairs, raw_inner)
