@@ -64,6 +64,7 @@ class SyntheticTown:
     footprints: Footprints
     buildings: list
     terrain: tuple  # (a, b, c, amplitude, wavelength)
+    n_trees: int = 0
 
     def terrain_z(self, xy) -> np.ndarray:
         return _terrain(np.asarray(xy, dtype=float), self.terrain)
@@ -357,4 +358,4 @@ def make_town(*, size=(200.0, 150.0), density=10.0, seed=0, noise_sigma=0.05,
     )
     fps = Footprints([b.footprint for b in buildings], [b.id for b in buildings],
                      {"roof_type": [b.roof_type for b in buildings]})
-    return SyntheticTown(cloud, fps, buildings, terrain)
+    return SyntheticTown(cloud, fps, buildings, terrain, placed)
