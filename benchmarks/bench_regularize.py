@@ -9,7 +9,7 @@ case) — then regularised with the default options. Printed per noise model:
   own dominant axes (result, BGT, noisy input);
 * IoU with the original BGT footprint (mean, share of polygons >= 0.9) and
   the noisy input's IoU for reference;
-* oblique walls: on the BGT polygons with > 10 % of oblique length, the
+* oblique walls: on the reference polygons with > 10 % of oblique length, the
   oblique share of the BGT and of the result;
 * fallbacks, repairs, reduction-type totals and time per polygon.
 
@@ -94,19 +94,19 @@ def report(name, rows, red):
     col = {k: np.array([r[k] for r in rows]) for k in rows[0]}
     print(f"== {name}: {len(rows)} polygons ==")
     print(f"aligned within 3 deg (length-weighted): result {weighted(col['al'], col['len']):.3f}"
-          f"  BGT {weighted(col['al_bgt'], col['len_bgt']):.3f}"
+          f"  reference {weighted(col['al_bgt'], col['len_bgt']):.3f}"
           f"  noisy input {weighted(col['al_noisy'], col['len_bgt']):.3f}")
-    print(f"IoU with BGT: mean {col['iou'].mean():.3f}  median {np.median(col['iou']):.3f}"
+    print(f"IoU with reference: mean {col['iou'].mean():.3f}  median {np.median(col['iou']):.3f}"
           f"  >= 0.9: {np.mean(col['iou'] >= 0.9):.1%}  (noisy input mean {col['iou_noisy'].mean():.3f})")
     big = col["len_bgt"] >= 50
     print(f"IoU on polygons with perimeter >= 50 m ({big.sum()}): mean {col['iou'][big].mean():.3f};"
           f" smaller ones ({(~big).sum()}): {col['iou'][~big].mean():.3f}")
     obl = col["al_bgt"] < 0.9
     if obl.any():
-        print(f"oblique walls ({obl.sum()} BGT polygons with > 10 % oblique length): oblique share"
-              f" BGT {1 - weighted(col['al_bgt'][obl], col['len_bgt'][obl]):.3f},"
+        print(f"oblique walls ({obl.sum()} reference polygons with > 10 % oblique length): oblique share"
+              f" reference {1 - weighted(col['al_bgt'][obl], col['len_bgt'][obl]):.3f},"
               f" result {1 - weighted(col['al'][obl], col['len'][obl]):.3f}")
-    print(f"vertices: result mean {col['nv'].mean():.1f}, BGT mean {col['nv_bgt'].mean():.1f};"
+    print(f"vertices: result mean {col['nv'].mean():.1f}, reference mean {col['nv_bgt'].mean():.1f};"
           f" mean deviation from input {col['dev'].mean():.3f} m")
     print(f"fallbacks {int(col['fallback'].sum())}, repaired {int(col['repaired'].sum())}")
     print("reductions (total): " + ", ".join(f"{k} {v}" for k, v in red.items()))
