@@ -20,7 +20,7 @@ Energies, per edge ``(u, v)`` and candidate positions ``p_i`` of ``u`` and
 ``E_Dis`` (eq. 5)
     The chessboard distance transform (``scipy.ndimage.distance_transform_cdt``)
     of the rasterised original topology, summed along the candidate edge:
-    the segment is sampled every half raster cell, each sample reads the
+    the segment is sampled every raster cell, each sample reads the
     distance of its raster cell, and the sum is weighted by the sample
     spacing, giving ``integral of distance ds`` in square metres — the paper's
     sum over the cells of the rasterised edge, times the cell area, made
@@ -33,10 +33,14 @@ Energies, per edge ``(u, v)`` and candidate positions ``p_i`` of ``u`` and
     :func:`short_edge_energy`).
 
 ``E`` (eq. 6)
-    ``C_Dir * E_Dir + C_Dis * E_Dis`` (``+ C_Short * E_Short``). With the defaults (``C_Dis = 1``,
-    ``C_Dir = T`` metres) aligning an adjustable edge of length ``L`` costs at
-    most about ``L * T / 4`` of deviation and saves ``L * T``, so adjustable
-    edges are aligned whenever the window lets them.
+    ``C_Dir * E_Dir + C_Dis * E_Dis (+ C_Short * E_Short)``. With the
+    defaults of :mod:`lidar2city.regularize.snake` (``T = 2 cell``,
+    ``C_Dis = 1``, ``C_Dir = T`` metres, ``C_Short = 2 cell**2`` below
+    ``2 cell``) aligning an adjustable edge of length ``L`` costs at most
+    about ``L * T / 4`` of deviation and saves ``L * T``, so adjustable edges
+    are aligned whenever the window lets them; and turning a jog into a
+    longer slanted edge to escape ``E_Short`` costs at least
+    ``C_Dir * 2 cell = C_Short``, so it does not pay.
 """
 
 from __future__ import annotations
