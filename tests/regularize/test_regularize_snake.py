@@ -197,6 +197,7 @@ def perturbed_bgt(data, rng, radius=0.3, spacing=0.5):
     return out
 
 
+@pytest.mark.slow
 def test_delft_bgt_perturbed_targets(data):
     rng = np.random.default_rng(2026)
     pairs = perturbed_bgt(data, rng)
