@@ -95,8 +95,8 @@ def solve_ilp(unary, edges, tables, time_limit=120.0):
                bounds=Bounds(0, 1), options={"time_limit": time_limit})
     dt = time.perf_counter() - t0
     if res.x is None:
-        return None, dt
-    return float(res.fun), dt
+        return None, dt, "no solution"
+    return float(res.fun), dt, "optimal" if res.status == 0 else "time limit"
 
 
 def timed(unary, edges, tables, strategy="auto", repeat=3):
@@ -113,8 +113,15 @@ def row(label, sol, dt, ilp=None):
     txt = (f"{label:<34} {dt * 1e3:9.2f} {red['I']:4d} {red['II']:4d} {red['III']:4d} {red['IV']:4d}"
            f" {red.get('VE', 0):4d} {sol.energy:12.5f}")
     if ilp is not None:
-        e, t = ilp
-        same = "n/a" if e is None else ("yes" if abs(e - sol.energy) < 1e-6 * max(1, abs(e)) else f"NO ({e:.5f})")
+        e, t, status = ilp
+        if e is None:
+            same = status
+        elif abs(e - sol.energy) < 1e-6 * max(1, abs(e)):
+            same = "yes"
+        elif status != "optimal":
+            same = f"{status}: milp {e:.5f}"
+        else:
+            same = f"NO (milp {e:.5f})"
         txt += f" {t * 1e3:10.1f} {same:>6}"
     print(txt)
 

@@ -197,6 +197,7 @@ def perturbed_bgt(data, rng, radius=0.3, spacing=0.5):
     return out
 
 
+@pytest.mark.slow
 def test_delft_bgt_perturbed_targets(data):
     rng = np.random.default_rng(2026)
     pairs = perturbed_bgt(data, rng)
@@ -292,3 +293,22 @@ def test_coincident_vertices_reported():
     new, info = adjust_planar_graph(xy, edges, direction=0.0)
     assert [1, 2] in info["coincident"]
     np.testing.assert_array_equal(new[1], new[2])
+
+
+def test_jog_energy_removes_small_steps():
+    # A 0.5 m bump 1 m long on a 20 m wall (noise-like): removed by the default jog
+    # energy (two jogs cost more than moving 1 m of wall by 0.5 m), kept without it.
+    bump = shapely.Polygon([(0, 0), (10, 0), (10, 0.5), (11, 0.5), (11, 0), (20, 0), (20, 10), (0, 10)])
+    opts = dict(direction=0.0, simplify_tolerance=0, refine=False)
+    with_jog, _ = regularize_polygon(bump, **opts)
+    without, _ = regularize_polygon(bump, c_short=0, **opts)
+    assert with_jog.equals(shapely.box(0, 0, 20, 10))
+    assert without.equals(bump)
+    # A real 0.5 m step between two 10 m walls stays: collapsing it would cost more.
+    step = shapely.Polygon([(0, 0), (10, 0), (10, 0.5), (20, 0.5), (20, 10), (0, 10)])
+    kept, _ = regularize_polygon(step, **opts)
+    assert kept.equals(step)
+    from lidar2city.regularize import regularize_polygons
+
+    with pytest.raises(InputError, match="unknown option"):
+        regularize_polygons([bump], cel=0.5)

@@ -19,6 +19,7 @@ through 2-D snake algorithm. IEEE TGRS 53(1), 3–14 (eqs. 4–6).
 
 from __future__ import annotations
 
+import inspect
 import logging
 import time
 from dataclasses import dataclass
@@ -53,6 +54,8 @@ class SnakeConfig:
     c_dir: float | None = field(None, "weight C_Dir of the direction energy (eq. 6); default T in metres, enough to align every adjustable edge")
     c_dis: float = field(1.0, "weight C_Dis of the deviation energy (eq. 6)")
     c_move: float = field(0.05, "tie-breaking vertex energy per metre of displacement")
+    c_short: float | None = field(None, "energy (m^2) of an edge shorter than short_length but not zero, to remove noise jogs; default 2 * cell^2; 0 = off")
+    short_length: float | None = field(None, "length (m) below which an edge counts as a jog; default 2 * cell")
     direction: float | None = field(None, "building direction in radians; default estimated per polygon (length-weighted histogram)")
     simplify_tolerance: float | None = field(None, "Douglas-Peucker tolerance (m) applied before the snake; default cell; 0 = none")
     refine: bool = field(True, "after the snake, shift each edge along its normal to the median of the input outline near it (keeps all angles; removes grid quantisation)")
@@ -60,18 +63,20 @@ class SnakeConfig:
 
     def __post_init__(self):
         _check_options(self.cell, self.window, self.t_adjust, self.c_dir, self.c_dis, self.c_move,
-                       self.simplify_tolerance, error=ConfigError, prefix="snake.")
+                       self.simplify_tolerance, c_short=self.c_short, short_length=self.short_length,
+                       error=ConfigError, prefix="snake.")
         if self.strategy not in ("auto", "paper"):
             raise ConfigError(f"snake.strategy: {self.strategy!r} is not one of 'auto', 'paper'")
 
 
 def _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolerance,
-                   *, error=InputError, prefix=""):
+                   *, c_short=None, short_length=None, error=InputError, prefix=""):
     if not (np.isfinite(cell) and cell > 0):
         raise error(f"{prefix}cell must be a positive number of metres, got {cell}")
     if isinstance(window, bool) or int(window) != window or not 0 <= window <= 10:
         raise error(f"{prefix}window must be an integer in [0, 10], got {window}")
-    for name, val in (("t_adjust", t_adjust), ("c_dir", c_dir), ("simplify_tolerance", simplify_tolerance)):
+    for name, val in (("t_adjust", t_adjust), ("c_dir", c_dir), ("simplify_tolerance", simplify_tolerance),
+                      ("c_short", c_short), ("short_length", short_length)):
         if val is not None and not (np.isfinite(val) and val >= 0):
             raise error(f"{prefix}{name} must be >= 0 (or unset), got {val}")
     for name, val in (("c_dis", c_dis), ("c_move", c_move)):
@@ -80,7 +85,7 @@ def _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolera
 
 
 def _frame_solve(xy, edges, segs, *, cell, window, direction, t_adjust, c_dir, c_dis, c_move,
-                 fixed, strategy):
+                 fixed, strategy, c_short=0.0, short_length=0.0):
     """Solve the snake in the building frame; return grid positions and details."""
     # Pivot on a grid node, so that with direction 0 the grid is the world grid.
     pivot = np.round(xy.mean(axis=0) / cell) * cell if len(xy) else np.zeros(2)
@@ -89,7 +94,7 @@ def _frame_solve(xy, edges, segs, *, cell, window, direction, t_adjust, c_dir, c
     cands = candidate_positions(q, window, fixed=fixed)
     raster = distance_raster(seg_q, margin=int(window) + 2)
     tables = edge_energy_tables(cands, edges, raster, cell=cell, t_adjust=t_adjust,
-                                c_dir=c_dir, c_dis=c_dis)
+                                c_dir=c_dir, c_dis=c_dis, c_short=c_short, short_length=short_length)
     unary = vertex_energy_tables(cands, q, cell=cell, c_move=c_move)
     sol = minimize_energy(unary, edges, tables, strategy=strategy)
     grid = np.array([cands[v][s] for v, s in enumerate(sol.states)]).reshape(-1, 2)
@@ -100,6 +105,12 @@ def _defaults(cell, t_adjust, c_dir):
     t = 2.0 * cell if t_adjust is None else float(t_adjust)
     c = t if c_dir is None else c_dir
     return t, c
+
+
+def _short_defaults(cell, c_short, short_length):
+    cs = 2.0 * cell * cell if c_short is None else float(c_short)
+    ls = 2.0 * cell if short_length is None else float(short_length)
+    return cs, ls
 
 
 def adjust_planar_graph(
@@ -114,6 +125,8 @@ def adjust_planar_graph(
     c_dir=None,
     c_dis: float = 1.0,
     c_move: float = 0.05,
+    c_short: float = 0.0,
+    short_length: float | None = None,
     fixed=None,
     strategy: str = "auto",
 ) -> tuple[np.ndarray, dict]:
@@ -142,6 +155,9 @@ def adjust_planar_graph(
         that edge, e.g. hips and valleys of a roof); default ``T`` (m).
     c_dis, c_move : float
         ``C_Dis`` and the tie-breaking displacement weight.
+    c_short, short_length : float
+        Jog energy (m^2; default 0 = off for general graphs, whose short
+        edges may be real) and its length (m, default ``2 * cell``).
     fixed : array of bool, shape (n,), optional
         Vertices that keep their exact position (one state).
     strategy : {"auto", "paper"}
@@ -185,9 +201,9 @@ def adjust_planar_graph(
         c_dir = np.asarray(c_dir, dtype=np.float64)
         if c_dir.shape != (len(e),) or not np.all(np.isfinite(c_dir) & (c_dir >= 0)):
             raise InputError(f"c_dir must be a number or {len(e)} non-negative numbers (one per edge)")
-        _check_options(cell, window, t_adjust, None, c_dis, c_move, None)
+        _check_options(cell, window, t_adjust, None, c_dis, c_move, None, c_short=c_short, short_length=short_length)
     else:
-        _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, None)
+        _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, None, c_short=c_short, short_length=short_length)
     fixed_arr = np.zeros(len(xy), dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
     if fixed_arr.shape != (len(xy),):
         raise InputError(f"fixed must have shape ({len(xy)},), got {fixed_arr.shape}")
@@ -197,9 +213,10 @@ def adjust_planar_graph(
     if direction is None:
         direction = dominant_direction(segs)
     t, c = _defaults(cell, t_adjust, c_dir)
+    cs, ls = _short_defaults(cell, c_short, short_length)
     grid, pivot, sol = _frame_solve(xy, e, segs, cell=cell, window=window, direction=direction,
                                     t_adjust=t, c_dir=c, c_dis=c_dis, c_move=c_move,
-                                    fixed=fixed_arr, strategy=strategy)
+                                    fixed=fixed_arr, strategy=strategy, c_short=cs, short_length=ls)
     new = from_frame(grid * cell, direction, pivot)
     new[fixed_arr] = xy[fixed_arr]
     info = {
@@ -326,6 +343,8 @@ def regularize_polygon(
     direction: float | None = None,
     simplify_tolerance: float | None = None,
     refine: bool = True,
+    c_short: float | None = None,
+    short_length: float | None = None,
     strategy: str = "auto",
 ):
     """Regularise a building footprint with the 2-D snake.
@@ -345,6 +364,10 @@ def regularize_polygon(
     simplify_tolerance : float, optional
         Douglas–Peucker tolerance (m) before the snake; default ``cell``;
         0 keeps every vertex.
+    c_short, short_length : float, optional
+        Energy (m^2) of a jog (an edge shorter than ``short_length`` m but
+        not of zero length) — beyond the paper, removes the steps noise
+        leaves; defaults ``2 * cell**2`` and ``2 * cell``; 0 = off.
     refine : bool
         After the snake, move each edge along its normal to the median of the
         input outline near it (directions unchanged): removes the grid's
@@ -382,7 +405,8 @@ def regularize_polygon(
         raise InputError(f"polygon must be a shapely Polygon, got {type(polygon).__name__}")
     if polygon.is_empty or polygon.area <= 0:
         raise EmptyInputError("polygon is empty")
-    _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolerance)
+    _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolerance,
+                   c_short=c_short, short_length=short_length)
     tol = cell if simplify_tolerance is None else float(simplify_tolerance)
     info: dict = {"status": "fallback", "reason": "", "direction_deg": None,
                   "n_vertices": len(polygon.exterior.coords) - 1,
@@ -414,10 +438,12 @@ def regularize_polygon(
         for s, k in zip(starts, sizes, strict=True)
     ])
     t, c = _defaults(cell, t_adjust, c_dir)
+    cs, ls = _short_defaults(cell, c_short, short_length)
     try:
         grid, pivot, sol = _frame_solve(xy, edges, segments_of(polygon), cell=cell, window=window,
                                         direction=direction, t_adjust=t, c_dir=c, c_dis=c_dis,
-                                        c_move=c_move, fixed=None, strategy=strategy)
+                                        c_move=c_move, fixed=None, strategy=strategy,
+                                        c_short=cs, short_length=ls)
     except AlgorithmError as exc:  # pragma: no cover - rings always reduce by I-III
         info["reason"] = f"snake failed: {exc}"
         return done(polygon)
@@ -490,9 +516,14 @@ def regularize_polygons(geometries, **options) -> tuple[list, list[dict]]:
     InputError
         Invalid options (checked once, before any polygon).
     """
+    known = set(inspect.signature(regularize_polygon).parameters) - {"polygon"}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise InputError(f"unknown option {unknown[0]!r}; known: {', '.join(sorted(known))}")
     _check_options(options.get("cell", 0.5), options.get("window", 2), options.get("t_adjust"),
                    options.get("c_dir"), options.get("c_dis", 1.0), options.get("c_move", 0.05),
-                   options.get("simplify_tolerance"))
+                   options.get("simplify_tolerance"), c_short=options.get("c_short"),
+                   short_length=options.get("short_length"))
     results, infos = [], []
     for geom in geometries:
         try:

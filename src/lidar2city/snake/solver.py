@@ -62,6 +62,10 @@ logger = logging.getLogger(__name__)
 _BROADCAST_LIMIT = 2_000_000
 #: Largest table (elements) the solver will build; denser graphs raise FitError.
 _MAX_TABLE = 50_000_000
+#: Irreducible parts up to this many vertices are planned whole; larger ones
+#: within a radius (edges) of the vertex to remove.
+_PLAN_GLOBAL = 40
+_PLAN_RADIUS = 3
 #: Type IV candidate pairs examined when the irreducible part is large.
 _MAX_PAIRS = 16
 
@@ -278,15 +282,19 @@ class _Structure:
 
         return min(self.active, key=key)
 
-    def component(self, v: int) -> set[int]:
-        """Active vertices connected to ``v``."""
-        seen, todo = {v}, [v]
-        while todo:
-            x = todo.pop()
-            for y in self.adj[x]:
-                if y not in seen:
-                    seen.add(y)
-                    todo.append(y)
+    def ball(self, v: int, radius: int | None = None) -> set[int]:
+        """Active vertices within ``radius`` edges of ``v`` (its component if None)."""
+        seen, front = {v}, [v]
+        for _ in itertools.count() if radius is None else range(radius):
+            nxt = []
+            for x in front:
+                for y in self.adj[x]:
+                    if y not in seen:
+                        seen.add(y)
+                        nxt.append(y)
+            front = nxt
+            if not front:
+                break
         return seen
 
     def rollout(self, bound: float = np.inf) -> float:
@@ -400,18 +408,20 @@ class _Reducer:
     def _choose(self):
         """Pick the next move when every active vertex has degree >= 3.
 
-        Within the connected part of the graph holding the min-weight vertex,
-        the candidates are type IV on a pair of vertices and (unless the
+        Within the connected part of the graph holding the min-weight vertex
+        (or, when that part is large, within ``_PLAN_RADIUS`` edges of it,
+        the rest frozen during the simulation, so planning stays cheap), the
+        candidates are type IV on a pair of vertices and (unless the
         strategy is ``"paper"``) the general elimination of that vertex. Each
         is simulated on the structure and the reduction of that part finished
         with a fixed policy (I–III, else min-weight elimination); the move with
-        the least total work wins, ties going to type IV. As the simulation
-        replays the solver's own order, re-planning at each stuck point never
-        does worse than the plan it replaces.
+        the least total work wins, ties going to type IV.
         """
         st = self.struct
         v = st.min_weight()
-        comp = st.component(v)
+        comp = st.ball(v)
+        if len(comp) > _PLAN_GLOBAL:
+            comp = st.ball(v, _PLAN_RADIUS)
 
         def restricted():
             sim = st.copy()
@@ -429,7 +439,7 @@ class _Reducer:
         else:
             deg = {x: len(st.adj[x]) for x in alive}
             pairs = sorted(
-                ((x, y) for x in alive for y in st.adj[x] if x < y),
+                ((x, y) for x in alive for y in st.adj[x] if x < y and y in comp),
                 key=lambda p: (-(deg[p[0]] + deg[p[1]]), p),
             )[:_MAX_PAIRS]
         for a, c in pairs:
