@@ -396,9 +396,12 @@ def regularize_polygon(
     --------
     >>> import shapely
     >>> noisy = shapely.Polygon([(0, 0), (12.1, 0.2), (11.9, 8.1), (6, 7.8), (0.1, 8.2)])
-    >>> poly, info = regularize_polygon(noisy, direction=0.0)
+    >>> poly, info = regularize_polygon(noisy, direction=0.0, refine=False)
     >>> sorted(shapely.get_coordinates(poly.exterior)[:-1].round(6).tolist())
     [[0.0, 0.0], [0.0, 8.0], [12.0, 0.0], [12.0, 8.0]]
+    >>> poly, info = regularize_polygon(noisy, direction=0.0)  # walls refitted to the data
+    >>> len(poly.exterior.coords) - 1, info["status"]
+    (4, 'regularized')
     """
     t0 = time.perf_counter()
     if not isinstance(polygon, shapely.Polygon):
