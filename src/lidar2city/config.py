@@ -35,6 +35,7 @@ STAGES: dict[str, str] = {
     "ground": "lidar2city.ground:GroundConfig",
     "lod1": "lidar2city.lod.lod1:Lod1Config",
     "lod22": "lidar2city.roof.building:Lod22Config",
+    "snake": "lidar2city.regularize.snake:SnakeConfig",
 }
 
 
