@@ -1,0 +1,115 @@
+"""LoD2.2 roofs on the Delft tile: fit (RMSE, coverage), validity, type IV use, speed.
+
+Usage: python benchmarks/bench_lod22.py [DATA_DIR]   (default $LIDAR2CITY_DATA or ../shared/data)
+
+Reconstructs the 132 BGT footprints of the shared AHN3 tile at LoD1.2 and LoD2.2
+(the AHN classes: 6 building, 2 ground) and measures, with the code that
+`lidar2city evaluate model` uses, the 3-D distance of the building points
+inside each footprint to each model's surface (point to mesh, as roofer's
+rf_rmse); "under a roof" is the share of those points whose vertical line
+meets a roof face. Then the whole-process time of the CLI, and the synthetic
+town of the demo against its truth.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def data_dir() -> Path:
+    if len(sys.argv) > 1:
+        return Path(sys.argv[1])
+    if os.environ.get("LIDAR2CITY_DATA"):
+        return Path(os.environ["LIDAR2CITY_DATA"])
+    return ROOT.parent / "shared" / "data"
+
+
+def under_roof(pts, solids):
+    import shapely
+
+    roofs = []
+    for s in solids:
+        for surf in s.surfaces:
+            if surf.semantic == "RoofSurface":
+                v = s.vertices
+                roofs.append(shapely.Polygon(v[surf.rings[0], :2], [v[h, :2] for h in surf.rings[1:]]))
+    if not roofs or not len(pts):
+        return 0.0
+    u = shapely.union_all(roofs).buffer(1e-6)
+    return float(np.mean(shapely.contains_xy(u, pts[:, 0], pts[:, 1])))
+
+
+def main():
+    import shapely
+
+    sys.path.insert(0, str(ROOT / "src"))
+    from lidar2city.io.las import read_points
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.lod.lod1 import Lod1Config
+    from lidar2city.metrics.model import model_rmse
+    from lidar2city.roof.building import Lod22Config
+    from lidar2city.tools.reconstruct import reconstruct_buildings
+    from lidar2city.validate.solid import check_solid
+
+    d = data_dir() / "delft"
+    laz, fpath = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
+    cloud = read_points(laz, crs="EPSG:7415")
+    fps, _ = read_footprints(fpath, origin=cloud.origin[:2], target_crs=cloud.crs)
+    cls = cloud.get("classification")
+    t0 = time.process_time()
+    results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=Lod22Config())
+    cpu = time.process_time() - t0
+    bxyz = cloud.xyz[cls == 6]
+    rm12, rm22, cover, valid, fallback, type4, times = [], [], [], 0, 0, [], []
+    kinds = {}
+    for g, r in zip(fps.geometries, results, strict=True):
+        pts = bxyz[shapely.contains_xy(g, bxyz[:, 0], bxyz[:, 1])]
+        s12 = r.solids["1.2"]
+        s22 = r.solids["2.2"]
+        s12 = s12 if isinstance(s12, list) else [s12]
+        s22 = s22 if isinstance(s22, list) else [s22]
+        rm12.append(model_rmse(pts, s12))
+        rm22.append(model_rmse(pts, s22))
+        cover.append(under_roof(pts, s22))
+        valid += all(not check_solid(s) for s in s22)
+        fallback += "lod22_fallback" in r.attributes
+        type4.append(r.attributes.get("type_iv", 0))
+        times.append(r.attributes.get("lod22_time", 0.0))
+        kinds[r.attributes.get("roof_type", "-")] = kinds.get(r.attributes.get("roof_type", "-"), 0) + 1
+    n = len(results)
+    rm12, rm22 = np.array(rm12), np.array(rm22)
+    print(f"Delft shared tile, {n} BGT footprints (AHN3 class 6 points inside each)")
+    print(f"  LoD2.2 RMSE  median {np.median(rm22):.3f} m  mean {rm22.mean():.3f} m  p90 {np.percentile(rm22, 90):.3f} m")
+    print(f"  LoD1.2 RMSE  median {np.median(rm12):.3f} m  mean {rm12.mean():.3f} m  p90 {np.percentile(rm12, 90):.3f} m")
+    print(f"  points under a roof face: median {100 * np.median(cover):.1f} %, all buildings >= 95 %: "
+          f"{int(np.sum(np.array(cover) >= 0.95))}/{n}")
+    print(f"  valid LoD2.2 solids {valid}/{n}, LoD1.2 fallbacks {fallback}")
+    print(f"  roof types {dict(sorted(kinds.items()))}")
+    t4 = np.array(type4)
+    print(f"  buildings needing type IV reductions: {int(np.sum(t4 > 0))}/{n} "
+          f"({100 * np.mean(t4 == 0):.1f} % needed none)")
+    print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean "
+          f"{1000 * np.mean(times):.1f} ms -> {1 / np.mean(times):.1f} buildings/s; whole batch CPU {cpu:.2f} s")
+    out = Path(tempfile.mkdtemp()) / "delft_lod22.city.json"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    cmd = [sys.executable, "-m", "lidar2city.cli.main", "reconstruct", str(laz), "--crs", "EPSG:7415",
+           "--footprints", str(fpath), "--lod", "1.2", "--lod", "2.2", "-o", str(out)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, env=env, capture_output=True)
+    print(f"  CLI whole process (LoD1.2 + LoD2.2, read, write CityJSON): {time.perf_counter() - t0:.2f} s")
+    res = subprocess.run([sys.executable, "-m", "lidar2city.cli.main", "validate", str(out)],
+                         env=env, capture_output=True, text=True)
+    print("  validate: " + (res.stdout.strip().splitlines() or ["?"])[-1])
+
+
+if __name__ == "__main__":
+    main()
