@@ -24,8 +24,8 @@ __all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes
 class Lod22Config:
     """Configuration of the ``[lod22]`` stage (LoD2.2 roofs)."""
 
-    cell: float | None = field(None, "Label grid cell (m); default twice the point spacing, "
-                               "clipped to 0.3-1.0 m.")
+    cell: float | None = field(None, "Label grid cell (m); default the point spacing, "
+                               "clipped to 0.25-1.0 m.")
     dist_tol: float = field(0.2, "Largest point-to-plane distance (m) within a facet "
                             "(about 2-3x the elevation noise).")
     angle_tol: float = field(20.0, "Largest angle (deg) between a point's normal and its facet.")
@@ -142,11 +142,12 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels
     return face_labels, np.asarray(planes)
 
 
-def _clean_faces(faces, labels, precision=1e-3):
+def _clean_faces(faces, labels, precision=5e-3):
     """Repair faces whose rings touch themselves (a hole pinched into the shell)."""
     import shapely
 
-    # one millimetre grid for all faces (what the CityJSON transform keeps): shared vertices
+    # a 5 mm grid for all faces (coarser than the 1 mm CityJSON quantisation and validator
+    # snapping, so distinct vertices stay distinct after them): shared vertices
     # snap alike, and near-zero-width spikes collapse and vanish on both sides
     snapped = shapely.set_precision(np.asarray(faces, dtype=object), precision)
     out_f, out_l = [], []
@@ -263,7 +264,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         if len(pts) < 3:
             raise FitError(f"too few points on the roof ({len(pts)})")
         spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
-        cell = cfg.cell or float(np.clip(2 * spacing, 0.3, 1.0))
+        cell = cfg.cell or float(np.clip(spacing, 0.25, 1.0))
         labels, planes = segment_planes(pts, dist_tol=cfg.dist_tol, angle_tol=cfg.angle_tol,
                                         min_area=cfg.min_facet_area, merge_angle=cfg.merge_angle)
         if len(planes) == 0:

@@ -215,27 +215,22 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         ring = _dedupe(ring)
         if len(ring) >= 3:
             surfaces.append(Surface([np.asarray(ring)], "WallSurface"))
-    # floor: the outer directed edges reversed, chained into rings
-    nxt = {}
-    for kp, kq in outer_edges:
-        nxt[kq] = kp  # reversed: the floor faces down
-    floor_rings = []
-    seen = set()
-    for start in list(nxt):
-        if start in seen:
-            continue
-        ring, k = [], start
-        while k not in seen:
-            seen.add(k)
-            ring.append(vid(k, ground_z)[0])
-            k = nxt[k]
-        floor_rings.append(np.asarray(ring))
-    # exterior first: the ring enclosing the largest area (clockwise from above now)
-    def area(r):
-        xy = np.asarray([verts[i][:2] for i in r])
-        return 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
-    floor_rings.sort(key=lambda r: area(r))  # most negative (largest clockwise) first
-    surfaces.insert(0, Surface(floor_rings, "GroundSurface"))
+    # floor: the polygons the outer edges enclose (pinched outlines give several), facing down
+    import shapely
+    from shapely.geometry import LineString
+    from shapely.geometry.polygon import orient
+
+    lines = [LineString([xy_of[kp], xy_of[kq]]) for kp, kq in outer_edges]
+    inside = shapely.union_all([shapely.Polygon(rs[0], rs[1:]) for rs in rings]).buffer(1e-7)
+    floors = []
+    for poly in shapely.get_parts(shapely.polygonize(lines)):
+        if not inside.contains(poly.representative_point()):
+            continue  # the inside of a courtyard
+        poly = orient(poly, -1.0)  # clockwise from above: the normal points down
+        ids = [[vid(_key(p), ground_z)[0] for p in np.asarray(r.coords)[:-1]]
+               for r in [poly.exterior, *poly.interiors]]
+        floors.append(Surface([np.asarray(r) for r in ids], "GroundSurface"))
+    surfaces[:0] = floors
     return Solid(np.asarray(verts), surfaces)
 
 
