@@ -336,17 +336,26 @@ def _segments_distance(p, verts):
     return np.hypot(d[..., 0], d[..., 1])
 
 
-def _refine_edges(q, boundary, *, step, max_iterations):
+def _refine_edges(q, boundary, *, step, max_iterations, corner_margin=1.0):
     """Shift edges by their mean signed distance to the boundary points (in place)."""
     uv = _to_uv(boundary, q.center, q.theta)
     u, v = uv[:, 0], uv[:, 1]
     for _ in range(max_iterations):
-        nearest = np.argmin(_segments_distance(uv, q.vertices_uv()), axis=1)
+        verts = q.vertices_uv()
+        nearest = np.argmin(_segments_distance(uv, verts), axis=1)
+        # points within a pixel of a corner are left out: marching squares cuts
+        # corners, which would pull the edges inwards at acute angles
+        a = verts[nearest]
+        ab = np.roll(verts, -1, axis=0)[nearest] - a
+        seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-12)
+        along = ((uv - a) * ab).sum(axis=1) / seg_len
+        central = (along > corner_margin) & (along < seg_len - corner_margin)
+        nearest = np.where(central, nearest, -1)
         h = q.v1 - q.v0
         if h <= 1e-6:
             break
         t = np.clip((v - q.v0) / h, 0.0, 1.0)
-        cnt = np.bincount(nearest, minlength=4)
+        cnt = np.bincount(nearest[nearest >= 0], minlength=4)
         moves = []
         # bases: v = v0 (edge 0) and v = v1 (edge 2)
         for edge, attr in ((0, "v0"), (2, "v1")):
@@ -369,13 +378,23 @@ def _refine_edges(q, boundary, *, step, max_iterations):
                 setattr(q, a1, x1 + step * m)
                 moves.append(abs(m))
             else:
-                # half edges: each half moves its own end vertex
+                # half edges: the mean signed distances of the two halves give
+                # each end vertex its shift (solved jointly, as both halves'
+                # offsets depend on both ends linearly: du(t) = d0 (1-t) + d1 t)
                 lower = ts < 0.5
-                for half, attr, w in ((lower, a0, 1.0 - ts), (~lower, a1, ts)):
-                    if half.any():
-                        m = float(du[half].mean()) / max(float(w[half].mean()), 0.5)
-                        setattr(q, attr, getattr(q, attr) + step * m)
-                        moves.append(abs(m))
+                if lower.sum() >= 1 and (~lower).sum() >= 1:
+                    rows = np.array([[np.mean(1 - ts[lower]), np.mean(ts[lower])],
+                                     [np.mean(1 - ts[~lower]), np.mean(ts[~lower])]])
+                    rhs = np.array([du[lower].mean(), du[~lower].mean()])
+                    try:
+                        d0, d1 = np.linalg.solve(rows, rhs)
+                    except np.linalg.LinAlgError:
+                        d0 = d1 = float(du.mean())
+                else:
+                    d0 = d1 = float(du.mean())
+                setattr(q, a0, x0 + step * d0)
+                setattr(q, a1, x1 + step * d1)
+                moves.extend([abs(d0), abs(d1)])
         if q.v0 > q.v1:
             q.v0, q.v1 = q.v1, q.v0
         if not moves or max(moves) < 1e-3:

@@ -256,7 +256,7 @@ def roughness(ndsm, *, size=3) -> np.ndarray:
     return np.where(valid, out, np.nan)
 
 
-def vegetation_from_roughness(ndsm, elevated, *, cell, threshold=0.35, window=5.0):
+def vegetation_from_roughness(ndsm, elevated, *, cell, threshold=0.6, window=5.0):
     """Vegetation among ``elevated`` pixels: locally rough (non-planar) surfaces.
 
     The plane-fit residual (:func:`roughness`, 3 x 3) is averaged over a
@@ -353,7 +353,7 @@ class BuildingMaskConfig:
     """Options of :func:`building_mask` (stage ``dsm_buildings``)."""
 
     min_height: float = field(2.5, "nDSM threshold (m): lower objects are not buildings")
-    roughness_threshold: float = field(0.35, "mean plane-fit residual (m) above which an "
+    roughness_threshold: float = field(0.6, "mean plane-fit residual (m) above which an "
                                              "elevated surface is vegetation (no orthoimage)")
     roughness_window: float = field(5.0, "window (m) over which the roughness is averaged")
     opening: float = field(2.0, "morphological opening radius (m) removing thin parts "
@@ -371,7 +371,7 @@ def _disk(radius_px):
     return x * x + y * y <= radius_px * radius_px + 1e-9
 
 
-def building_mask(ndsm, *, cell, vegetation=None, min_height=2.5, roughness_threshold=0.35,
+def building_mask(ndsm, *, cell, vegetation=None, min_height=2.5, roughness_threshold=0.6,
                   roughness_window=5.0, opening=2.0, min_area=20.0, max_hole_area=12.0):
     """Building pixels: elevated, not vegetation, cleaned by morphology.
 
