@@ -259,21 +259,26 @@ def roughness(ndsm, *, size=3) -> np.ndarray:
 def vegetation_from_roughness(ndsm, elevated, *, cell, threshold=0.6, window=5.0):
     """Vegetation among ``elevated`` pixels: locally rough (non-planar) surfaces.
 
-    The plane-fit residual (:func:`roughness`, 3 x 3) is averaged over a
-    ``window`` (m) and compared with ``threshold`` (m): tree crowns stay rough
-    over the window while roofs are rough only along ridges and eaves.
+    The plane-fit residual (:func:`roughness`, 3 x 3) is taken only at interior
+    pixels (whose whole window is elevated, so walls and eaves do not count),
+    averaged over a ``window`` (m) and compared with ``threshold`` (m): tree
+    crowns stay rough inside while roofs are planar, or rough only along
+    ridges. Border pixels take the mean of the interior pixels around them;
+    thin parts without interior pixels are left to the morphology.
 
     Returns
     -------
     ndarray of bool, shape (H, W)
     """
     cell = _check_cell(cell)
+    elevated = np.asarray(elevated, dtype=bool)
     rough = roughness(ndsm)
-    size = max(1, int(round(window / cell)))
-    w = elevated.astype(np.float64)
-    num = ndimage.uniform_filter(np.where(elevated, np.nan_to_num(rough), 0.0), size, mode="nearest")
+    interior = ndimage.binary_erosion(elevated, structure=np.ones((3, 3), bool)) & np.isfinite(rough)
+    size = max(3, int(round(window / cell)) | 1)
+    w = interior.astype(np.float64)
+    num = ndimage.uniform_filter(np.where(interior, rough, 0.0), size, mode="nearest")
     den = ndimage.uniform_filter(w, size, mode="nearest")
-    mean_rough = num / np.maximum(den, 1e-9)
+    mean_rough = np.where(den > 1e-9, num / np.maximum(den, 1e-9), 0.0)
     return elevated & (mean_rough > threshold)
 
 
