@@ -39,6 +39,8 @@ __all__ = [
     "vegetation_from_roughness",
     "vegetation_from_colour",
     "building_mask",
+    "RoofRegionsConfig",
+    "roof_regions",
     "label_buildings",
     "grid_points",
 ]
@@ -425,6 +427,103 @@ def _remove_small(mask, min_px):
     keep = sizes >= min_px
     keep[0] = False
     return keep[lab]
+
+
+@dataclass(frozen=True)
+class RoofRegionsConfig:
+    """Options of :func:`roof_regions` (stage ``dsm_roofs``)."""
+
+    min_height: float = field(2.5, "nDSM threshold (m): lower objects are not buildings")
+    max_step: float = field(0.5, "largest height difference (m) between 4-neighbours inside "
+                                 "one roof region")
+    min_area: float = field(30.0, "smallest roof region (m2)")
+    expand: float = field(2.0, "regions grow by this distance (m) into the remaining elevated "
+                               "pixels (blurred eaves and walls)")
+    max_hole_area: float = field(12.0, "holes up to this area (m2) are filled; larger ones are "
+                                       "kept as courtyards")
+    roughness_threshold: float = field(0.0, "without an orthoimage, regions whose interior "
+                                            "mean plane-fit residual exceeds this (m) are "
+                                            "vegetation; 0 disables the test")
+
+
+def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0.5,
+                 min_area=30.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0):
+    """Building regions as smooth elevated surfaces grown on the DSM.
+
+    The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
+    (nDSM > ``min_height``, minus ``vegetation``): 4-neighbours whose DSM
+    heights differ by at most ``max_step`` join. Roofs are piecewise smooth,
+    so each becomes one region, separated from neighbouring buildings of
+    another height and from tree crowns, whose rough surfaces break into
+    fragments smaller than ``min_area`` and are dropped. Regions then grow by
+    ``expand`` into the remaining elevated pixels (the blurred eaves of a
+    smoothed DSM), small holes are filled and large ones kept as courtyards.
+
+    Parameters
+    ----------
+    dsm, ndsm : ndarray, shape (H, W)
+        Surface and normalised heights (m), NaN for nodata.
+    cell : float
+        Pixel size (m).
+    vegetation : ndarray of bool, optional
+        Pixels excluded beforehand (e.g. :func:`vegetation_from_colour`).
+
+    Returns
+    -------
+    labels : ndarray of int32, shape (H, W)
+        0 background, 1..n regions.
+    n : int
+    """
+    from skimage.segmentation import expand_labels
+
+    dsm = _check_grid(dsm, "dsm")
+    ndsm = _check_grid(ndsm, "ndsm")
+    cell = _check_cell(cell)
+    if dsm.shape != ndsm.shape:
+        raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
+    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0:
+        raise InputError("max_step must be > 0; min_area, expand, max_hole_area >= 0")
+    elevated = np.isfinite(ndsm) & np.isfinite(dsm) & (ndsm > min_height)
+    if vegetation is not None:
+        vegetation = np.asarray(vegetation, dtype=bool)
+        if vegetation.shape != dsm.shape:
+            raise InputError(f"vegetation mask {vegetation.shape} and DSM {dsm.shape} differ")
+        elevated &= ~vegetation
+    lab = _smooth_components(np.where(elevated, dsm, np.nan), elevated, max_step) + 1
+    lab[~elevated] = 0
+    sizes = np.bincount(lab.ravel())
+    keep = sizes >= max(1, int(np.ceil(min_area / cell**2)))
+    keep[0] = False
+    if roughness_threshold > 0 and keep.any():
+        rough = roughness(ndsm)
+        interior = ndimage.binary_erosion(lab > 0, structure=np.ones((3, 3), bool))
+        interior &= np.isfinite(rough)
+        num = np.bincount(lab[interior], rough[interior], minlength=len(sizes))
+        den = np.bincount(lab[interior], minlength=len(sizes))
+        mean_rough = np.where(den > 0, num / np.maximum(den, 1), 0.0)
+        keep &= mean_rough <= roughness_threshold
+    lab = np.where(keep[lab], lab, 0)
+    if expand > 0:
+        grown = expand_labels(lab, distance=expand / cell)
+        lab = np.where(elevated, grown, 0)
+    # fill small holes region by region (courtyards stay)
+    hole_px = int(np.floor(max_hole_area / cell**2))
+    if hole_px > 0:
+        holes = ndimage.binary_fill_holes(lab > 0) & (lab == 0)
+        hl, nh = ndimage.label(holes)
+        if nh:
+            hs = np.bincount(hl.ravel())
+            small = (hs <= hole_px)
+            small[0] = False
+            fill = small[hl]
+            # a hole takes the label of its neighbouring region
+            near = expand_labels(lab, distance=2.0)
+            lab = np.where(fill, near, lab)
+    # touching regions stay apart (no re-labelling of connected components)
+    ids = np.unique(lab[lab > 0])
+    remap = np.zeros(lab.max() + 1, dtype=np.int32)
+    remap[ids] = np.arange(1, len(ids) + 1, dtype=np.int32)
+    return remap[lab], int(len(ids))
 
 
 def label_buildings(mask, *, connectivity=1):

@@ -25,10 +25,12 @@ from ..io.raster import Raster, read_raster, write_raster
 from ..segment.dsm import (
     BuildingMaskConfig,
     DtmConfig,
+    RoofRegionsConfig,
     building_mask,
     dtm_from_dsm,
     grid_points,
     label_buildings,
+    roof_regions,
     vegetation_from_colour,
 )
 
@@ -37,6 +39,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "Lod1DsmConfig",
     "REGULARIZERS",
+    "SEGMENTERS",
     "building_height",
     "prism",
     "segment_dsm",
@@ -144,13 +147,18 @@ def prism(polygon, ground_z, roof_z) -> Solid:
 
 
 def _configs(config):
-    defaults = {"dtm": DtmConfig(), "dsm_buildings": BuildingMaskConfig(),
+    defaults = {"dtm": DtmConfig(), "dsm_roofs": RoofRegionsConfig(),
+                "dsm_buildings": BuildingMaskConfig(),
                 "polygon_fit": PolygonFitConfig(), "dsm_lod1": Lod1DsmConfig()}
     if config:
         for k, v in config.items():
             if k in defaults:
                 defaults[k] = v
     return defaults
+
+
+def _segment_config(cfg, method):
+    return cfg["dsm_roofs"] if method == "roofs" else cfg["dsm_buildings"]
 
 
 def _read_inputs(dsm, dtm, ortho):
@@ -178,34 +186,56 @@ def _read_inputs(dsm, dtm, ortho):
     return d, dt, o
 
 
-def segment_dsm(dsm, *, cell, dtm=None, rgb=None, dtm_config=None, mask_config=None):
-    """DTM (given or built), nDSM, building mask and labels from arrays.
+def _segment_roofs(dsm, ndsm, *, cell, vegetation, config):
+    cfg = config if isinstance(config, RoofRegionsConfig) else RoofRegionsConfig()
+    return roof_regions(dsm, ndsm, cell=cell, vegetation=vegetation, **dataclasses.asdict(cfg))
+
+
+def _segment_mask(dsm, ndsm, *, cell, vegetation, config):
+    cfg = config if isinstance(config, BuildingMaskConfig) else BuildingMaskConfig()
+    mask = building_mask(ndsm, cell=cell, vegetation=vegetation, **dataclasses.asdict(cfg))
+    return label_buildings(mask)
+
+
+#: segmentation name -> function(dsm, ndsm, *, cell, vegetation, config) -> (labels, n)
+SEGMENTERS = {"roofs": _segment_roofs, "mask": _segment_mask}
+
+
+def segment_dsm(dsm, *, cell, dtm=None, rgb=None, method="roofs", dtm_config=None,
+                segment_config=None):
+    """DTM (given or built), nDSM and building labels from arrays.
+
+    ``method`` picks :data:`SEGMENTERS`: ``"roofs"`` (smooth-surface region
+    growing, :func:`roof_regions`) or ``"mask"`` (nDSM threshold minus
+    vegetation, morphology, connected components: :func:`building_mask`).
 
     Returns
     -------
     dict
-        ``dtm``, ``ndsm``, ``mask``, ``labels``, ``n`` and ``dtm_built`` (bool).
+        ``dtm``, ``ndsm``, ``labels``, ``n`` and ``dtm_built`` (bool).
     """
+    if method not in SEGMENTERS:
+        raise InputError(f"segmentation method must be one of {', '.join(SEGMENTERS)}, got {method!r}")
     dsm = np.asarray(dsm, dtype=np.float64)
     built = dtm is None
+    dcfg = dataclasses.asdict(dtm_config or DtmConfig())
     if built:
-        dtm, _ = dtm_from_dsm(dsm, cell=cell, **dataclasses.asdict(dtm_config or DtmConfig()))
+        dtm, _ = dtm_from_dsm(dsm, cell=cell, **dcfg)
     else:
         dtm = np.asarray(dtm, dtype=np.float64)
         # DTM gaps (e.g. under large buildings) are filled from the DSM-derived terrain
         gaps = np.isfinite(dsm) & ~np.isfinite(dtm)
         if gaps.any():
-            own, _ = dtm_from_dsm(dsm, cell=cell, **dataclasses.asdict(dtm_config or DtmConfig()))
+            own, _ = dtm_from_dsm(dsm, cell=cell, **dcfg)
             dtm = np.where(gaps, own, dtm)
     ndsm = dsm - dtm
-    mc = mask_config or BuildingMaskConfig()
     veg = None
     if rgb is not None:
-        elevated = np.isfinite(ndsm) & (ndsm > mc.min_height)
+        min_h = getattr(segment_config, "min_height", 2.5)
+        elevated = np.isfinite(ndsm) & (ndsm > min_h)
         veg = vegetation_from_colour(rgb, elevated)
-    mask = building_mask(ndsm, cell=cell, vegetation=veg, **dataclasses.asdict(mc))
-    labels, n = label_buildings(mask)
-    return {"dtm": dtm, "ndsm": ndsm, "mask": mask, "labels": labels, "n": n, "dtm_built": built}
+    labels, n = SEGMENTERS[method](dsm, ndsm, cell=cell, vegetation=veg, config=segment_config)
+    return {"dtm": dtm, "ndsm": ndsm, "labels": labels, "n": n, "dtm_built": built}
 
 
 def _raw_outline(region_mask, *, cell, offset, config=None):
@@ -294,7 +324,7 @@ def _world_geoms(results, origin, xy_unit):
 
 
 def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", dtm_out=None,
-                        config=None, figure=None, progress=None) -> dict:
+                        config=None, figure=None, progress=None, segmentation="roofs") -> dict:
     """Building footprints from a DSM (and optionally a DTM and an orthoimage) to a GPKG.
 
     Parameters
@@ -311,12 +341,14 @@ def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", 
     dtm_out : str or Path, optional
         Write the DTM used (given or built) as a GeoTIFF.
     config : dict, optional
-        ``{stage: dataclass}`` for the stages ``dtm``, ``dsm_buildings``,
-        ``polygon_fit``, ``dsm_lod1`` (others ignored).
+        ``{stage: dataclass}`` for the stages ``dtm``, ``dsm_roofs``,
+        ``dsm_buildings``, ``polygon_fit``, ``dsm_lod1`` (others ignored).
     figure : str or Path, optional
         PNG of the outlines over the nDSM coloured by shape type.
     progress : callable(done, total), optional
         Called after each building.
+    segmentation : {"roofs", "mask"}
+        Building segmentation (:data:`SEGMENTERS`).
 
     Returns
     -------
@@ -329,7 +361,8 @@ def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", 
     cell = d.cell_size
     rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
     seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
-                      dtm_config=cfg["dtm"], mask_config=cfg["dsm_buildings"])
+                      method=segmentation, dtm_config=cfg["dtm"],
+                      segment_config=_segment_config(cfg, segmentation))
     if dtm_out is not None:
         write_raster(dtm_out, Raster(seg["dtm"], d.transform, d.crs, np.isfinite(seg["dtm"])))
     results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell, regularize=regularize,
@@ -386,7 +419,7 @@ def _figure(path, raster, ndsm, results, origin):
 
 
 def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit", config=None,
-                  progress=None) -> dict:
+                  progress=None, segmentation="roofs") -> dict:
     """LoD1.2 buildings from a DSM: fitted outlines (or given footprints) extruded.
 
     The ground height is the median DTM inside the outline, the roof the ground
@@ -414,7 +447,8 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
     if footprints is None:
         rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
         seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
-                          dtm_config=cfg["dtm"], mask_config=cfg["dsm_buildings"])
+                          method=segmentation, dtm_config=cfg["dtm"],
+                          segment_config=_segment_config(cfg, segmentation))
         results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell,
                                        regularize=regularize, fit_config=cfg["polygon_fit"],
                                        lod1_config=lc, progress=progress)
