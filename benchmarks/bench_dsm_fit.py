@@ -87,7 +87,8 @@ def main(data=None):
             am = area_metrics(sel, ref)
             mo = match_objects(sel, ref, min_iou=0.5)
             al = axis_alignment(sel, tolerance_deg=3.0)
-            hdiff = [abs(heights[hits[p]] - ref_h[r]) for p, r, _ in mo["pairs"]]
+            hdiff = np.array([abs(heights[hits[p]] - ref_h[r]) for p, r, _ in mo["pairs"]])
+            hdiff = hdiff[np.isfinite(hdiff)]  # two references have no HEIGHT
             clipped = [g.intersection(hull) for g in pred if g.intersects(hull)]
             ah = area_metrics(clipped, ref)
             mh = match_objects(clipped, ref, min_iou=0.5)

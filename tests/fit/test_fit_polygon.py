@@ -110,9 +110,11 @@ def test_selection_follows_weights():
     c = info["candidates"]
     assert c["composite"][0] == min(v[0] for v in c.values())
     # costs are error fraction + weight x complexity
+    cfg = PolygonFitConfig()
     for k, (cost, err, cx) in c.items():
-        w = 0.03 if k == "polygon" else 0.012
+        w = cfg.polygon_weight if k == "polygon" else cfg.regular_weight
         assert cost == pytest.approx(err + w * cx)
+    assert cfg.polygon_weight > cfg.regular_weight
     # regular shapes made expensive: the free polygon wins
     _, kind2, _ = select_outline(mask, regular_weight=0.2, polygon_weight=0.001)
     assert kind2 == "polygon"
@@ -186,3 +188,22 @@ def test_bad_inputs():
         fit_building_outline(np.ones((10, 10), bool), cell=0.0)
     with pytest.raises(InputError):
         fit_building_outline(np.ones(10, bool), cell=1.0)
+
+
+def test_small_noisy_buildings_select_their_shape():
+    """Default weights on building-sized regions (4-8 x 6-14 px, 2 noisy pixels)."""
+    rng = np.random.default_rng(0)
+    hits = {"rectangle": 0, "right_trapezoid": 0}
+    n = 12
+    for _ in range(n):
+        w, h = rng.uniform(4, 8), rng.uniform(6, 14)
+        ang = rng.uniform(-45, 45)
+        c = (30 + h / 2, 30 + w / 2)
+        rect = np.array([[30, 30], [30 + h, 30], [30 + h, 30 + w], [30, 30 + w]])
+        trap = np.array([[30, 30], [30 + h, 30], [30 + h - 0.6 * w, 30 + w], [30, 30 + w]])
+        for kind, v in (("rectangle", rect), ("right_trapezoid", trap)):
+            m = noisy(rasterise(rotate(v, ang, c)), rng, n=2)
+            _, got, _ = fit_building_outline(m, cell=1.0)
+            hits[kind] += got == kind
+    assert hits["rectangle"] == n
+    assert hits["right_trapezoid"] >= 0.7 * n

@@ -71,9 +71,9 @@ SHAPE_TYPES = {"rectangle": 4, "right_trapezoid": 5, "trapezoid": 6, "composite"
 class PolygonFitConfig:
     """Options of :func:`fit_building_outline` (stage ``polygon_fit``)."""
 
-    regular_weight: float = field(0.012, "complexity weight per degree of freedom (rectangle, "
+    regular_weight: float = field(0.02, "complexity weight per degree of freedom (rectangle, "
                                          "trapezoids) and per edge (composite shapes)")
-    polygon_weight: float = field(0.03, "complexity weight per edge of a non-regular polygon "
+    polygon_weight: float = field(0.04, "complexity weight per edge of a non-regular polygon "
                                         "(higher than regular_weight: regular shapes are preferred)")
     shapes: tuple = field(("rectangle", "right_trapezoid", "trapezoid", "composite", "polygon"),
                           "candidate shape types")
@@ -708,7 +708,7 @@ def _n_edges(poly):
     return int(shapely.get_num_coordinates(poly)) - 1 - len(poly.interiors)
 
 
-def select_outline(mask, *, regular_weight=0.012, polygon_weight=0.03,
+def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
                    shapes=("rectangle", "right_trapezoid", "trapezoid", "composite", "polygon"),
                    step=0.8, max_iterations=60, max_rotation_deg=4.0, min_rotation_deg=0.25,
                    max_polygon_vertices=60):
