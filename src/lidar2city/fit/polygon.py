@@ -78,7 +78,7 @@ class PolygonFitConfig:
     shapes: tuple = field(("rectangle", "right_trapezoid", "trapezoid", "composite", "polygon"),
                           "candidate shape types")
     step: float = field(0.8, "fraction of the mean signed edge distance applied per iteration")
-    max_iterations: int = field(60, "edge-shift iterations per rotation trial")
+    max_iterations: int = field(30, "edge-shift iterations per rotation trial")
     max_rotation_deg: float = field(4.0, "first rotation step (degrees); halved down to "
                                          "min_rotation_deg")
     min_rotation_deg: float = field(0.25, "smallest rotation step (degrees)")
@@ -324,80 +324,72 @@ def _to_uv(points, center, theta):
     return np.column_stack([d @ e1, d @ e2])
 
 
+_NEXT = np.array([1, 2, 3, 0])
+
+
 def _segments_distance(p, verts):
-    """Distances (n, k) of points p (n, 2) to the closed polygon's k edges."""
+    """Squared distances (n, k) of points p (n, 2) to the closed polygon's k edges."""
     a = verts
-    b = np.roll(verts, -1, axis=0)
-    ab = b - a
+    ab = np.roll(verts, -1, axis=0) - a
     denom = np.maximum((ab * ab).sum(axis=1), 1e-18)
     ap = p[:, None, :] - a[None]
     t = np.clip((ap * ab[None]).sum(axis=2) / denom, 0.0, 1.0)
     d = ap - t[..., None] * ab[None]
-    return np.hypot(d[..., 0], d[..., 1])
+    return d[..., 0] ** 2 + d[..., 1] ** 2
 
 
-def _refine_edges(q, boundary, *, step, max_iterations, corner_margin=1.0):
-    """Shift edges by their mean signed distance to the boundary points (in place)."""
+def _refine_edges(q, boundary, *, step, max_iterations, corner_margin=1.0, tol=0.01):
+    """Shift edges by their mean signed distance to the boundary points (in place).
+
+    Each boundary point belongs to its nearest edge (points within
+    ``corner_margin`` of a corner are left out: marching squares cuts corners,
+    which would pull edges inwards at acute angles). Bases and perpendicular
+    legs move by ``step`` times the mean signed distance of their points; an
+    oblique leg's two halves give the shifts of its two end vertices.
+    """
     uv = _to_uv(boundary, q.center, q.theta)
     u, v = uv[:, 0], uv[:, 1]
+    right_leg_free = q.kind != "rectangle"
+    left_leg_free = q.kind == "trapezoid"
     for _ in range(max_iterations):
         verts = q.vertices_uv()
-        nearest = np.argmin(_segments_distance(uv, verts), axis=1)
-        # points within a pixel of a corner are left out: marching squares cuts
-        # corners, which would pull the edges inwards at acute angles
-        a = verts[nearest]
-        ab = np.roll(verts, -1, axis=0)[nearest] - a
+        edge = np.argmin(_segments_distance(uv, verts), axis=1)
+        a = verts[edge]
+        ab = verts[_NEXT][edge] - a
         seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-12)
         along = ((uv - a) * ab).sum(axis=1) / seg_len
-        central = (along > corner_margin) & (along < seg_len - corner_margin)
-        nearest = np.where(central, nearest, -1)
+        ok = (along > corner_margin) & (along < seg_len - corner_margin)
         h = q.v1 - q.v0
-        if h <= 1e-6:
+        if h <= 1e-6 or ok.sum() < 4:
             break
         t = np.clip((v - q.v0) / h, 0.0, 1.0)
-        cnt = np.bincount(nearest[nearest >= 0], minlength=4)
-        moves = []
-        # bases: v = v0 (edge 0) and v = v1 (edge 2)
-        for edge, attr in ((0, "v0"), (2, "v1")):
-            if cnt[edge] >= 2:
-                dv = float((v[nearest == edge] - getattr(q, attr)).mean())
-                setattr(q, attr, getattr(q, attr) + step * dv)
-                moves.append(abs(dv))
-        # legs: left (edge 3, l0 -> l1) and right (edge 1, r0 -> r1)
-        for edge, a0, a1 in ((3, "l0", "l1"), (1, "r0", "r1")):
-            if cnt[edge] < 2:
-                continue
-            sel = nearest == edge
-            x0, x1 = getattr(q, a0), getattr(q, a1)
-            ts = t[sel]
-            du = u[sel] - (x0 + (x1 - x0) * ts)
-            perpendicular = q.kind == "rectangle" or (q.kind == "right_trapezoid" and edge == 3)
-            if perpendicular:
-                m = float(du.mean())
-                setattr(q, a0, x0 + step * m)
-                setattr(q, a1, x1 + step * m)
-                moves.append(abs(m))
-            else:
-                # half edges: the mean signed distances of the two halves give
-                # each end vertex its shift (solved jointly, as both halves'
-                # offsets depend on both ends linearly: du(t) = d0 (1-t) + d1 t)
-                lower = ts < 0.5
-                if lower.sum() >= 1 and (~lower).sum() >= 1:
-                    rows = np.array([[np.mean(1 - ts[lower]), np.mean(ts[lower])],
-                                     [np.mean(1 - ts[~lower]), np.mean(ts[~lower])]])
-                    rhs = np.array([du[lower].mean(), du[~lower].mean()])
-                    try:
-                        d0, d1 = np.linalg.solve(rows, rhs)
-                    except np.linalg.LinAlgError:
-                        d0 = d1 = float(du.mean())
-                else:
-                    d0 = d1 = float(du.mean())
-                setattr(q, a0, x0 + step * d0)
-                setattr(q, a1, x1 + step * d1)
-                moves.extend([abs(d0), abs(d1)])
+        left = q.l0 + (q.l1 - q.l0) * t
+        right = q.r0 + (q.r1 - q.r0) * t
+        res = np.choose(edge, [v - q.v0, u - right, v - q.v1, u - left])
+        key = (edge * 2 + (t >= 0.5))[ok]
+        cnt = np.bincount(key, minlength=8).astype(np.float64)
+        s_res = np.bincount(key, res[ok], minlength=8)
+        s_t = np.bincount(key, t[ok], minlength=8)
+        tot_c = cnt[0::2] + cnt[1::2]
+        tot_mean = np.where(tot_c >= 2, (s_res[0::2] + s_res[1::2]) / np.maximum(tot_c, 1), 0.0)
+        shifts = {"v0": tot_mean[0], "v1": tot_mean[2]}
+        for e, a0, a1, free in ((3, "l0", "l1", left_leg_free), (1, "r0", "r1", right_leg_free)):
+            c_lo, c_hi = cnt[2 * e], cnt[2 * e + 1]
+            if free and c_lo >= 1 and c_hi >= 1:
+                # du(t) = d0 (1 - t) + d1 t must match both halves' means
+                t_lo, t_hi = s_t[2 * e] / c_lo, s_t[2 * e + 1] / c_hi
+                m_lo, m_hi = s_res[2 * e] / c_lo, s_res[2 * e + 1] / c_hi
+                det = (1 - t_lo) * t_hi - t_lo * (1 - t_hi)
+                if abs(det) > 1e-6:
+                    shifts[a0] = (m_lo * t_hi - t_lo * m_hi) / det
+                    shifts[a1] = ((1 - t_lo) * m_hi - (1 - t_hi) * m_lo) / det
+                    continue
+            shifts[a0] = shifts[a1] = tot_mean[e]
+        for k, d in shifts.items():
+            setattr(q, k, getattr(q, k) + step * d)
         if q.v0 > q.v1:
             q.v0, q.v1 = q.v1, q.v0
-        if not moves or max(moves) < 1e-3:
+        if max(abs(d) for d in shifts.values()) < tol:
             break
     return q
 
@@ -513,7 +505,7 @@ def _quad_from_corners(corners, kind):
 
 
 def fit_quadrilateral(kind, mask, *, boundary=None, region=None, corners=None, step=0.8,
-                      max_iterations=60, max_rotation_deg=4.0, min_rotation_deg=0.25):
+                      max_iterations=30, max_rotation_deg=4.0, min_rotation_deg=0.25):
     """Fit a rectangle, right trapezoid or trapezoid to a region.
 
     Parameters
@@ -710,7 +702,7 @@ def _n_edges(poly):
 
 def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
                    shapes=("rectangle", "right_trapezoid", "trapezoid", "composite", "polygon"),
-                   step=0.8, max_iterations=60, max_rotation_deg=4.0, min_rotation_deg=0.25,
+                   step=0.8, max_iterations=30, max_rotation_deg=4.0, min_rotation_deg=0.25,
                    max_polygon_vertices=60):
     """Fit every candidate shape to a (hole-free) region and pick the cheapest.
 

@@ -35,6 +35,7 @@ __all__ = [
     "BuildingMaskConfig",
     "dtm_from_dsm",
     "normalized_dsm",
+    "fill_nodata",
     "roughness",
     "vegetation_from_roughness",
     "vegetation_from_colour",
@@ -207,6 +208,20 @@ def dtm_from_dsm(dsm, *, cell, max_step=0.3, max_slope_deg=5.0, seed_window=80.0
     dtm = _interpolate(dsm, ground, valid)
     dtm = np.where(valid, np.minimum(dtm, dsm), np.nan)
     return dtm, ground
+
+
+def fill_nodata(grid, where) -> np.ndarray:
+    """Fill NaN cells of ``grid`` inside ``where`` by linear interpolation from the valid ones.
+
+    Linear on the Delaunay triangulation of the valid cells bordering the gaps,
+    nearest value outside their hull. Cells outside ``where`` stay NaN.
+    """
+    grid = _check_grid(grid, "grid")
+    where = np.asarray(where, dtype=bool)
+    known = np.isfinite(grid) & where
+    if not known.any():
+        raise EmptyInputError("no valid cell to interpolate from")
+    return _interpolate(grid, known, where)
 
 
 def normalized_dsm(dsm, dtm) -> np.ndarray:

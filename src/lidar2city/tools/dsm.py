@@ -28,6 +28,7 @@ from ..segment.dsm import (
     RoofRegionsConfig,
     building_mask,
     dtm_from_dsm,
+    fill_nodata,
     grid_points,
     label_buildings,
     roof_regions,
@@ -223,11 +224,10 @@ def segment_dsm(dsm, *, cell, dtm=None, rgb=None, method="roofs", dtm_config=Non
         dtm, _ = dtm_from_dsm(dsm, cell=cell, **dcfg)
     else:
         dtm = np.asarray(dtm, dtype=np.float64)
-        # DTM gaps (e.g. under large buildings) are filled from the DSM-derived terrain
+        # DTM gaps (e.g. under large buildings) are interpolated from the terrain around
         gaps = np.isfinite(dsm) & ~np.isfinite(dtm)
-        if gaps.any():
-            own, _ = dtm_from_dsm(dsm, cell=cell, **dcfg)
-            dtm = np.where(gaps, own, dtm)
+        if gaps.any() and np.isfinite(dtm).any():
+            dtm = fill_nodata(dtm, np.isfinite(dsm))
     ndsm = dsm - dtm
     veg = None
     if rgb is not None:
