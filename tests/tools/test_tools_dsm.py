@@ -96,7 +96,7 @@ def test_prism_with_courtyard_volume():
     s = prism(poly, 1.0, 4.0)
     vol = 0.0
     for surf in s.surfaces:
-        for k, ring_idx in enumerate(surf.rings):
+        for ring_idx in surf.rings:
             ring = s.vertices[ring_idx]
             for i in range(1, len(ring) - 1):
                 vol += np.dot(ring[0], np.cross(ring[i], ring[i + 1])) / 6.0

@@ -68,7 +68,7 @@ def _check_cell(cell) -> float:
 
 @dataclass(frozen=True)
 class DtmConfig:
-    """Options of :func:`dtm_from_dsm` (stage ``dtm``)."""
+    """Options of :func:`dtm_from_dsm` (stage ``dsm_dtm``)."""
 
     max_step: float = field(0.3, "largest height difference (m) between 4-neighbours inside "
                                  "one ground region, on top of what max_slope_deg allows")

@@ -148,7 +148,7 @@ def prism(polygon, ground_z, roof_z) -> Solid:
 
 
 def _configs(config):
-    defaults = {"dtm": DtmConfig(), "dsm_roofs": RoofRegionsConfig(),
+    defaults = {"dsm_dtm": DtmConfig(), "dsm_roofs": RoofRegionsConfig(),
                 "dsm_buildings": BuildingMaskConfig(),
                 "polygon_fit": PolygonFitConfig(), "dsm_lod1": Lod1DsmConfig()}
     if config:
@@ -341,7 +341,7 @@ def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", 
     dtm_out : str or Path, optional
         Write the DTM used (given or built) as a GeoTIFF.
     config : dict, optional
-        ``{stage: dataclass}`` for the stages ``dtm``, ``dsm_roofs``,
+        ``{stage: dataclass}`` for the stages ``dsm_dtm``, ``dsm_roofs``,
         ``dsm_buildings``, ``polygon_fit``, ``dsm_lod1`` (others ignored).
     figure : str or Path, optional
         PNG of the outlines over the nDSM coloured by shape type.
@@ -361,7 +361,7 @@ def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", 
     cell = d.cell_size
     rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
     seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
-                      method=segmentation, dtm_config=cfg["dtm"],
+                      method=segmentation, dtm_config=cfg["dsm_dtm"],
                       segment_config=_segment_config(cfg, segmentation))
     if dtm_out is not None:
         write_raster(dtm_out, Raster(seg["dtm"], d.transform, d.crs, np.isfinite(seg["dtm"])))
@@ -447,7 +447,7 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
     if footprints is None:
         rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
         seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
-                          method=segmentation, dtm_config=cfg["dtm"],
+                          method=segmentation, dtm_config=cfg["dsm_dtm"],
                           segment_config=_segment_config(cfg, segmentation))
         results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell,
                                        regularize=regularize, fit_config=cfg["polygon_fit"],
@@ -458,7 +458,7 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
 
         fp, _ = read_footprints(footprints, origin=origin, xy_unit=d.xy_unit, target_crs=d.crs)
         if dt is None:
-            dtm_arr, _ = dtm_from_dsm(d.array, cell=cell, **dataclasses.asdict(cfg["dtm"]))
+            dtm_arr, _ = dtm_from_dsm(d.array, cell=cell, **dataclasses.asdict(cfg["dsm_dtm"]))
         else:
             dtm_arr = dt.array
         ndsm = d.array - dtm_arr
