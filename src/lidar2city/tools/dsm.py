@@ -310,6 +310,9 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
         except (FitError, EmptyInputError) as exc:
             res.status, res.reason = "failed", str(exc)
             logger.info("building %s: %s", rid, exc)
+        except Exception as exc:  # a batch never dies on one building
+            res.status, res.reason = "failed", f"{type(exc).__name__}: {exc}"
+            logger.warning("building %s failed unexpectedly", rid, exc_info=True)
         out.append(res)
         if progress is not None:
             progress(i, total)
