@@ -21,7 +21,14 @@ many built-up blocks have no reference at all):
 
 Everything is run twice: with the given DTM and with the DTM built from the
 DSM. The DTM built from the DSM is compared with the given one over ground
-pixels (given nDSM < 0.5 m) and over all pixels.
+pixels (given nDSM < 0.5 m) and over all pixels. Most of the ground-pixel RMSE
+comes from the elevated highway in the north-west corner, which the given DTM
+keeps as terrain and the region growing leaves out (4.3 m lower there on
+average); without the northern 60 rows the ground-pixel RMSE is about 1.1 m.
+
+Measured 2026-11-21 (2-core shared machine), see the closing note of issue 6:
+given DTM: quality 0.564, 69.6 % matched, 86.0 % aligned, heights 0.28 m;
+DTM from the DSM: quality 0.569, 71.4 % matched, 86.8 % aligned, heights 0.60 m.
 """
 
 from __future__ import annotations
