@@ -1,0 +1,1 @@
+"""Segmentation: building regions from rasters (DSM, DTM, orthoimage)."""

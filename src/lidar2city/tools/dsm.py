@@ -1,0 +1,540 @@
+"""File-level jobs on gridded surface models: footprints and LoD1 buildings from a DSM.
+
+``footprints_from_dsm`` reads a DSM (and optionally a DTM and an orthoimage),
+segments the buildings, fits each outline (:mod:`lidar2city.fit.polygon`) and
+writes a GeoPackage in the raster's CRS. ``lod1_from_dsm`` extrudes the same
+outlines, or given footprints, to LoD1.2 prisms with heights from the nDSM.
+``rasters_from_las`` grids a coloured point cloud into a DSM and an
+orthoimage for them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import field
+from ..datamodel import BuildingResult, Solid, Surface
+from ..errors import EmptyInputError, FitError, InputError
+from ..fit.polygon import PolygonFitConfig, fit_building_outline, region_polygon
+from ..io.raster import Raster, read_raster, write_raster
+from ..segment.dsm import (
+    BuildingMaskConfig,
+    DtmConfig,
+    RoofRegionsConfig,
+    building_mask,
+    dtm_from_dsm,
+    fill_nodata,
+    grid_points,
+    label_buildings,
+    roof_regions,
+    vegetation_from_colour,
+)
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "Lod1DsmConfig",
+    "REGULARIZERS",
+    "SEGMENTERS",
+    "building_height",
+    "prism",
+    "segment_dsm",
+    "outlines_from_labels",
+    "footprints_from_dsm",
+    "lod1_from_dsm",
+    "rasters_from_las",
+]
+
+
+@dataclass(frozen=True)
+class Lod1DsmConfig:
+    """Options of the LoD1 heights from an nDSM (stage ``dsm_lod1``)."""
+
+    roof_stat: str = field("median", "roof height statistic of the nDSM inside the outline "
+                                      "(courtyards excluded): 'mean', 'median' or 'pNN' (percentile)")
+    inner_margin: float = field(1.0, "pixels closer than this (m) to the outline are left out "
+                                     "of the statistic (mixed wall/ground pixels)")
+
+
+def _stat(values, how):
+    if how == "mean":
+        return float(np.mean(values))
+    if how == "median":
+        return float(np.median(values))
+    if isinstance(how, str) and how.startswith("p"):
+        try:
+            q = float(how[1:])
+        except ValueError:
+            q = -1.0
+        if 0 <= q <= 100:
+            return float(np.percentile(values, q))
+    raise InputError(f"roof_stat must be 'mean', 'median' or 'pNN' (0-100), got {how!r}")
+
+
+def _polygon_pixels(polygon, shape, cell, *, margin=0.0):
+    """Boolean mask of pixels whose centres are inside ``polygon`` (local metres)."""
+    import shapely
+    from affine import Affine
+    from rasterio import features
+
+    g = polygon.buffer(-margin) if margin > 0 else polygon
+    if g.is_empty:
+        return np.zeros(shape, dtype=bool)
+    pix = shapely.transform(g, lambda c: np.column_stack([c[:, 0] / cell, -c[:, 1] / cell]))
+    return features.rasterize([(pix, 1)], out_shape=shape, transform=Affine.identity(),
+                              fill=0, dtype="uint8").astype(bool)
+
+
+def building_height(ndsm, polygon, *, cell, roof_stat="median", inner_margin=1.0):
+    """Height (m) of a building from the nDSM pixels inside its outline.
+
+    Courtyards (the polygon's holes) are excluded by construction; pixels
+    within ``inner_margin`` of the outline are left out unless that leaves none.
+
+    Parameters
+    ----------
+    ndsm : ndarray, shape (H, W)
+    polygon : shapely Polygon
+        Local metres, the raster's top-left corner at (0, 0), y northwards.
+
+    Returns
+    -------
+    float
+        NaN when no valid pixel falls inside.
+    """
+    pix = _polygon_pixels(polygon, ndsm.shape, cell, margin=inner_margin)
+    vals = ndsm[pix & np.isfinite(ndsm)]
+    if len(vals) == 0:
+        pix = _polygon_pixels(polygon, ndsm.shape, cell)
+        vals = ndsm[pix & np.isfinite(ndsm)]
+    if len(vals) == 0:
+        return float("nan")
+    return _stat(vals, roof_stat)
+
+
+def prism(polygon, ground_z, roof_z) -> Solid:
+    """LoD1.2 prism of a polygon (with holes): ground, one wall per edge, roof.
+
+    Every surface's exterior ring is counter-clockwise seen from outside the
+    solid (the ground reversed, walls outward), holes the other way.
+    """
+    from shapely.geometry.polygon import orient
+
+    if not roof_z > ground_z:
+        raise FitError(f"roof {roof_z:.2f} m is not above the ground {ground_z:.2f} m")
+    poly = orient(polygon, sign=1.0)
+    rings = [np.asarray(poly.exterior.coords)[:-1, :2]]
+    rings += [np.asarray(r.coords)[:-1, :2] for r in poly.interiors]
+    pts = np.concatenate(rings)
+    n = len(pts)
+    verts = np.vstack([np.column_stack([pts, np.full(n, ground_z)]),
+                       np.column_stack([pts, np.full(n, roof_z)])])
+    idx_rings, start = [], 0
+    for r in rings:
+        idx_rings.append(np.arange(start, start + len(r)))
+        start += len(r)
+    surfaces = [Surface([r[::-1].copy() for r in idx_rings], "GroundSurface")]
+    for r in idx_rings:
+        nxt = np.roll(r, -1)
+        for a, b in zip(r, nxt, strict=True):
+            surfaces.append(Surface([np.array([a, b, b + n, a + n])], "WallSurface"))
+    surfaces.append(Surface([r + n for r in idx_rings], "RoofSurface"))
+    return Solid(verts, surfaces)
+
+
+def _configs(config):
+    defaults = {"dsm_dtm": DtmConfig(), "dsm_roofs": RoofRegionsConfig(),
+                "dsm_buildings": BuildingMaskConfig(),
+                "polygon_fit": PolygonFitConfig(), "dsm_lod1": Lod1DsmConfig()}
+    if config:
+        for k, v in config.items():
+            if k in defaults:
+                defaults[k] = v
+    return defaults
+
+
+def _segment_config(cfg, method):
+    return cfg["dsm_roofs"] if method == "roofs" else cfg["dsm_buildings"]
+
+
+def _read_inputs(dsm, dtm, ortho):
+    d = read_raster(dsm)
+    t = d.transform
+    if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.a <= 0 or t.e >= 0:
+        raise InputError(f"{dsm}: only north-up rasters are supported (transform {tuple(t)[:6]})")
+    if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
+        raise InputError(f"{dsm}: pixels must be square, got {t.a} x {-t.e}")
+    if not d.mask.any():
+        raise EmptyInputError(f"{dsm} holds no valid pixel")
+    dt = o = None
+    if dtm is not None:
+        dt = read_raster(dtm)
+        if dt.shape != d.shape or not np.allclose(tuple(dt.transform)[:6], tuple(t)[:6]):
+            raise InputError(f"the DTM {dtm} must share the DSM's grid (shape {d.shape}, "
+                             f"transform {tuple(t)[:6]})")
+    if ortho is not None:
+        o = read_raster(ortho)
+        arr = np.asarray(o.array)
+        if arr.ndim != 3 or arr.shape[0] < 3:
+            raise InputError(f"the orthoimage {ortho} needs 3 colour bands, got shape {arr.shape}")
+        if arr.shape[1:] != d.shape or not np.allclose(tuple(o.transform)[:6], tuple(t)[:6]):
+            raise InputError(f"the orthoimage {ortho} must share the DSM's grid (shape {d.shape})")
+    return d, dt, o
+
+
+def _segment_roofs(dsm, ndsm, *, cell, vegetation, config):
+    cfg = config if isinstance(config, RoofRegionsConfig) else RoofRegionsConfig()
+    return roof_regions(dsm, ndsm, cell=cell, vegetation=vegetation, **dataclasses.asdict(cfg))
+
+
+def _segment_mask(dsm, ndsm, *, cell, vegetation, config):
+    cfg = config if isinstance(config, BuildingMaskConfig) else BuildingMaskConfig()
+    mask = building_mask(ndsm, cell=cell, vegetation=vegetation, **dataclasses.asdict(cfg))
+    return label_buildings(mask)
+
+
+#: segmentation name -> function(dsm, ndsm, *, cell, vegetation, config) -> (labels, n)
+SEGMENTERS = {"roofs": _segment_roofs, "mask": _segment_mask}
+
+
+def segment_dsm(dsm, *, cell, dtm=None, rgb=None, method="roofs", dtm_config=None,
+                segment_config=None):
+    """DTM (given or built), nDSM and building labels from arrays.
+
+    ``method`` picks :data:`SEGMENTERS`: ``"roofs"`` (smooth-surface region
+    growing, :func:`roof_regions`) or ``"mask"`` (nDSM threshold minus
+    vegetation, morphology, connected components: :func:`building_mask`).
+
+    Returns
+    -------
+    dict
+        ``dtm``, ``ndsm``, ``labels``, ``n`` and ``dtm_built`` (bool).
+    """
+    if method not in SEGMENTERS:
+        raise InputError(f"segmentation method must be one of {', '.join(SEGMENTERS)}, got {method!r}")
+    dsm = np.asarray(dsm, dtype=np.float64)
+    built = dtm is None
+    dcfg = dataclasses.asdict(dtm_config or DtmConfig())
+    if built:
+        dtm, _ = dtm_from_dsm(dsm, cell=cell, **dcfg)
+    else:
+        dtm = np.asarray(dtm, dtype=np.float64)
+        # DTM gaps (e.g. under large buildings) are interpolated from the terrain around
+        gaps = np.isfinite(dsm) & ~np.isfinite(dtm)
+        if gaps.any() and np.isfinite(dtm).any():
+            dtm = fill_nodata(dtm, np.isfinite(dsm))
+    ndsm = dsm - dtm
+    veg = None
+    if rgb is not None:
+        min_h = getattr(segment_config, "min_height", 2.5)
+        elevated = np.isfinite(ndsm) & (ndsm > min_h)
+        veg = vegetation_from_colour(rgb, elevated)
+    labels, n = SEGMENTERS[method](dsm, ndsm, cell=cell, vegetation=veg, config=segment_config)
+    return {"dtm": dtm, "ndsm": ndsm, "labels": labels, "n": n, "dtm_built": built}
+
+
+def _raw_outline(region_mask, *, cell, offset, config=None):
+    """The region's pixel polygon as it is (``regularize="none"``)."""
+    import shapely
+    from shapely.geometry.polygon import orient
+
+    rows, cols = np.nonzero(region_mask)
+    r0, c0 = rows.min(), cols.min()
+    poly = region_polygon(region_mask[r0:rows.max() + 1, c0:cols.max() + 1])
+    if poly.geom_type != "Polygon":
+        poly = max(poly.geoms, key=lambda g: g.area)
+    x0, y0 = offset
+    poly = shapely.transform(poly, lambda c: np.column_stack([x0 + (c[:, 0] + c0) * cell,
+                                                              y0 - (c[:, 1] + r0) * cell]))
+    return orient(poly, 1.0), "pixels", {"cost": float("nan"), "error": 0.0,
+                                         "complexity": len(poly.exterior.coords) - 1}
+
+
+#: outline method name -> function(region_mask, *, cell, offset, config) -> (polygon, type, info)
+REGULARIZERS = {
+    "fit": lambda m, *, cell, offset, config=None: fit_building_outline(
+        m, cell=cell, offset=offset, config=config),
+    "none": _raw_outline,
+}
+
+
+def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=None,
+                         lod1_config=None, progress=None):
+    """Fit an outline and a height to every labelled region (local metres, y north).
+
+    A region that fails gets ``status="failed"`` and the reason; the batch
+    continues.
+
+    Returns
+    -------
+    list of BuildingResult
+        ``footprint`` (shapely Polygon, local metres, the raster's top-left
+        corner at (0, 0)), ``attributes`` with ``shape_type``, ``area``,
+        ``height``, ``cost``, ``fit_error``, ``n_vertices``, ``pixels``.
+    """
+    from scipy import ndimage
+
+    if regularize not in REGULARIZERS:
+        raise InputError(f"regularize must be one of {', '.join(REGULARIZERS)}, got {regularize!r}")
+    fn = REGULARIZERS[regularize]
+    lc = lod1_config or Lod1DsmConfig()
+    objects = ndimage.find_objects(labels)
+    total = len(objects)
+    out = []
+    for i, sl in enumerate(objects, start=1):
+        if sl is None:
+            continue
+        rid = f"b{i}"
+        # a margin of one pixel around the region keeps its bbox local
+        r0, r1 = max(sl[0].start - 1, 0), min(sl[0].stop + 1, labels.shape[0])
+        c0, c1 = max(sl[1].start - 1, 0), min(sl[1].stop + 1, labels.shape[1])
+        sub = labels[r0:r1, c0:c1] == i
+        res = BuildingResult(rid)
+        try:
+            poly, kind, info = fn(sub, cell=cell, offset=(c0 * cell, -r0 * cell), config=fit_config)
+            if poly.is_empty or not poly.is_valid:
+                raise FitError("the fitted outline is empty or invalid")
+            h = building_height(ndsm, poly, cell=cell, roof_stat=lc.roof_stat,
+                                inner_margin=lc.inner_margin)
+            res.footprint = poly
+            res.attributes = {
+                "shape_type": kind, "area": float(poly.area), "height": h,
+                "cost": float(info.get("cost", np.nan)), "fit_error": float(info.get("error", np.nan)),
+                "n_vertices": int(len(poly.exterior.coords) - 1), "pixels": int(sub.sum()),
+            }
+        except (FitError, EmptyInputError) as exc:
+            res.status, res.reason = "failed", str(exc)
+            logger.info("building %s: %s", rid, exc)
+        except Exception as exc:  # a batch never dies on one building
+            res.status, res.reason = "failed", f"{type(exc).__name__}: {exc}"
+            logger.warning("building %s failed unexpectedly", rid, exc_info=True)
+        out.append(res)
+        if progress is not None:
+            progress(i, total)
+    return out
+
+
+def _world_geoms(results, origin, xy_unit):
+    from ..io.vector import to_world
+
+    return [to_world(r.footprint, origin, xy_unit) if r.footprint is not None else None
+            for r in results]
+
+
+def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", dtm_out=None,
+                        config=None, figure=None, progress=None, segmentation="roofs") -> dict:
+    """Building footprints from a DSM (and optionally a DTM and an orthoimage) to a GPKG.
+
+    Parameters
+    ----------
+    dsm, dtm, ortho : str or Path
+        Rasters GDAL reads, on one grid; the orthoimage needs 3 colour bands.
+        Without a DTM one is built from the DSM (:func:`dtm_from_dsm`).
+    output : str or Path
+        GeoPackage (layer ``footprints``) in the DSM's CRS with ``id``,
+        ``shape_type``, ``area`` (m2), ``height`` (m), ``cost``, ``fit_error``,
+        ``n_vertices``, ``status``, ``reason``.
+    regularize : {"fit", "none"}
+        Outline method (:data:`REGULARIZERS`).
+    dtm_out : str or Path, optional
+        Write the DTM used (given or built) as a GeoTIFF.
+    config : dict, optional
+        ``{stage: dataclass}`` for the stages ``dsm_dtm``, ``dsm_roofs``,
+        ``dsm_buildings``, ``polygon_fit``, ``dsm_lod1`` (others ignored).
+    figure : str or Path, optional
+        PNG of the outlines over the nDSM coloured by shape type.
+    progress : callable(done, total), optional
+        Called after each building.
+    segmentation : {"roofs", "mask"}
+        Building segmentation (:data:`SEGMENTERS`).
+
+    Returns
+    -------
+    dict
+        Counts, shape types, timings and the output paths.
+    """
+    t0 = time.perf_counter()
+    cfg = _configs(config)
+    d, dt, o = _read_inputs(dsm, dtm, ortho)
+    cell = d.cell_size
+    rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
+    seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
+                      method=segmentation, dtm_config=cfg["dsm_dtm"],
+                      segment_config=_segment_config(cfg, segmentation))
+    if dtm_out is not None:
+        write_raster(dtm_out, Raster(seg["dtm"], d.transform, d.crs, np.isfinite(seg["dtm"])))
+    results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell, regularize=regularize,
+                                   fit_config=cfg["polygon_fit"], lod1_config=cfg["dsm_lod1"],
+                                   progress=progress)
+    origin = np.array([d.transform.c, d.transform.f])
+    _write_footprints(output, results, origin, d.crs, d.xy_unit)
+    if figure is not None:
+        _figure(figure, d, seg["ndsm"], results, origin)
+    kinds: dict[str, int] = {}
+    for r in results:
+        if r.ok:
+            kinds[r.attributes["shape_type"]] = kinds.get(r.attributes["shape_type"], 0) + 1
+    return {
+        "buildings": sum(r.ok for r in results), "failed": sum(not r.ok for r in results),
+        "shape_types": kinds, "dtm": "built from the DSM" if seg["dtm_built"] else str(dtm),
+        "cell_m": cell, "crs": d.crs.to_string() if d.crs is not None else None,
+        "output": str(output), "dtm_out": None if dtm_out is None else str(dtm_out),
+        "figure": None if figure is None else str(figure),
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
+
+
+def _write_footprints(output, results, origin, crs, xy_unit):
+    from ..io.vector import write_polygons
+
+    keys = ["shape_type", "area", "height", "cost", "fit_error", "n_vertices"]
+    fields = {"id": [r.id for r in results]}
+    for k in keys:
+        vals = [r.attributes.get(k) for r in results]
+        if k in ("area", "height", "cost", "fit_error"):
+            vals = np.array([np.nan if v is None else float(v) for v in vals])
+        elif k == "n_vertices":
+            vals = np.array([-1 if v is None else int(v) for v in vals])
+        else:
+            vals = ["" if v is None else str(v) for v in vals]
+        fields[k] = vals
+    fields["status"] = [r.status for r in results]
+    fields["reason"] = [r.reason for r in results]
+    write_polygons(output, [r.footprint for r in results], fields, origin=origin, crs=crs,
+                   xy_unit=xy_unit)
+
+
+def _figure(path, raster, ndsm, results, origin):
+    from ..io.plots import plot_outlines
+
+    t = raster.transform
+    h, w = raster.shape
+    extent = (t.c, t.c + w * t.a, t.f + h * t.e, t.f)
+    ok = [r for r in results if r.ok]
+    geoms = _world_geoms(ok, origin, raster.xy_unit)
+    plot_outlines(path, ndsm, extent, geoms, [r.attributes["shape_type"] for r in ok],
+                  title=f"{len(ok)} buildings")
+
+
+def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit", config=None,
+                  progress=None, segmentation="roofs") -> dict:
+    """LoD1.2 buildings from a DSM: fitted outlines (or given footprints) extruded.
+
+    The ground height is the median DTM inside the outline, the roof the ground
+    plus the nDSM statistic ``dsm_lod1.roof_stat`` (courtyards excluded).
+
+    Parameters
+    ----------
+    footprints : str or Path, optional
+        Vector footprints (any OGR source, any CRS: reprojected to the DSM's);
+        default: outlines fitted to the segmented DSM.
+
+    Returns
+    -------
+    dict
+        ``buildings`` (list of :class:`BuildingResult` with ``solids["1.2"]``,
+        local metres), ``origin`` (world, CRS units, z 0), ``crs``, ``xy_unit``,
+        ``z_unit`` (metres per unit of the raster values: 1) and counts.
+    """
+    t0 = time.perf_counter()
+    cfg = _configs(config)
+    d, dt, o = _read_inputs(dsm, dtm, ortho)
+    cell = d.cell_size
+    origin = np.array([d.transform.c, d.transform.f])
+    lc = cfg["dsm_lod1"]
+    if footprints is None:
+        rgb = None if o is None else np.asarray(o.array)[:3].astype(np.float64)
+        seg = segment_dsm(d.array, cell=cell, dtm=None if dt is None else dt.array, rgb=rgb,
+                          method=segmentation, dtm_config=cfg["dsm_dtm"],
+                          segment_config=_segment_config(cfg, segmentation))
+        results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell,
+                                       regularize=regularize, fit_config=cfg["polygon_fit"],
+                                       lod1_config=lc, progress=progress)
+        dtm_arr, ndsm = seg["dtm"], seg["ndsm"]
+    else:
+        from ..io.vector import read_footprints
+
+        fp, _ = read_footprints(footprints, origin=origin, xy_unit=d.xy_unit, target_crs=d.crs)
+        if dt is None:
+            dtm_arr, _ = dtm_from_dsm(d.array, cell=cell, **dataclasses.asdict(cfg["dsm_dtm"]))
+        else:
+            dtm_arr = dt.array
+        ndsm = d.array - dtm_arr
+        results = []
+        for i, (g, fid) in enumerate(zip(fp.geometries, fp.ids, strict=True), start=1):
+            r = BuildingResult(str(fid), footprint=g)
+            if g is None:
+                r.status, r.reason = "failed", fp.attributes["_note"][i - 1] or "no geometry"
+            else:
+                poly = g if g.geom_type == "Polygon" else max(g.geoms, key=lambda p: p.area)
+                r.footprint = poly
+                r.attributes = {"height": building_height(ndsm, poly, cell=cell,
+                                                          roof_stat=lc.roof_stat,
+                                                          inner_margin=lc.inner_margin),
+                                "area": float(poly.area)}
+            results.append(r)
+            if progress is not None:
+                progress(i, len(fp))
+    for r in results:
+        if not r.ok:
+            continue
+        h = r.attributes.get("height", float("nan"))
+        pix = _polygon_pixels(r.footprint, d.shape, cell) & np.isfinite(dtm_arr)
+        if not np.isfinite(h) or not pix.any():
+            r.status, r.reason = "failed", "no valid DSM/DTM pixel inside the outline"
+            continue
+        if h <= 0:
+            r.status, r.reason = "failed", f"height {h:.2f} m is not above the terrain"
+            continue
+        ground = float(np.median(dtm_arr[pix]))
+        try:
+            r.solids["1.2"] = prism(r.footprint, ground, ground + h)
+        except FitError as exc:
+            r.status, r.reason = "failed", str(exc)
+            continue
+        r.attributes.update({"ground_z": ground, "roof_z": ground + h})
+    return {
+        "buildings": results, "origin": np.array([origin[0], origin[1], 0.0]), "crs": d.crs,
+        "xy_unit": d.xy_unit, "z_unit": 1.0,
+        "ok": sum(r.ok for r in results), "failed": sum(not r.ok for r in results),
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
+
+
+def rasters_from_las(paths, *, cell, dsm_out, ortho_out=None, crs=None) -> dict:
+    """Grid a point cloud into a DSM GeoTIFF and, with RGB, an orthoimage GeoTIFF.
+
+    The DSM holds the highest point per cell (heights in the cloud's z units
+    converted to metres); the orthoimage the colour of that point (3 bands,
+    uint16 as stored in LAS). Both are in the cloud's CRS with ``cell`` metres
+    pixels.
+    """
+    from affine import Affine
+
+    from ..io.las import read_points
+
+    cloud = read_points(paths, crs=crs)
+    cloud.require_points()
+    rgb = None
+    if all(k in cloud.attributes for k in ("red", "green", "blue")):
+        rgb = np.column_stack([cloud.attributes[k] for k in ("red", "green", "blue")])
+    elif ortho_out is not None:
+        raise InputError("the point cloud has no red/green/blue attributes for an orthoimage")
+    g = grid_points(cloud.xyz, rgb, cell=cell)
+    u = cloud.xy_unit
+    x0w = cloud.origin[0] + g["x0"] / u
+    y0w = cloud.origin[1] + g["y0"] / u
+    transform = Affine(cell / u, 0.0, x0w, 0.0, -cell / u, y0w)
+    dsm = g["dsm"] + cloud.origin[2] * cloud.z_unit
+    write_raster(dsm_out, Raster(dsm, transform, cloud.crs, np.isfinite(dsm)))
+    if ortho_out is not None and g["values"] is not None:
+        vals = np.nan_to_num(g["values"], nan=0.0)
+        write_raster(ortho_out, Raster(vals, transform, cloud.crs, np.isfinite(g["values"]).all(axis=0)),
+                     dtype="uint16", nodata=0)
+    return {"points": len(cloud), "shape": g["dsm"].shape, "cell_m": cell,
+            "dsm": str(dsm_out), "ortho": None if ortho_out is None else str(ortho_out)}
