@@ -31,10 +31,15 @@ __all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict
 
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
+    "dsm_buildings": "lidar2city.segment.dsm:BuildingMaskConfig",
+    "dsm_dtm": "lidar2city.segment.dsm:DtmConfig",
+    "dsm_lod1": "lidar2city.tools.dsm:Lod1DsmConfig",
+    "dsm_roofs": "lidar2city.segment.dsm:RoofRegionsConfig",
     "footprints": "lidar2city.footprints:FootprintsConfig",
     "ground": "lidar2city.ground:GroundConfig",
     "lod1": "lidar2city.lod.lod1:Lod1Config",
     "lod22": "lidar2city.roof.building:Lod22Config",
+    "polygon_fit": "lidar2city.fit.polygon:PolygonFitConfig",
     "snake": "lidar2city.regularize.snake:SnakeConfig",
 }
 
