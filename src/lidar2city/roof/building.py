@@ -170,7 +170,30 @@ def _clean_faces(faces, labels, precision=5e-3):
             if g.geom_type == "Polygon" and g.area > 1e-9:
                 out_f.append(g)
                 out_l.append(lab)
-    return out_f, np.asarray(out_l, dtype=np.int64)
+    return _absorb_slivers(out_f, np.asarray(out_l, dtype=np.int64))
+
+
+def _absorb_slivers(faces, labels, *, min_width=0.01):
+    """Slivers (narrower than ``min_width`` on average) join the neighbour they share most with."""
+    import shapely
+
+    faces, labels = list(faces), list(labels)
+    i = 0
+    while i < len(faces):
+        f = faces[i]
+        if f.area >= min_width * f.length / 2 or len(faces) == 1:
+            i += 1
+            continue
+        shared = [(f.boundary.intersection(g.boundary).length, j) for j, g in enumerate(faces) if j != i]
+        length, j = max(shared)
+        merged = shapely.set_precision(shapely.union(faces[j], f), 5e-3) if length > 0 else None
+        if merged is None or merged.geom_type != "Polygon":
+            i += 1
+            continue
+        faces[j] = merged
+        del faces[i], labels[i]
+        i = 0
+    return faces, np.asarray(labels, dtype=np.int64)
 
 
 def _nonmanifold_points(solid):

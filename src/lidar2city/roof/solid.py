@@ -39,6 +39,43 @@ def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
 
+def conform(rings_per_face, *, tol=1e-3):
+    """Insert every partition vertex lying on another face's edge into that edge (no T-junctions).
+
+    Faces merged or snapped separately can disagree on how a shared boundary is
+    subdivided; a solid needs each edge shared exactly.
+    """
+    import shapely
+
+    pts = np.unique(np.concatenate([r for rs in rings_per_face for r in rs]), axis=0)
+    tree = shapely.STRtree(shapely.points(pts))
+    out = []
+    for rs in rings_per_face:
+        new_rs = []
+        for r in rs:
+            seq = []
+            for k in range(len(r)):
+                p, q = r[k], r[(k + 1) % len(r)]
+                seq.append(p)
+                d = q - p
+                L2 = float(d @ d)
+                if L2 == 0:
+                    continue
+                cand = tree.query(shapely.LineString([p, q]).buffer(tol))
+                if not len(cand):
+                    continue
+                c = pts[cand]
+                t = ((c - p) @ d) / L2
+                dist = np.abs((c[:, 0] - p[0]) * d[1] - (c[:, 1] - p[1]) * d[0]) / np.sqrt(L2)
+                ends = np.minimum(np.hypot(*(c - p).T), np.hypot(*(c - q).T))
+                on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
+                for j in np.argsort(t[on]):
+                    seq.append(c[on][j])
+            new_rs.append(np.asarray(seq))
+        out.append(new_rs)
+    return out
+
+
 def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
     """Insert a vertex where two adjacent faces' planes cross along their shared edge.
 
@@ -60,7 +97,7 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
     list of list of ndarray
         Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
     """
-    rings = [_rings(f) for f in faces]
+    rings = conform([_rings(f) for f in faces])
     owner = {}
     for fi, rs in enumerate(rings):
         for r in rs:
@@ -224,8 +261,8 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     inside = shapely.union_all([shapely.Polygon(rs[0], rs[1:]) for rs in rings]).buffer(1e-7)
     floors = []
     for poly in shapely.get_parts(shapely.polygonize(lines)):
-        if not inside.contains(poly.representative_point()):
-            continue  # the inside of a courtyard
+        if poly.area < 1e-3 * poly.length or not inside.contains(poly.representative_point()):
+            continue  # the inside of a courtyard, or a zero-width loop of outline edges
         poly = orient(poly, -1.0)  # clockwise from above: the normal points down
         ids = [[vid(_key(p), ground_z)[0] for p in np.asarray(r.coords)[:-1]]
                for r in [poly.exterior, *poly.interiors]]
