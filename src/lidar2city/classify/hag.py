@@ -1,0 +1,148 @@
+"""Height above ground from a ground mask: a gridded DTM with filled holes.
+
+A small, robust stand-in for the ground package's DTM: ground points are
+gridded (lowest point per cell, so low vegetation left in the ground class
+does not lift the surface), empty cells (under buildings, over water) are
+filled by linear interpolation between the filled cells (nearest value
+outside their convex hull), and each point's terrain height is read
+bilinearly from the grid.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import EmptyInputError, InputError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["GroundGrid", "ground_grid", "height_above_ground"]
+
+
+@dataclass(frozen=True, eq=False)
+class GroundGrid:
+    """A terrain grid: ``z[i, j]`` is the height at ``(x0 + j*cell, y0 + i*cell)``.
+
+    Attributes
+    ----------
+    z : ndarray, shape (rows, cols)
+        Terrain heights at the grid nodes (no NaN).
+    x0, y0 : float
+        Coordinates of node ``(0, 0)``.
+    cell : float
+        Node spacing (m).
+    observed : ndarray of bool, shape (rows, cols)
+        True where the node had ground points (False where filled).
+    """
+
+    z: np.ndarray
+    x0: float
+    y0: float
+    cell: float
+    observed: np.ndarray
+
+    def sample(self, xy) -> np.ndarray:
+        """Bilinear terrain height at ``xy`` (N, 2); clamped at the grid border."""
+        from scipy.ndimage import map_coordinates
+
+        xy = np.asarray(xy, dtype=np.float64)
+        rows, cols = self.z.shape
+        c = np.clip((xy[:, 0] - self.x0) / self.cell, 0, cols - 1)
+        r = np.clip((xy[:, 1] - self.y0) / self.cell, 0, rows - 1)
+        return map_coordinates(self.z, np.vstack([r, c]), order=1, mode="nearest")
+
+
+def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None) -> GroundGrid:
+    """Grid the ground points (lowest per cell) and fill the empty cells.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Coordinates in metres.
+    ground : ndarray of bool, shape (N,)
+        Ground mask.
+    cell : float
+        Grid spacing (m).
+    extent : tuple (xmin, ymin, xmax, ymax), optional
+        Area to cover; defaults to the bounds of all points.
+
+    Raises
+    ------
+    EmptyInputError
+        If no point is ground.
+    InputError
+        If the shapes disagree or ``cell`` is not positive.
+    """
+    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    ground = np.asarray(ground, dtype=bool)
+    if ground.shape != (len(xyz),):
+        raise InputError(f"ground mask has shape {ground.shape}, expected ({len(xyz)},)")
+    if not cell > 0:
+        raise InputError(f"cell must be positive, got {cell}")
+    if not ground.any():
+        raise EmptyInputError("no ground points: cannot compute heights above ground")
+    if extent is None:
+        extent = (*xyz[:, :2].min(axis=0), *xyz[:, :2].max(axis=0))
+    x0, y0 = float(extent[0]), float(extent[1])
+    cols = int(np.floor((extent[2] - x0) / cell)) + 2
+    rows = int(np.floor((extent[3] - y0) / cell)) + 2
+    g = xyz[ground]
+    # nodes are cell centres of the binning lattice shifted by half a cell
+    j = np.clip(np.floor((g[:, 0] - x0) / cell + 0.5).astype(np.int64), 0, cols - 1)
+    i = np.clip(np.floor((g[:, 1] - y0) / cell + 0.5).astype(np.int64), 0, rows - 1)
+    key = i * cols + j
+    order = np.lexsort((g[:, 2], key))
+    key_sorted = key[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = key_sorted[1:] != key_sorted[:-1]
+    z = np.full(rows * cols, np.nan)
+    z[key_sorted[first]] = g[order[first], 2]
+    z = z.reshape(rows, cols)
+    observed = np.isfinite(z)
+    if not observed.all():
+        oi, oj = np.nonzero(observed)
+        ei, ej = np.nonzero(~observed)
+        known = np.column_stack([oj, oi]).astype(np.float64)
+        values = z[oi, oj]
+        query = np.column_stack([ej, ei]).astype(np.float64)
+        filled = np.full(len(query), np.nan)
+        if len(known) >= 3 and np.linalg.matrix_rank(known - known.mean(axis=0)) == 2:
+            filled = LinearNDInterpolator(known, values)(query)
+        miss = ~np.isfinite(filled)
+        if miss.any():
+            filled[miss] = NearestNDInterpolator(known, values)(query[miss])
+        z[ei, ej] = filled
+    return GroundGrid(z, x0, y0, float(cell), observed)
+
+
+def height_above_ground(xyz, ground, *, cell: float = 1.0) -> np.ndarray:
+    """Height of every point above the terrain interpolated from the ground points.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Coordinates in metres.
+    ground : ndarray of bool, shape (N,)
+        Ground mask.
+    cell : float
+        DTM grid spacing (m).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        ``z - dtm(x, y)`` in metres (negative below the terrain).
+
+    Examples
+    --------
+    >>> xyz = np.array([[0., 0., 1.], [1., 0., 1.], [0., 1., 1.], [0.5, 0.5, 4.]])
+    >>> height_above_ground(xyz, np.array([True, True, True, False])).round(2)
+    array([0., 0., 0., 3.])
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    grid = ground_grid(xyz, ground, cell=cell)
+    return xyz[:, 2] - grid.sample(xyz[:, :2])
