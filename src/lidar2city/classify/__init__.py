@@ -7,7 +7,7 @@ feature and region-growing building blocks.
 """
 
 from .core import ClassifyConfig, classify_points, greenness
-from .features import LocalShape, local_shape, neighbourhood_size, point_spacing
+from .features import LocalShape, local_shape, point_spacing
 from .hag import GroundGrid, ground_grid, height_above_ground
 from .regions import Regions, planar_regions, region_planes
 
@@ -17,7 +17,6 @@ __all__ = [
     "greenness",
     "LocalShape",
     "local_shape",
-    "neighbourhood_size",
     "point_spacing",
     "GroundGrid",
     "ground_grid",

@@ -35,7 +35,7 @@ import numpy as np
 from ..config import field
 from ..datamodel import ASPRS
 from ..errors import ConfigError, InputError
-from .features import local_shape, neighbourhood_size, point_spacing
+from .features import local_shape, point_spacing
 from .hag import height_above_ground
 from .regions import planar_regions
 
@@ -52,10 +52,8 @@ class ClassifyConfig:
     medium_height: float = field(0.5, "Height above ground (m) separating low (3) from medium (4) vegetation.")
     wall_min_height: float = field(0.5, "Lowest height above ground (m) of wall points joined to a building.")
     dtm_cell: float = field(1.0, "Cell size (m) of the DTM gridded from the ground points.")
-    pca_radius: float = field(1.0, "Radius (m) the local PCA neighbourhood should cover (k derived from the spacing).")
     feature_spacing: float = field(0.2, "Denser object points are thinned to one per voxel of this size (m) for the local features.")
-    k_min: int = field(8, "Smallest PCA neighbourhood (points).")
-    k_max: int = field(12, "Largest PCA neighbourhood (points).")
+    k: int = field(8, "Neighbours of the local PCA; thinning to feature_spacing bounds its size in metres on dense data.")
     max_residual: float = field(0.08, "Largest local plane residual (m) of a point in a planar region.")
     max_angle: float = field(20.0, "Largest normal angle (degrees) between neighbours of one planar region.")
     max_distance: float = field(0.15, "Largest distance (m) of a neighbour to a point's tangent plane in region growing.")
@@ -68,6 +66,7 @@ class ClassifyConfig:
     closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells.")
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
     min_seed_coverage: float = field(0.5, "Smallest fraction of a building area's elevated cells holding roof seed points.")
+    min_building_width: float = field(3.0, "Building areas narrower than this everywhere (m) are dropped (bridges, walls).")
     min_building_area: float = field(15.0, "Smallest building area (m2); smaller ones are dropped.")
     roof_tolerance: float = field(1.0, "Points more than this (m) above the roof seeds of their cell are tested as vegetation.")
     rough_residual: float = field(0.1, "Local residual (m) above which a point is rough (vegetation cue).")
@@ -77,12 +76,12 @@ class ClassifyConfig:
     max_height: float = field(300.0, "Points more than this (m) above the terrain are noise.")
 
     def __post_init__(self):
-        for name in ("min_height", "dtm_cell", "pca_radius", "feature_spacing", "max_residual", "max_distance",
+        for name in ("min_height", "dtm_cell", "feature_spacing", "max_residual", "max_distance",
                      "cell", "isolation_radius", "noise_below", "max_height", "rough_residual"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"classify.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("medium_height", "wall_min_height", "min_facet_area", "max_facet_rms",
-                     "closing_radius", "max_hole_area", "min_building_area", "roof_tolerance"):
+                     "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"classify.{name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.max_angle < 90:
@@ -91,8 +90,8 @@ class ClassifyConfig:
             raise ConfigError(f"classify.max_facet_slope must be in (0, 90], got {self.max_facet_slope!r}")
         if not 0 <= self.max_multi_return <= 1:
             raise ConfigError(f"classify.max_multi_return must be in [0, 1], got {self.max_multi_return!r}")
-        if not 3 <= self.k_min <= self.k_max:
-            raise ConfigError(f"classify.k_min must be >= 3 and <= k_max, got {self.k_min}, {self.k_max}")
+        if not 4 <= self.k <= 100:
+            raise ConfigError(f"classify.k must be in [4, 100], got {self.k!r}")
         if self.medium_height > self.min_height:
             raise ConfigError("classify.medium_height must not exceed classify.min_height")
 
@@ -154,13 +153,6 @@ def _disk(radius_cells: float) -> np.ndarray:
 
 def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
                     rgb=None, config: ClassifyConfig | None = None, **params) -> np.ndarray:
-    return _classify(xyz, ground, hag=hag, return_number=return_number,
-                     number_of_returns=number_of_returns, rgb=rgb, config=config,
-                     **params)["classes"]
-
-
-def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
-              rgb=None, config: ClassifyConfig | None = None, **params) -> dict:
     """ASPRS classes for every point given a ground mask.
 
     Parameters
@@ -207,6 +199,14 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     >>> cls = classify_points(xyz, ground_mask)            # doctest: +SKIP
     >>> (cls == 6).mean()                                  # doctest: +SKIP
     """
+    return _classify(xyz, ground, hag=hag, return_number=return_number,
+                     number_of_returns=number_of_returns, rgb=rgb, config=config,
+                     **params)["classes"]
+
+
+def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
+              rgb=None, config: ClassifyConfig | None = None, **params) -> dict:
+    """:func:`classify_points` returning its intermediate arrays too (diagnostics, tests)."""
     import dataclasses
 
     from scipy.spatial import cKDTree
@@ -257,10 +257,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         rep = _voxel_thin(p, c.feature_spacing)
         q = p[rep]
         nn = np.asarray(cKDTree(q).query(p, k=1)[1], dtype=np.int64)
-        q_spacing = point_spacing(q[:, :2])
     else:
-        q, nn, q_spacing = p, np.arange(len(p)), obj_spacing
-    k = neighbourhood_size(q_spacing, c.pca_radius, k_min=c.k_min, k_max=c.k_max)
+        q, nn = p, np.arange(len(p))
+    k = c.k
     shape = local_shape(q, k)
     cell = max(c.cell, 1.5 * spacing)
     regions = planar_regions(q, shape, max_residual=c.max_residual, max_angle=c.max_angle,
@@ -291,7 +290,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
                        & (multi_frac <= c.max_multi_return) & (green_frac <= 0.5)
                        & (mean_h >= c.min_height))
     else:
-        seed_region = np.zeros(0, bool)
+        seed_region = fits = np.zeros(0, bool)
     seed = np.zeros(len(p), bool)
     seed[inr] = seed_region[lab[inr]]
     seed &= ph >= c.min_height
@@ -328,6 +327,16 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         n_high = np.bincount(lab_flat, high_grid.ravel(), minlength=nb + 1)[1:]
         coverage = n_seed / np.maximum(n_high, 1)
         keep_b = (b_area >= c.min_building_area) & (coverage >= c.min_seed_coverage)
+        if c.min_building_width > 0:
+            # narrow structures (bridges, walls, fences, hedges on planar tops)
+            # vanish under an erosion by half the width
+            # (the tile border is no building edge: pad by replication)
+            disk_w = _disk(0.5 * c.min_building_width / cell)
+            pw = disk_w.shape[0]
+            core = ndimage.binary_erosion(np.pad(closed, pw, mode="edge"),
+                                          structure=disk_w)[pw:-pw, pw:-pw]
+            wide = np.bincount(lab_flat, core.ravel(), minlength=nb + 1)[1:] > 0
+            keep_b &= wide
         big = np.concatenate([[False], keep_b])
         building_grid = big[bl]
     else:
@@ -351,14 +360,16 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     in_zone = building_zone[pi, pj]
     in_building = building_grid[pi, pj]
     above_roof = p[:, 2] > roof[pi, pj] + c.roof_tolerance
-    region_area = np.zeros(len(p))
-    region_area[inr] = regions.area[lab[inr]]
-    planar = region_area >= min(c.min_facet_area, 1.0)
+    # elevated points on a sizeable plane that is no building (a shed, a
+    # vehicle, a bridge deck) are "other", not vegetation
+    planar = np.zeros(len(p), bool)
+    if r:
+        planar[inr] = ((regions.area >= c.min_facet_area) & fits)[lab[inr]]
     # vegetation inside a building area: above the roof and vegetation-like,
     # or rough multi-return points at the zone's edge (trees against walls)
     veg_over = above_roof & veg_cue & ~seed & (rough | not_last)
     edge_veg = ~in_building & rough & (multi | green) & ~seed
-    is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | seed
+    is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | (seed & in_building)
     high = ph >= c.min_height
     is_veg = ~is_building & (veg_cue | ~planar)
     out = np.full(len(p), ASPRS.UNCLASSIFIED, dtype=np.uint8)

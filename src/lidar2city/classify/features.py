@@ -16,7 +16,7 @@ from ..errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LocalShape", "point_spacing", "neighbourhood_size", "local_shape"]
+__all__ = ["LocalShape", "point_spacing", "local_shape"]
 
 
 def point_spacing(xy, *, cell: float | None = None) -> float:
@@ -51,19 +51,6 @@ def point_spacing(xy, *, cell: float | None = None) -> float:
     occupied = len(np.unique(keys))
     density = n / (occupied * cell * cell)
     return float(1.0 / np.sqrt(density))
-
-
-def neighbourhood_size(spacing: float, radius: float, *, k_min: int = 8, k_max: int = 24) -> int:
-    """Number of neighbours covering a disc of ``radius`` metres at ``spacing``.
-
-    ``k = pi r^2 / spacing^2`` clipped to ``[k_min, k_max]``, so the PCA
-    neighbourhood has a similar size in metres on sparse and dense data
-    wherever the clip does not bind.
-    """
-    if spacing <= 0 or radius <= 0:
-        raise InputError("spacing and radius must be positive")
-    k = int(round(np.pi * radius * radius / (spacing * spacing)))
-    return int(np.clip(k, k_min, k_max))
 
 
 @dataclass(frozen=True, eq=False)

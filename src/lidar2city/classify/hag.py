@@ -3,8 +3,8 @@
 A small, robust stand-in for the ground package's DTM: ground points are
 gridded (lowest point per cell, so low vegetation left in the ground class
 does not lift the surface), empty cells (under buildings, over water) are
-filled by linear interpolation between the filled cells (nearest value
-outside their convex hull), and each point's terrain height is read
+filled with the nearest observed height relaxed into a smooth membrane
+(Laplace equation with the observed cells fixed), and each point's terrain height is read
 bilinearly from the grid.
 """
 
@@ -55,7 +55,27 @@ class GroundGrid:
         return map_coordinates(self.z, np.vstack([r, c]), order=1, mode="nearest")
 
 
-def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None) -> GroundGrid:
+def _fill(z, observed, *, iterations: int) -> np.ndarray:
+    """Fill the unobserved nodes: nearest observed value, then harmonic relaxation.
+
+    Jacobi iterations of the discrete Laplace equation on the unobserved nodes
+    (observed ones fixed) turn the nearest-value steps into a smooth membrane
+    spanning the hole, the usual fill under buildings.
+    """
+    from scipy import ndimage
+
+    _, (ii, jj) = ndimage.distance_transform_edt(~observed, return_indices=True)
+    z = z[ii, jj]
+    free = ~observed
+    for _ in range(iterations):
+        p = np.pad(z, 1, mode="edge")
+        avg = 0.25 * (p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:])
+        z = np.where(free, avg, z)
+    return z
+
+
+def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None,
+                fill_iterations: int = 200) -> GroundGrid:
     """Grid the ground points (lowest per cell) and fill the empty cells.
 
     Parameters
@@ -68,6 +88,8 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None) -> GroundGrid:
         Grid spacing (m).
     extent : tuple (xmin, ymin, xmax, ymax), optional
         Area to cover; defaults to the bounds of all points.
+    fill_iterations : int
+        Relaxation sweeps smoothing the filled holes.
 
     Raises
     ------
@@ -76,8 +98,6 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None) -> GroundGrid:
     InputError
         If the shapes disagree or ``cell`` is not positive.
     """
-    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
-
     xyz = np.asarray(xyz, dtype=np.float64)
     ground = np.asarray(ground, dtype=bool)
     if ground.shape != (len(xyz),):
@@ -105,18 +125,7 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None) -> GroundGrid:
     z = z.reshape(rows, cols)
     observed = np.isfinite(z)
     if not observed.all():
-        oi, oj = np.nonzero(observed)
-        ei, ej = np.nonzero(~observed)
-        known = np.column_stack([oj, oi]).astype(np.float64)
-        values = z[oi, oj]
-        query = np.column_stack([ej, ei]).astype(np.float64)
-        filled = np.full(len(query), np.nan)
-        if len(known) >= 3 and np.linalg.matrix_rank(known - known.mean(axis=0)) == 2:
-            filled = LinearNDInterpolator(known, values)(query)
-        miss = ~np.isfinite(filled)
-        if miss.any():
-            filled[miss] = NearestNDInterpolator(known, values)(query[miss])
-        z[ei, ej] = filled
+        z = _fill(z, observed, iterations=fill_iterations)
     return GroundGrid(z, x0, y0, float(cell), observed)
 
 
