@@ -44,6 +44,14 @@ logger = logging.getLogger(__name__)
 __all__ = ["ClassifyConfig", "classify_points", "greenness"]
 
 
+#: Floors of the planarity thresholds as multiples of the feature point spacing
+#: (they bind below about 4 pts/m2, keeping sparse data as separable as dense).
+_RESIDUAL_PER_SPACING = 0.4
+_DISTANCE_PER_SPACING = 0.8
+_ROUGH_PER_SPACING = 0.3
+_CLOSING_PER_SPACING = 4.0
+
+
 @dataclass(frozen=True)
 class ClassifyConfig:
     """Parameters of :func:`classify_points` (config stage ``classify``). Lengths in metres."""
@@ -233,12 +241,12 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     spacing = point_spacing(xyz[:, :2])
 
     # --- noise: isolated points, far below / above the terrain -------------
-    tree = cKDTree(xyz)
     iso_r = max(c.isolation_radius, 4.0 * spacing)
-    k_iso = min(3, n)
-    dist, _ = tree.query(xyz, k=k_iso)
-    dist = np.asarray(dist).reshape(n, k_iso)
-    isolated = dist[:, -1] > iso_r if n > 2 else np.zeros(n, bool)
+    isolated = np.zeros(n, bool)
+    cand = np.flatnonzero(~ground)
+    if n > 2 and len(cand):
+        dist, _ = cKDTree(xyz).query(xyz[cand], k=3, distance_upper_bound=iso_r, workers=-1)
+        isolated[cand] = ~np.isfinite(dist[:, -1])
     noise = ~ground & (isolated | (hag < -c.noise_below) | (hag > c.max_height))
     cls[noise] = ASPRS.NOISE
 
@@ -256,17 +264,26 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     if obj_spacing < c.feature_spacing:
         rep = _voxel_thin(p, c.feature_spacing)
         q = p[rep]
-        nn = np.asarray(cKDTree(q).query(p, k=1)[1], dtype=np.int64)
+        nn = np.asarray(cKDTree(q).query(p, k=1, workers=-1)[1], dtype=np.int64)
     else:
         q, nn = p, np.arange(len(p))
     k = c.k
     shape = local_shape(q, k)
     cell = max(c.cell, 1.5 * spacing)
-    regions = planar_regions(q, shape, max_residual=c.max_residual, max_angle=c.max_angle,
-                             max_distance=c.max_distance, area_cell=cell)
+    # on sparse data a k-neighbourhood spans more roof detail and the seeds
+    # cover a roof more loosely: thresholds grow with the feature spacing
+    s_f = point_spacing(q[:, :2])
+    max_residual = max(c.max_residual, _RESIDUAL_PER_SPACING * s_f)
+    max_distance = max(c.max_distance, _DISTANCE_PER_SPACING * s_f)
+    rough_residual = max(c.rough_residual, _ROUGH_PER_SPACING * s_f)
+    closing_radius = max(c.closing_radius, _CLOSING_PER_SPACING * s_f)
+    regions = planar_regions(q, shape, max_residual=max_residual, max_angle=c.max_angle,
+                             max_distance=max_distance, area_cell=cell)
     lab = regions.labels[nn]
     residual = shape.residual[nn]
-    has_returns = return_number is not None and number_of_returns is not None
+    # single-return data (every number_of_returns == 1) carries no return cue
+    has_returns = (return_number is not None and number_of_returns is not None
+                   and bool(np.any(np.asarray(number_of_returns) > 1)))
     if has_returns:
         multi = np.asarray(number_of_returns)[obj_idx] > 1
         not_last = np.asarray(return_number)[obj_idx] < np.asarray(number_of_returns)[obj_idx]
@@ -305,7 +322,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     pi = np.floor((p[:, 1] - y0) / cell).astype(np.int64)
     seed_grid = np.zeros((nrow, ncol), bool)
     seed_grid[pi[seed], pj[seed]] = True
-    disk = _disk(c.closing_radius / cell)
+    disk = _disk(closing_radius / cell)
     pad = disk.shape[0]
     padded = np.pad(seed_grid, pad)
     closed = ndimage.binary_closing(padded, structure=disk)[pad:-pad, pad:-pad] | seed_grid
@@ -345,7 +362,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     roof = np.full((nrow, ncol), -np.inf)
     np.maximum.at(roof, (pi[seed], pj[seed]), p[seed, 2])
     # a wall or a taller part next to a lower roof stays under the highest roof nearby
-    roof = ndimage.maximum_filter(roof, footprint=_disk(c.closing_radius / cell + 1),
+    roof = ndimage.maximum_filter(roof, footprint=_disk(closing_radius / cell + 1),
                                   mode="nearest")
     has_roof = np.isfinite(roof)
     if has_roof.any():
@@ -355,7 +372,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     building_zone = ndimage.binary_dilation(building_grid, structure=np.ones((3, 3), bool))
 
     # --- point decisions ------------------------------------------------------
-    rough = residual > c.rough_residual
+    rough = residual > rough_residual
     veg_cue = rough | multi | green
     in_zone = building_zone[pi, pj]
     in_building = building_grid[pi, pj]
@@ -368,7 +385,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     # vegetation inside a building area: above the roof and vegetation-like,
     # or rough multi-return points at the zone's edge (trees against walls)
     veg_over = above_roof & veg_cue & ~seed & (rough | not_last)
-    edge_veg = ~in_building & rough & (multi | green) & ~seed
+    edge_veg = ~in_building & rough & (multi | green | (not has_returns)) & ~seed
     is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | (seed & in_building)
     high = ph >= c.min_height
     is_veg = ~is_building & (veg_cue | ~planar)

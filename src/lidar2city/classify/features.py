@@ -12,8 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-
 logger = logging.getLogger(__name__)
 
 __all__ = ["LocalShape", "point_spacing", "local_shape"]
@@ -112,7 +110,7 @@ def local_shape(xyz, k: int, *, tree=None, chunk: int = 200_000) -> LocalShape:
     k = int(min(max(k, 1), n))
     if tree is None:
         tree = cKDTree(xyz)
-    _, idx = tree.query(xyz, k=k)
+    _, idx = tree.query(xyz, k=k, workers=-1)
     idx = np.asarray(idx, dtype=np.int64).reshape(n, k)
     normal = np.empty((n, 3))
     evals = np.empty((n, 3))
