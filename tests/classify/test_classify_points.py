@@ -9,7 +9,7 @@ from lidar2city.classify import ClassifyConfig, classify_points
 from lidar2city.classify.core import _classify
 from lidar2city.errors import ConfigError, EmptyInputError, InputError
 
-GROUND, VEG, BUILDING, NOISE, WALL = 2, 5, 6, 7, 66
+GROUND, VEG, BUILDING, NOISE, WALL, CHIMNEY, OVERHANG = 2, 5, 6, 7, 66, 61, 55
 
 
 def _grid(x0, x1, y0, y1, step, rng, jitter=0.3):
@@ -62,18 +62,34 @@ def scene(seed=0, step=0.35):
             zz = rng.uniform(0.6, top - 0.3, 60)
             add(np.column_stack([np.full(60, x), yy, zz + terrain(np.column_stack([np.full(60, x), yy]))]), WALL)
 
-    # trees: crowns as noisy ellipsoid volumes with multiple returns
-    for cx, cy in ((52.0, 40.0), (20.0, 38.0), (28.0, 30.0)):
+    # a chimney 0.9 m x 0.9 m rising 2.5 m above the ridge: sides and a rough cap
+    top = base + 10.5
+    cx0, cy0 = 38.8, 12.0
+    u = rng.uniform(0, 0.9, (40, 2))
+    pts = [np.column_stack([cx0 + u[:, 0], cy0 + u[:, 1], top + rng.uniform(-0.4, 0.4, 40)])]
+    for side in range(4):
+        t = rng.uniform(0, 0.9, 25)
+        zz = rng.uniform(base + 8.0 - 3.0 * 0.9 / 5.0, top, 25)
+        x = cx0 + (t if side < 2 else np.full(25, 0.9 * (side - 2)))
+        y = cy0 + (np.full(25, 0.9 * side) if side < 2 else t)
+        pts.append(np.column_stack([x, y, zz]))
+    add(np.concatenate(pts) + rng.normal(0, 0.02, (140, 3)), CHIMNEY)
+
+    # trees: crowns as noisy ellipsoid volumes with multiple returns; one
+    # overhangs the flat roof's east edge
+    for cx, cy, label in ((52.0, 40.0, VEG), (20.0, 38.0, VEG), (28.0, 30.0, VEG),
+                          (23.0, 13.0, OVERHANG)):
         m = 900
         d = rng.normal(size=(m, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         rad = rng.uniform(0.3, 1.0, m) ** 0.5
+        zc = 7.0 if label == VEG else 9.5
         crown = np.column_stack([cx + 3.0 * rad * d[:, 0], cy + 3.0 * rad * d[:, 1],
-                                 7.0 + 2.5 * rad * d[:, 2]])
+                                 zc + 2.5 * rad * d[:, 2]])
         crown[:, 2] += terrain(crown[:, :2])
         n = rng.integers(2, 5, m)
         r = np.minimum(rng.integers(1, 4, m), n - 1)
-        add(crown, VEG, r, n)
+        add(crown, label, r, n)
     # noise: birds high above, a multipath point deep under the terrain
     add(np.array([[30.0, 45.0, 40.0], [5.0, 5.0, 35.0]]), NOISE)
     add(np.array([[50.0, 10.0, -6.0]]), NOISE)
@@ -107,6 +123,20 @@ def test_trees_are_high_vegetation(synthetic):
     _, truth, _, _, cls = synthetic
     assert (cls[truth == VEG] == 5).mean() >= 0.95
     assert not np.any(cls[truth == VEG] == 6)
+
+
+def test_chimney_is_building(synthetic):
+    _, truth, _, _, cls = synthetic
+    assert (cls[truth == CHIMNEY] == 6).mean() >= 0.98
+
+
+def test_tree_over_a_roof_is_vegetation(synthetic):
+    xyz, truth, _, _, cls = synthetic
+    over = truth == OVERHANG
+    assert (cls[over] == 5).mean() >= 0.9
+    # its part above the roof too
+    above = over & (xyz[:, 0] < 22.0)
+    assert above.sum() > 50 and (cls[above] == 5).mean() >= 0.85
 
 
 def test_noise_points(synthetic):

@@ -76,6 +76,8 @@ class ClassifyConfig:
     min_seed_coverage: float = field(0.5, "Smallest fraction of a building area's elevated cells holding roof seed points.")
     min_building_width: float = field(3.0, "Building areas narrower than this everywhere (m) are dropped (bridges, walls).")
     min_building_area: float = field(15.0, "Smallest building area (m2); smaller ones are dropped.")
+    max_roof_object_area: float = field(4.0, "Rough clusters above a roof up to this area (m2), mostly single returns, stay building (chimneys, dormers).")
+    edge_buffer: float = field(0.5, "Points this close (m) outside a building area (walls, eaves) can join it (at least one cell).")
     roof_tolerance: float = field(1.0, "Points more than this (m) above the roof seeds of their cell are tested as vegetation.")
     rough_residual: float = field(0.1, "Local residual (m) above which a point is rough (vegetation cue).")
     green_threshold: float = field(0.05, "Excess-green index above which a point is green (used only with RGB).")
@@ -89,7 +91,8 @@ class ClassifyConfig:
             if not getattr(self, name) > 0:
                 raise ConfigError(f"classify.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("medium_height", "wall_min_height", "min_facet_area", "max_facet_rms",
-                     "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance"):
+                     "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance",
+                     "edge_buffer", "max_roof_object_area"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"classify.{name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.max_angle < 90:
@@ -369,7 +372,10 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         _, (ri, rj) = ndimage.distance_transform_edt(~has_roof, return_indices=True)
         roof = roof[ri, rj]
     # buildings reach one cell further for edges and walls
-    building_zone = ndimage.binary_dilation(building_grid, structure=np.ones((3, 3), bool))
+    building_zone = building_grid
+    if c.edge_buffer > 0:
+        building_zone = ndimage.binary_dilation(building_grid,
+                                                structure=_disk(max(c.edge_buffer / cell, 1.0)))
 
     # --- point decisions ------------------------------------------------------
     rough = residual > rough_residual
@@ -385,6 +391,19 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     # vegetation inside a building area: above the roof and vegetation-like,
     # or rough multi-return points at the zone's edge (trees against walls)
     veg_over = above_roof & veg_cue & ~seed & (rough | not_last)
+    if veg_over.any() and c.max_roof_object_area > 0:
+        # chimneys, dormers, antennas: small single-return clusters on a roof
+        # stay building; trees over roofs are larger or return several echoes
+        over_grid = np.zeros((nrow, ncol), bool)
+        over_grid[pi[veg_over], pj[veg_over]] = True
+        ol, no = ndimage.label(over_grid, structure=np.ones((3, 3), bool))
+        o_area = np.bincount(ol.ravel(), minlength=no + 1) * cell * cell
+        o_lab = ol[pi, pj]
+        o_multi = np.bincount(o_lab[veg_over], multi[veg_over], minlength=no + 1)
+        o_count = np.maximum(np.bincount(o_lab[veg_over], minlength=no + 1), 1)
+        small = (o_area <= c.max_roof_object_area) & (o_multi / o_count <= c.max_multi_return)
+        small[0] = False
+        veg_over &= ~small[o_lab]
     edge_veg = ~in_building & rough & (multi | green | (not has_returns)) & ~seed
     is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | (seed & in_building)
     high = ph >= c.min_height
