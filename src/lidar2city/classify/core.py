@@ -8,19 +8,26 @@ Rabbani et al. 2006; Vosselman 2009):
    or high vegetation.
 2. **Noise**: points far from any other point (isolated, e.g. birds or
    multipath) and points far below the terrain.
-3. **Local PCA** of every object point's neighbourhood (k derived from the
-   measured spacing): normal and residual, the roughness index.
+3. **Local PCA** of every object point's k-neighbourhood: normal and
+   residual, the roughness index. Clouds denser than ``feature_spacing``
+   are thinned to one point per voxel for the features (each point then
+   takes its nearest kept point's), and on sparse clouds the planarity
+   thresholds and the closing radius grow with the measured spacing, so
+   the same defaults serve 2 to 100+ pts/m2.
 4. **Planar region growing**: regions are connected components of the
    kNN edges joining locally coplanar points (:mod:`.regions`). Roof facets
    become large planar regions; vegetation breaks into small incoherent ones.
    Regions that are large, fit a plane, are not steep and are mostly made of
    single / last returns are roof seeds.
 5. **Morphology on a grid**: roof seed cells are closed, small holes filled,
-   and connected building areas smaller than ``min_building_area`` dropped.
+   and connected building areas dropped when smaller than
+   ``min_building_area``, narrower than ``min_building_width`` everywhere
+   (bridges, walls) or too sparsely covered by seeds (``min_seed_coverage``:
+   trees give scattered planar patches, roofs are covered).
 6. **Point decision**: object points inside a building area and not above
    the roof as vegetation (rough, multi-return, optionally green) are
-   building — so walls, roof edges, chimneys and dormers join their
-   building; other elevated points are high vegetation when they look like
+   building — so walls, roof edges, chimneys and dormers (small clusters
+   above the roof) join their building; other elevated points are high vegetation when they look like
    vegetation, else unclassified; lower points are low / medium vegetation
    by height when they look like vegetation.
 """
@@ -62,16 +69,16 @@ class ClassifyConfig:
     dtm_cell: float = field(1.0, "Cell size (m) of the DTM gridded from the ground points.")
     feature_spacing: float = field(0.2, "Denser object points are thinned to one per voxel of this size (m) for the local features.")
     k: int = field(8, "Neighbours of the local PCA; thinning to feature_spacing bounds its size in metres on dense data.")
-    max_residual: float = field(0.08, "Largest local plane residual (m) of a point in a planar region.")
+    max_residual: float = field(0.08, "Largest local plane residual (m) of a point in a planar region (at least 0.4 spacing).")
     max_angle: float = field(20.0, "Largest normal angle (degrees) between neighbours of one planar region.")
-    max_distance: float = field(0.15, "Largest distance (m) of a neighbour to a point's tangent plane in region growing.")
+    max_distance: float = field(0.15, "Largest distance (m) of a neighbour to a point's tangent plane in region growing (at least 0.8 spacing).")
     min_facet_area: float = field(3.0, "Smallest area (m2) of a planar region seeding a building.")
     max_facet_rms: float = field(0.08, "Largest RMS residual (m) of a seed region's fitted plane (unless the region is large).")
     large_region_area: float = field(10.0, "Regions at least this large (m2) seed buildings whatever their plane fit (roof facets chained over ridges).")
     max_facet_slope: float = field(70.0, "Steepest seed region (degrees); steeper ones are walls, not roofs.")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
     cell: float = field(0.5, "Cell size (m) of the building grid (raised to 1.5 spacing on sparse data).")
-    closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells.")
+    closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells (at least 4 spacings).")
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
     min_seed_coverage: float = field(0.5, "Smallest fraction of a building area's elevated cells holding roof seed points.")
     min_building_width: float = field(3.0, "Building areas narrower than this everywhere (m) are dropped (bridges, walls).")
@@ -79,7 +86,7 @@ class ClassifyConfig:
     max_roof_object_area: float = field(4.0, "Rough clusters above a roof up to this area (m2), mostly single returns, stay building (chimneys, dormers).")
     edge_buffer: float = field(0.5, "Points this close (m) outside a building area (walls, eaves) can join it (at least one cell).")
     roof_tolerance: float = field(1.0, "Points more than this (m) above the roof seeds of their cell are tested as vegetation.")
-    rough_residual: float = field(0.1, "Local residual (m) above which a point is rough (vegetation cue).")
+    rough_residual: float = field(0.1, "Local residual (m) above which a point is rough, a vegetation cue (at least 0.3 spacing).")
     green_threshold: float = field(0.05, "Excess-green index above which a point is green (used only with RGB).")
     isolation_radius: float = field(2.0, "A point with fewer than 2 neighbours within this radius (m, at least 4 spacings) is noise.")
     noise_below: float = field(1.5, "Points more than this (m) below the terrain are noise.")
