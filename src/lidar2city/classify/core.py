@@ -57,6 +57,8 @@ _RESIDUAL_PER_SPACING = 0.4
 _DISTANCE_PER_SPACING = 0.8
 _ROUGH_PER_SPACING = 0.3
 _CLOSING_PER_SPACING = 4.0
+#: A roof seed facet covers at least this many feature spacings squared.
+_FACET_POINTS = 8.0
 
 
 @dataclass(frozen=True)
@@ -72,7 +74,7 @@ class ClassifyConfig:
     max_residual: float = field(0.08, "Largest local plane residual (m) of a point in a planar region (at least 0.4 spacing).")
     max_angle: float = field(20.0, "Largest normal angle (degrees) between neighbours of one planar region.")
     max_distance: float = field(0.15, "Largest distance (m) of a neighbour to a point's tangent plane in region growing (at least 0.8 spacing).")
-    min_facet_area: float = field(3.0, "Smallest area (m2) of a planar region seeding a building.")
+    min_facet_area: float = field(3.0, "Smallest area (m2) of a planar region seeding a building (at least 8 spacings squared).")
     max_facet_rms: float = field(0.08, "Largest RMS residual (m) of a seed region's fitted plane (unless the region is large).")
     large_region_area: float = field(10.0, "Regions at least this large (m2) seed buildings whatever their plane fit (roof facets chained over ridges).")
     max_facet_slope: float = field(70.0, "Steepest seed region (degrees); steeper ones are walls, not roofs.")
@@ -287,6 +289,8 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     max_distance = max(c.max_distance, _DISTANCE_PER_SPACING * s_f)
     rough_residual = max(c.rough_residual, _ROUGH_PER_SPACING * s_f)
     closing_radius = max(c.closing_radius, _CLOSING_PER_SPACING * s_f)
+    # a seed facet must hold enough points to be told from a smooth bit of canopy
+    min_facet_area = max(c.min_facet_area, _FACET_POINTS * s_f * s_f)
     regions = planar_regions(q, shape, max_residual=max_residual, max_angle=c.max_angle,
                              max_distance=max_distance, area_cell=cell)
     lab = regions.labels[nn]
@@ -312,7 +316,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         mean_h = np.bincount(lab[inr], ph[inr], minlength=r) / size
         # one plane, or a large smooth surface (facets chained over ridges)
         fits = (regions.rms <= c.max_facet_rms) | (regions.area >= c.large_region_area)
-        seed_region = ((regions.area >= c.min_facet_area) & fits
+        seed_region = ((regions.area >= min_facet_area) & fits
                        & (regions.normal[:, 2] >= np.cos(np.radians(c.max_facet_slope)))
                        & (multi_frac <= c.max_multi_return) & (green_frac <= 0.5)
                        & (mean_h >= c.min_height))
@@ -394,7 +398,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     # vehicle, a bridge deck) are "other", not vegetation
     planar = np.zeros(len(p), bool)
     if r:
-        planar[inr] = ((regions.area >= c.min_facet_area) & fits)[lab[inr]]
+        planar[inr] = ((regions.area >= min_facet_area) & fits)[lab[inr]]
     # vegetation inside a building area: above the roof and vegetation-like,
     # or rough multi-return points at the zone's edge (trees against walls)
     veg_over = above_roof & veg_cue & ~seed & (rough | not_last)
