@@ -1,8 +1,8 @@
 """Height above ground from a ground mask: a gridded DTM with filled holes.
 
 A small, robust stand-in for the ground package's DTM: ground points are
-gridded (lowest point per cell, so low vegetation left in the ground class
-does not lift the surface), empty cells (under buildings, over water) are
+gridded (mean height of the ground points around each grid node, unbiased
+on slopes, unlike the lowest point), empty cells (under buildings, over water) are
 filled with the nearest observed height relaxed into a smooth membrane
 (Laplace equation with the observed cells fixed), and each point's terrain height is read
 bilinearly from the grid.
@@ -76,7 +76,7 @@ def _fill(z, observed, *, iterations: int) -> np.ndarray:
 
 def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None,
                 fill_iterations: int = 200) -> GroundGrid:
-    """Grid the ground points (lowest per cell) and fill the empty cells.
+    """Grid the ground points (mean per node cell) and fill the empty cells.
 
     Parameters
     ----------
@@ -116,13 +116,10 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None,
     j = np.clip(np.floor((g[:, 0] - x0) / cell + 0.5).astype(np.int64), 0, cols - 1)
     i = np.clip(np.floor((g[:, 1] - y0) / cell + 0.5).astype(np.int64), 0, rows - 1)
     key = i * cols + j
-    order = np.lexsort((g[:, 2], key))
-    key_sorted = key[order]
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = key_sorted[1:] != key_sorted[:-1]
-    z = np.full(rows * cols, np.nan)
-    z[key_sorted[first]] = g[order[first], 2]
-    z = z.reshape(rows, cols)
+    count = np.bincount(key, minlength=rows * cols)
+    total = np.bincount(key, g[:, 2], minlength=rows * cols)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.where(count > 0, total / np.maximum(count, 1), np.nan).reshape(rows, cols)
     observed = np.isfinite(z)
     if not observed.all():
         z = _fill(z, observed, iterations=fill_iterations)
