@@ -57,6 +57,8 @@ _RESIDUAL_PER_SPACING = 0.4
 _DISTANCE_PER_SPACING = 0.8
 _ROUGH_PER_SPACING = 0.3
 _CLOSING_PER_SPACING = 4.0
+#: Height above the terrain (m) under which a region point touches the ground.
+_CONTACT_HEIGHT = 0.5
 #: A roof seed facet covers at least this many feature spacings squared.
 _FACET_POINTS = 8.0
 
@@ -78,6 +80,8 @@ class ClassifyConfig:
     max_facet_rms: float = field(0.08, "Largest RMS residual (m) of a seed region's fitted plane (unless the region is large).")
     large_region_area: float = field(10.0, "Regions at least this large (m2) seed buildings whatever their plane fit (roof facets chained over ridges).")
     max_facet_slope: float = field(70.0, "Steepest seed region (degrees); steeper ones are walls, not roofs.")
+    max_ground_contact: float = field(0.05, "Largest fraction of a seed region's points within 0.5 m of the terrain (planes reaching the ground are ramps and bridge decks).")
+    max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
     cell: float = field(0.5, "Cell size (m) of the building grid (raised to 1.5 spacing on sparse data).")
     closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells (at least 4 spacings).")
@@ -90,7 +94,7 @@ class ClassifyConfig:
     roof_tolerance: float = field(1.0, "Points more than this (m) above the roof seeds of their cell are tested as vegetation.")
     rough_residual: float = field(0.1, "Local residual (m) above which a point is rough, a vegetation cue (at least 0.3 spacing).")
     green_threshold: float = field(0.05, "Excess-green index above which a point is green (used only with RGB).")
-    isolation_radius: float = field(2.0, "A point with fewer than 2 neighbours within this radius (m, at least 4 spacings) is noise.")
+    isolation_radius: float = field(2.0, "A point off the terrain (beyond medium_height) with fewer than 2 neighbours within this radius (m, at least 4 spacings) is noise.")
     noise_below: float = field(1.5, "Points more than this (m) below the terrain are noise.")
     max_height: float = field(300.0, "Points more than this (m) above the terrain are noise.")
 
@@ -108,6 +112,10 @@ class ClassifyConfig:
             raise ConfigError(f"classify.max_angle must be in (0, 90), got {self.max_angle!r}")
         if not 0 < self.max_facet_slope <= 90:
             raise ConfigError(f"classify.max_facet_slope must be in (0, 90], got {self.max_facet_slope!r}")
+        if not 0 <= self.max_ground_contact <= 1:
+            raise ConfigError(f"classify.max_ground_contact must be in [0, 1], got {self.max_ground_contact!r}")
+        if not 0 <= self.max_linearity <= 1:
+            raise ConfigError(f"classify.max_linearity must be in [0, 1], got {self.max_linearity!r}")
         if not 0 <= self.max_multi_return <= 1:
             raise ConfigError(f"classify.max_multi_return must be in [0, 1], got {self.max_multi_return!r}")
         if not 4 <= self.k <= 100:
@@ -259,6 +267,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     if n > 2 and len(cand):
         dist, _ = cKDTree(xyz).query(xyz[cand], k=3, distance_upper_bound=iso_r, workers=-1)
         isolated[cand] = ~np.isfinite(dist[:, -1])
+    # an isolated point on the terrain is sparse sampling (water, dark
+    # surfaces), not noise: only isolated points off the surface are
+    isolated &= np.abs(hag) > c.medium_height
     noise = ~ground & (isolated | (hag < -c.noise_below) | (hag > c.max_height))
     cls[noise] = ASPRS.NOISE
 
@@ -314,12 +325,18 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         multi_frac = np.bincount(lab[inr], multi[inr], minlength=r) / size
         green_frac = np.bincount(lab[inr], green[inr], minlength=r) / size
         mean_h = np.bincount(lab[inr], ph[inr], minlength=r) / size
+        # a plane running down to the terrain is a ramp, a bridge deck or
+        # terrain; roof planes end at their eaves, high above the ground
+        low_frac = np.bincount(lab[inr], ph[inr] < _CONTACT_HEIGHT, minlength=r) / size
+        # parallel wires at one height form a "plane" of linear neighbourhoods
+        mean_lin = np.bincount(lab[inr], shape.linearity[nn][inr], minlength=r) / size
         # one plane, or a large smooth surface (facets chained over ridges)
         fits = (regions.rms <= c.max_facet_rms) | (regions.area >= c.large_region_area)
         seed_region = ((regions.area >= min_facet_area) & fits
                        & (regions.normal[:, 2] >= np.cos(np.radians(c.max_facet_slope)))
                        & (multi_frac <= c.max_multi_return) & (green_frac <= 0.5)
-                       & (mean_h >= c.min_height))
+                       & (mean_h >= c.min_height) & (low_frac <= c.max_ground_contact)
+                       & (mean_lin <= c.max_linearity))
     else:
         seed_region = fits = np.zeros(0, bool)
     seed = np.zeros(len(p), bool)
@@ -431,4 +448,4 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
                 int(building_grid.sum()))
     return {"classes": cls, "hag": hag, "obj_idx": obj_idx, "shape": shape, "regions": regions,
             "seed": seed, "labels": lab, "in_zone": in_zone, "in_building": in_building, "veg_over": veg_over,
-            "edge_veg": edge_veg, "spacing": spacing, "k": k, "building_grid": building_grid}
+            "edge_veg": edge_veg, "linearity": shape.linearity[nn], "spacing": spacing, "k": k, "building_grid": building_grid}
