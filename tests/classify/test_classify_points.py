@@ -180,6 +180,27 @@ def test_small_planar_object_is_no_building():
     assert (cls[~ground] == 6).all()
 
 
+def test_ramp_reaching_the_ground_is_no_building():
+    """A 6 m wide deck rising from the terrain to 5 m (a bridge approach)."""
+    rng = np.random.default_rng(8)
+    g = _grid(0, 50, 0, 30, 0.35, rng)
+    deck = _grid(5, 45, 12, 18, 0.35, rng)
+    on = (g[:, 1] > 12) & (g[:, 1] < 18) & (g[:, 0] > 5) & (g[:, 0] < 45)
+    g = g[~on]
+    z = np.minimum(deck[:, 0] - 5.0, 45.0 - deck[:, 0]) * 0.25  # up to 5 m mid-span
+    xyz = np.concatenate([np.column_stack([g, np.zeros(len(g))]),
+                          np.column_stack([deck, z])])
+    ground = np.arange(len(xyz)) < len(g)
+    ground[len(g):] = z < 0.05  # the ground filter takes the foot of the ramp
+    cls = classify_points(xyz, ground)
+    assert not np.any(cls == 6)
+    # a flat roof of the same size at 5 m is a building
+    roof = np.column_stack([deck, np.full(len(deck), 5.0)])
+    xyz = np.concatenate([np.column_stack([g, np.zeros(len(g))]), roof])
+    ground = np.arange(len(xyz)) < len(g)
+    assert (classify_points(xyz, ground)[~ground] == 6).all()
+
+
 def test_low_points_by_height():
     """Rough multi-return bushes: medium vegetation above medium_height, low below."""
     rng = np.random.default_rng(4)
@@ -292,3 +313,19 @@ def test_delft_subset_building_f1(data):
                            2: "ground"}, ignore=(9, 26))
     assert s.f1["building"] >= 0.93, s.f1
     assert s.f1["vegetation"] >= 0.88, s.f1
+
+
+def test_autzen_feet_rgb_no_false_buildings(data):
+    """Autzen (international feet, RGB): a park with trees, a river bank and power
+    lines but no building; the power lines and the footbridge must not become buildings,
+    and the tree crowns must be high vegetation."""
+    from lidar2city.io.las import read_points
+
+    cloud = read_points(data / "misc" / "autzen_trim.laz")
+    a = cloud.attributes
+    assert cloud.xy_unit == pytest.approx(0.3048)
+    rgb = np.column_stack([a["red"], a["green"], a["blue"]])
+    cls = classify_points(cloud.xyz, a["classification"] == 2, return_number=a["return_number"],
+                          number_of_returns=a["number_of_returns"], rgb=rgb)
+    assert (cls == 6).mean() < 0.001
+    assert (cls == 5).sum() > 10_000
