@@ -27,9 +27,10 @@ Rabbani et al. 2006; Vosselman 2009):
 6. **Point decision**: object points inside a building area and not above
    the roof as vegetation (rough, multi-return, optionally green) are
    building — so walls, roof edges, chimneys and dormers (small clusters
-   above the roof) join their building; other elevated points are high vegetation when they look like
-   vegetation, else unclassified; lower points are low / medium vegetation
-   by height when they look like vegetation.
+   above the roof) join their building. Other points are vegetation — high,
+   medium or low by their height — when they look like vegetation or lie on
+   no sizeable plane, and "other" (1) when they lie on one (vehicles, sheds,
+   fences, decks).
 """
 
 from __future__ import annotations
@@ -438,7 +439,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     is_veg = ~is_building & (veg_cue | ~planar)
     out = np.full(len(p), ASPRS.UNCLASSIFIED, dtype=np.uint8)
     out[is_veg & high] = ASPRS.HIGH_VEGETATION
-    low_veg = ~is_building & ~high & veg_cue
+    low_veg = ~is_building & ~high & (veg_cue | ~planar)
     out[low_veg & (ph >= c.medium_height)] = ASPRS.MEDIUM_VEGETATION
     out[low_veg & (ph < c.medium_height)] = ASPRS.LOW_VEGETATION
     out[is_building] = ASPRS.BUILDING
