@@ -296,7 +296,10 @@ def test_green_colour_is_a_vegetation_cue():
 
 @pytest.mark.slow
 def test_delft_subset_building_f1(data):
-    """A 100 m x 100 m part of the Delft tile against the AHN classes (ground from AHN)."""
+    """A 100 m x 100 m part of the Delft tile against the AHN classes (ground from AHN).
+
+    Measured: building F1 0.951, vegetation F1 0.930 (AHN class 1 as vegetation).
+    """
     from lidar2city.io.las import read_points
     from lidar2city.metrics.classification import classification_scores
 
@@ -312,7 +315,7 @@ def test_delft_subset_building_f1(data):
         predicted_mapping={6: "building", 3: "vegetation", 4: "vegetation", 5: "vegetation",
                            2: "ground"}, ignore=(9, 26))
     assert s.f1["building"] >= 0.93, s.f1
-    assert s.f1["vegetation"] >= 0.88, s.f1
+    assert s.f1["vegetation"] >= 0.90, s.f1
 
 
 def test_autzen_feet_rgb_no_false_buildings(data):
