@@ -332,3 +332,13 @@ def test_autzen_feet_rgb_no_false_buildings(data):
                           number_of_returns=a["number_of_returns"], rgb=rgb)
     assert (cls == 6).mean() < 0.001
     assert (cls == 5).sum() > 10_000
+
+
+def test_far_outlier_is_noise_and_changes_nothing(synthetic):
+    """A stray point kilometres away (bad GPS) must not inflate grids or spacing."""
+    xyz, truth, rn, nr, cls = synthetic
+    far = np.vstack([xyz, [[5000.0, -3000.0, 30.0]]])
+    out = classify_points(far, np.r_[truth == GROUND, False], return_number=np.r_[rn, 1],
+                          number_of_returns=np.r_[nr, 1])
+    assert out[-1] == 7
+    assert (out[:-1] == cls).mean() >= 0.995

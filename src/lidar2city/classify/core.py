@@ -58,6 +58,8 @@ _RESIDUAL_PER_SPACING = 0.4
 _DISTANCE_PER_SPACING = 0.8
 _ROUGH_PER_SPACING = 0.3
 _CLOSING_PER_SPACING = 4.0
+#: Largest building grid (cells) before asking for tiling (~1 GB of grids).
+_MAX_CELLS = 100_000_000
 #: Height above the terrain (m) under which a region point touches the ground.
 _CONTACT_HEIGHT = 0.5
 #: A roof seed facet covers at least this many feature spacings squared.
@@ -347,9 +349,13 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     # --- building grid: seed cells, closing, holes, area filter ------------
     from scipy import ndimage
 
-    x0, y0 = xyz[:, 0].min(), xyz[:, 1].min()
-    ncol = int(np.floor((xyz[:, 0].max() - x0) / cell)) + 1
-    nrow = int(np.floor((xyz[:, 1].max() - y0) / cell)) + 1
+    x0, y0 = p[:, 0].min(), p[:, 1].min()
+    ncol = int(np.floor((p[:, 0].max() - x0) / cell)) + 1
+    nrow = int(np.floor((p[:, 1].max() - y0) / cell)) + 1
+    if nrow * ncol > _MAX_CELLS:
+        raise InputError(
+            f"the object points span {nrow * cell:.0f} m x {ncol * cell:.0f} m, too large for "
+            f"one building grid of {cell:g} m cells; split the input into tiles")
     pj = np.floor((p[:, 0] - x0) / cell).astype(np.int64)
     pi = np.floor((p[:, 1] - y0) / cell).astype(np.int64)
     seed_grid = np.zeros((nrow, ncol), bool)

@@ -21,8 +21,9 @@ def point_spacing(xy, *, cell: float | None = None) -> float:
     """Mean horizontal point spacing (m): ``1 / sqrt(density)`` over the occupied area.
 
     The area is the number of occupied grid cells times the cell area (cells of
-    twice the spacing over the bounding box), so gaps such as water do not
-    lower the density.
+    twice the spacing over the bounding box of the central 99 % of the
+    points), so gaps such as water do not lower the density and far outliers
+    do not distort it.
 
     Parameters
     ----------
@@ -40,10 +41,12 @@ def point_spacing(xy, *, cell: float | None = None) -> float:
     n = len(xy)
     if n < 2:
         return 1.0
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    area = float(np.prod(np.maximum(hi - lo, 1e-3)))
+    lo = xy.min(axis=0)
     if cell is None:
-        cell = max(2.0 * np.sqrt(area / n), 0.05)
+        # bounding box of the bulk of the points: far outliers do not inflate the cell
+        q_lo, q_hi = np.percentile(xy, [0.5, 99.5], axis=0)
+        area = float(np.prod(np.maximum(q_hi - q_lo, 1e-3)))
+        cell = max(2.0 * np.sqrt(0.99 * area / n), 0.05)
     ij = np.floor((xy - lo) / cell).astype(np.int64)
     keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
     occupied = len(np.unique(keys))

@@ -87,7 +87,8 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None,
     cell : float
         Grid spacing (m).
     extent : tuple (xmin, ymin, xmax, ymax), optional
-        Area to cover; defaults to the bounds of all points.
+        Area to cover; defaults to the bounds of the ground points (points
+        outside read the border heights).
     fill_iterations : int
         Relaxation sweeps smoothing the filled holes.
 
@@ -106,11 +107,15 @@ def ground_grid(xyz, ground, *, cell: float = 1.0, extent=None,
         raise InputError(f"cell must be positive, got {cell}")
     if not ground.any():
         raise EmptyInputError("no ground points: cannot compute heights above ground")
-    if extent is None:
-        extent = (*xyz[:, :2].min(axis=0), *xyz[:, :2].max(axis=0))
+    if extent is None:  # points beyond the ground's extent read the border value
+        g2 = xyz[ground, :2]
+        extent = (*g2.min(axis=0), *g2.max(axis=0))
     x0, y0 = float(extent[0]), float(extent[1])
     cols = int(np.floor((extent[2] - x0) / cell)) + 2
     rows = int(np.floor((extent[3] - y0) / cell)) + 2
+    if rows * cols > 100_000_000:
+        raise InputError(f"the ground spans {rows * cell:.0f} m x {cols * cell:.0f} m, too large "
+                         f"for one DTM grid of {cell:g} m cells; split the input into tiles")
     g = xyz[ground]
     # nodes are cell centres of the binning lattice shifted by half a cell
     j = np.clip(np.floor((g[:, 0] - x0) / cell + 0.5).astype(np.int64), 0, cols - 1)
