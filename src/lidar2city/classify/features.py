@@ -1,0 +1,133 @@
+"""Point features for classification: spacing, local PCA on k nearest neighbours.
+
+Everything is vectorised: the neighbourhood covariances of all points are
+built at once from the kNN index array (``numpy.einsum`` on centred
+neighbour coordinates) and decomposed with a batched ``numpy.linalg.eigh``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["LocalShape", "point_spacing", "local_shape"]
+
+
+def point_spacing(xy, *, cell: float | None = None) -> float:
+    """Mean horizontal point spacing (m): ``1 / sqrt(density)`` over the occupied area.
+
+    The area is the number of occupied grid cells times the cell area (cells of
+    twice the spacing over the bounding box of the central 99 % of the
+    points), so gaps such as water do not lower the density and far outliers
+    do not distort it.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, 2)
+        Horizontal coordinates in metres.
+    cell : float, optional
+        Grid cell (m) used to measure the occupied area.
+
+    Returns
+    -------
+    float
+        Spacing in metres; ``1.0`` when fewer than 2 points are given.
+    """
+    xy = np.asarray(xy, dtype=np.float64)[:, :2]
+    n = len(xy)
+    if n < 2:
+        return 1.0
+    lo = xy.min(axis=0)
+    if cell is None:
+        # bounding box of the bulk of the points: far outliers do not inflate the cell
+        q_lo, q_hi = np.percentile(xy, [0.5, 99.5], axis=0)
+        area = float(np.prod(np.maximum(q_hi - q_lo, 1e-3)))
+        cell = max(2.0 * np.sqrt(0.99 * area / n), 0.05)
+    ij = np.floor((xy - lo) / cell).astype(np.int64)
+    keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    occupied = len(np.unique(keys))
+    density = n / (occupied * cell * cell)
+    return float(1.0 / np.sqrt(density))
+
+
+@dataclass(frozen=True, eq=False)
+class LocalShape:
+    """Per-point neighbourhood shape from local PCA.
+
+    Attributes
+    ----------
+    neighbours : ndarray, shape (N, k), int64
+        Indices of the k nearest neighbours (the point itself first).
+    normal : ndarray, shape (N, 3)
+        Unit normal (eigenvector of the smallest eigenvalue), ``nz >= 0``.
+    residual : ndarray, shape (N,)
+        Standard deviation of the neighbours' distances to the local plane
+        (``sqrt(lambda_3)``, metres) — the roughness index.
+    curvature : ndarray, shape (N,)
+        Surface variation ``lambda_3 / (lambda_1 + lambda_2 + lambda_3)``.
+    linearity : ndarray, shape (N,)
+        ``(lambda_1 - lambda_2) / lambda_1`` (wires, edges).
+    """
+
+    neighbours: np.ndarray
+    normal: np.ndarray
+    residual: np.ndarray
+    curvature: np.ndarray
+    linearity: np.ndarray
+
+
+def local_shape(xyz, k: int, *, tree=None, chunk: int = 200_000) -> LocalShape:
+    """Local PCA of every point's k-neighbourhood (Pauly et al. 2002 surface variation).
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Coordinates in metres.
+    k : int
+        Neighbourhood size including the point itself (clipped to N).
+    tree : scipy.spatial.cKDTree, optional
+        A tree built on ``xyz`` (3D), reused when given.
+    chunk : int
+        Points per batch (bounds the memory of the ``(chunk, k, 3)`` array).
+
+    Returns
+    -------
+    LocalShape
+
+    References
+    ----------
+    M. Pauly, M. Gross, L. Kobbelt, "Efficient simplification of point-sampled
+    surfaces", IEEE Visualization 2002 (surface variation, eq. 5).
+    """
+    from scipy.spatial import cKDTree
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    n = len(xyz)
+    if n == 0:
+        z = np.zeros(0)
+        return LocalShape(np.zeros((0, 0), np.int64), np.zeros((0, 3)), z, z, z)
+    k = int(min(max(k, 1), n))
+    if tree is None:
+        tree = cKDTree(xyz)
+    _, idx = tree.query(xyz, k=k, workers=-1)
+    idx = np.asarray(idx, dtype=np.int64).reshape(n, k)
+    normal = np.empty((n, 3))
+    evals = np.empty((n, 3))
+    for s in range(0, n, chunk):
+        nb = xyz[idx[s:s + chunk]]                      # (m, k, 3)
+        nb = nb - nb.mean(axis=1, keepdims=True)
+        cov = np.einsum("mki,mkj->mij", nb, nb) / k     # (m, 3, 3)
+        w, v = np.linalg.eigh(cov)                       # ascending eigenvalues
+        evals[s:s + chunk] = np.maximum(w, 0.0)
+        normal[s:s + chunk] = v[:, :, 0]
+    flip = normal[:, 2] < 0
+    normal[flip] *= -1.0
+    total = evals.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curvature = np.where(total > 0, evals[:, 0] / total, 0.0)
+        linearity = np.where(evals[:, 2] > 0, (evals[:, 2] - evals[:, 1]) / evals[:, 2], 0.0)
+    return LocalShape(idx, normal, np.sqrt(evals[:, 0]), curvature, linearity)

@@ -1,0 +1,35 @@
+"""``lidar2city classify IN -o OUT``."""
+
+from __future__ import annotations
+
+import click
+
+from ._options import crs_option, output_option
+
+NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
+         5: "high vegetation", 6: "building", 7: "noise"}
+
+
+@click.command("classify")
+@click.argument("input", type=click.Path(dir_okay=False))
+@output_option()
+@crs_option
+@click.option("--ground-from-file", is_flag=True,
+              help="Reuse the input's class 2 points as ground (when that class is trustworthy) "
+                   "instead of running the ground filter.")
+@click.option("--ground-method", default="smrf", show_default=True, metavar="METHOD",
+              help="Ground filter used when the ground is not taken from the file.")
+@click.option("--config", "config", default=None, type=click.Path(dir_okay=False),
+              help="Run configuration (TOML); its [classify] table sets the parameters.")
+def command(input, output, crs, ground_from_file, ground_method, config):
+    """Classify INPUT into ground (2), building (6), vegetation (3/4/5), noise (7), other (1).
+
+    Every point is written to OUTPUT with all its attributes and its new class.
+    """
+    from ..tools.classify import classify_file
+
+    summary = classify_file(input, output, crs=crs, ground_from_file=ground_from_file,
+                            ground_method=ground_method, config=config)
+    parts = ", ".join(f"{NAMES.get(k, k)} {v:,}" for k, v in summary["classes"].items())
+    click.echo(f"{output}: {summary['points']:,} points classified in "
+               f"{summary['seconds']:.1f} s ({parts})")

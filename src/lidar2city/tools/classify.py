@@ -1,0 +1,132 @@
+"""``classify``: a LAS/LAZ tile in, the same points with ASPRS classes out."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import numpy as np
+
+from ..datamodel import ASPRS
+from ..errors import ConfigError, DependencyError, EmptyInputError, FileFormatError
+from ..io.las import read_las, write_las
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["classify_file", "classify_config"]
+
+
+def classify_config(source=None):
+    """The ``[classify]`` section of a run config (TOML path or dict) as a :class:`ClassifyConfig`.
+
+    Other sections are validated by :func:`lidar2city.config.load_config`.
+    """
+    import tomllib
+    from pathlib import Path
+
+    from ..classify import ClassifyConfig
+    from ..config import STAGES, build_stage, load_config
+
+    if source is None:
+        return ClassifyConfig()
+    if isinstance(source, ClassifyConfig):
+        return source
+    if isinstance(source, dict):
+        data = dict(source)
+    else:
+        path = Path(source)
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise FileFormatError(f"{str(path)!r}: no such config file") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"{str(path)!r} is not a text TOML file") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{str(path)!r} is not valid TOML: {exc}") from None
+    section = data.pop("classify", None)
+    if section is not None and not isinstance(section, dict):
+        raise ConfigError("[classify] must be a table of options")
+    if "classify" in STAGES:
+        return load_config({**data, "classify": section or {}})["classify"]
+    load_config(data)  # validates the other sections
+    return build_stage("classify", section, cls=ClassifyConfig)
+
+
+def _ground(cloud, *, ground_from_file: bool, method: str):
+    if ground_from_file:
+        cls = cloud.get("classification")
+        if cls is None or not (cls == ASPRS.GROUND).any():
+            raise EmptyInputError(
+                "--ground-from-file: the input has no ground (class 2) points to reuse")
+        return cls == ASPRS.GROUND
+    try:
+        from ..ground import ground_mask
+    except ImportError as exc:
+        if isinstance(exc, ModuleNotFoundError) and exc.name not in (None, "lidar2city.ground"):
+            raise  # a broken dependency inside the ground package: show it
+        raise DependencyError(
+            "the ground filter (lidar2city.ground) is not available in this installation; "
+            "pass --ground-from-file to reuse the input's class 2 points") from None
+    ground = np.asarray(ground_mask(cloud.xyz, method=method), dtype=bool)
+    if not ground.any():
+        raise EmptyInputError("the ground filter found no ground point in the input")
+    return ground
+
+
+def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
+                  ground_method: str = "smrf", config=None) -> dict:
+    """Classify every point of ``src`` and write them all, with every attribute, to ``dst``.
+
+    Parameters
+    ----------
+    src, dst : str or Path
+        Input and output LAS/LAZ files (the output format follows its extension;
+        written under a temporary name and renamed on success).
+    crs : str, optional
+        CRS overriding or supplying the file's own (needed for the unit of a
+        file without CRS only when it is not in metres).
+    ground_from_file : bool
+        Reuse the input's class 2 as the ground instead of filtering it.
+    ground_method : str
+        Method of :func:`lidar2city.ground.ground_mask` otherwise.
+    config : ClassifyConfig, dict or path of a run TOML, optional
+
+    Returns
+    -------
+    dict
+        ``points``, ``classes`` (code -> count), ``seconds``, ``config``.
+
+    Raises
+    ------
+    FileFormatError, EmptyInputError, InputError, ConfigError, DependencyError
+    """
+    from ..classify import classify_points
+
+    cfg = classify_config(config)
+    t0 = time.perf_counter()
+    tile = read_las(src, crs=crs)
+    cloud = tile.point_cloud()
+    cloud.require_points(str(src))
+    ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method)
+    rgb = None
+    if all(k in cloud.attributes for k in ("red", "green", "blue")):
+        rgb = np.column_stack([cloud.attributes[k] for k in ("red", "green", "blue")])
+        if not rgb.any():
+            rgb = None  # formats with colour fields left at zero
+    classes = classify_points(
+        cloud.xyz, ground,
+        return_number=cloud.get("return_number"),
+        number_of_returns=cloud.get("number_of_returns"),
+        rgb=rgb, config=cfg,
+    )
+    write_las(dst, tile, classification=classes)
+    values, counts = np.unique(classes, return_counts=True)
+    summary = {
+        "points": len(cloud),
+        "classes": {int(v): int(c) for v, c in zip(values, counts, strict=True)},
+        "seconds": round(time.perf_counter() - t0, 3),
+        "config": dataclasses.asdict(cfg),
+    }
+    logger.info("classified %s -> %s in %.1f s", src, dst, summary["seconds"])
+    return summary
