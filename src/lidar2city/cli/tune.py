@@ -19,10 +19,12 @@ _path = click.Path(dir_okay=False)
 @click.option("--population", type=click.IntRange(min=4), default=30, show_default=True, help="Chromosomes per generation.")
 @click.option("--generations", type=click.IntRange(min=0), default=15, show_default=True, help="Maximum generations.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Processes evaluating fitness.")
+@click.option("--objective", type=click.Choice(["cost", "kappa"]), default="cost", show_default=True,
+              help="Fitness: (FP + FN) / N pixels (eq. 4), or 1 - kappa.")
 @click.option("--config", "config_path", type=_path, default=None, help="Run config TOML; its [active_contour] section sets the other snake parameters.")
 @click.option("--figure", type=_path, default=None, help="Also write the cost per generation as a PNG.")
-def command(dsm, dtm, ortho, reference, output, seed, population, generations, jobs, config_path,
-            figure):
+def command(dsm, dtm, ortho, reference, output, seed, population, generations, jobs, objective,
+            config_path, figure):
     """Tune the five active-contour weights (alpha, beta, gamma, mu, epsilon) with a genetic algorithm.
 
     The cost is the share of wrongly classified pixels, (FP + FN) / N, of the
@@ -53,7 +55,8 @@ def command(dsm, dtm, ortho, reference, output, seed, population, generations, j
             bar.update(1)
 
         res = tune(dsm, dtm=dtm, ortho=ortho, reference=reference, output=output, seed=seed,
-                   population=population, generations=generations, n_jobs=jobs, config=cfg,
+                   population=population, generations=generations, n_jobs=jobs, objective=objective,
+                   config=cfg,
                    figure=figure, callback=step)
     for r in res["history"]:
         click.echo(f"generation {r['generation']:3d}  best cost {r['best_cost']:.5f}  "

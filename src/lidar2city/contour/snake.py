@@ -266,9 +266,10 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     Every ``resample_every`` iterations the loops of self-intersecting
     contours are cut, contours are resampled to ``spacing`` and the region
     statistics are updated. The external step is limited to
-    ``max_step`` pixels per iteration, a limit multiplied by ``step_decay``
-    after every resampling period so that a contour oscillating about an edge
-    settles. Stops when the root-mean-square vertex
+    ``max_step`` pixels per iteration; the time step and that limit are
+    multiplied by ``step_decay`` after every resampling period so that a
+    contour oscillating about an edge settles and a contour that keeps
+    shrinking (internal energy stronger than the image forces) stops. Stops when the root-mean-square vertex
     displacement of an iteration falls below ``tol`` pixels.
 
     Parameters
@@ -318,7 +319,8 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     hi = np.array([shape[0] - 1, shape[1] - 1], dtype=np.float64)
     # the fixed point A v = F does not depend on the time step: scale it with the
     # external weights so the explicit external step stays stable for any weights
-    tau = tau / max(1.0, gamma + mu + epsilon)
+    tau0 = tau / max(1.0, gamma + mu + epsilon)
+    tau, limit = tau0, max_step
     rag = _Ragged(contours)
     lu = rag.system(alpha, beta, tau)
     stats = region_forces(contours, shape, image, ndsm, band=band, var_floor=var_floor)
@@ -352,7 +354,6 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
             # a normal force that alternates along the contour folds it: smooth it (1-2-1)
             push = 0.5 * push + 0.25 * (push[rag.nb[-1]] + push[rag.nb[1]])
             force += push[:, None] * normal
-        limit = max_step * step_decay ** (it // resample_every)
         mag = np.hypot(force[:, 0], force[:, 1]) * tau
         over = mag > limit
         if over.any():
@@ -369,6 +370,9 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
             tangled = _Ragged(_untangle(rag.split(v)))
             contours = tangled.resample(tangled.v, spacing, min_vertices, caps)
             rag = _Ragged(contours)
+            # damping: the whole step (internal and external) shrinks every period
+            decay = step_decay ** (it // resample_every)
+            tau, limit = tau0 * decay, max_step * decay
             lu = rag.system(alpha, beta, tau)
             stats = region_forces(contours, shape, image, ndsm, band=band, var_floor=var_floor)
             v = rag.v

@@ -134,7 +134,7 @@ def footprints_active_contour(dsm, *, output, dtm=None, ortho=None, weights=None
 
 
 def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30, generations=15,
-         n_jobs=1, config=None, figure=None, callback=None) -> dict:
+         n_jobs=1, objective="cost", config=None, figure=None, callback=None) -> dict:
     """Learn the five weights on a DSM with reference footprints; write them as TOML.
 
     The cost is scored on :func:`~lidar2city.contour.raster.evaluation_domain`
@@ -162,14 +162,14 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
     weights, history = tune_weights(inp["dsm"], inp["ndsm"], ref, ortho=inp["ortho"], cell=inp["cell"],
                                     domain=domain, config=cfg, population=population,
                                     generations=generations, seed=seed, n_jobs=n_jobs,
-                                    callback=callback)
+                                    objective=objective, callback=callback)
     cost = history[-1]["best_cost"] if history else float("nan")
     # the defaults' cost on the same pixels: tuning must not be worse
     from ..contour.outlines import prepare_scene
     from ..contour.raster import PixelFrame
 
     scene = prepare_scene(inp["dsm"], inp["ndsm"], ortho=inp["ortho"], cell=inp["cell"], config=cfg)
-    _init_worker(scene, PixelFrame(cell=inp["cell"]), ref, domain, cfg)
+    _init_worker(scene, PixelFrame(cell=inp["cell"]), ref, domain, cfg, objective)
     default = normalize_weights({k: getattr(cfg, k) for k in ("alpha", "beta", "gamma", "mu", "epsilon")})
     default_cost = weights_cost(list(default.values()))
     if default_cost < cost:
@@ -177,7 +177,8 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
                        "training pixels; keeping the defaults", default_cost, cost)
         weights, cost = default, default_cost
     write_weights(output, weights, metadata={
-        "cost": round(cost, 6), "default_cost": round(default_cost, 6), "seed": seed,
+        "objective": objective, "cost": round(cost, 6), "default_cost": round(default_cost, 6),
+        "seed": seed,
         "population": population, "generations": len(history) - 1,
         "stopped": "converged" if history and history[-1]["same"] >= 0.95 else "generations",
         "dsm": str(dsm), "reference": str(reference)})

@@ -22,7 +22,8 @@ from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GAResult", "genetic_minimize", "converged_share", "tune_weights", "weights_cost"]
+__all__ = ["GAResult", "OBJECTIVES", "genetic_minimize", "converged_share", "tune_weights",
+           "weights_cost"]
 
 
 def _deap():
@@ -259,12 +260,20 @@ def genetic_minimize(fitness, n_genes, *, bounds=(0.0, 3.0), population=30, gene
 _SCENE = {}
 
 
-def _init_worker(scene, frame, reference, domain, config):
-    _SCENE.update(scene=scene, frame=frame, reference=reference, domain=domain, config=config)
+#: Fitness choices: eq. 4's share of wrong pixels, or one minus Cohen's kappa.
+OBJECTIVES = ("cost", "kappa")
+
+
+def _init_worker(scene, frame, reference, domain, config, objective="cost"):
+    _SCENE.update(scene=scene, frame=frame, reference=reference, domain=domain, config=config,
+                  objective=objective)
 
 
 def weights_cost(weights) -> float:
-    """Cost (FP + FN) / N of one weight vector on the scene loaded by ``_init_worker``."""
+    """Fitness of one weight vector on the scene loaded by ``_init_worker``.
+
+    ``(FP + FN) / N`` over the domain (objective ``"cost"``), or ``1 - kappa``.
+    """
     from ..contour.outlines import contours_to_polygons, run_scene
     from ..contour.raster import rasterize_polygons
 
@@ -275,12 +284,16 @@ def weights_cost(weights) -> float:
     pred = rasterize_polygons(polys, s["reference"].shape, s["frame"])
     dom = s["domain"]
     ref = s["reference"]
+    if s.get("objective", "cost") == "kappa":
+        from ..metrics.footprints import pixel_metrics
+
+        return 1.0 - float(pixel_metrics(pred[dom], ref[dom])["kappa"])
     return float(np.count_nonzero(pred[dom] != ref[dom])) / max(int(dom.sum()), 1)
 
 
 def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None, config=None,
                  population=30, generations=15, seed=None, n_jobs=1, cxpb=0.8, mutpb=0.04,
-                 callback=None):
+                 objective="cost", callback=None):
     """Learn the five active-contour weights from reference buildings.
 
     The cost of a weight vector is the share of wrongly classified pixels,
@@ -301,6 +314,9 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
         :func:`lidar2city.contour.raster.evaluation_domain`.
     config : ActiveContourConfig, optional
         Everything but the weights.
+    objective : {"cost", "kappa"}
+        ``"cost"``: (FP + FN) / N (eq. 4). ``"kappa"``: 1 - Cohen's kappa, which
+        does not reward erasing buildings where false positives abound.
     population, generations, seed, n_jobs, cxpb, mutpb, callback
         See :func:`genetic_minimize`.
 
@@ -314,6 +330,8 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     from ..contour.outlines import WEIGHT_BOUNDS, WEIGHT_NAMES, ActiveContourConfig, prepare_scene
     from ..contour.raster import PixelFrame
 
+    if objective not in OBJECTIVES:
+        raise InputError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
     cfg = config or ActiveContourConfig()
     ref = np.asarray(reference_mask, dtype=bool)
     if ref.shape != np.shape(dsm):
@@ -328,7 +346,7 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     result = genetic_minimize(
         weights_cost, len(WEIGHT_NAMES), bounds=WEIGHT_BOUNDS, population=population,
         generations=generations, cxpb=cxpb, mutpb=mutpb, seed=seed, n_jobs=n_jobs,
-        initializer=_init_worker, initargs=(scene, frame, ref, dom, cfg), callback=callback)
+        initializer=_init_worker, initargs=(scene, frame, ref, dom, cfg, objective), callback=callback)
     weights = {k: float(v) for k, v in zip(WEIGHT_NAMES, result.best, strict=True)}
     logger.info("tuned weights %s: cost %.5f (%s)", weights, result.best_cost, result.stopped)
     return weights, result.history
