@@ -152,7 +152,7 @@ def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
     logger.debug("%d regions, %d kept (%d too small, %d too rough)", n, int(keep.sum()),
                  int((area < min_area).sum()), int((med > max_roughness).sum()))
     lab = np.where(keep[lab], lab, 0)
-    lab = expand_labels(lab, 1) * cand
+    lab = expand_labels(lab, 1.5) * cand  # 1.5: diagonal neighbours (corners) too
     lab, _, _ = _relabel(lab)
     return lab.astype(np.int32)
 

@@ -45,7 +45,8 @@ class ActiveContourConfig:
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
     min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
-    edge_sigma: float = field(1.0, "Gaussian sigma of the edge map for the GVF (pixels).")
+    edge_map: str = field("gradient", "Edge map of the GVF: 'canny' (blurred linked Canny edges of the DSM: walls) or 'gradient' (gradient magnitude, also strong on pitched roofs).")
+    edge_sigma: float = field(0.5, "Gaussian sigma of the edge map for the GVF (pixels); small keeps the two walls of narrow buildings apart.")
     gvf_mu: float = field(0.2, "GVF diffusion weight.")
     gvf_iterations: int = field(200, "Maximum GVF iterations.")
     tau: float = field(0.5, "Time step of the semi-implicit snake iteration.")
@@ -70,6 +71,8 @@ class ActiveContourConfig:
         for name in ("max_iter", "gvf_iterations", "resample_every", "min_edge_length"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"active_contour.{name}: must be >= 1, got {getattr(self, name)}")
+        if self.edge_map not in ("canny", "gradient"):
+            raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
             raise ConfigError(f"active_contour.step_decay: must be in (0, 1], got {self.step_decay}")
         if self.max_gap < 0 or self.min_area < 0 or self.simplify < 0 or self.smooth < 0:
@@ -161,7 +164,11 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
                               max_roughness=cfg.max_roughness, min_area=cfg.min_area, edges=edges)
     contours = initial_contours(labels)
-    f = edge_map(z, sigma=cfg.edge_sigma)
+    if cfg.edge_map == "canny":
+        f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0
+        f = f / f.max() if f.max() > 0 else f
+    else:
+        f = edge_map(z, sigma=cfg.edge_sigma)
     g = gradient_vector_flow(f, mu=cfg.gvf_mu, max_iter=cfg.gvf_iterations, callback=gvf_callback)
     mag = np.hypot(g[0], g[1])
     scale = np.percentile(mag, 99.0)
