@@ -37,7 +37,7 @@ def test_tune_writes_weights(runner, tmp_path):
     out = d / "w.toml"
     args = ["tune", "--dsm", str(d / "dsm.tif"), "--dtm", str(d / "dtm.tif"),
             "--reference", str(d / "ref.gpkg"), "-o", str(out), "--seed", "3",
-            "--population", "6", "--generations", "2", "--figure", str(d / "ga.png")]
+            "--population", "4", "--generations", "1", "--figure", str(d / "ga.png")]
     res = runner.invoke(cli, args)
     assert res.exit_code == 0, res.output
     data = tomllib.loads(out.read_text())
@@ -60,6 +60,13 @@ def test_tune_writes_weights(runner, tmp_path):
                                      weights=out)
     assert info["buildings"] == 3
     assert info["weights"] == pytest.approx(w)
+    from lidar2city.io.vector import read_footprints
+
+    fp, crs = read_footprints(d / "fp.gpkg", origin=(500000.0, 4200000.0))
+    assert crs.to_epsg() == 26918
+    truth = shapely.box(8 * 2.0, -22 * 2.0, 20 * 2.0, -10 * 2.0)  # first box, local metres
+    best = max(g.intersection(truth).area / g.union(truth).area for g in fp.geometries)
+    assert best > 0.8
 
 
 @pytest.mark.parametrize("case", ["missing_reference", "bad_output", "grid_mismatch",
