@@ -66,3 +66,11 @@ def test_callback_gets_every_generation():
     seen = []
     genetic_minimize(toy_cost, 5, population=6, generations=3, seed=1, callback=seen.append)
     assert [r["generation"] for r in seen] == [0, 1, 2, 3]
+
+
+def test_seeded_chromosome_bounds_the_result():
+    # the optimum itself in the first generation: elitism keeps it
+    res = genetic_minimize(toy_cost, 5, population=6, generations=2, seed=5, initial=[OPTIMUM])
+    assert res.best_cost == pytest.approx(0.01)
+    with pytest.raises(InputError):
+        genetic_minimize(toy_cost, 5, population=6, generations=1, seed=5, initial=[[1.0, 2.0]])

@@ -105,8 +105,8 @@ def _evaluate(fitness, chromosomes, executor):
 
 def genetic_minimize(fitness, n_genes, *, bounds=(0.0, 3.0), population=30, generations=20,
                      cxpb=0.8, mutpb=0.04, blend_alpha=0.3, sigma=None, elite=1,
-                     same_share=0.95, same_tol=None, seed=None, n_jobs=1, initializer=None,
-                     initargs=(), callback=None) -> GAResult:
+                     same_share=0.95, same_tol=None, seed=None, n_jobs=1, initial=None,
+                     initializer=None, initargs=(), callback=None) -> GAResult:
     """Minimise ``fitness`` over a box with a continuous genetic algorithm.
 
     Parameters
@@ -138,6 +138,10 @@ def genetic_minimize(fitness, n_genes, *, bounds=(0.0, 3.0), population=30, gene
     n_jobs : int
         Processes evaluating fitness (1: in this process). Results do not
         depend on it.
+    initial : sequence of sequences, optional
+        Chromosomes placed in the first generation (e.g. the current
+        defaults, so that with elitism the result is never worse than them);
+        the rest is drawn uniformly.
     initializer, initargs
         Run once in every worker process (e.g. to load a shared scene).
     callback : callable, optional
@@ -221,6 +225,10 @@ def genetic_minimize(fitness, n_genes, *, bounds=(0.0, 3.0), population=30, gene
 
     try:
         pop = [toolbox.individual() for _ in range(population)]
+        for i, chrom in enumerate(list(initial or [])[:population]):
+            if len(chrom) != n_genes:
+                raise InputError(f"initial chromosome {i} has {len(chrom)} genes, expected {n_genes}")
+            pop[i][:] = [min(max(float(g), lo), hi) for g in chrom]
         evaluate(pop)
         rec = record(0, pop)
         stopped = "generations"
@@ -346,7 +354,8 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     result = genetic_minimize(
         weights_cost, len(WEIGHT_NAMES), bounds=WEIGHT_BOUNDS, population=population,
         generations=generations, cxpb=cxpb, mutpb=mutpb, seed=seed, n_jobs=n_jobs,
-        initializer=_init_worker, initargs=(scene, frame, ref, dom, cfg, objective), callback=callback)
+        initial=[[getattr(cfg, k) for k in WEIGHT_NAMES]], initializer=_init_worker, initargs=(scene, frame, ref, dom, cfg, objective), callback=callback)
     weights = {k: float(v) for k, v in zip(WEIGHT_NAMES, result.best, strict=True)}
+    # (the configured weights are in the first generation: tuned is never worse on these pixels)
     logger.info("tuned weights %s: cost %.5f (%s)", weights, result.best_cost, result.stopped)
     return weights, result.history
