@@ -55,6 +55,9 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
             raise InputError("no --dtm given, and this build cannot derive a DTM from the DSM: "
                              "pass --dtm") from None
         ground = dtm_from_dsm(zs, cell=cell)
+        if isinstance(ground, tuple):  # (dtm, ground mask)
+            ground = ground[0]
+        logger.info("no DTM given: derived one from the DSM")
     else:
         t = read_raster(dtm)
         _same_grid(d, t, f"DTM {str(dtm)!r}")
