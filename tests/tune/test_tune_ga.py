@@ -74,3 +74,24 @@ def test_seeded_chromosome_bounds_the_result():
     assert res.best_cost == pytest.approx(0.01)
     with pytest.raises(InputError):
         genetic_minimize(toy_cost, 5, population=6, generations=1, seed=5, initial=[[1.0, 2.0]])
+
+
+def test_tune_weights_on_a_synthetic_dsm_is_reproducible_across_jobs():
+    from lidar2city.tune.ga import tune_weights
+
+    rng = np.random.default_rng(0)
+    dsm = rng.normal(0.0, 0.1, (50, 50))
+    ref = np.zeros((50, 50), bool)
+    for r0, r1, c0, c1 in [(5, 15, 5, 20), (25, 45, 20, 32)]:
+        dsm[r0:r1, c0:c1] += 7.0
+        ref[r0:r1, c0:c1] = True
+    a = tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=2, n_jobs=1)
+    b = tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=2, n_jobs=2)
+    assert a == b
+    weights, history = a
+    assert set(weights) == {"alpha", "beta", "gamma", "mu", "epsilon"}
+    assert history[-1]["best_cost"] < 0.05
+    with pytest.raises(InputError):
+        tune_weights(dsm, dsm, ref[:10], cell=1.0)
+    with pytest.raises(InputError):
+        tune_weights(dsm, dsm, ref, cell=1.0, objective="iou")
