@@ -105,3 +105,18 @@ def test_tune_bad_input_one_line_error(runner, tmp_path, case):
         assert res.output.strip().startswith("Error:"), res.output
         assert len(res.output.strip().splitlines()) == 1
     assert not (d / "w.toml").exists()
+
+
+def test_tune_config_file_sets_snake_parameters(runner, tmp_path):
+    from lidar2city.cli.main import cli
+
+    d = _write_scene(tmp_path)
+    (d / "run.toml").write_text("[active_contour]\nmax_iter = 'many'\n")
+    args = ["tune", "--dsm", str(d / "dsm.tif"), "--dtm", str(d / "dtm.tif"),
+            "--reference", str(d / "ref.gpkg"), "-o", str(d / "w.toml"), "--population", "4",
+            "--generations", "0", "--config", str(d / "run.toml")]
+    res = runner.invoke(cli, args)
+    assert res.exit_code == 1 and "active_contour.max_iter" in res.output
+    (d / "run.toml").write_text("[active_contour]\nmax_iter = 20\n")
+    res = runner.invoke(cli, args)
+    assert res.exit_code == 0, res.output

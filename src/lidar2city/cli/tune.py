@@ -35,20 +35,12 @@ def command(dsm, dtm, ortho, reference, output, seed, population, generations, j
 
     cfg = None
     if config_path is not None:
-        import tomllib
-        from pathlib import Path
-
         from ..config import build_stage
         from ..contour.outlines import ActiveContourConfig
-        from ..errors import ConfigError, FileFormatError
+        from ..io.weights import read_stage_table
 
-        try:
-            data = tomllib.loads(Path(config_path).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FileFormatError(f"{config_path!r}: no such config file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{config_path!r} is not valid TOML: {exc}") from None
-        cfg = build_stage("active_contour", data.get("active_contour", {}), cls=ActiveContourConfig)
+        cfg = build_stage("active_contour", read_stage_table(config_path, "active_contour"),
+                          cls=ActiveContourConfig)
 
     with progress(length=generations + 1, label="tuning") as bar:
         def step(record):
@@ -56,8 +48,7 @@ def command(dsm, dtm, ortho, reference, output, seed, population, generations, j
 
         res = tune(dsm, dtm=dtm, ortho=ortho, reference=reference, output=output, seed=seed,
                    population=population, generations=generations, n_jobs=jobs, objective=objective,
-                   config=cfg,
-                   figure=figure, callback=step)
+                   config=cfg, figure=figure, callback=step)
     for r in res["history"]:
         click.echo(f"generation {r['generation']:3d}  best cost {r['best_cost']:.5f}  "
                    f"mean {r['mean']:.5f}  same {100 * r['same']:.0f} %", err=True)

@@ -9,9 +9,27 @@ from pathlib import Path
 from ..errors import ConfigError, FileFormatError
 from ._atomic import atomic_path, check_input_file
 
-__all__ = ["read_weights", "write_weights"]
+__all__ = ["read_weights", "write_weights", "read_stage_table"]
 
 _NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
+
+
+def _load(path) -> dict:
+    p = check_input_file(path)
+    try:
+        return tomllib.loads(Path(p).read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{str(p)!r} is not a text file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
+
+
+def read_stage_table(path, stage) -> dict:
+    """The ``[stage]`` table of a run-config TOML file (empty if absent)."""
+    table = _load(path).get(stage, {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"{str(path)!r}: [{stage}] must be a table")
+    return table
 
 
 def read_weights(path) -> dict:
@@ -28,13 +46,8 @@ def read_weights(path) -> dict:
     ConfigError
         Not TOML, unknown keys or non-numeric / negative values.
     """
-    p = check_input_file(path)
-    try:
-        data = tomllib.loads(Path(p).read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{str(p)!r} is not a text file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
+    p = path
+    data = _load(path)
     table = data.get("active_contour", {k: v for k, v in data.items() if k in _NAMES})
     if not isinstance(table, dict):
         raise ConfigError(f"{str(p)!r}: [active_contour] must be a table")
