@@ -1,0 +1,202 @@
+"""Initial building contours from a DSM: height mask, roughness filter, Canny edges.
+
+One closed contour per building region, in pixel coordinates ``(row, col)``
+where pixel centres are at integer positions.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from scipy import ndimage as ndi
+
+from ..errors import InputError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["roughness_index", "linked_edges", "building_regions", "initial_contours"]
+
+
+def _filled(a):
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2:
+        raise InputError(f"expected a 2-D raster, got shape {a.shape}")
+    ok = np.isfinite(a)
+    if not ok.any():
+        raise InputError("raster holds no finite value")
+    if ok.all():
+        return a.copy()
+    # nearest valid value: keeps edges sharp and gradients finite
+    idx = ndi.distance_transform_edt(~ok, return_distances=False, return_indices=True)
+    return a[tuple(idx)]
+
+
+def roughness_index(dsm, *, cell=1.0) -> np.ndarray:
+    """Terrain ruggedness index of a DSM, as a slope (dimensionless).
+
+    The mean absolute height difference of each pixel to its 8 neighbours
+    (Riley et al. 1999), divided by the cell size so thresholds do not depend
+    on the resolution. NaN pixels are filled by their nearest valid value.
+
+    Parameters
+    ----------
+    dsm : ndarray, shape (H, W)
+    cell : float
+        Pixel size in metres.
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+
+    References
+    ----------
+    Riley, S. J., DeGloria, S. D., Elliot, R. (1999). A terrain ruggedness index
+    that quantifies topographic heterogeneity. Intermountain J. Sciences 5(1-4).
+    """
+    z = np.pad(_filled(dsm), 1, mode="edge")
+    h, w = z.shape[0] - 2, z.shape[1] - 2
+    centre = z[1:-1, 1:-1]
+    acc = np.zeros((h, w))
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                acc += np.abs(centre - z[1 + dr:1 + dr + h, 1 + dc:1 + dc + w])
+    return acc / 8.0 / float(cell)
+
+
+def linked_edges(dsm, *, sigma=1.0, low_threshold=None, high_threshold=None,
+                 max_gap=1, min_length=4) -> np.ndarray:
+    """Canny edges of a DSM with small gaps closed and short segments dropped.
+
+    Parameters
+    ----------
+    dsm : ndarray, shape (H, W)
+    sigma : float
+        Gaussian smoothing of the Canny detector, in pixels.
+    low_threshold, high_threshold : float, optional
+        Hysteresis thresholds on the gradient magnitude of the smoothed DSM
+        (metres of height per pixel); default 0.5 and 1.0.
+    max_gap : int
+        Gaps of up to this many pixels between edge pixels are bridged by a
+        morphological closing (0: none).
+    min_length : int
+        Edge chains (8-connected) with fewer pixels are dropped.
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+
+    References
+    ----------
+    Canny, J. (1986). A computational approach to edge detection. IEEE PAMI 8(6).
+    """
+    from skimage.feature import canny
+    from skimage.morphology import skeletonize
+
+    z = _filled(dsm)
+    lo = 0.5 if low_threshold is None else float(low_threshold)
+    hi = 1.0 if high_threshold is None else float(high_threshold)
+    if hi < lo:
+        raise InputError(f"high_threshold ({hi}) must be >= low_threshold ({lo})")
+    edges = canny(z, sigma=sigma, low_threshold=lo, high_threshold=hi)
+    if max_gap > 0:
+        size = 2 * int(np.ceil(max_gap / 2.0)) + 1
+        closed = ndi.binary_closing(edges, structure=np.ones((size, size), bool), border_value=0)
+        edges = skeletonize(closed | edges)
+    if min_length > 1:
+        lab, n = ndi.label(edges, structure=np.ones((3, 3), bool))
+        if n:
+            sizes = np.bincount(lab.ravel(), minlength=n + 1)
+            keep = sizes >= min_length
+            keep[0] = False
+            edges = keep[lab]
+    return edges
+
+
+def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
+                     canny_sigma=1.0, max_gap=1, min_edge_length=4, min_area=20.0,
+                     edges=None) -> np.ndarray:
+    """Label image of candidate building regions.
+
+    Pixels higher than ``min_height`` above the terrain form the candidate
+    mask; linked Canny edges of the DSM cut it where buildings touch trees or
+    each other; regions whose median roughness index exceeds ``max_roughness``
+    (vegetation: rough, irregular canopy) or smaller than ``min_area`` are
+    dropped; the cut pixels are given back to their neighbouring region.
+
+    Returns
+    -------
+    ndarray of int32, shape (H, W)
+        0 for background, 1..n for regions.
+    """
+    from skimage.segmentation import expand_labels
+
+    z = _filled(dsm)
+    nd = np.asarray(ndsm, dtype=np.float64)
+    if nd.shape != z.shape:
+        raise InputError(f"dsm and ndsm differ in shape: {z.shape} vs {nd.shape}")
+    cand = np.nan_to_num(nd, nan=0.0) > min_height
+    if edges is None:
+        edges = linked_edges(z, sigma=canny_sigma, max_gap=max_gap, min_length=min_edge_length)
+    core = cand & ~edges
+    lab, n = ndi.label(core)
+    if n == 0:
+        return lab.astype(np.int32)
+    rough = roughness_index(z, cell=cell)
+    idx = np.arange(1, n + 1)
+    area = ndi.sum_labels(np.ones_like(lab), lab, idx) * cell * cell
+    med = ndi.labeled_comprehension(rough, lab, idx, np.median, np.float64, 0.0)
+    keep = np.zeros(n + 1, bool)
+    keep[1:] = (area >= min_area) & (med <= max_roughness)
+    logger.debug("%d regions, %d kept (%d too small, %d too rough)", n, int(keep.sum()),
+                 int((area < min_area).sum()), int((med > max_roughness).sum()))
+    lab = np.where(keep[lab], lab, 0)
+    lab = expand_labels(lab, 1.5) * cand  # 1.5: diagonal neighbours (corners) too
+    lab, _, _ = _relabel(lab)
+    return lab.astype(np.int32)
+
+
+def _relabel(lab):
+    from skimage.segmentation import relabel_sequential
+
+    return relabel_sequential(lab)
+
+
+def initial_contours(labels, *, min_vertices=8) -> list[np.ndarray]:
+    """One closed contour per labelled region: its outer boundary.
+
+    The contour runs half-way between the region's boundary pixel centres and
+    their outside neighbours (iso-line 0.5 of the region mask), so the pixels
+    whose centres it encloses are exactly the (hole-filled) region.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions (see :func:`building_regions`).
+
+    Returns
+    -------
+    list of ndarray, shape (M, 2)
+        ``(row, col)`` vertices, not repeated at the end, one per region in
+        label order; regions whose outline has fewer than ``min_vertices``
+        vertices are skipped.
+    """
+    from skimage.measure import find_contours
+
+    labels = np.asarray(labels)
+    out = []
+    for k, sl in enumerate(ndi.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        r0, c0 = sl[0].start - 1, sl[1].start - 1
+        sub = labels[sl] == k
+        sub = np.pad(ndi.binary_fill_holes(sub), 1)
+        rings = find_contours(sub.astype(np.float64), 0.5)
+        if not rings:
+            continue
+        ring = max(rings, key=len)[:-1]
+        if len(ring) < min_vertices:
+            continue
+        out.append(ring + np.array([r0, c0], dtype=np.float64))
+    return out

@@ -1,0 +1,279 @@
+"""Building outlines from a DSM by active contours: configuration and pipeline."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage as ndi
+
+from ..config import field
+from ..errors import ConfigError, InputError
+from .gvf import edge_map, gradient_vector_flow
+from .initial import _filled, building_regions, initial_contours, linked_edges
+from .raster import PixelFrame
+from .snake import evolve_contours
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
+           "ContourScene", "prepare_scene", "run_scene", "contours_to_polygons",
+           "active_contour_outlines"]
+
+#: The five energy weights, in chromosome order.
+WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
+#: Range searched by the genetic algorithm for every weight.
+WEIGHT_BOUNDS = (0.0, 3.0)
+#: Weights used when none are given: tuned by the GA (objective 1 - kappa, population
+#: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage
+#: (benchmarks/bench_active_contour.py). Retune for other data with ``lidar2city tune``.
+DEFAULT_WEIGHTS = {"alpha": 0.83, "beta": 2.72, "gamma": 2.78, "mu": 0.26, "epsilon": 1.18}
+#: Hand-set weights before tuning (kept as the untuned baseline of the benchmark).
+UNTUNED_WEIGHTS = {"alpha": 0.2, "beta": 0.2, "gamma": 1.0, "mu": 1.0, "epsilon": 1.0}
+
+
+@dataclass(frozen=True)
+class ActiveContourConfig:
+    """Stage ``active_contour``: snake outlines of buildings from a DSM."""
+
+    alpha: float = field(DEFAULT_WEIGHTS["alpha"], "Elasticity weight (|v'|^2, per pixel spacing).")
+    beta: float = field(DEFAULT_WEIGHTS["beta"], "Rigidity weight (|v''|^2).")
+    gamma: float = field(DEFAULT_WEIGHTS["gamma"], "Weight of the gradient-vector-flow edge force.")
+    mu: float = field(DEFAULT_WEIGHTS["mu"], "Weight of the regional variance energy (image or DSM inside vs outside).")
+    epsilon: float = field(DEFAULT_WEIGHTS["epsilon"], "Weight of the altitudinal variance energy (nDSM inside vs outside).")
+    min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
+    max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
+    min_area: float = field(20.0, "Smallest building region kept (m2).")
+    canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
+    max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
+    min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
+    edge_map: str = field("gradient", "Edge map of the GVF: 'canny' (blurred linked Canny edges of the DSM: walls) or 'gradient' (gradient magnitude, also strong on pitched roofs).")
+    edge_sigma: float = field(0.5, "Gaussian sigma of the edge map for the GVF (pixels); small keeps the two walls of narrow buildings apart.")
+    gvf_mu: float = field(0.2, "GVF diffusion weight.")
+    gvf_iterations: int = field(200, "Maximum GVF iterations.")
+    tau: float = field(0.5, "Time step of the semi-implicit snake iteration.")
+    max_step: float = field(1.0, "Largest external-force move per iteration (pixels).")
+    step_decay: float = field(0.9, "Factor applied to max_step after every resampling period (damps oscillations).")
+    max_iter: int = field(150, "Maximum snake iterations.")
+    tol: float = field(0.02, "Convergence: RMS vertex move per iteration below this (pixels).")
+    spacing: float = field(1.0, "Vertex spacing after resampling (pixels).")
+    resample_every: int = field(5, "Resample contours and update region statistics every N iterations.")
+    band: float = field(3.0, "Width of the outside band for region statistics (pixels).")
+    smooth: float = field(0.7, "Gaussian sigma applied to the region-term images (pixels; 0: none).")
+    simplify: float = field(0.5, "Douglas-Peucker tolerance of the output outlines (pixels; 0: none).")
+
+    def __post_init__(self):
+        for name in WEIGHT_NAMES:
+            w = getattr(self, name)
+            if not np.isfinite(w) or w < 0:
+                raise ConfigError(f"active_contour.{name}: must be >= 0, got {w}")
+        for name in ("tau", "spacing", "max_step", "tol", "band", "gvf_mu"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"active_contour.{name}: must be > 0, got {getattr(self, name)}")
+        for name in ("max_iter", "gvf_iterations", "resample_every", "min_edge_length"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"active_contour.{name}: must be >= 1, got {getattr(self, name)}")
+        if self.edge_map not in ("canny", "gradient"):
+            raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
+        if not 0 < self.step_decay <= 1:
+            raise ConfigError(f"active_contour.step_decay: must be in (0, 1], got {self.step_decay}")
+        if self.max_gap < 0 or self.min_area < 0 or self.simplify < 0 or self.smooth < 0:
+            raise ConfigError("active_contour.max_gap, min_area, simplify and smooth must be >= 0")
+
+    def with_weights(self, weights) -> ActiveContourConfig:
+        """A copy with the five weights from a mapping or a 5-sequence."""
+        return dataclasses.replace(self, **normalize_weights(weights))
+
+
+def normalize_weights(weights) -> dict:
+    """``{name: float}`` for the five weights from a mapping or a sequence in WEIGHT_NAMES order."""
+    if weights is None:
+        return dict(DEFAULT_WEIGHTS)
+    if isinstance(weights, dict):
+        unknown = sorted(set(weights) - set(WEIGHT_NAMES))
+        if unknown:
+            raise ConfigError(f"active_contour.{unknown[0]}: unknown weight; known: {', '.join(WEIGHT_NAMES)}")
+        out = dict(DEFAULT_WEIGHTS)
+        out.update({k: float(v) for k, v in weights.items()})
+    else:
+        values = [float(v) for v in weights]
+        if len(values) != len(WEIGHT_NAMES):
+            raise ConfigError(f"expected {len(WEIGHT_NAMES)} weights ({', '.join(WEIGHT_NAMES)}), got {len(values)}")
+        out = dict(zip(WEIGHT_NAMES, values, strict=True))
+    for k, v in out.items():
+        if not np.isfinite(v) or v < 0:
+            raise ConfigError(f"active_contour.{k}: must be >= 0, got {v}")
+    return out
+
+
+@dataclass(eq=False)
+class ContourScene:
+    """Everything the snakes need that does not depend on the five weights.
+
+    Attributes
+    ----------
+    contours : list of ndarray (M, 2)
+        Initial ``(row, col)`` contours, one per building region.
+    labels : ndarray of int32 (H, W)
+        The building regions they came from.
+    gvf : ndarray (2, H, W)
+        Gradient vector flow, magnitudes normalised to about <= 1.
+    image : ndarray (H, W)
+        Intensity of the regional term (grey orthoimage, or the DSM).
+    ndsm : ndarray (H, W)
+        Height above terrain, NaN filled.
+    """
+
+    contours: list
+    labels: np.ndarray
+    gvf: np.ndarray
+    image: np.ndarray
+    ndsm: np.ndarray
+
+
+def _grey(ortho, shape):
+    o = np.asarray(ortho, dtype=np.float64)
+    if o.ndim == 3:
+        o = o[:3].mean(axis=0) if o.shape[0] <= 4 else o.mean(axis=-1)
+    if o.shape != shape:
+        raise InputError(f"orthoimage shape {o.shape} differs from the DSM's {shape}; resample it onto the DSM grid")
+    return _filled(o)
+
+
+def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfig | None = None,
+                  gvf_callback=None) -> ContourScene:
+    """Initial contours, GVF field and region images of a DSM (weight-independent).
+
+    Parameters
+    ----------
+    dsm, ndsm : ndarray, shape (H, W)
+        Surface heights and heights above terrain (m); NaN for no data.
+    ortho : ndarray, shape (H, W) or (B, H, W), optional
+        Orthoimage on the same grid; its grey level drives the regional term
+        (the DSM does otherwise).
+    cell : float
+        Pixel size (m).
+    """
+    cfg = config or ActiveContourConfig()
+    z = _filled(dsm)
+    nd = np.asarray(ndsm, dtype=np.float64)
+    if nd.shape != z.shape:
+        raise InputError(f"dsm {z.shape} and ndsm {nd.shape} differ in shape")
+    if cell <= 0:
+        raise InputError(f"cell must be > 0, got {cell}")
+    nd = np.where(np.isfinite(nd), nd, 0.0)
+    edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
+    labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
+                              max_roughness=cfg.max_roughness, min_area=cfg.min_area, edges=edges)
+    contours = initial_contours(labels)
+    if cfg.edge_map == "canny":
+        f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0
+        f = f / f.max() if f.max() > 0 else f
+    else:
+        f = edge_map(z, sigma=cfg.edge_sigma)
+    g = gradient_vector_flow(f, mu=cfg.gvf_mu, max_iter=cfg.gvf_iterations, callback=gvf_callback)
+    mag = np.hypot(g[0], g[1])
+    scale = np.percentile(mag, 99.0)
+    if scale > 0:
+        g = g / scale
+        mag = mag / scale
+        big = mag > 1.0
+        g[:, big] /= mag[big]
+    image = z if ortho is None else _grey(ortho, z.shape)
+    if cfg.smooth > 0:
+        image = ndi.gaussian_filter(image, cfg.smooth)
+        nd = ndi.gaussian_filter(nd, cfg.smooth)
+    logger.info("%d initial contours", len(contours))
+    return ContourScene(contours, labels, g, image, nd)
+
+
+def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig | None = None,
+              callback=None) -> list:
+    """Evolve the scene's initial contours with the given weights; ``(row, col)`` contours."""
+    cfg = (config or ActiveContourConfig())
+    if weights is not None:
+        cfg = cfg.with_weights(weights)
+    return evolve_contours(
+        scene.contours, scene.gvf, scene.image, scene.ndsm,
+        alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
+        tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
+        spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band,
+        callback=callback)
+
+
+def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:
+    """Valid shapely polygons (local metres) of closed ``(row, col)`` contours.
+
+    Self-intersections are repaired (the largest polygonal part is kept);
+    ``simplify`` is in pixels; polygons smaller than ``min_area`` m2 are dropped.
+    Returns one entry per contour (``None`` for dropped ones).
+    """
+    import shapely
+
+    out = []
+    scale = float(np.sqrt(abs(np.linalg.det(frame.m[:, :2])))) * frame.xy_unit
+    for c in contours:
+        if c is None or len(c) < 3:
+            out.append(None)
+            continue
+        poly = shapely.Polygon(frame.to_local(c))
+        if not poly.is_valid:
+            fixed = shapely.make_valid(poly)
+            parts = [g for g in getattr(fixed, "geoms", [fixed]) if g.geom_type == "Polygon"]
+            parts += [p for g in getattr(fixed, "geoms", []) if g.geom_type == "MultiPolygon" for p in g.geoms]
+            poly = max(parts, key=lambda p: p.area) if parts else None
+        if poly is not None and simplify > 0:
+            poly = poly.simplify(simplify * scale, preserve_topology=True)
+        if poly is None or poly.is_empty or poly.area <= min_area:
+            out.append(None)
+        else:
+            out.append(poly)
+    return out
+
+
+def active_contour_outlines(dsm, ndsm, *, ortho=None, weights=None, cell=1.0, transform=None,
+                            origin=(0.0, 0.0), xy_unit=1.0,
+                            config: ActiveContourConfig | None = None, callback=None) -> list:
+    """Building outlines from a DSM with GVF + region-energy snakes.
+
+    Parameters
+    ----------
+    dsm, ndsm : ndarray, shape (H, W)
+        Surface heights and heights above terrain (m), NaN for no data.
+    ortho : ndarray, shape (H, W) or (B, H, W), optional
+        Orthoimage on the DSM grid for the regional variance energy.
+    weights : mapping or 5-sequence, optional
+        ``alpha, beta, gamma, mu, epsilon``; default: those of ``config``.
+    cell : float
+        Pixel size (m); used for areas and, without ``transform``, coordinates.
+    transform : affine.Affine, optional
+        Pixel-corner to world transform of the raster; with ``origin`` and
+        ``xy_unit`` it places outlines in the local metric frame (see
+        :class:`PixelFrame`).
+    config : ActiveContourConfig, optional
+    callback : callable, optional
+        ``callback(iteration, contours)`` from the snake iteration.
+
+    Returns
+    -------
+    list of shapely.Polygon
+        One outline per building found, in local metres.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> dsm = np.zeros((40, 40)); dsm[10:30, 12:28] = 8.0
+    >>> polys = active_contour_outlines(dsm, dsm, cell=1.0)
+    >>> len(polys)
+    1
+    """
+    cfg = config or ActiveContourConfig()
+    if weights is not None:
+        cfg = cfg.with_weights(weights)
+    scene = prepare_scene(dsm, ndsm, ortho=ortho, cell=cell, config=cfg)
+    contours = run_scene(scene, config=cfg, callback=callback)
+    frame = PixelFrame(transform, cell=cell, origin=origin, xy_unit=xy_unit)
+    polys = contours_to_polygons(contours, frame, simplify=cfg.simplify, min_area=0.5 * cfg.min_area)
+    return [p for p in polys if p is not None]

@@ -1,0 +1,192 @@
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lidar2city.contour import (
+    ActiveContourConfig,
+    PixelFrame,
+    active_contour_outlines,
+    evaluation_domain,
+    evolve_contours,
+    gradient_vector_flow,
+    linked_edges,
+    prepare_scene,
+    rasterize_polygons,
+    resample_contour,
+)
+from lidar2city.contour.snake import _labels
+from lidar2city.errors import ConfigError, InputError
+
+# a 28 x 30 px building, 8 m high, on flat ground with noise; its outline in
+# (row, col) pixel-centre coordinates runs half a pixel outside the pixels
+ROWS, COLS = slice(15, 45), slice(12, 40)
+TRUTH = shapely.box(11.5, 14.5, 39.5, 44.5)  # (x = col, y = row)
+
+
+def _scene(seed=0):
+    rng = np.random.default_rng(seed)
+    dsm = np.zeros((60, 60))
+    dsm[ROWS, COLS] = 8.0
+    dsm += rng.normal(0.0, 0.2, dsm.shape)
+    return dsm, prepare_scene(dsm, dsm, cell=1.0)
+
+
+def _iou(contour):
+    p = shapely.make_valid(shapely.Polygon(contour[:, ::-1]))
+    return p.intersection(TRUTH).area / p.union(TRUTH).area
+
+
+@pytest.mark.parametrize("corners", [
+    [[18, 15], [18, 36], [41, 36], [41, 15]],   # inside, 3 px short of every edge
+    [[12, 9], [12, 43], [48, 43], [48, 9]],     # outside, 3 px beyond
+    [[17, 14], [17, 42], [47, 42], [47, 14]],   # shifted by 2-3 px
+])
+@pytest.mark.parametrize("weights", [
+    (0.2, 0.2, 1.0, 0.0, 0.0),   # GVF alone
+    (0.2, 0.2, 0.0, 1.0, 0.0),   # regional variance alone
+    (0.2, 0.2, 1.0, 1.0, 1.0),   # all terms
+])
+def test_snake_converges_onto_rectangle(corners, weights):
+    _, sc = _scene()
+    rng = np.random.default_rng(1)
+    init = resample_contour(np.array(corners, float), 1.0)
+    init = init + rng.normal(0.0, 0.5, init.shape)
+    assert _iou(init) < 0.8
+    a, b, g, m, e = weights
+    out = evolve_contours([init], sc.gvf, sc.image, sc.ndsm, alpha=a, beta=b, gamma=g, mu=m,
+                          epsilon=e, max_iter=300)[0]
+    assert _iou(out) > 0.9
+
+
+def test_gvf_points_toward_a_known_edge():
+    # edge map: a vertical line at column 20
+    f = np.zeros((41, 41))
+    f[:, 20] = 1.0
+    g = gradient_vector_flow(f, mu=0.2, max_iter=2000)
+    rows = slice(5, 36)
+    left, right = g[1][rows, 5:18], g[1][rows, 23:36]
+    assert (left > 0).all()      # columns increase toward the edge
+    assert (right < 0).all()
+    assert np.abs(g[0][rows, 5:36]).max() < 1e-6 + 0.05 * np.abs(g[1][rows, 5:36]).max()
+    # the flow reaches far from the edge (plain gradients are zero there)
+    assert abs(g[1][20, 8]) > 0
+
+
+def test_gvf_of_a_square_points_to_its_outline():
+    f = np.zeros((50, 50))
+    f[15, 15:35] = f[34, 15:35] = f[15:35, 15] = f[15:35, 34] = 1.0
+    g = gradient_vector_flow(f, mu=0.2, max_iter=3000)
+    # just outside the right side the flow points left, inside it points right
+    assert g[1][25, 40] < 0 and g[1][25, 30] > 0
+    assert g[0][8, 25] > 0 and g[0][19, 25] < 0
+
+
+def test_outlines_of_a_synthetic_building_in_metres():
+    dsm, _ = _scene()
+    polys = active_contour_outlines(dsm, dsm, cell=0.5, transform=(0.5, 0, 100.0, 0, -0.5, 200.0),
+                                    origin=(100.0, 200.0))
+    assert len(polys) == 1
+    # the building spans cols 12..40, rows 15..45 of 0.5 m pixels
+    truth = shapely.box(6.0, -22.5, 20.0, -7.5)
+    p = polys[0]
+    assert p.intersection(truth).area / p.union(truth).area > 0.9
+
+
+def test_outlines_do_not_mutate_inputs_and_ortho_is_used():
+    dsm, _ = _scene()
+    before = dsm.copy()
+    ortho = np.where(dsm > 4, 200.0, 50.0)
+    polys = active_contour_outlines(dsm, dsm, ortho=ortho, cell=1.0)
+    assert np.array_equal(dsm, before)
+    assert len(polys) == 1
+    with pytest.raises(InputError):
+        active_contour_outlines(dsm, dsm, ortho=ortho[:10], cell=1.0)
+
+
+def test_flat_dsm_has_no_building():
+    z = np.full((30, 30), 5.0)
+    assert active_contour_outlines(z, np.zeros_like(z)) == []
+
+
+def test_trees_removed_by_roughness():
+    rng = np.random.default_rng(4)
+    dsm = np.zeros((60, 60))
+    dsm[10:30, 10:30] = 8.0                       # flat roof
+    dsm[35:55, 35:55] = 8.0 + rng.uniform(-3, 3, (20, 20))  # rough canopy
+    cfg = ActiveContourConfig(max_roughness=0.5)
+    sc = prepare_scene(dsm, dsm, cell=1.0, config=cfg)
+    assert len(sc.contours) == 1
+    assert sc.contours[0][:, 0].max() < 31
+
+
+def test_linked_edges_close_small_gaps_and_drop_short_chains():
+    z = np.zeros((40, 40))
+    z[10:30, 10:30] = 6.0
+    e = linked_edges(z, min_length=4)
+    assert e.any()
+    z2 = z.copy()
+    z2[2, 2] = 6.0   # a one-pixel spike gives a short chain
+    e2 = linked_edges(z2, min_length=12)
+    assert not e2[:6, :6].any()
+
+
+def test_weights_validated():
+    with pytest.raises(ConfigError):
+        ActiveContourConfig(alpha=-1.0)
+    with pytest.raises(ConfigError):
+        ActiveContourConfig().with_weights([1, 2, 3])
+    with pytest.raises(ConfigError):
+        ActiveContourConfig().with_weights({"delta": 1.0})
+    assert ActiveContourConfig().with_weights([0, 1, 2, 3, 0]).mu == 3
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(-5, 35), st.floats(-5, 35)), min_size=3, max_size=10))
+def test_scanline_labels_match_even_odd_polygon_fill(pts):
+    from skimage.draw import polygon
+
+    c = np.array(pts, dtype=np.float64)
+    lab = _labels([c], (30, 30))
+    rr, cc = polygon(c[:, 0], c[:, 1], (30, 30))
+    ref = np.zeros((30, 30), dtype=np.int32)
+    ref[rr, cc] = 1
+    # pixel centres on the outline itself are a matter of convention: skip them
+    ring = shapely.LinearRing(np.vstack([c[:, ::-1], c[:1, ::-1]])) if len(np.unique(c, axis=0)) > 2 else None
+    for r, col in zip(*np.nonzero(lab != ref), strict=True):
+        assert ring is None or ring.distance(shapely.Point(col, r)) < 1e-6
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(-50, 50), st.floats(-50, 50), st.integers(8, 60))
+def test_resample_keeps_ring_closed_and_spacing(dx, dy, n):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.column_stack([10 * np.sin(t) + dy, 10 * np.cos(t) + dx])
+    out = resample_contour(ring, 1.0)
+    seg = np.hypot(*np.diff(np.vstack([out, out[:1]]), axis=0).T)
+    assert len(out) >= 8
+    assert seg.max() < 1.2 and seg.min() > 0.5
+
+
+def test_pixel_frame_round_trip_and_rasterize():
+    fr = PixelFrame((2.0, 0, 1000.0, 0, -2.0, 5000.0), origin=(1000.0, 5000.0))
+    rc = np.array([[0.0, 0.0], [3.5, 7.25]])
+    assert np.allclose(fr.to_pixel(fr.to_local(rc)), rc)
+    assert np.allclose(fr.to_local([0, 0]), [1.0, -1.0])
+    mask = rasterize_polygons([shapely.box(2.0, -8.0, 6.0, -4.0)], (10, 10), fr)
+    assert mask.sum() == 4 and mask[2:4, 1:3].all()
+
+
+def test_evaluation_domain_excludes_border_and_cut_objects():
+    ref = np.zeros((40, 40), bool)
+    ref[10:15, 10:15] = True
+    ref[20:25, 20:28] = True
+    objects = ref.copy()
+    objects[30:40, 0:8] = True       # a building cut by the raster edge
+    dom = evaluation_domain(ref, objects, buffer=20, edge_margin=2)
+    assert dom[12, 12] and dom[22, 22]
+    assert not dom[0].any() and not dom[:, -1].any()
+    assert not dom[30:38, 2:8].any()
+    with pytest.raises(InputError):
+        evaluation_domain(np.zeros((5, 5), bool))
