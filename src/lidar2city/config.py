@@ -31,6 +31,8 @@ __all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict
 
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
+    "active_contour": "lidar2city.contour.outlines:ActiveContourConfig",
+    "classify": "lidar2city.classify:ClassifyConfig",
     "dsm_buildings": "lidar2city.segment.dsm:BuildingMaskConfig",
     "dsm_dtm": "lidar2city.segment.dsm:DtmConfig",
     "dsm_lod1": "lidar2city.tools.dsm:Lod1DsmConfig",

@@ -25,7 +25,8 @@ def _check_xyz(xyz) -> np.ndarray:
 
 def low_outliers(xyz, *, radius: float = 5.0, depth: float = 1.5, iterations: int = 2,
                  block: float = 10.0, block_depth: float = 6.0,
-                 block_percentile: float = 25.0, block_reach: int = 2) -> np.ndarray:
+                 block_percentile: float = 25.0, block_reach: int = 2,
+                 min_neighbors: int = 3) -> np.ndarray:
     """Mask of low outliers: isolated low points and small clusters deep below the terrain.
 
     **Isolated points.**
@@ -33,8 +34,8 @@ def low_outliers(xyz, *, radius: float = 5.0, depth: float = 1.5, iterations: in
     only the lowest point can be an outlier; it is one when it lies more than
     ``depth`` below every other point of its cell and of the 8 neighbouring
     cells (so the reference neighbourhood reaches from ``radius`` to
-    ``2 * radius`` away). A point with no other point around it is kept: it
-    cannot be judged. The test is repeated ``iterations`` times without the
+    ``2 * radius`` away). A point with fewer than ``min_neighbors`` other
+    points around it is kept: it cannot be judged. The test is repeated ``iterations`` times without the
     outliers found so far, which also catches a low point whose only
     neighbour below ``depth`` was another outlier.
 
@@ -65,6 +66,8 @@ def low_outliers(xyz, *, radius: float = 5.0, depth: float = 1.5, iterations: in
         Percentile (0-100) of each block's heights taken as its level.
     block_reach : int
         Blocks searched on each side (>= 0).
+    min_neighbors : int
+        Other points needed in the 3 x 3 cells around a point to judge it.
 
     Returns
     -------
@@ -131,7 +134,10 @@ def low_outliers(xyz, *, radius: float = 5.0, depth: float = 1.5, iterations: in
                 if dr == 1 and dc == 1:
                     continue
                 np.minimum(ref, nb[dr:dr + h, dc:dc + w], out=ref)
-        cell_out = np.isfinite(ref) & (m1 < ref - depth)
+        cnt = np.zeros((h + 2, w + 2))
+        cnt[1:-1, 1:-1] = np.bincount(flat[live], minlength=h * w).reshape(h, w)
+        around = sum(cnt[dr:dr + h, dc:dc + w] for dr in (0, 1, 2) for dc in (0, 1, 2)) - 1
+        cell_out = np.isfinite(ref) & (m1 < ref - depth) & (around >= min_neighbors)
         new = at_min & cell_out.ravel()[flat]
         if not new.any():
             break

@@ -111,7 +111,7 @@ def roof_type(planes, n_step_edges=0, *, flat_slope=5.0) -> str:
             return "gable"
     if len(used) >= 4 and np.all(slopes >= flat_slope) and steps == 0:
         q = np.round((az - az[0]) / 90.0) % 4
-        dev = np.abs(((az - az[0]) - np.round((az - az[0]) / 90.0) * 90))
+        dev = np.abs((az - az[0]) - np.round((az - az[0]) / 90.0) * 90)
         if len(np.unique(q)) == 4 and np.all(dev < 20) and len(used) == 4:
             return "hip"
     return "complex"

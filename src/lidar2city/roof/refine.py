@@ -175,7 +175,7 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     inter_lines: dict = {}
     wall_lines: dict = {}
     interior_of_intersection = set()
-    for (i, j), v in types.items():
+    for v in types.values():
         coords_parts = [np.asarray(g.coords) for g in _line_parts(v["shared"])]
         for coords in coords_parts:
             ends = [coords[0], coords[-1]]

@@ -187,7 +187,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         levels[e[1]].append(ground_z)
     # unify levels per vertex
     xy_of = {}
-    for fi, rs in enumerate(rings):
+    for rs in rings:
         for r in rs:
             for p in r:
                 xy_of[_key(p)] = p

@@ -172,7 +172,6 @@ def boundary_chains(grid: LabelGrid):
     eid = np.concatenate([np.arange(len(u)), np.arange(len(u))])
     srt = np.argsort(order_u, kind="stable")
     starts = np.searchsorted(order_u[srt], np.arange(n_nodes + 1))
-    nbr_node = order_v[srt]
     nbr_edge = eid[srt]
     pair_key = pairs[:, 0] * 1_000_003 + pairs[:, 1]
     # a node is a junction when its degree is not 2, or its two edges separate different pairs

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..datamodel import ASPRS
-from ..errors import ConfigError, DependencyError, EmptyInputError, FileFormatError
+from ..errors import ConfigError, EmptyInputError, FileFormatError
 from ..io.las import read_las, write_las
 
 logger = logging.getLogger(__name__)
@@ -53,25 +53,46 @@ def classify_config(source=None):
     return build_stage("classify", section, cls=ClassifyConfig)
 
 
-def _ground(cloud, *, ground_from_file: bool, method: str):
+def _ground(cloud, *, ground_from_file: bool, method: str, config=None):
     if ground_from_file:
         cls = cloud.get("classification")
         if cls is None or not (cls == ASPRS.GROUND).any():
             raise EmptyInputError(
                 "--ground-from-file: the input has no ground (class 2) points to reuse")
         return cls == ASPRS.GROUND
-    try:
-        from ..ground import ground_mask
-    except ImportError as exc:
-        if isinstance(exc, ModuleNotFoundError) and exc.name not in (None, "lidar2city.ground"):
-            raise  # a broken dependency inside the ground package: show it
-        raise DependencyError(
-            "the ground filter (lidar2city.ground) is not available in this installation; "
-            "pass --ground-from-file to reuse the input's class 2 points") from None
-    ground = np.asarray(ground_mask(cloud.xyz, method=method), dtype=bool)
+    from ..ground import ground_mask
+
+    params = {} if config is None else {k: v for k, v in dataclasses.asdict(config).items()
+                                        if k != "method"}
+    ground = np.asarray(ground_mask(cloud.xyz, method=method, **params), dtype=bool)
     if not ground.any():
         raise EmptyInputError("the ground filter found no ground point in the input")
     return ground
+
+
+def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str = "smrf",
+                   config=None, ground_config=None) -> np.ndarray:
+    """ASPRS classes of every point of a :class:`PointCloud`: ground filter, then classification.
+
+    The cloud's returns and colours are used when present. This is what
+    ``classify``, ``footprints`` and ``reconstruct`` run on a raw tile.
+    """
+    from ..classify import classify_points
+
+    cfg = config if config is not None else classify_config(None)
+    ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method,
+                     config=ground_config)
+    rgb = None
+    if all(k in cloud.attributes for k in ("red", "green", "blue")):
+        rgb = np.column_stack([cloud.attributes[k] for k in ("red", "green", "blue")])
+        if not rgb.any():
+            rgb = None  # formats with colour fields left at zero
+    return classify_points(
+        cloud.xyz, ground,
+        return_number=cloud.get("return_number"),
+        number_of_returns=cloud.get("number_of_returns"),
+        rgb=rgb, config=cfg,
+    )
 
 
 def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
@@ -101,25 +122,13 @@ def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
     ------
     FileFormatError, EmptyInputError, InputError, ConfigError, DependencyError
     """
-    from ..classify import classify_points
-
     cfg = classify_config(config)
     t0 = time.perf_counter()
     tile = read_las(src, crs=crs)
     cloud = tile.point_cloud()
     cloud.require_points(str(src))
-    ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method)
-    rgb = None
-    if all(k in cloud.attributes for k in ("red", "green", "blue")):
-        rgb = np.column_stack([cloud.attributes[k] for k in ("red", "green", "blue")])
-        if not rgb.any():
-            rgb = None  # formats with colour fields left at zero
-    classes = classify_points(
-        cloud.xyz, ground,
-        return_number=cloud.get("return_number"),
-        number_of_returns=cloud.get("number_of_returns"),
-        rgb=rgb, config=cfg,
-    )
+    classes = classify_cloud(cloud, ground_from_file=ground_from_file,
+                             ground_method=ground_method, config=cfg)
     write_las(dst, tile, classification=classes)
     values, counts = np.unique(classes, return_counts=True)
     summary = {

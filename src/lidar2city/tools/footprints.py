@@ -58,20 +58,10 @@ def _building_classes(cloud, building_class):
     cls = cloud.get("classification")
     if cls is not None and np.any(cls == building_class):
         return cls
-    try:
-        from ..classify import classify_points
-        from ..ground import ground_mask
-    except ImportError:
-        raise InputError(f"input has no building class ({building_class}): "
-                         "run lidar2city classify first") from None
+    from .classify import classify_cloud
+
     logger.info("no building class in the input: classifying the points")
-    extra = {}
-    if cloud.get("return_number") is not None and cloud.get("number_of_returns") is not None:
-        extra = {"return_number": cloud.get("return_number"),
-                 "number_of_returns": cloud.get("number_of_returns")}
-    if all(cloud.get(k) is not None for k in ("red", "green", "blue")):
-        extra["rgb"] = np.column_stack([cloud.get(k) for k in ("red", "green", "blue")])
-    cls = np.asarray(classify_points(cloud.xyz, ground_mask(cloud.xyz), **extra))
+    cls = np.asarray(classify_cloud(cloud))
     if cls.shape != (len(cloud),) or not np.any(cls == building_class):
         raise InputError(f"no building points (class {building_class}) found after classification")
     return cls

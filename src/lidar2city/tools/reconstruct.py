@@ -175,17 +175,23 @@ def point_roles(cloud, config):
     """Boolean masks ``(building, ground)`` of the cloud's points.
 
     Uses the classification the input carries (ASPRS 6 building, 2 ground by
-    default; ``config.building_classes`` / ``ground_classes``).
+    default; ``config.building_classes`` / ``ground_classes``); a raw tile
+    without building points is ground-filtered and classified first
+    (:func:`lidar2city.tools.classify.classify_cloud`).
 
     Raises
     ------
-    InputError
-        When the input has no building class. (Plug-in point: classify the
-        points here once :mod:`lidar2city.classify` exists.)
+    EmptyInputError
+        When no building point is found even after classification.
     """
     cls = cloud.get("classification")
     if cls is None or not np.isin(cls, config.building_classes).any():
-        raise InputError("input has no building class: run lidar2city classify first")
+        from .classify import classify_cloud
+
+        logger.info("no building class in the input: filtering ground and classifying")
+        cls = classify_cloud(cloud)
+        if not np.isin(cls, config.building_classes).any():
+            raise EmptyInputError("no building point found in the input, even after classification")
     return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes)
 
 
