@@ -1,0 +1,798 @@
+"""Floating models: parametric building primitives fitted to footprints and LiDAR.
+
+Each primitive is a small model with a datum point (``x``, ``y`` the plan
+centre, ``z`` the ground height), a pose (translation and ``azimuth``, the
+direction of the length / ridge axis in degrees counter-clockwise from +x;
+tilt and swing fixed at 0) and shape parameters:
+
+========  ==========================================================
+box       length, width, height (flat roof above the datum)
+gable     + roof_height (ridge above the eaves; ridge along the length)
+hip       + roof_height, hip_length (horizontal run of the end faces)
+shed      + roof_height (rise from the low eave at -width/2 to the
+          high eave at +width/2; slope = atan(roof_height / width))
+prism     the footprint polygon (vertices fitted) and height
+========  ==========================================================
+
+``height`` is always the eave height above the datum (for flat roofs the
+roof height). Fitting runs in two steps, as in the floating-model method:
+
+1. **Plan (LSMDF)**: the footprint boundary is resampled at a fixed interval
+   and the plan parameters minimise the squared distances of the samples
+   (within a buffer) to the model edges (:mod:`lidar2city.fit.lsm`).
+2. **Heights**: the datum from a DTM or ground points; the roof parameters
+   from the building's points transformed into the model's local frame
+   ``(u, v, z)``: flat roofs from the refined histogram mode of the heights,
+   sloped roofs by least squares of the points' perpendicular distances to
+   the roof faces (the eave / ridge profile), again keeping only points within
+   a buffer of the model and iterating.
+
+Standard deviations come from ``(J^T J)^-1 s0^2`` of each step; the eave
+height's combines the datum's.
+
+:func:`fit_best` fits every candidate and picks the one with the smallest
+Bayesian information criterion (see its docstring); :func:`fit_primitive`
+is the semi-automatic entry point (a chosen primitive from approximate
+parameters).
+
+References
+----------
+The floating-model seed (parametric primitives fitted by least-squares model
+matching to map data, eq. 1-2); Schwarz, G. (1978), Estimating the dimension
+of a model, *Annals of Statistics* 6(2) — the BIC.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from ..config import field
+from ..datamodel import Solid, Surface
+from ..errors import FitError
+from .lsm import (
+    fit_polygon,
+    fit_rectangle,
+    polygon_rings,
+    rectangle_approx,
+    rectangle_corners,
+    resample_rings,
+    segment_distances,
+    solve_least_squares,
+)
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "PrimitivesConfig",
+    "FitFailure",
+    "Primitive",
+    "BoxPrimitive",
+    "GablePrimitive",
+    "HipPrimitive",
+    "ShedPrimitive",
+    "PrismPrimitive",
+    "PRIMITIVES",
+    "fit_primitive",
+    "fit_best",
+    "histogram_mode",
+    "bilinear",
+    "datum_from_ground",
+    "main_polygon",
+]
+
+
+@dataclass(frozen=True)
+class PrimitivesConfig:
+    """Stage ``primitives``: floating-model fitting of one primitive per footprint."""
+
+    candidates: tuple = field(("box", "gable", "hip", "shed", "prism"),
+                              "primitives tried by the automatic choice")
+    plan_interval: float = field(0.5, "footprint boundary resampling interval, metres")
+    plan_buffer: float = field(1.0, "footprint samples farther than this from the model edges are ignored, metres")
+    roof_buffer: float = field(1.0, "roof points farther than this from the roof faces are ignored, metres")
+    roof_loss_scale: float = field(0.2, "soft-L1 scale of the roof residuals (chimneys, dormers), metres")
+    footprint_sigma: float = field(0.1, "a-priori accuracy of footprint vertices, metres (model choice)")
+    roof_sigma_floor: float = field(0.02, "smallest roof residual sigma used by the model choice, metres")
+    prism_simplify: float = field(0.2, "Douglas-Peucker tolerance of the prism's approximate polygon, metres")
+    mode_bin: float = field(0.1, "histogram bin of the flat-roof height mode, metres")
+    ground_buffer: float = field(5.0, "ground points within this distance outside a footprint give its datum, metres")
+    ground_percentile: float = field(50.0, "percentile of those ground heights taken as datum (lower for unclassified points)")
+    min_points: int = field(5, "fewest roof points for a fit")
+    min_hip_length: float = field(0.5, "hips shorter than this (or than 3 std) are not significant, metres")
+
+    def __post_init__(self):
+        unknown = sorted(set(self.candidates) - set(PRIMITIVES))
+        if unknown or not self.candidates:
+            raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
+        for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale",
+                     "footprint_sigma", "roof_sigma_floor", "mode_bin", "ground_buffer"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.ground_percentile <= 100:
+            raise ValueError(f"ground_percentile must be in [0, 100], got {self.ground_percentile}")
+
+
+class FitFailure:
+    """A failed fit: falsy, carrying the primitive kind and the reason."""
+
+    def __init__(self, kind: str, reason: str):
+        self.kind = kind
+        self.reason = reason
+
+    def __bool__(self) -> bool:
+        return False
+
+    def __repr__(self) -> str:
+        return f"FitFailure({self.kind!r}, {self.reason!r})"
+
+
+# ---------------------------------------------------------------------------
+# helpers
+
+
+def histogram_mode(z, *, bin: float = 0.1, window: float | None = None) -> float:
+    """The mode of heights: the fullest histogram bin, refined by the mean around it.
+
+    Parameters
+    ----------
+    z : ndarray (N,)
+    bin : float
+        Bin width (metres). The counts are smoothed with a [1, 2, 1] kernel.
+    window : float, optional
+        Half-width of the refinement window (default ``3 * bin``); the mean of
+        the heights within it is taken, twice.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    if len(z) == 0:
+        raise FitError("no heights for a mode")
+    window = 3 * bin if window is None else window
+    lo = z.min()
+    nb = int((z.max() - lo) / bin) + 1
+    counts = np.bincount(((z - lo) / bin).astype(np.int64), minlength=nb).astype(float)
+    smooth = np.convolve(np.pad(counts, 1), [1.0, 2.0, 1.0], mode="valid")
+    m = lo + (np.argmax(smooth) + 0.5) * bin
+    for _ in range(2):
+        sel = np.abs(z - m) <= window
+        if sel.any():
+            m = float(z[sel].mean())
+    return float(m)
+
+
+def bilinear(grid, rows, cols) -> np.ndarray:
+    """Bilinear interpolation of ``grid`` (H, W) at fractional pixel-centre indices.
+
+    ``rows``/``cols`` are in pixel-centre units (0 = centre of the first pixel);
+    outside the grid or next to NaN gives NaN.
+    """
+    grid = np.asarray(grid, dtype=np.float64)
+    rows = np.asarray(rows, dtype=np.float64)
+    cols = np.asarray(cols, dtype=np.float64)
+    h, w = grid.shape
+    r0 = np.floor(rows).astype(np.int64)
+    c0 = np.floor(cols).astype(np.int64)
+    fr, fc = rows - r0, cols - c0
+    r0c, c0c = np.clip(r0, 0, h - 1), np.clip(c0, 0, w - 1)
+    r1c, c1c = np.clip(r0 + 1, 0, h - 1), np.clip(c0 + 1, 0, w - 1)
+    out = (grid[r0c, c0c] * (1 - fr) * (1 - fc) + grid[r0c, c1c] * (1 - fr) * fc
+           + grid[r1c, c0c] * fr * (1 - fc) + grid[r1c, c1c] * fr * fc)
+    outside = (rows < -0.5) | (cols < -0.5) | (rows > h - 0.5) | (cols > w - 0.5)
+    return np.where(outside, np.nan, out)
+
+
+def datum_from_ground(ground_z, *, percentile: float = 50.0) -> tuple[float, float]:
+    """Datum height and its standard deviation from ground heights around a building.
+
+    The ``percentile`` of the heights; the std is the spread (1.4826 MAD)
+    over sqrt(n), times 1.2533 (efficiency of the median).
+    """
+    g = np.asarray(ground_z, dtype=np.float64)
+    if len(g) == 0:
+        raise FitError("no ground heights for the datum")
+    z = float(np.percentile(g, percentile))
+    mad = 1.4826 * float(np.median(np.abs(g - np.median(g))))
+    return z, 1.2533 * mad / math.sqrt(len(g))
+
+
+def main_polygon(geom):
+    """The polygon of a footprint (the largest part of a MultiPolygon)."""
+    if geom is None or geom.is_empty:
+        raise FitError("empty footprint")
+    if geom.geom_type == "MultiPolygon":
+        return max(geom.geoms, key=lambda g: g.area)
+    if geom.geom_type != "Polygon":
+        raise FitError(f"footprint is a {geom.geom_type}, not a polygon")
+    return geom
+
+
+def _frame(xy, x, y, az_deg):
+    a = math.radians(az_deg)
+    dx, dy = xy[:, 0] - x, xy[:, 1] - y
+    return dx * math.cos(a) + dy * math.sin(a), -dx * math.sin(a) + dy * math.cos(a)
+
+
+def _to_world(u, v, x, y, az_deg):
+    a = math.radians(az_deg)
+    return x + u * math.cos(a) - v * math.sin(a), y + u * math.sin(a) + v * math.cos(a)
+
+
+def _trunc_rss(r, c):
+    return float(np.minimum(np.asarray(r) ** 2, c * c).sum())
+
+
+# ---------------------------------------------------------------------------
+# primitives
+
+
+class Primitive:
+    """Base of the fitted primitives.
+
+    Attributes
+    ----------
+    params : dict of str to float
+        Parameter values (metres, degrees), see the module docstring.
+    std : dict of str to float
+        Their standard deviations.
+    info : dict
+        Fit statistics: ``residual_rmse`` (roof points used, metres),
+        ``plan_rmse`` (footprint samples used, metres), ``iterations``,
+        ``n_points``, ``n_samples``, ``bic``.
+    """
+
+    kind: ClassVar[str] = ""
+    roof_names: ClassVar[tuple] = ()
+
+    def __init__(self, params: dict, std: dict | None = None, info: dict | None = None):
+        self.params = dict(params)
+        self.std = dict(std or {})
+        self.info = dict(info or {})
+
+    def __bool__(self) -> bool:
+        return True
+
+    def __repr__(self) -> str:
+        p = ", ".join(f"{k}={v:.3f}" for k, v in self.params.items())
+        return f"{type(self).__name__}({p})"
+
+    # geometry ------------------------------------------------------------
+    def outline(self) -> np.ndarray:
+        """Plan outline (counter-clockwise, open), shape (K, 2)."""
+        p = self.params
+        return rectangle_corners(p["x"], p["y"], p["azimuth"], p["length"], p["width"])
+
+    def roof_z(self, xy) -> tuple[np.ndarray, np.ndarray]:
+        """Roof height and roof slope (tan) at plan positions (N, 2)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        p = self.params
+        u, v = _frame(xy, p["x"], p["y"], p["azimuth"])
+        q = np.array([p["z"] + p["height"]] + [p[n] for n in self.roof_names])
+        return self._roof(q, u, v, p["length"], p["width"])
+
+    @staticmethod
+    def _roof(q, u, v, length, width):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def residuals(self, points) -> np.ndarray:
+        """Signed perpendicular distances of points (N, 3) to the roof faces (above +)."""
+        points = np.asarray(points, dtype=np.float64)
+        zr, s = self.roof_z(points[:, :2])
+        return (points[:, 2] - zr) / np.sqrt(1.0 + s * s)
+
+    def _local_vertices(self) -> np.ndarray:
+        """Vertices in the (u, v, z) frame: base 0-3, eaves 4-7, ridge 8-9 (or apex 8)."""
+        raise NotImplementedError
+
+    def _faces(self) -> list[tuple[str, list[int]]]:
+        raise NotImplementedError
+
+    def corners(self) -> np.ndarray:
+        """3-D corners of the model (the solid's vertices), shape (K, 3)."""
+        return self.to_solid().vertices
+
+    def to_solid(self) -> Solid:
+        """The closed solid: shared vertices, outward counter-clockwise faces, semantics."""
+        p = self.params
+        luv = self._local_vertices()
+        x, y = _to_world(luv[:, 0], luv[:, 1], p["x"], p["y"], p["azimuth"])
+        verts = np.column_stack([x, y, luv[:, 2]])
+        surfaces = [Surface([np.asarray(f, dtype=np.int64)], sem) for sem, f in self._faces()]
+        return Solid(verts, surfaces)
+
+    def derived(self) -> dict:
+        """Derived quantities (roof slope in degrees...)."""
+        return {}
+
+
+class _Rectangular(Primitive):
+    """Primitives on a rectangular plan (x, y, azimuth, length, width)."""
+
+    def _base(self):
+        p = self.params
+        ln, wd, z0, ze = p["length"], p["width"], p["z"], p["z"] + p["height"]
+        uv = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]) * [ln, wd]
+        return np.vstack([np.column_stack([uv, np.full(4, z0)]),
+                          np.column_stack([uv, np.full(4, ze)])])
+
+    def _walls(self, ends=None):
+        ends = ends or {}
+        walls = []
+        for i in range(4):
+            j = (i + 1) % 4
+            walls.append(("WallSurface", [i, j, 4 + j] + ends.get(i, []) + [4 + i]))
+        return walls
+
+
+class BoxPrimitive(_Rectangular):
+    """A box: rectangle plan, flat roof at ``height`` above the datum."""
+
+    kind = "box"
+    roof_names = ()
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        return np.full(u.shape, q[0]), np.zeros(u.shape)
+
+    def _local_vertices(self):
+        return self._base()
+
+    def _faces(self):
+        return [("GroundSurface", [0, 3, 2, 1])] + self._walls() + [("RoofSurface", [4, 5, 6, 7])]
+
+
+class GablePrimitive(_Rectangular):
+    """A gable-roof house: ridge along the length, ``roof_height`` above the eaves."""
+
+    kind = "gable"
+    roof_names = ("roof_height",)
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        s = 2.0 * q[1] / width
+        return q[0] + q[1] - s * np.abs(v), np.full(u.shape, s)
+
+    def _local_vertices(self):
+        p = self.params
+        zr = p["z"] + p["height"] + p["roof_height"]
+        ridge = np.array([[-p["length"] / 2, 0.0, zr], [p["length"] / 2, 0.0, zr]])
+        return np.vstack([self._base(), ridge])
+
+    def _faces(self):
+        return ([("GroundSurface", [0, 3, 2, 1])] + self._walls({1: [9], 3: [8]})
+                + [("RoofSurface", [4, 5, 9, 8]), ("RoofSurface", [6, 7, 8, 9])])
+
+    def derived(self):
+        p = self.params
+        return {"roof_slope": math.degrees(math.atan2(2 * p["roof_height"], p["width"]))}
+
+
+class HipPrimitive(_Rectangular):
+    """A hip-roof house: gable plus end faces running ``hip_length`` from the end walls."""
+
+    kind = "hip"
+    roof_names = ("roof_height", "hip_length")
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        ze, rh, hl = q
+        side = 1.0 - 2.0 * np.abs(v) / width
+        end = (length / 2.0 - np.abs(u)) / max(hl, 1e-9)
+        use_end = end < side
+        s = np.where(use_end, rh / max(hl, 1e-9), 2.0 * rh / width)
+        return ze + rh * np.minimum(side, end), s
+
+    def _apex(self):
+        return self.params["length"] - 2 * self.params["hip_length"] < 1e-3
+
+    def _local_vertices(self):
+        p = self.params
+        zr = p["z"] + p["height"] + p["roof_height"]
+        if self._apex():
+            return np.vstack([self._base(), [[0.0, 0.0, zr]]])
+        r = p["length"] / 2 - p["hip_length"]
+        return np.vstack([self._base(), [[-r, 0.0, zr], [r, 0.0, zr]]])
+
+    def _faces(self):
+        faces = [("GroundSurface", [0, 3, 2, 1])] + self._walls()
+        if self._apex():
+            return faces + [("RoofSurface", [4, 5, 8]), ("RoofSurface", [5, 6, 8]),
+                            ("RoofSurface", [6, 7, 8]), ("RoofSurface", [7, 4, 8])]
+        return faces + [("RoofSurface", [4, 5, 9, 8]), ("RoofSurface", [5, 6, 9]),
+                        ("RoofSurface", [6, 7, 8, 9]), ("RoofSurface", [7, 4, 8])]
+
+    def derived(self):
+        p = self.params
+        return {"roof_slope": math.degrees(math.atan2(2 * p["roof_height"], p["width"])),
+                "hip_slope": math.degrees(math.atan2(p["roof_height"], p["hip_length"]))}
+
+
+class ShedPrimitive(_Rectangular):
+    """A shed (mono-pitch) roof rising ``roof_height`` from v = -width/2 to +width/2."""
+
+    kind = "shed"
+    roof_names = ("roof_height",)
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        s = q[1] / width
+        return q[0] + s * (v + width / 2.0), np.full(u.shape, s)
+
+    def _local_vertices(self):
+        b = self._base()
+        b[6:8, 2] += self.params["roof_height"]
+        return b
+
+    def _faces(self):
+        return [("GroundSurface", [0, 3, 2, 1])] + self._walls() + [("RoofSurface", [4, 5, 6, 7])]
+
+    def derived(self):
+        p = self.params
+        return {"roof_slope": math.degrees(math.atan2(p["roof_height"], p["width"]))}
+
+
+class PrismPrimitive(Primitive):
+    """A polygonal prism: the fitted footprint polygon extruded to a flat roof.
+
+    ``rings`` holds the fitted rings in local plan coordinates (exterior
+    counter-clockwise, holes clockwise, open).
+    """
+
+    kind = "prism"
+    roof_names = ()
+
+    def __init__(self, params, std=None, info=None, rings=None):
+        super().__init__(params, std, info)
+        self.rings = [np.asarray(r, dtype=np.float64) for r in (rings or [])]
+
+    def outline(self):
+        return self.rings[0]
+
+    def roof_z(self, xy):
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.full(len(xy), self.params["z"] + self.params["height"]), np.zeros(len(xy))
+
+    def to_solid(self):
+        z0 = self.params["z"]
+        zt = z0 + self.params["height"]
+        n = sum(len(r) for r in self.rings)
+        plan = np.vstack(self.rings)
+        verts = np.vstack([np.column_stack([plan, np.full(n, z0)]),
+                           np.column_stack([plan, np.full(n, zt)])])
+        offs = np.concatenate([[0], np.cumsum([len(r) for r in self.rings])])
+        ground, roof, walls = [], [], []
+        for o0, o1 in zip(offs[:-1], offs[1:], strict=True):
+            idx = np.arange(o0, o1)
+            ground.append(idx[::-1].copy())
+            roof.append(idx + n)
+            for i, j in zip(idx, np.roll(idx, -1), strict=True):
+                walls.append(Surface([np.array([i, j, j + n, i + n])], "WallSurface"))
+        return Solid(verts, [Surface(ground, "GroundSurface")] + walls + [Surface(roof, "RoofSurface")])
+
+
+PRIMITIVES: dict[str, type[Primitive]] = {
+    "box": BoxPrimitive,
+    "gable": GablePrimitive,
+    "hip": HipPrimitive,
+    "shed": ShedPrimitive,
+    "prism": PrismPrimitive,
+}
+
+PrimitiveName = Literal["box", "gable", "hip", "shed", "prism"]
+
+
+# ---------------------------------------------------------------------------
+# fitting
+
+
+def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, max_outer=6):
+    """Iterated robust least squares of roof parameters ``q`` to points near the roof."""
+    x, y, az, ln, wd = plan
+    u, v = _frame(points[:, :2], x, y, az)
+    z = points[:, 2]
+
+    def resid(q, sel):
+        zr, s = cls._roof(q, u[sel], v[sel], ln, wd)
+        return (z[sel] - zr) / np.sqrt(1.0 + s * s)
+
+    q = np.asarray(q0, dtype=np.float64)
+    sel = np.ones(len(z), dtype=bool)
+    prev = None
+    nfev = 0
+    std = np.zeros_like(q)
+    s0 = 0.0
+    for _ in range(max_outer):
+        if sel.sum() < max(min_points, len(q) + 1):
+            raise FitError(f"{int(sel.sum())} roof points within {buffer} m of the {cls.kind} roof")
+        q, std, _, nf, s0 = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
+                                                bounds=bounds, loss="soft_l1", f_scale=loss_scale)
+        nfev += nf
+        sel = np.abs(resid(q, np.ones(len(z), dtype=bool))) <= buffer
+        if prev is not None and np.array_equal(sel, prev):
+            break
+        prev = sel
+    r = resid(q, sel)
+    return q, std, r, sel, nfev, s0
+
+
+def _roof_start(kind, z, ln, wd, approx):
+    lo, hi = np.percentile(z, [5, 95])
+    rh = max(hi - lo, 0.2)
+    q = {"box": [lo], "gable": [lo, rh], "hip": [lo, rh, min(wd / 2, ln / 2 * 0.95)],
+         "shed": [lo, hi - lo]}[kind]
+    return q
+
+
+def _bic(roof_r, n_roof_params, plan_d, n_plan_params, n_vertices, cfg: PrimitivesConfig):
+    """BIC of a candidate: roof term (unknown sigma) + plan term (known footprint sigma)."""
+    n_r = len(roof_r)
+    rss = _trunc_rss(roof_r, cfg.roof_buffer)
+    roof = n_r * math.log(max(rss / n_r, cfg.roof_sigma_floor ** 2)) + n_roof_params * math.log(n_r)
+    n_p = len(plan_d)
+    n_eff = max(n_vertices, n_plan_params)
+    plan = (n_eff / n_p) * _trunc_rss(plan_d, 2 * cfg.plan_buffer) / cfg.footprint_sigma ** 2
+    plan += n_plan_params * math.log(n_eff)
+    return roof + plan, roof, plan
+
+
+def _rect_from_approx(approx, polygon):
+    base = rectangle_approx(polygon)
+    if not approx:
+        return base
+    names = ("x", "y", "azimuth", "length", "width")
+    return np.array([float(approx.get(n, b)) if approx.get(n) is not None else b
+                     for n, b in zip(names, base, strict=True)])
+
+
+def _plan_rectangle(polygon, samples, approx, cfg):
+    return fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer)
+
+
+def _check_inputs(footprint, points):
+    polygon = main_polygon(footprint)
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+    return polygon, points
+
+
+def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygon, cfg,
+                 orientation_swap=False):
+    x, y, az, ln, wd = plan.params
+    sx, sy, saz, sl, sw = plan.std
+    if orientation_swap:
+        az, ln, wd, sl, sw = az + 90.0, wd, ln, sw, sl
+    z0, z0std = datum
+    params = {"x": x, "y": y, "z": z0, "azimuth": az % 360.0, "length": ln, "width": wd,
+              "height": q[0] - z0}
+    std = {"x": sx, "y": sy, "z": z0std, "azimuth": saz, "length": sl, "width": sw,
+           "height": math.hypot(qstd[0], z0std)}
+    for name, val, sd in zip(cls.roof_names, q[1:], qstd[1:], strict=True):
+        params[name] = float(val)
+        std[name] = float(sd)
+    if cls is ShedPrimitive and params["roof_height"] < 0:
+        # canonical: rising towards +v; turn the model by 180 degrees
+        params["azimuth"] = (params["azimuth"] + 180.0) % 360.0
+        params["height"] += params["roof_height"]
+        params["roof_height"] = -params["roof_height"]
+    elif cls is not ShedPrimitive:
+        params["azimuth"] %= 180.0
+    if params["height"] <= 0:
+        raise FitError(f"roof below the datum (eave height {params['height']:.2f} m)")
+    model = cls({k: float(v) for k, v in params.items()}, {k: float(v) for k, v in std.items()})
+    c = model.outline()
+    d = segment_distances(samples, c, np.roll(c, -1, axis=0)).min(axis=1)
+    return model, d
+
+
+def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dict | None = None,
+                  config: PrimitivesConfig | None = None):
+    """Fit one primitive of a chosen kind (semi-automatic mode).
+
+    Parameters
+    ----------
+    kind : {'box', 'gable', 'hip', 'shed', 'prism'}
+    footprint : shapely Polygon or MultiPolygon
+        Local metric plan (the largest part of a MultiPolygon is used).
+    points : ndarray, shape (N, 3)
+        The building's points (roof points; those inside the footprint).
+    datum : (float, float)
+        Ground height at the building and its standard deviation.
+    approx : dict, optional
+        Approximate parameters to start from (any of ``x, y, azimuth, length,
+        width, height, roof_height, hip_length``, local metres / degrees). The
+        azimuth fixes the ridge direction of gable / hip / shed roofs (the
+        shed's high side may flip). Missing ones come from the footprint's
+        minimum rotated rectangle and the point heights.
+    config : PrimitivesConfig, optional
+
+    Returns
+    -------
+    Primitive or FitFailure
+        The fitted model, or a falsy failure with the reason.
+    """
+    cfg = config or PrimitivesConfig()
+    if kind not in PRIMITIVES:
+        raise ValueError(f"kind must be one of {', '.join(PRIMITIVES)}, got {kind!r}")
+    try:
+        polygon, points = _check_inputs(footprint, points)
+        samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
+        if kind == "prism":
+            return _fit_prism(polygon, points, samples, datum, cfg, approx)[0]
+        plan = _plan_rectangle(polygon, samples, approx, cfg)
+        return _fit_rect_kind(PRIMITIVES[kind], plan, polygon, points, samples, datum, cfg,
+                              approx, swap=False)[0]
+    except FitError as exc:
+        return FitFailure(kind, str(exc))
+
+
+def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, swap):
+    if len(points) < cfg.min_points:
+        raise FitError(f"{len(points)} points (fewer than {cfg.min_points})")
+    x, y, az, ln, wd = plan.params
+    geo = (x, y, az + 90.0, wd, ln) if swap else (x, y, az, ln, wd)
+    ln_g, wd_g = geo[3], geo[4]
+    if cls is BoxPrimitive:
+        q0 = [histogram_mode(points[:, 2], bin=cfg.mode_bin)]
+        bounds = None
+    else:
+        q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g, approx)
+        if cls is HipPrimitive:
+            bounds = ([-np.inf, 0.0, 0.05], [np.inf, np.inf, ln_g / 2.0])
+        elif cls is GablePrimitive:
+            bounds = ([-np.inf, 0.0], [np.inf, np.inf])
+        else:
+            bounds = None
+    if approx:
+        z0 = datum[0]
+        if approx.get("height") is not None:
+            q0[0] = z0 + float(approx["height"])
+        for i, name in enumerate(cls.roof_names, start=1):
+            if approx.get(name) is not None:
+                q0[i] = float(approx[name])
+        if bounds is not None:
+            q0 = list(np.clip(q0, np.asarray(bounds[0]) + 1e-6, np.asarray(bounds[1]) - 1e-6))
+    q, qstd, r, sel, nfev, s0 = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
+                                          loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
+    if cls is HipPrimitive and q[2] < max(cfg.min_hip_length, 3.0 * qstd[2]):
+        raise FitError(f"hip length {q[2]:.2f} m +- {qstd[2]:.2f} not significant (a gable)")
+    model, plan_d = _finish_rect(cls, plan, q, qstd, r, int(sel.sum()), nfev, datum, samples,
+                                 polygon, cfg, orientation_swap=swap)
+    all_r = model.residuals(points)
+    bic, broof, bplan = _bic(all_r, len(q), plan_d, 5, len(polygon_rings(polygon)[0]), cfg)
+    model.info.update({
+        "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
+        "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))),
+        "iterations": int(plan.iterations + nfev),
+        "n_points": int(sel.sum()),
+        "n_samples": int(plan.used.sum()),
+        "bic": bic, "bic_roof": broof, "bic_plan": bplan,
+    })
+    return model, bic
+
+
+def _fit_prism(polygon, points, samples, datum, cfg, approx=None):
+    import shapely
+
+    if len(points) < cfg.min_points:
+        raise FitError(f"{len(points)} points (fewer than {cfg.min_points})")
+    simple = shapely.simplify(polygon, cfg.prism_simplify, preserve_topology=True)
+    if simple.is_empty or simple.area <= 0:
+        simple = polygon
+    rings = polygon_rings(simple)
+    plan = fit_polygon(samples, rings, buffer=cfg.plan_buffer)
+    flat = plan.params.reshape(-1, 2)
+    offs = plan.extra["offsets"]
+    fitted = [flat[a:b] for a, b in zip(offs[:-1], offs[1:], strict=True)]
+    fitted_poly = shapely.Polygon(fitted[0], fitted[1:])
+    if not fitted_poly.is_valid or fitted_poly.area <= 0:
+        # the fit crossed edges (tiny features): keep the approximate rings
+        fitted = rings
+        fitted_poly = simple
+    z = points[:, 2]
+    h0 = histogram_mode(z, bin=cfg.mode_bin)
+    if approx and approx.get("height") is not None:
+        h0 = datum[0] + float(approx["height"])
+    sel = np.abs(z - h0) <= cfg.roof_buffer
+    if sel.sum() < cfg.min_points:
+        raise FitError(f"{int(sel.sum())} roof points within {cfg.roof_buffer} m of the flat roof")
+    q, qstd, r, sel, nfev, _ = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
+                                         buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                         min_points=cfg.min_points)
+    z0, z0std = datum
+    if q[0] - z0 <= 0:
+        raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
+    c = fitted_poly.centroid
+    vstd = plan.std.reshape(-1, 2)
+    params = {"x": c.x, "y": c.y, "z": z0, "azimuth": 0.0, "height": q[0] - z0,
+              "vertices": float(len(flat))}
+    std = {"x": float(np.sqrt(np.mean(vstd[:, 0] ** 2))), "y": float(np.sqrt(np.mean(vstd[:, 1] ** 2))),
+           "z": z0std, "height": math.hypot(qstd[0], z0std),
+           "vertex": float(np.sqrt(np.mean(vstd ** 2)))}
+    model = PrismPrimitive({k: float(v) for k, v in params.items()}, std, rings=fitted)
+    rings_f = model.rings
+    a = np.vstack(rings_f)
+    b = np.vstack([np.roll(rr, -1, axis=0) for rr in rings_f])
+    plan_d = segment_distances(samples, a, b).min(axis=1)
+    nv = len(flat)
+    bic, broof, bplan = _bic(model.residuals(points), 1, plan_d, 2 * nv,
+                             sum(len(rr) for rr in polygon_rings(polygon)), cfg)
+    model.info.update({
+        "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
+        "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))) if len(plan.residuals) else 0.0,
+        "iterations": int(plan.iterations + nfev),
+        "n_points": int(sel.sum()),
+        "n_samples": int(plan.used.sum()),
+        "bic": bic, "bic_roof": broof, "bic_plan": bplan,
+    })
+    return model, bic
+
+
+def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | None = None):
+    """Fit every candidate primitive and choose one by BIC (automatic mode).
+
+    Candidates: a box, gable, hip and shed on the LSMDF rectangle (gable, hip
+    and shed in both ridge directions), and a prism on the fitted footprint
+    polygon. The chosen one minimises
+
+    ``BIC = n_r ln(max(RSS_r / n_r, s_r^2)) + k_r ln(n_r)
+    + (n_v / n_s) RSS_p / sigma_fp^2 + k_p ln(n_v)``
+
+    - roof term: ``RSS_r`` the sum of squared perpendicular distances of all
+      ``n_r`` points to the roof, each truncated at ``roof_buffer`` (a dormer
+      or tree does not decide the roof type), with unknown variance floored at
+      ``roof_sigma_floor``; ``k_r`` roof parameters (box and prism 1, gable and
+      shed 2, hip 3);
+    - plan term: ``RSS_p`` the squared distances of the ``n_s`` boundary
+      samples to the model outline (truncated at twice ``plan_buffer``) with
+      the known footprint accuracy ``footprint_sigma``; the samples are
+      interpolated between the ``n_v`` footprint vertices, so they count as
+      ``n_v`` observations; ``k_p`` plan parameters (5 for a rectangle, 2 per
+      vertex for the prism).
+
+    Returns
+    -------
+    best : Primitive or FitFailure
+    fits : dict of str to Primitive or FitFailure
+        Every candidate (``"gable"`` and ``"gable90"`` for the two ridge directions...).
+    """
+    cfg = config or PrimitivesConfig()
+    fits: dict = {}
+    try:
+        polygon, points = _check_inputs(footprint, points)
+        samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
+        plan = None
+        if any(k != "prism" for k in cfg.candidates):
+            try:
+                plan = _plan_rectangle(polygon, samples, None, cfg)
+            except FitError as exc:
+                for k in cfg.candidates:
+                    if k != "prism":
+                        fits[k] = FitFailure(k, f"rectangle plan: {exc}")
+    except FitError as exc:
+        return FitFailure("auto", str(exc)), fits
+    scores = {}
+    for kind in cfg.candidates:
+        variants = [("", False)] if kind in ("box", "prism") else [("", False), ("90", True)]
+        for suffix, swap in variants:
+            name = kind + suffix
+            try:
+                if kind == "prism":
+                    model, bic = _fit_prism(polygon, points, samples, datum, cfg)
+                elif plan is None:
+                    continue
+                else:
+                    model, bic = _fit_rect_kind(PRIMITIVES[kind], plan, polygon, points, samples,
+                                                datum, cfg, None, swap=swap)
+            except FitError as exc:
+                fits[name] = FitFailure(kind, str(exc))
+                continue
+            fits[name] = model
+            scores[name] = bic
+    if not scores:
+        reasons = "; ".join(f"{k}: {f.reason}" for k, f in fits.items())
+        return FitFailure("auto", f"no primitive could be fitted ({reasons})"), fits
+    best = min(scores, key=scores.get)
+    return fits[best], fits
