@@ -90,7 +90,7 @@ __all__ = [
 class PrimitivesConfig:
     """Stage ``primitives``: floating-model fitting of one primitive per footprint."""
 
-    candidates: tuple = field(("box", "gable", "hip", "shed", "prism"),
+    candidates: tuple = field(("box", "gable", "hip", "shed", "prism", "prism_gable", "prism_shed"),
                               "primitives tried by the automatic choice")
     plan_interval: float = field(0.5, "footprint boundary resampling interval, metres")
     plan_buffer: float = field(1.0, "footprint samples farther than this from the model edges are ignored, metres")
@@ -103,6 +103,8 @@ class PrimitivesConfig:
     ground_buffer: float = field(5.0, "ground points within this distance outside a footprint give its datum, metres")
     ground_percentile: float = field(50.0, "percentile of those ground heights taken as datum (lower for unclassified points)")
     min_points: int = field(5, "fewest roof points for a fit")
+    min_roof_height: float = field(0.25, "sloped roofs rising less than this (or than 3 std) count as flat, metres")
+    max_slope: float = field(75.0, "steepest roof face, degrees")
     min_hip_length: float = field(0.5, "hips shorter than this (or than 3 std) are not significant, metres")
 
     def __post_init__(self):
@@ -246,8 +248,11 @@ class Primitive:
     kind: ClassVar[str] = ""
     roof_names: ClassVar[tuple] = ()
 
+    #: optional parameters and their defaults
+    defaults: ClassVar[dict] = {}
+
     def __init__(self, params: dict, std: dict | None = None, info: dict | None = None):
-        self.params = dict(params)
+        self.params = {**self.defaults, **params}
         self.std = dict(std or {})
         self.info = dict(info or {})
 
@@ -344,21 +349,34 @@ class BoxPrimitive(_Rectangular):
 
 
 class GablePrimitive(_Rectangular):
-    """A gable-roof house: ridge along the length, ``roof_height`` above the eaves."""
+    """A gable-roof house: ridge along the length, ``roof_height`` above the eaves.
+
+    ``ridge_offset`` moves the ridge across (towards +v) from the centre line
+    (0 for a symmetric roof); both faces keep the slope
+    ``2 roof_height / width``, so the eaves are at ``height -+ slope *
+    ridge_offset`` and ``height`` is their mean. The footprint fixes the
+    walls, the points the ridge: noise in the footprint does not tilt the roof.
+    """
 
     kind = "gable"
-    roof_names = ("roof_height",)
+    roof_names = ("roof_height", "ridge_offset")
+    defaults = {"ridge_offset": 0.0}
 
     @staticmethod
     def _roof(q, u, v, length, width):
         s = 2.0 * q[1] / width
-        return q[0] + q[1] - s * np.abs(v), np.full(u.shape, s)
+        return q[0] + q[1] - s * np.abs(v - q[2]), np.full(u.shape, s)
 
     def _local_vertices(self):
         p = self.params
+        b = self._base()
+        s = 2.0 * p["roof_height"] / p["width"]
+        dz = s * p["ridge_offset"]
+        b[4:6, 2] -= dz
+        b[6:8, 2] += dz
         zr = p["z"] + p["height"] + p["roof_height"]
-        ridge = np.array([[-p["length"] / 2, 0.0, zr], [p["length"] / 2, 0.0, zr]])
-        return np.vstack([self._base(), ridge])
+        ridge = np.array([[-p["length"] / 2, p["ridge_offset"], zr], [p["length"] / 2, p["ridge_offset"], zr]])
+        return np.vstack([b, ridge])
 
     def _faces(self):
         return ([("GroundSurface", [0, 3, 2, 1])] + self._walls({1: [9], 3: [8]})
@@ -433,6 +451,13 @@ class ShedPrimitive(_Rectangular):
         return {"roof_slope": math.degrees(math.atan2(p["roof_height"], p["width"]))}
 
 
+def _vplane(c0, g, x, y, az_deg):
+    """Plane ``z = c0 + g * v`` (v across the azimuth from (x, y)) as ``(a, b, c)`` of a + b X + c Y."""
+    t = math.radians(az_deg)
+    st, ct = math.sin(t), math.cos(t)
+    return [c0 + g * (x * st - y * ct), -g * st, g * ct]
+
+
 class PrismPrimitive(Primitive):
     """A polygonal prism: the fitted footprint polygon extruded to a flat roof.
 
@@ -449,6 +474,12 @@ class PrismPrimitive(Primitive):
 
     def outline(self):
         return self.rings[0]
+
+    def polygon(self):
+        """The fitted plan as a shapely Polygon."""
+        import shapely
+
+        return shapely.Polygon(self.rings[0], self.rings[1:])
 
     def roof_z(self, xy):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -472,15 +503,89 @@ class PrismPrimitive(Primitive):
         return Solid(verts, [Surface(ground, "GroundSurface")] + walls + [Surface(roof, "RoofSurface")])
 
 
+class PrismGablePrimitive(PrismPrimitive):
+    """A gable roof over a polygonal footprint (L-shaped houses, irregular plots).
+
+    ``x``, ``y`` is a point of the ridge line (the one nearest the footprint
+    centroid), ``azimuth`` its direction; the roof falls by ``roof_height``
+    over ``width / 2`` on both sides, reaching ``height`` above the datum at
+    ``|v| = width / 2``. The solid is the polygon up to the lower envelope of
+    the two roof planes (:func:`lidar2city.fit.envelope.envelope_solid`).
+    """
+
+    kind = "prism_gable"
+    roof_names = ("roof_height", "ridge_offset")
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        s = 2.0 * q[1] / width
+        return q[0] + q[1] - s * np.abs(v - q[2]), np.full(u.shape, s)
+
+    def roof_z(self, xy):
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        p = self.params
+        u, v = _frame(xy, p["x"], p["y"], p["azimuth"])
+        return self._roof(np.array([p["z"] + p["height"], p["roof_height"], 0.0]), u, v,
+                          1.0, p["width"])
+
+    def planes(self):
+        p = self.params
+        ze = p["z"] + p["height"]
+        s = 2.0 * p["roof_height"] / p["width"]
+        top = ze + p["roof_height"]
+        return [_vplane(top, -s, p["x"], p["y"], p["azimuth"]), _vplane(top, s, p["x"], p["y"], p["azimuth"])]
+
+    def to_solid(self):
+        from .envelope import envelope_solid
+
+        return envelope_solid(self.polygon(), self.planes(), self.params["z"])
+
+    def derived(self):
+        p = self.params
+        return {"roof_slope": math.degrees(math.atan2(2 * p["roof_height"], p["width"]))}
+
+
+class PrismShedPrimitive(PrismGablePrimitive):
+    """A shed roof over a polygonal footprint: one plane rising ``roof_height`` over ``width``.
+
+    ``x``, ``y`` is the centre of the footprint's minimum rotated rectangle,
+    ``height`` the roof height above the datum at ``v = -width / 2``.
+    """
+
+    kind = "prism_shed"
+    roof_names = ("roof_height",)
+
+    @staticmethod
+    def _roof(q, u, v, length, width):
+        return ShedPrimitive._roof(q, u, v, length, width)
+
+    def roof_z(self, xy):
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        p = self.params
+        u, v = _frame(xy, p["x"], p["y"], p["azimuth"])
+        return self._roof(np.array([p["z"] + p["height"], p["roof_height"]]), u, v, 1.0, p["width"])
+
+    def planes(self):
+        p = self.params
+        g = p["roof_height"] / p["width"]
+        return [_vplane(p["z"] + p["height"] + p["roof_height"] / 2, g, p["x"], p["y"], p["azimuth"])]
+
+    def derived(self):
+        p = self.params
+        return {"roof_slope": math.degrees(math.atan2(p["roof_height"], p["width"]))}
+
+
 PRIMITIVES: dict[str, type[Primitive]] = {
     "box": BoxPrimitive,
     "gable": GablePrimitive,
     "hip": HipPrimitive,
     "shed": ShedPrimitive,
     "prism": PrismPrimitive,
+    "prism_gable": PrismGablePrimitive,
+    "prism_shed": PrismShedPrimitive,
 }
 
-PrimitiveName = Literal["box", "gable", "hip", "shed", "prism"]
+PrimitiveName = Literal["box", "gable", "hip", "shed", "prism", "prism_gable", "prism_shed"]
 
 
 # ---------------------------------------------------------------------------
@@ -520,7 +625,7 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
 def _roof_start(kind, z, ln, wd, approx):
     lo, hi = np.percentile(z, [5, 95])
     rh = max(hi - lo, 0.2)
-    q = {"box": [lo], "gable": [lo, rh], "hip": [lo, rh, min(wd / 2, ln / 2 * 0.95)],
+    q = {"box": [lo], "gable": [lo, rh, 0.0], "hip": [lo, rh, min(wd / 2, ln / 2 * 0.95)],
          "shed": [lo, hi - lo]}[kind]
     return q
 
@@ -578,10 +683,13 @@ def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygo
         params["height"] += params["roof_height"]
         params["roof_height"] = -params["roof_height"]
     elif cls is not ShedPrimitive:
+        if params["azimuth"] % 360.0 >= 180.0 and "ridge_offset" in params:
+            params["ridge_offset"] = -params["ridge_offset"]
         params["azimuth"] %= 180.0
-    if params["height"] <= 0:
-        raise FitError(f"roof below the datum (eave height {params['height']:.2f} m)")
     model = cls({k: float(v) for k, v in params.items()}, {k: float(v) for k, v in std.items()})
+    low = float(model._local_vertices()[4:, 2].min()) - z0
+    if low <= 0:
+        raise FitError(f"roof below the datum (lowest eave {low:.2f} m above it)")
     c = model.outline()
     d = segment_distances(samples, c, np.roll(c, -1, axis=0)).min(axis=1)
     return model, d
@@ -619,8 +727,9 @@ def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dic
     try:
         polygon, points = _check_inputs(footprint, points)
         samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
-        if kind == "prism":
-            return _fit_prism(polygon, points, samples, datum, cfg, approx)[0]
+        if kind.startswith("prism"):
+            pp = _prism_plan(polygon, samples, cfg)
+            return _fit_prism_kind(PRIMITIVES[kind], pp, points, datum, cfg, approx)[0]
         plan = _plan_rectangle(polygon, samples, approx, cfg)
         return _fit_rect_kind(PRIMITIVES[kind], plan, polygon, points, samples, datum, cfg,
                               approx, swap=False)[0]
@@ -639,12 +748,13 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
         bounds = None
     else:
         q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g, approx)
+        tmax = math.tan(math.radians(cfg.max_slope))
         if cls is HipPrimitive:
-            bounds = ([-np.inf, 0.0, 0.05], [np.inf, np.inf, ln_g / 2.0])
+            bounds = ([-np.inf, 0.0, 0.05], [np.inf, tmax * wd_g / 2, ln_g / 2.0])
         elif cls is GablePrimitive:
-            bounds = ([-np.inf, 0.0], [np.inf, np.inf])
+            bounds = ([-np.inf, 0.0, -0.45 * wd_g], [np.inf, tmax * wd_g / 2, 0.45 * wd_g])
         else:
-            bounds = None
+            bounds = ([-np.inf, -tmax * wd_g], [np.inf, tmax * wd_g])
     if approx:
         z0 = datum[0]
         if approx.get("height") is not None:
@@ -656,6 +766,8 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
             q0 = list(np.clip(q0, np.asarray(bounds[0]) + 1e-6, np.asarray(bounds[1]) - 1e-6))
     q, qstd, r, sel, nfev, s0 = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
                                           loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
+    if cls is not BoxPrimitive and abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
+        raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
     if cls is HipPrimitive and q[2] < max(cfg.min_hip_length, 3.0 * qstd[2]):
         raise FitError(f"hip length {q[2]:.2f} m +- {qstd[2]:.2f} not significant (a gable)")
     model, plan_d = _finish_rect(cls, plan, q, qstd, r, int(sel.sum()), nfev, datum, samples,
@@ -673,13 +785,12 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
     return model, bic
 
 
-def _fit_prism(polygon, points, samples, datum, cfg, approx=None):
+def _prism_plan(polygon, samples, cfg):
+    """LSMDF of the simplified footprint polygon's vertices (shared by all prism kinds)."""
     import shapely
 
-    if len(points) < cfg.min_points:
-        raise FitError(f"{len(points)} points (fewer than {cfg.min_points})")
     simple = shapely.simplify(polygon, cfg.prism_simplify, preserve_topology=True)
-    if simple.is_empty or simple.area <= 0:
+    if simple.is_empty or simple.area <= 0 or simple.geom_type != "Polygon":
         simple = polygon
     rings = polygon_rings(simple)
     plan = fit_polygon(samples, rings, buffer=cfg.plan_buffer)
@@ -691,34 +802,85 @@ def _fit_prism(polygon, points, samples, datum, cfg, approx=None):
         # the fit crossed edges (tiny features): keep the approximate rings
         fitted = rings
         fitted_poly = simple
-    z = points[:, 2]
-    h0 = histogram_mode(z, bin=cfg.mode_bin)
-    if approx and approx.get("height") is not None:
-        h0 = datum[0] + float(approx["height"])
-    sel = np.abs(z - h0) <= cfg.roof_buffer
-    if sel.sum() < cfg.min_points:
-        raise FitError(f"{int(sel.sum())} roof points within {cfg.roof_buffer} m of the flat roof")
-    q, qstd, r, sel, nfev, _ = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
-                                         buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
-                                         min_points=cfg.min_points)
-    z0, z0std = datum
-    if q[0] - z0 <= 0:
-        raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
-    c = fitted_poly.centroid
-    vstd = plan.std.reshape(-1, 2)
-    params = {"x": c.x, "y": c.y, "z": z0, "azimuth": 0.0, "height": q[0] - z0,
-              "vertices": float(len(flat))}
-    std = {"x": float(np.sqrt(np.mean(vstd[:, 0] ** 2))), "y": float(np.sqrt(np.mean(vstd[:, 1] ** 2))),
-           "z": z0std, "height": math.hypot(qstd[0], z0std),
-           "vertex": float(np.sqrt(np.mean(vstd ** 2)))}
-    model = PrismPrimitive({k: float(v) for k, v in params.items()}, std, rings=fitted)
-    rings_f = model.rings
-    a = np.vstack(rings_f)
-    b = np.vstack([np.roll(rr, -1, axis=0) for rr in rings_f])
+    a = np.vstack(fitted)
+    b = np.vstack([np.roll(rr, -1, axis=0) for rr in fitted])
     plan_d = segment_distances(samples, a, b).min(axis=1)
-    nv = len(flat)
-    bic, broof, bplan = _bic(model.residuals(points), 1, plan_d, 2 * nv,
-                             sum(len(rr) for rr in polygon_rings(polygon)), cfg)
+    return {"rings": fitted, "polygon": fitted_poly, "plan": plan, "plan_d": plan_d,
+            "n_vertices": len(a), "n_footprint_vertices": sum(len(r) for r in polygon_rings(polygon))}
+
+
+def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
+    if len(points) < cfg.min_points:
+        raise FitError(f"{len(points)} points (fewer than {cfg.min_points})")
+    plan = pp["plan"]
+    z0, z0std = datum
+    vstd = plan.std.reshape(-1, 2)
+    vertex_std = float(np.sqrt(np.mean(vstd ** 2)))
+    z = points[:, 2]
+    tmax = math.tan(math.radians(cfg.max_slope))
+    if cls is PrismPrimitive:
+        h0 = histogram_mode(z, bin=cfg.mode_bin)
+        if approx and approx.get("height") is not None:
+            h0 = z0 + float(approx["height"])
+        q, qstd, r, sel, nfev, _ = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
+                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                             min_points=cfg.min_points)
+        if q[0] - z0 <= 0:
+            raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
+        c = pp["polygon"].centroid
+        params = {"x": c.x, "y": c.y, "z": z0, "azimuth": 0.0, "height": q[0] - z0}
+        std = {"x": float(np.sqrt(np.mean(vstd[:, 0] ** 2))), "y": float(np.sqrt(np.mean(vstd[:, 1] ** 2))),
+               "z": z0std, "height": math.hypot(qstd[0], z0std)}
+    else:
+        x, y, az, ln, wd = rectangle_approx(pp["polygon"])
+        if approx and approx.get("azimuth") is not None:
+            az = float(approx["azimuth"])
+            if abs(((az - rectangle_approx(pp["polygon"])[2]) + 45.0) % 180.0 - 45.0) > 45.0:
+                ln, wd = wd, ln
+        if swap:
+            az, ln, wd = az + 90.0, wd, ln
+        lo, hi = np.percentile(z, [5, 95])
+        if cls is PrismGablePrimitive:
+            q0 = [lo, max(hi - lo, 0.2), 0.0]
+            bounds = ([-np.inf, 0.0, -wd / 2], [np.inf, tmax * wd / 2, wd / 2])
+        else:
+            q0 = [lo, hi - lo]
+            bounds = ([-np.inf, -tmax * wd], [np.inf, tmax * wd])
+        if approx:
+            if approx.get("height") is not None:
+                q0[0] = z0 + float(approx["height"])
+            if approx.get("roof_height") is not None:
+                q0[1] = float(approx["roof_height"])
+        q, qstd, r, sel, nfev, _ = _fit_roof(cls, q0, bounds, points, (x, y, az, ln, wd),
+                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                             min_points=cfg.min_points)
+        if abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
+            raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
+        t = math.radians(az)
+        d = np.array([math.cos(t), math.sin(t)])
+        nrm = np.array([-math.sin(t), math.cos(t)])
+        ze, rh = q[0], q[1]
+        if cls is PrismGablePrimitive:
+            ridge = np.array([x, y]) + q[2] * nrm
+            c = np.array(pp["polygon"].centroid.coords[0])
+            ridge = ridge + ((c - ridge) @ d) * d
+            x, y = ridge
+            az %= 180.0
+        elif rh < 0:
+            az, ze, rh = az + 180.0, ze + rh, -rh
+        params = {"x": float(x), "y": float(y), "z": z0, "azimuth": az % 360.0, "width": float(wd),
+                  "height": ze - z0, "roof_height": float(rh)}
+        std = {"x": vertex_std, "y": vertex_std, "z": z0std, "height": math.hypot(qstd[0], z0std),
+               "roof_height": float(qstd[1])}
+        if cls is PrismGablePrimitive:
+            std["ridge_offset"] = float(qstd[2])
+    std["vertex"] = vertex_std
+    params["vertices"] = float(pp["n_vertices"])
+    model = cls({k: float(v) for k, v in params.items()}, std, rings=pp["rings"])
+    if cls is not PrismPrimitive:
+        model.to_solid()  # raises FitError when the roof does not close over the polygon
+    bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], 2 * pp["n_vertices"],
+                             pp["n_footprint_vertices"], cfg)
     model.info.update({
         "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
         "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))) if len(plan.residuals) else 0.0,
@@ -763,14 +925,21 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | 
     try:
         polygon, points = _check_inputs(footprint, points)
         samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
-        plan = None
-        if any(k != "prism" for k in cfg.candidates):
+        plan = pplan = None
+        if any(not k.startswith("prism") for k in cfg.candidates):
             try:
                 plan = _plan_rectangle(polygon, samples, None, cfg)
             except FitError as exc:
                 for k in cfg.candidates:
-                    if k != "prism":
+                    if not k.startswith("prism"):
                         fits[k] = FitFailure(k, f"rectangle plan: {exc}")
+        if any(k.startswith("prism") for k in cfg.candidates):
+            try:
+                pplan = _prism_plan(polygon, samples, cfg)
+            except FitError as exc:
+                for k in cfg.candidates:
+                    if k.startswith("prism"):
+                        fits[k] = FitFailure(k, f"polygon plan: {exc}")
     except FitError as exc:
         return FitFailure("auto", str(exc)), fits
     scores = {}
@@ -779,8 +948,10 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | 
         for suffix, swap in variants:
             name = kind + suffix
             try:
-                if kind == "prism":
-                    model, bic = _fit_prism(polygon, points, samples, datum, cfg)
+                if kind.startswith("prism"):
+                    if pplan is None:
+                        continue
+                    model, bic = _fit_prism_kind(PRIMITIVES[kind], pplan, points, datum, cfg, swap=swap)
                 elif plan is None:
                     continue
                 else:
@@ -794,5 +965,12 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | 
     if not scores:
         reasons = "; ".join(f"{k}: {f.reason}" for k, f in fits.items())
         return FitFailure("auto", f"no primitive could be fitted ({reasons})"), fits
-    best = min(scores, key=scores.get)
+    # 1. plan family (rectangle or polygon) from the footprint evidence alone,
+    # 2. the roof within the family by the whole BIC (equal plan terms there)
+    families = {"rect": [k for k in scores if not k.startswith("prism")],
+                "poly": [k for k in scores if k.startswith("prism")]}
+    plan_terms = {f: min(fits[k].info["bic_plan"] for k in ks) for f, ks in families.items() if ks}
+    family = min(plan_terms, key=plan_terms.get)
+    best = min(families[family], key=scores.get)
+    fits[best].info["family"] = family
     return fits[best], fits
