@@ -90,7 +90,7 @@ __all__ = [
 class PrimitivesConfig:
     """Stage ``primitives``: floating-model fitting of one primitive per footprint."""
 
-    candidates: tuple = field(("box", "gable", "hip", "shed", "prism", "prism_gable", "prism_shed"),
+    candidates: tuple[str, ...] = field(("box", "gable", "hip", "shed", "prism", "prism_gable", "prism_shed"),
                               "primitives tried by the automatic choice")
     plan_interval: float = field(0.5, "footprint boundary resampling interval, metres")
     plan_buffer: float = field(1.0, "footprint samples farther than this from the model edges are ignored, metres")
@@ -108,6 +108,7 @@ class PrimitivesConfig:
     min_hip_length: float = field(0.5, "hips shorter than this (or than 3 std) are not significant, metres")
 
     def __post_init__(self):
+        object.__setattr__(self, "candidates", tuple(self.candidates))
         unknown = sorted(set(self.candidates) - set(PRIMITIVES))
         if unknown or not self.candidates:
             raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
