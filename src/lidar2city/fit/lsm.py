@@ -40,6 +40,9 @@ __all__ = [
     "segment_distances",
     "fit_rectangle",
     "fit_polygon",
+    "OutlineObservations",
+    "fit_rectilinear",
+    "outline_observations",
     "solve_least_squares",
 ]
 
@@ -163,7 +166,7 @@ def _jacobian(fun, x, r0):
 
 
 def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_scale=1.0,
-                        max_nfev=200):
+                        max_nfev=200, full=False):
     """Run ``scipy.optimize.least_squares`` and derive the parameter covariance.
 
     Levenberg-Marquardt when unbounded with a plain quadratic loss and enough
@@ -216,6 +219,8 @@ def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_s
         J = J * np.sqrt(w)[:, None]
     cov = np.linalg.pinv(J.T @ J) * s02
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    if full:
+        return res.x, std, r, int(res.nfev), float(np.sqrt(s02)), cov
     return res.x, std, r, int(res.nfev), float(np.sqrt(s02))
 
 
@@ -234,7 +239,115 @@ def _rect_residuals(params, samples, edge):
     return r
 
 
+@dataclass(frozen=True, eq=False)
+class OutlineObservations:
+    """Roof-outline points seen in the LiDAR, each tied to a model edge.
+
+    Attributes
+    ----------
+    points : ndarray (M, 2)
+        Estimated outline positions (local metres).
+    edge : ndarray of int (M,)
+        Index of the model edge each observes.
+    family : ndarray of int (M,)
+        Overhang group of that edge (one unknown overhang per group).
+    sigma : ndarray (M,)
+        A-priori standard deviations, metres.
+    """
+
+    points: np.ndarray
+    edge: np.ndarray
+    family: np.ndarray
+    sigma: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def outline_observations(xy, a, b, *, density: float, family=None, strip: float = 1.5,
+                         sigma: float = 0.05, min_piece: float = 2.0) -> OutlineObservations:
+    """Find the roof outline in the LiDAR points along model edges (free edges only).
+
+    For each edge a->b of a counter-clockwise outline (outward normal on the
+    right), the points in a strip ``strip`` metres either side of it are
+    split along the edge in pieces of at least ``min_piece`` metres (1 m kept
+    clear of the corners). In each piece the outline is the second outermost
+    point plus its expected gap ``2 / (density * piece length)`` (the points of
+    a uniform Poisson process; the second, not the first, so one stray point
+    does not decide). A piece is used only where the roof visibly ends: at
+    least half the expected points inside, and an empty band of at least
+    0.5 m beyond the outline within the strip (so roofs continuing across a
+    shared wall into the neighbour's give no observation).
+
+    Parameters
+    ----------
+    xy : ndarray (N, 2)
+        Building points around the model (inside and outside the footprint).
+    a, b : ndarray (E, 2)
+        Edge start and end points.
+    density : float
+        Points per square metre on the roof.
+    family : ndarray of int (E,), optional
+        Overhang group per edge (default all 0).
+
+    Returns
+    -------
+    OutlineObservations
+        With sigma ``max(sigma, sqrt(2) / (density * piece length))``.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    family = np.zeros(len(a), dtype=np.int64) if family is None else np.asarray(family)
+    pts, edges, fams, sig = [], [], [], []
+    if density <= 0 or len(xy) < 4:
+        return OutlineObservations(np.empty((0, 2)), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+    for k in range(len(a)):
+        d = b[k] - a[k]
+        L = float(np.hypot(*d))
+        margin = 1.0
+        usable = L - 2 * margin
+        if usable < min_piece:
+            continue
+        d = d / L
+        n = np.array([d[1], -d[0]])
+        rel = xy - a[k]
+        s = rel @ d
+        t = rel @ n
+        near = (np.abs(t) <= strip) & (s >= margin) & (s <= L - margin)
+        if near.sum() < 4:
+            continue
+        npieces = max(1, min(int(usable // min_piece), 2))
+        edges_s = np.linspace(margin, L - margin, npieces + 1)
+        for j in range(npieces):
+            lo, hi = edges_s[j], edges_s[j + 1]
+            sel = near & (s >= lo) & (s < hi)
+            plen = hi - lo
+            tt = np.sort(t[sel])
+            expected_inside = density * plen * strip
+            if len(tt) < 3 or (tt < 0).sum() < 0.5 * expected_inside:
+                continue
+            gap = 1.0 / (density * plen)
+            bound = tt[-2] + 2.0 * gap
+            if bound > strip - 0.5 or bound < -strip + 0.5:
+                continue
+            pts.append(a[k] + 0.5 * (lo + hi) * d + bound * n)
+            edges.append(k)
+            fams.append(int(family[k]))
+            sig.append(max(sigma, np.sqrt(2.0) * gap))
+    if not pts:
+        return OutlineObservations(np.empty((0, 2)), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+    return OutlineObservations(np.asarray(pts), np.asarray(edges, dtype=np.int64),
+                               np.asarray(fams, dtype=np.int64), np.asarray(sig))
+
+
+def _compact(families):
+    uniq, inv = np.unique(families, return_inverse=True)
+    return len(uniq), inv
+
+
 def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
+                  outline: OutlineObservations | None = None, sample_sigma: float = 1.0,
                   callback=None) -> PlanFit:
     """Fit a rectangle to boundary samples by least squares (LSMDF).
 
@@ -248,13 +361,20 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
         Samples farther than this (metres) from every model edge are ignored.
     max_outer : int, default 10
         Maximum re-assignment rounds.
+    outline : OutlineObservations, optional
+        LiDAR roof-outline points (edges numbered as the rectangle's:
+        0 at v = -w/2, 1 at u = +l/2, 2 at v = +w/2, 3 at u = -l/2), observing
+        the model edge moved outwards by an unknown overhang per family.
+    sample_sigma : float, default 1
+        Standard deviation of one footprint sample (weights against ``outline``).
     callback : callable, optional
         Called as ``callback(round, params)`` after each solve.
 
     Returns
     -------
     PlanFit
-        ``params = (x, y, azimuth_deg, length, width)``.
+        ``params = (x, y, azimuth_deg, length, width)``; with ``outline``,
+        ``extra["overhang"]`` / ``extra["overhang_std"]`` per family.
 
     Raises
     ------
@@ -262,11 +382,12 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
         Fewer than 5 samples within the buffer, or fewer than 2 edges observed.
     """
     samples = np.asarray(samples, dtype=np.float64)
-    params = np.asarray(approx, dtype=np.float64).copy()
+    nf, fam = (0, None) if outline is None or len(outline) == 0 else _compact(outline.family)
+    params = np.concatenate([np.asarray(approx, dtype=np.float64), np.zeros(nf)])
     prev = None
     nfev = 0
     for k in range(1, max_outer + 1):
-        c = rectangle_corners(*params)
+        c = rectangle_corners(*params[:5])
         d = segment_distances(samples, c, np.roll(c, -1, axis=0))
         edge = d.argmin(axis=1)
         used = d.min(axis=1) <= buffer
@@ -277,16 +398,25 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
         if used.sum() < 5 or len(np.unique(edge[used] % 2)) < 2:
             raise FitError(f"only {int(used.sum())} footprint samples within {buffer} m of the rectangle")
         s, e = samples[used], edge[used]
-        x, std, r, nf, s0 = solve_least_squares(lambda p, s=s, e=e: _rect_residuals(p, s, e), params)
-        nfev += nf
+
+        def fun(p, s=s, e=e):
+            r = _rect_residuals(p[:5], s, e) / sample_sigma
+            if nf == 0:
+                return r
+            ro = (_rect_residuals(p[:5], outline.points, outline.edge) - p[5 + fam]) / outline.sigma
+            return np.concatenate([r, ro])
+
+        x, std, r, nfe, s0 = solve_least_squares(fun, params)
+        nfev += nfe
         params = x
-        if params[3] < 0:
-            params[3] = -params[3]
-        if params[4] < 0:
-            params[4] = -params[4]
+        params[3:5] = np.abs(params[3:5])
         if callback is not None:
-            callback(k, params.copy())
-    return PlanFit(params, std, r, used, nfev, k, s0)
+            callback(k, params[:5].copy())
+    r_fp = r[: len(s)] * sample_sigma
+    extra = {}
+    if nf:
+        extra = {"overhang": params[5:].copy(), "overhang_std": std[5:].copy(), "n_outline": len(outline)}
+    return PlanFit(params[:5], std[:5], r_fp, used, nfev, k, s0, extra)
 
 
 def _poly_residuals(flat, samples, i0, i1, prior, lam):
@@ -299,6 +429,7 @@ def _poly_residuals(flat, samples, i0, i1, prior, lam):
 
 
 def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, prior_weight=1e-3,
+                outline: OutlineObservations | None = None, sample_sigma: float = 1.0,
                 callback=None) -> PlanFit:
     """Fit polygon vertex coordinates to boundary samples (LSMDF for prisms).
 
@@ -313,12 +444,18 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
     samples : ndarray, shape (N, 2)
     rings : list of ndarray (K_i, 2)
         Approximate rings (exterior counter-clockwise, holes clockwise), open.
+    outline : OutlineObservations, optional
+        LiDAR roof-outline points; ``edge`` numbers the edges ring after ring
+        (edge i from vertex i to the next of its ring); each observes its edge
+        moved outwards by an unknown overhang per family.
+    sample_sigma : float, default 1
+        Standard deviation of one footprint sample (weights against ``outline``).
 
     Returns
     -------
     PlanFit
         ``params`` are the flattened vertices of all rings; ``extra["offsets"]``
-        gives ring starts.
+        gives ring starts, ``extra["overhang"]`` the overhangs with ``outline``.
     """
     samples = np.asarray(samples, dtype=np.float64)
     sizes = [len(r) for r in rings]
@@ -326,8 +463,10 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
     verts = np.vstack(rings).astype(np.float64)
     i0 = np.concatenate([np.arange(o, o + s) for o, s in zip(offsets[:-1], sizes, strict=True)])
     i1 = np.concatenate([o + (np.arange(s) + 1) % s for o, s in zip(offsets[:-1], sizes, strict=True)])
+    nf, fam = (0, None) if outline is None or len(outline) == 0 else _compact(outline.family)
+    nv2 = verts.size
     prior = verts.ravel().copy()
-    flat = prior.copy()
+    flat = np.concatenate([prior, np.zeros(nf)])
     prev = None
     nfev = 0
     r = np.empty(0)
@@ -335,8 +474,9 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
     s0 = 0.0
     used = np.zeros(len(samples), dtype=bool)
     k = 0
+    lam = prior_weight / sample_sigma
     for k in range(1, max_outer + 1):
-        v = flat.reshape(-1, 2)
+        v = flat[:nv2].reshape(-1, 2)
         d = segment_distances(samples, v[i0], v[i1])
         edge = d.argmin(axis=1)
         used = d.min(axis=1) <= buffer
@@ -347,10 +487,158 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
         if used.sum() < 3:
             raise FitError(f"only {int(used.sum())} footprint samples within {buffer} m of the polygon")
         s, e = samples[used], edge[used]
-        fun = lambda p, s=s, e=e: _poly_residuals(p, s, i0[e], i1[e], prior, prior_weight)  # noqa: E731
-        flat, std, rr, nf, s0 = solve_least_squares(fun, flat)
-        r = rr[: len(s)]
-        nfev += nf
+
+        def fun(p, s=s, e=e):
+            r = _poly_residuals(p[:nv2], s, i0[e], i1[e], prior, lam)
+            r[: len(s)] /= sample_sigma
+            if nf == 0:
+                return r
+            ro = _poly_residuals(p[:nv2], outline.points, i0[outline.edge], i1[outline.edge], prior, 0.0)
+            ro = (ro[: len(outline)] - p[nv2 + fam]) / outline.sigma
+            return np.concatenate([r, ro])
+
+        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat)
+        r = rr[: len(s)] * sample_sigma
+        nfev += nfe
         if callback is not None:
-            callback(k, flat.copy())
-    return PlanFit(flat, std, r, used, nfev, k, s0, {"offsets": offsets})
+            callback(k, flat[:nv2].copy())
+    extra = {"offsets": offsets}
+    if nf:
+        extra.update({"overhang": flat[nv2:].copy(), "overhang_std": std[nv2:].copy(),
+                      "n_outline": len(outline)})
+    return PlanFit(flat[:nv2], std[:nv2], r, used, nfev, k, s0, extra)
+
+
+def _rectilinear_setup(rings, az, tol):
+    """Direction class (0-3) of every edge relative to ``az``, or None if not rectilinear."""
+    classes = []
+    for ring in rings:
+        b = np.roll(ring, -1, axis=0)
+        ang = np.degrees(np.arctan2(b[:, 1] - ring[:, 1], b[:, 0] - ring[:, 0])) - az
+        m = np.round((ang % 360.0) / 90.0) % 4
+        dev = np.abs(((ang - 90.0 * m) + 180.0) % 360.0 - 180.0)
+        if np.any(dev > tol):
+            return None
+        m = m.astype(np.int64)
+        if np.any((m - np.roll(m, 1)) % 2 == 0):  # consecutive edges must turn by 90 degrees
+            return None
+        classes.append(m)
+    return classes
+
+
+def _rectilinear_vertices(p, m, prev):
+    az = p[0]
+    c = p[1:]
+    th = np.radians(az + 90.0 * m)
+    n = np.column_stack([np.sin(th), -np.cos(th)])
+    return c[prev][:, None] * n[prev] + c[:, None] * n
+
+
+def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_outer: int = 10,
+                    tolerance: float = 10.0, outline: OutlineObservations | None = None,
+                    sample_sigma: float = 1.0) -> PlanFit | None:
+    """Fit a rectilinear polygon (all corners right angles) to boundary samples.
+
+    Parameters are one azimuth and one offset per edge (the edge's line
+    ``n_k . p = c_k`` with ``n_k`` the outward normal of direction
+    ``azimuth + 90 m_k``); each vertex is the crossing of its two edges. Far
+    fewer unknowns than free vertices, and the noise of every vertex helps
+    fix the common orientation.
+
+    Parameters
+    ----------
+    samples : ndarray (N, 2)
+    rings : list of ndarray (K_i, 2)
+        Approximate rings (exterior counter-clockwise, holes clockwise), open.
+    azimuth : float, optional
+        Approximate main direction (degrees); default the longest edge's.
+    tolerance : float, default 10
+        Largest deviation (degrees) of an approximate edge from the main
+        directions; beyond it the polygon is not rectilinear (returns None).
+    outline, sample_sigma
+        As in :func:`fit_polygon` (edges numbered ring after ring).
+
+    Returns
+    -------
+    PlanFit or None
+        ``params`` the flattened vertices (like :func:`fit_polygon`), ``std``
+        their standard deviations (propagated), ``extra["azimuth"]``,
+        ``extra["offsets"]``; None when the rings are not rectilinear.
+    """
+    samples = np.asarray(samples, dtype=np.float64)
+    rings = [np.asarray(r, dtype=np.float64) for r in rings]
+    allv = np.vstack(rings)
+    centre = allv.mean(axis=0)
+    rings_c = [r - centre for r in rings]
+    if azimuth is None:
+        r0 = rings_c[0]
+        e = np.roll(r0, -1, axis=0) - r0
+        k = int(np.argmax(np.hypot(e[:, 0], e[:, 1])))
+        azimuth = float(np.degrees(np.arctan2(e[k, 1], e[k, 0])))
+    classes = _rectilinear_setup(rings_c, azimuth, tolerance)
+    if classes is None:
+        return None
+    m = np.concatenate(classes)
+    sizes = [len(r) for r in rings_c]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    prev = np.concatenate([o + (np.arange(n) - 1) % n for o, n in zip(offsets[:-1], sizes, strict=True)])
+    nxt = np.concatenate([o + (np.arange(n) + 1) % n for o, n in zip(offsets[:-1], sizes, strict=True)])
+    v0 = np.vstack(rings_c)
+    mid = 0.5 * (v0 + v0[nxt])
+    th = np.radians(azimuth + 90.0 * m)
+    n0 = np.column_stack([np.sin(th), -np.cos(th)])
+    c0 = (mid * n0).sum(axis=1)
+    nf, fam = (0, None) if outline is None or len(outline) == 0 else _compact(outline.family)
+    ne = len(m)
+    params = np.concatenate([[azimuth], c0, np.zeros(nf)])
+    smp = samples - centre
+    opts = None if nf == 0 else outline.points - centre
+
+    def edge_resid(p, pts, e):
+        th = np.radians(p[0] + 90.0 * m[e])
+        return pts[:, 0] * np.sin(th) - pts[:, 1] * np.cos(th) - p[1 + e]
+
+    prev_key = None
+    nfev = 0
+    k = 0
+    cov = None
+    for k in range(1, max_outer + 1):
+        v = _rectilinear_vertices(params[: 1 + ne], m, prev)
+        d = segment_distances(smp, v, v[nxt])
+        edge = d.argmin(axis=1)
+        used = d.min(axis=1) <= buffer
+        key = np.where(used, edge, -1)
+        if prev_key is not None and np.array_equal(key, prev_key):
+            break
+        prev_key = key
+        if used.sum() < ne + 1:
+            raise FitError(f"only {int(used.sum())} footprint samples within {buffer} m of the polygon")
+        s, e = smp[used], edge[used]
+
+        def fun(p, s=s, e=e):
+            r = edge_resid(p, s, e) / sample_sigma
+            if nf == 0:
+                return r
+            ro = (edge_resid(p, opts, outline.edge) - p[1 + ne + fam]) / outline.sigma
+            return np.concatenate([r, ro])
+
+        params, std, rr, nfe, s0, cov = solve_least_squares(fun, params, full=True)
+        nfev += nfe
+    r = rr[: len(s)] * sample_sigma
+    verts = _rectilinear_vertices(params[: 1 + ne], m, prev)
+    # propagate the covariance of (azimuth, offsets) to the vertices
+    J = np.empty((verts.size, 1 + ne))
+    base = verts.ravel()
+    for j in range(1 + ne):
+        h = 1e-6
+        pp = params[: 1 + ne].copy()
+        pp[j] += h
+        J[:, j] = (_rectilinear_vertices(pp, m, prev).ravel() - base) / h
+    cv = J @ cov[: 1 + ne, : 1 + ne] @ J.T
+    vstd = np.sqrt(np.clip(np.diag(cv), 0.0, None))
+    extra = {"offsets": offsets, "azimuth": float(params[0]), "azimuth_std": float(std[0]),
+             "n_params": 1 + ne}
+    if nf:
+        extra.update({"overhang": params[1 + ne:].copy(), "overhang_std": std[1 + ne:].copy(),
+                      "n_outline": len(outline)})
+    return PlanFit((verts + centre).ravel(), vstd, r, used, nfev, k, s0, extra)

@@ -57,6 +57,8 @@ from ..errors import FitError
 from .lsm import (
     fit_polygon,
     fit_rectangle,
+    fit_rectilinear,
+    outline_observations,
     polygon_rings,
     rectangle_approx,
     rectangle_corners,
@@ -98,7 +100,11 @@ class PrimitivesConfig:
     roof_loss_scale: float = field(0.2, "soft-L1 scale of the roof residuals (chimneys, dormers), metres")
     footprint_sigma: float = field(0.1, "a-priori accuracy of footprint vertices, metres (model choice)")
     roof_sigma_floor: float = field(0.02, "smallest roof residual sigma used by the model choice, metres")
+    rectilinear_tolerance: float = field(10.0, "prism footprints with all edges within this many degrees of two perpendicular directions keep right angles (0: never)")
     prism_simplify: float = field(0.2, "Douglas-Peucker tolerance of the prism's approximate polygon, metres")
+    lidar_outline: bool = field(True, "refine the plan with the roof outline seen in the LiDAR (free edges, unknown overhangs)")
+    outline_strip: float = field(1.5, "half-width of the strip searched for the LiDAR roof outline along each edge, metres")
+    outline_sigma: float = field(0.05, "smallest standard deviation of a LiDAR outline observation, metres")
     mode_bin: float = field(0.1, "histogram bin of the flat-roof height mode, metres")
     ground_buffer: float = field(5.0, "ground points within this distance outside a footprint give its datum, metres")
     ground_percentile: float = field(50.0, "percentile of those ground heights taken as datum (lower for unclassified points)")
@@ -112,7 +118,7 @@ class PrimitivesConfig:
         unknown = sorted(set(self.candidates) - set(PRIMITIVES))
         if unknown or not self.candidates:
             raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
-        for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale",
+        for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale", "outline_strip", "outline_sigma",
                      "footprint_sigma", "roof_sigma_floor", "mode_bin", "ground_buffer"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -652,8 +658,28 @@ def _rect_from_approx(approx, polygon):
                      for n, b in zip(names, base, strict=True)])
 
 
-def _plan_rectangle(polygon, samples, approx, cfg):
-    return fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer)
+def _sample_sigma(cfg, n_samples, polygon):
+    """Std of one boundary sample such that all count as the footprint's vertices."""
+    nv = sum(len(r) for r in polygon_rings(polygon))
+    return cfg.footprint_sigma * math.sqrt(max(n_samples, 1) / max(nv, 1))
+
+
+def _density(points, polygon):
+    return len(points) / polygon.area if polygon.area > 0 else 0.0
+
+
+def _plan_rectangle(polygon, samples, approx, cfg, context=None, density=0.0):
+    plan = fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer)
+    if not cfg.lidar_outline or context is None or len(context) == 0 or density <= 0:
+        return plan
+    c = rectangle_corners(*plan.params)
+    outline = outline_observations(np.asarray(context)[:, :2], c, np.roll(c, -1, axis=0), density=density,
+                                   family=np.array([0, 1, 0, 1]), strip=cfg.outline_strip,
+                                   sigma=cfg.outline_sigma)
+    if len(outline) < 2:
+        return plan
+    return fit_rectangle(samples, plan.params, buffer=cfg.plan_buffer, outline=outline,
+                         sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon))
 
 
 def _check_inputs(footprint, points):
@@ -697,7 +723,7 @@ def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygo
 
 
 def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dict | None = None,
-                  config: PrimitivesConfig | None = None):
+                  context=None, config: PrimitivesConfig | None = None):
     """Fit one primitive of a chosen kind (semi-automatic mode).
 
     Parameters
@@ -715,6 +741,10 @@ def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dic
         azimuth fixes the ridge direction of gable / hip / shed roofs (the
         shed's high side may flip). Missing ones come from the footprint's
         minimum rotated rectangle and the point heights.
+    context : ndarray, shape (M, 2) or (M, 3), optional
+        Building points around the footprint (inside and up to
+        ``outline_strip`` outside): the roof outline seen in them refines
+        the plan (``lidar_outline``).
     config : PrimitivesConfig, optional
 
     Returns
@@ -729,9 +759,9 @@ def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dic
         polygon, points = _check_inputs(footprint, points)
         samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
         if kind.startswith("prism"):
-            pp = _prism_plan(polygon, samples, cfg)
+            pp = _prism_plan(polygon, samples, cfg, context, _density(points, polygon))
             return _fit_prism_kind(PRIMITIVES[kind], pp, points, datum, cfg, approx)[0]
-        plan = _plan_rectangle(polygon, samples, approx, cfg)
+        plan = _plan_rectangle(polygon, samples, approx, cfg, context, _density(points, polygon))
         return _fit_rect_kind(PRIMITIVES[kind], plan, polygon, points, samples, datum, cfg,
                               approx, swap=False)[0]
     except FitError as exc:
@@ -786,15 +816,44 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
     return model, bic
 
 
-def _prism_plan(polygon, samples, cfg):
-    """LSMDF of the simplified footprint polygon's vertices (shared by all prism kinds)."""
+def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
+    """LSMDF of the simplified footprint polygon (shared by all prism kinds).
+
+    Rectilinear footprints (every edge within ``rectilinear_tolerance`` of
+    two perpendicular directions) are fitted with right angles enforced
+    (:func:`~lidar2city.fit.lsm.fit_rectilinear`), others vertex by vertex.
+    """
     import shapely
 
     simple = shapely.simplify(polygon, cfg.prism_simplify, preserve_topology=True)
     if simple.is_empty or simple.area <= 0 or simple.geom_type != "Polygon":
         simple = polygon
     rings = polygon_rings(simple)
-    plan = fit_polygon(samples, rings, buffer=cfg.plan_buffer)
+
+    def fit(approx_rings, az=None, **kw):
+        if cfg.rectilinear_tolerance > 0:
+            f = fit_rectilinear(samples, approx_rings, azimuth=az, buffer=cfg.plan_buffer,
+                                tolerance=cfg.rectilinear_tolerance, **kw)
+            if f is not None:
+                return f
+        return fit_polygon(samples, approx_rings, buffer=cfg.plan_buffer, **kw)
+
+    plan = fit(rings)
+    if cfg.lidar_outline and context is not None and len(context) and density > 0:
+        flat = plan.params.reshape(-1, 2)
+        offs = plan.extra["offsets"]
+        sizes = np.diff(offs)
+        i1 = np.concatenate([o + (np.arange(n) + 1) % n for o, n in zip(offs[:-1], sizes, strict=True)])
+        a, b = flat, flat[i1]
+        az = plan.extra.get("azimuth", rectangle_approx(simple)[2])
+        ang = (np.degrees(np.arctan2(b[:, 1] - a[:, 1], b[:, 0] - a[:, 0])) - az) % 180.0
+        fam = np.where((ang < 20) | (ang > 160), 0, np.where(np.abs(ang - 90) < 20, 1, 2))
+        outline = outline_observations(np.asarray(context)[:, :2], a, b, density=density, family=fam,
+                                       strip=cfg.outline_strip, sigma=cfg.outline_sigma)
+        if len(outline) >= 2:
+            approx = [flat[o0:o1] for o0, o1 in zip(offs[:-1], offs[1:], strict=True)]
+            plan = fit(approx, plan.extra.get("azimuth"), outline=outline,
+                       sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon))
     flat = plan.params.reshape(-1, 2)
     offs = plan.extra["offsets"]
     fitted = [flat[a:b] for a, b in zip(offs[:-1], offs[1:], strict=True)]
@@ -807,7 +866,7 @@ def _prism_plan(polygon, samples, cfg):
     b = np.vstack([np.roll(rr, -1, axis=0) for rr in fitted])
     plan_d = segment_distances(samples, a, b).min(axis=1)
     return {"rings": fitted, "polygon": fitted_poly, "plan": plan, "plan_d": plan_d,
-            "n_vertices": len(a), "n_footprint_vertices": sum(len(r) for r in polygon_rings(polygon))}
+            "n_vertices": len(a), "n_plan_params": int(plan.extra.get("n_params", 2 * len(a))), "n_footprint_vertices": sum(len(r) for r in polygon_rings(polygon))}
 
 
 def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
@@ -880,7 +939,7 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
     model = cls({k: float(v) for k, v in params.items()}, std, rings=pp["rings"])
     if cls is not PrismPrimitive:
         model.to_solid()  # raises FitError when the roof does not close over the polygon
-    bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], 2 * pp["n_vertices"],
+    bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], pp["n_plan_params"],
                              pp["n_footprint_vertices"], cfg)
     model.info.update({
         "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
@@ -893,7 +952,8 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
     return model, bic
 
 
-def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | None = None):
+def fit_best(footprint, points, *, datum=(0.0, 0.0), context=None,
+             config: PrimitivesConfig | None = None):
     """Fit every candidate primitive and choose one by BIC (automatic mode).
 
     Candidates: a box, gable, hip and shed on the LSMDF rectangle (gable, hip
@@ -929,14 +989,14 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | 
         plan = pplan = None
         if any(not k.startswith("prism") for k in cfg.candidates):
             try:
-                plan = _plan_rectangle(polygon, samples, None, cfg)
+                plan = _plan_rectangle(polygon, samples, None, cfg, context, _density(points, polygon))
             except FitError as exc:
                 for k in cfg.candidates:
                     if not k.startswith("prism"):
                         fits[k] = FitFailure(k, f"rectangle plan: {exc}")
         if any(k.startswith("prism") for k in cfg.candidates):
             try:
-                pplan = _prism_plan(polygon, samples, cfg)
+                pplan = _prism_plan(polygon, samples, cfg, context, _density(points, polygon))
             except FitError as exc:
                 for k in cfg.candidates:
                     if k.startswith("prism"):
@@ -971,7 +1031,11 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), config: PrimitivesConfig | 
     families = {"rect": [k for k in scores if not k.startswith("prism")],
                 "poly": [k for k in scores if k.startswith("prism")]}
     plan_terms = {f: min(fits[k].info["bic_plan"] for k in ks) for f, ks in families.items() if ks}
-    family = min(plan_terms, key=plan_terms.get)
+    # the polygon family needs positive evidence (a BIC lower by 2) over the rectangle
+    if "rect" in plan_terms and "poly" in plan_terms:
+        family = "poly" if plan_terms["poly"] < plan_terms["rect"] - 2.0 else "rect"
+    else:
+        family = next(iter(plan_terms))
     best = min(families[family], key=scores.get)
     fits[best].info["family"] = family
     return fits[best], fits

@@ -198,14 +198,15 @@ def reconstruct_primitives(cloud: PointCloud, footprints: Footprints, *,
         try:
             poly = main_polygon(geom)
             pts = cloud.xyz[bidx[bindex.inside(poly)]]
+            context = cloud.xyz[bidx[bindex.inside(poly.buffer(cfg.outline_strip + 0.5))]]
             datum = _datum(poly, cloud, gindex, gidx, allindex, dtm, cfg)
             spec = user_primitives.get(str(fid))
             if spec is not None:
                 model = fit_primitive(spec["primitive"], poly, pts, datum=datum,
-                                      approx=_approx_local(spec, cloud), config=cfg)
+                                      approx=_approx_local(spec, cloud), context=context, config=cfg)
                 mode = "user"
             else:
-                model, _ = fit_best(poly, pts, datum=datum, config=cfg)
+                model, _ = fit_best(poly, pts, datum=datum, context=context, config=cfg)
                 mode = "auto"
             if not model:
                 raise FitError(f"{model.kind}: {model.reason}")
