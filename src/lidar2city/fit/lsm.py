@@ -42,6 +42,7 @@ __all__ = [
     "fit_polygon",
     "OutlineObservations",
     "fit_rectilinear",
+    "drop_observation",
     "outline_observations",
     "solve_least_squares",
 ]
@@ -341,6 +342,13 @@ def outline_observations(xy, a, b, *, density: float, family=None, strip: float 
                                np.asarray(fams, dtype=np.int64), np.asarray(sig))
 
 
+def drop_observation(outline: OutlineObservations, i: int) -> OutlineObservations:
+    """The outline observations without the ``i``-th."""
+    keep = np.arange(len(outline)) != i
+    return OutlineObservations(outline.points[keep], outline.edge[keep], outline.family[keep],
+                               outline.sigma[keep])
+
+
 def _compact(families):
     uniq, inv = np.unique(families, return_inverse=True)
     return len(uniq), inv
@@ -415,7 +423,9 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
     r_fp = r[: len(s)] * sample_sigma
     extra = {}
     if nf:
-        extra = {"overhang": params[5:].copy(), "overhang_std": std[5:].copy(), "n_outline": len(outline)}
+        ro = _rect_residuals(params[:5], outline.points, outline.edge) - params[5 + fam]
+        extra = {"overhang": params[5:].copy(), "overhang_std": std[5:].copy(), "n_outline": len(outline),
+                 "outline_residuals": ro}
     return PlanFit(params[:5], std[:5], r_fp, used, nfev, k, s0, extra)
 
 
@@ -504,8 +514,9 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
             callback(k, flat[:nv2].copy())
     extra = {"offsets": offsets}
     if nf:
+        ro = _poly_residuals(flat[:nv2], outline.points, i0[outline.edge], i1[outline.edge], prior, 0.0)
         extra.update({"overhang": flat[nv2:].copy(), "overhang_std": std[nv2:].copy(),
-                      "n_outline": len(outline)})
+                      "n_outline": len(outline), "outline_residuals": ro[: len(outline)] - flat[nv2 + fam]})
     return PlanFit(flat[:nv2], std[:nv2], r, used, nfev, k, s0, extra)
 
 
@@ -639,6 +650,7 @@ def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_ou
     extra = {"offsets": offsets, "azimuth": float(params[0]), "azimuth_std": float(std[0]),
              "n_params": 1 + ne}
     if nf:
+        ro = edge_resid(params, opts, outline.edge) - params[1 + ne + fam]
         extra.update({"overhang": params[1 + ne:].copy(), "overhang_std": std[1 + ne:].copy(),
-                      "n_outline": len(outline)})
+                      "n_outline": len(outline), "outline_residuals": ro})
     return PlanFit((verts + centre).ravel(), vstd, r, used, nfev, k, s0, extra)

@@ -44,6 +44,7 @@ of a model, *Annals of Statistics* 6(2) — the BIC.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -58,6 +59,7 @@ from .lsm import (
     fit_polygon,
     fit_rectangle,
     fit_rectilinear,
+    drop_observation,
     outline_observations,
     polygon_rings,
     rectangle_approx,
@@ -105,6 +107,7 @@ class PrimitivesConfig:
     lidar_outline: bool = field(True, "refine the plan with the roof outline seen in the LiDAR (free edges, unknown overhangs)")
     outline_strip: float = field(1.5, "half-width of the strip searched for the LiDAR roof outline along each edge, metres")
     outline_sigma: float = field(0.05, "smallest standard deviation of a LiDAR outline observation, metres")
+    outline_max_shift: float = field(0.5, "LiDAR outline refinements moving a corner farther than this are rejected, metres")
     mode_bin: float = field(0.1, "histogram bin of the flat-roof height mode, metres")
     ground_buffer: float = field(5.0, "ground points within this distance outside a footprint give its datum, metres")
     ground_percentile: float = field(50.0, "percentile of those ground heights taken as datum (lower for unclassified points)")
@@ -118,7 +121,7 @@ class PrimitivesConfig:
         unknown = sorted(set(self.candidates) - set(PRIMITIVES))
         if unknown or not self.candidates:
             raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
-        for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale", "outline_strip", "outline_sigma",
+        for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale", "outline_strip", "outline_sigma", "outline_max_shift",
                      "footprint_sigma", "roof_sigma_floor", "mode_bin", "ground_buffer"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -668,8 +671,40 @@ def _density(points, polygon):
     return len(points) / polygon.area if polygon.area > 0 else 0.0
 
 
+def _decorrelate(plan, polygon):
+    """Scale footprint-only std devs: the resampled boundary holds only the vertices' information."""
+    nv = sum(len(r) for r in polygon_rings(polygon))
+    f = math.sqrt(max(int(plan.used.sum()), 1) / max(nv, 1))
+    return dataclasses.replace(plan, std=plan.std * max(f, 1.0))
+
+
+def _shift_limit(cfg, corner_std):
+    """Largest corner move accepted from the LiDAR outline: 3 std of the footprint-only corners
+    (at least 3 a-priori footprint sigmas in 2-D), at most ``outline_max_shift``."""
+    return min(cfg.outline_max_shift, 3.0 * max(corner_std, math.sqrt(2.0) * cfg.footprint_sigma))
+
+
+def _snoop(fit, outline, *, k: float = 3.0, max_drop: int = 3):
+    """Fit with the outline observations, dropping the worst while its residual exceeds k sigma.
+
+    Data snooping (Baarda): an outline piece contradicting the footprint and
+    the other pieces (a dormer, a gutter, a lower annex) is removed. Returns
+    None when fewer than 2 observations remain.
+    """
+    for _ in range(max_drop + 1):
+        if len(outline) < 2:
+            return None
+        f = fit(outline)
+        w = np.abs(f.extra.get("outline_residuals", np.zeros(0))) / outline.sigma
+        if len(w) == 0 or w.max() <= k:
+            return f
+        outline = drop_observation(outline, int(np.argmax(w)))
+    return None
+
+
 def _plan_rectangle(polygon, samples, approx, cfg, context=None, density=0.0):
-    plan = fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer)
+    plan = _decorrelate(fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer),
+                        polygon)
     if not cfg.lidar_outline or context is None or len(context) == 0 or density <= 0:
         return plan
     c = rectangle_corners(*plan.params)
@@ -678,8 +713,19 @@ def _plan_rectangle(polygon, samples, approx, cfg, context=None, density=0.0):
                                    sigma=cfg.outline_sigma)
     if len(outline) < 2:
         return plan
-    return fit_rectangle(samples, plan.params, buffer=cfg.plan_buffer, outline=outline,
-                         sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon))
+    refined = _snoop(lambda o: fit_rectangle(samples, plan.params, buffer=cfg.plan_buffer, outline=o,
+                                             sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon)),
+                     outline)
+    if refined is None:
+        return plan
+    shift = np.hypot(*(rectangle_corners(*refined.params) - c).T).max()
+    sx, sy, saz, sl, sw = plan.std
+    corner_std = math.sqrt(sx ** 2 + sy ** 2 + (sl / 2) ** 2 + (sw / 2) ** 2
+                           + (max(plan.params[3:5]) / 2 * math.radians(saz)) ** 2)
+    if shift > _shift_limit(cfg, corner_std):
+        logger.debug("LiDAR outline moved a corner by %.2f m: kept the footprint-only plan", shift)
+        return plan
+    return refined
 
 
 def _check_inputs(footprint, points):
@@ -838,7 +884,7 @@ def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
                 return f
         return fit_polygon(samples, approx_rings, buffer=cfg.plan_buffer, **kw)
 
-    plan = fit(rings)
+    plan = _decorrelate(fit(rings), polygon)
     if cfg.lidar_outline and context is not None and len(context) and density > 0:
         flat = plan.params.reshape(-1, 2)
         offs = plan.extra["offsets"]
@@ -852,8 +898,15 @@ def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
                                        strip=cfg.outline_strip, sigma=cfg.outline_sigma)
         if len(outline) >= 2:
             approx = [flat[o0:o1] for o0, o1 in zip(offs[:-1], offs[1:], strict=True)]
-            plan = fit(approx, plan.extra.get("azimuth"), outline=outline,
-                       sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon))
+            refined = _snoop(lambda o: fit(approx, plan.extra.get("azimuth"), outline=o,
+                                           sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon)),
+                             outline)
+            moved = None
+            if refined is not None and refined.params.size == flat.size:
+                moved = refined.params.reshape(-1, 2) - flat
+            limit = _shift_limit(cfg, math.sqrt(2.0) * float(plan.std.max()))
+            if moved is not None and np.hypot(*moved.T).max() <= limit:
+                plan = refined
     flat = plan.params.reshape(-1, 2)
     offs = plan.extra["offsets"]
     fitted = [flat[a:b] for a, b in zip(offs[:-1], offs[1:], strict=True)]

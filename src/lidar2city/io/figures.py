@@ -63,9 +63,8 @@ def write_check_image(path, points, solid, *, footprint=None, title: str = "", o
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     v = solid.vertices
     edges = solid_edges(solid)
-    fig = Figure(figsize=(11, 5), dpi=dpi)
-    ax1 = fig.add_subplot(1, 2, 1)
-    ax2 = fig.add_subplot(1, 2, 2)
+    fig = Figure(figsize=(15, 5), dpi=dpi)
+    ax1 = fig.add_subplot(1, 3, 1)
     if ortho is not None:
         img, extent = ortho
         img = np.asarray(img)
@@ -86,25 +85,28 @@ def write_check_image(path, points, solid, *, footprint=None, title: str = "", o
     ax1.set_aspect("equal")
     ax1.set_xlabel("x (m)")
     ax1.set_ylabel("y (m)")
-    ax1.set_title("plan")
-    # side view along the longest horizontal axis of the model (principal direction)
+    ax1.set_title("plan (model red, footprint dashed)")
+    # side views along and across the main horizontal axis of the model; only the
+    # points over the model (1 m margin), coloured by their depth in the view
     c = v[:, :2].mean(axis=0)
     cov = np.cov((v[:, :2] - c).T) if len(v) > 2 else np.eye(2)
     w, vec = np.linalg.eigh(cov)
     d = vec[:, np.argmax(w)]
-    ext = np.abs((v[:, :2] - c) @ np.array([-d[1], d[0]])).max() + 1.0
-    if len(points):
-        rel = points[:, :2] - c
-        across = rel @ np.array([-d[1], d[0]])
-        near = np.abs(across) <= ext
-        ax2.scatter(rel[near] @ d, points[near, 2], c=across[near], s=2, cmap="coolwarm")
-    vu = (v[:, :2] - c) @ d
-    for a, b in edges:
-        ax2.plot(vu[[a, b]], v[[a, b], 2], color="red", lw=1.2)
-    ax2.set_aspect("equal")
-    ax2.set_xlabel("along the main axis (m)")
-    ax2.set_ylabel("z (m)")
-    ax2.set_title("side view (points coloured by distance across)")
+    n = np.array([-d[1], d[0]])
+    vu, vv = (v[:, :2] - c) @ d, (v[:, :2] - c) @ n
+    rel = points[:, :2] - c if len(points) else np.empty((0, 2))
+    pu, pv = rel @ d, rel @ n
+    over = ((pu >= vu.min() - 1) & (pu <= vu.max() + 1) & (pv >= vv.min() - 1) & (pv <= vv.max() + 1))
+    for k, (ax_h, ax_depth, vh, name) in enumerate(((pu, pv, vu, "along"), (pv, pu, vv, "across"))):
+        ax = fig.add_subplot(1, 3, 2 + k)
+        if over.any():
+            ax.scatter(ax_h[over], points[over, 2], c=ax_depth[over], s=2, cmap="coolwarm")
+        for a, b in edges:
+            ax.plot(vh[[a, b]], v[[a, b], 2], color="red", lw=1.2)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{name} the main axis (m)")
+        ax.set_ylabel("z (m)")
+        ax.set_title(f"view {name} the main axis")
     if title:
         fig.suptitle(title)
     fig.tight_layout()
