@@ -190,7 +190,8 @@ def test_exact_recovery_noise_free(kind):
     datum = datum_from_ground(ground)
     assert datum == (2.0, 0.0)
     approx = {"azimuth": 33.0 + 4.0} if kind != "box" else None
-    m = fit_primitive(kind, poly, roof, datum=datum, approx=approx)
+    exact = PrimitivesConfig(footprint_sigma=1e-9)  # the footprint is exact too
+    m = fit_primitive(kind, poly, roof, datum=datum, approx=approx, config=exact)
     assert m, m
     for name, value in truth.params.items():
         assert m.params[name] == pytest.approx(value, abs=1e-5), name
@@ -245,12 +246,25 @@ def test_std_devs_shrink_with_more_points():
     stds = []
     for density in (2.0, 32.0):
         fp, pts = noisy_data(truth, density, rng)
-        m = fit_primitive("gable", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0})
+        m = fit_primitive("gable", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0},
+                          config=PrimitivesConfig(footprint_sigma=1e-6))
         assert m
         stds.append((m.std["roof_height"], m.std["height"], m.std["ridge_offset"]))
     ratio = np.array(stds[1]) / np.array(stds[0])
     assert np.all(ratio < 0.4)  # 16x the points: about 1/4 of the std
     assert np.all(ratio > 0.1)
+
+
+def test_eave_height_std_includes_the_footprint_accuracy():
+    truth = make("gable")
+    fp, pts = noisy_data(truth, 32.0, np.random.default_rng(3))
+    sharp = fit_primitive("gable", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0},
+                          config=PrimitivesConfig(footprint_sigma=1e-6))
+    loose = fit_primitive("gable", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0},
+                          config=PrimitivesConfig(footprint_sigma=0.1))
+    slope = 2 * 3.0 / 8.0
+    assert loose.std["width"] > 0.05
+    assert loose.std["height"] >= slope * loose.std["width"] / 2 > 10 * sharp.std["height"]
 
 
 def test_std_devs_are_realistic():
@@ -260,10 +274,26 @@ def test_std_devs_are_realistic():
     est, rep = [], []
     for _ in range(20):
         fp, pts = noisy_data(truth, 4.0, rng)
-        m = fit_primitive("shed", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0})
+        m = fit_primitive("shed", fp, pts, datum=(2.0, 0.0), approx={"azimuth": 33.0},
+                          config=PrimitivesConfig(footprint_sigma=1e-6))  # exact footprint
         est.append(m.params["roof_height"])
         rep.append(m.std["roof_height"])
     assert np.std(est) == pytest.approx(np.mean(rep), rel=0.6)
+
+
+def test_std_devs_realistic_under_footprint_and_height_noise():
+    """Errors over a synthetic scene, divided by their reported std, have an RMS near 1."""
+    from lidar2city.tools.primitives import reconstruct_primitives
+
+    sc = synthetic_scene(16, seed=8, kinds=("box", "gable", "shed"))
+    res = reconstruct_primitives(sc.cloud(), sc.footprint_set())
+    z = {k: [] for k in ("x", "y", "length", "width", "height")}
+    for r, t in zip(res, sc.truth, strict=True):
+        for k in z:
+            z[k].append((r.attributes[f"primitive_{k}"] - t.params[k]) / r.attributes[f"primitive_{k}_std"])
+    for k, v in z.items():
+        rms = float(np.sqrt(np.mean(np.square(v))))
+        assert 0.3 < rms < 2.0, (k, rms)
 
 
 def test_plan_std_from_footprint_noise():
@@ -412,3 +442,57 @@ def test_fitted_solids_on_synthetic_data_are_valid(cls):
         for m in fits.values():
             if m:
                 assert solid_problems(m.to_solid()) == [], m
+
+
+# ---------------------------------------------------------------------------
+# LiDAR outline and rectilinear plans
+
+
+def _roof_points(poly, density, rng):
+    x0, y0, x1, y1 = poly.bounds
+    xy = rng.uniform([x0, y0], [x1, y1], size=(int(density * (x1 - x0) * (y1 - y0)), 2))
+    return xy[shapely.contains_xy(poly, xy[:, 0], xy[:, 1])]
+
+
+def test_outline_observations_find_free_edges_only():
+    from lidar2city.fit.lsm import outline_observations
+
+    rng = np.random.default_rng(0)
+    roof = shapely.box(0, 0, 12, 8)
+    neighbour = shapely.box(12, 0, 20, 8)  # a row house sharing the east wall
+    xy = np.vstack([_roof_points(roof, 8, rng), _roof_points(neighbour, 8, rng)])
+    model = np.array([[0.1, 0.05], [12.0, 0.05], [12.0, 8.1], [0.1, 8.1]])
+    obs = outline_observations(xy, model, np.roll(model, -1, axis=0), density=8.0)
+    assert 1 not in obs.edge  # the shared east wall gives nothing
+    assert {0, 2, 3} <= set(obs.edge.tolist())
+    truth = {0: 0.0, 2: 8.0, 3: 0.0}
+    for p, e, s in zip(obs.points, obs.edge, obs.sigma, strict=True):
+        coord = p[1] if e in (0, 2) else p[0]
+        assert abs(coord - truth[int(e)]) < 4 * s + 0.05
+
+
+def test_fit_rectilinear_l_shape_and_rejection():
+    from lidar2city.fit.lsm import fit_rectilinear
+
+    rng = np.random.default_rng(4)
+    samples = resample_rings([L_RING], 0.5)
+    f = fit_rectilinear(samples, [L_RING + rng.normal(0, 0.15, L_RING.shape)])
+    assert f is not None and f.extra["n_params"] == 7
+    assert np.allclose(f.params.reshape(-1, 2), L_RING, atol=1e-6)
+    skew = np.array([[0, 0], [10, 0], [13, 6], [0, 6]], dtype=float)
+    assert fit_rectilinear(resample_rings([skew], 0.5), [skew]) is None
+
+
+def test_lidar_outline_improves_corners():
+    from lidar2city.metrics.corners import corner_metrics
+    from lidar2city.tools.primitives import reconstruct_primitives
+
+    sc = synthetic_scene(12, seed=31, kinds=("box", "gable", "prism"))
+    ref = dict(zip(sc.ids, sc.corners, strict=True))
+    out = {}
+    for flag in (False, True):
+        res = reconstruct_primitives(sc.cloud(), sc.footprint_set(), config=PrimitivesConfig(lidar_outline=flag))
+        out[flag] = corner_metrics({r.id: r.solids["2.2"].vertices for r in res}, ref)
+    assert out[True].completeness == out[False].completeness == 1.0
+    assert out[True].rmse_xy < 0.8 * out[False].rmse_xy
+    assert out[True].rmse_xy < 0.10

@@ -56,14 +56,13 @@ def test_user_primitive_and_approximate_pose(scene):
     i = next(k for k, t in enumerate(scene.truth) if t.kind == "gable")
     fid = scene.ids[i]
     t = scene.truth[i].params
+    one = Footprints([scene.footprints[i]], [fid])
     user = {fid: {"primitive": "gable", "azimuth": t["azimuth"] + 3.0, "height": t["height"] + 0.5}}
-    res = reconstruct_primitives(scene.cloud(), scene.footprint_set(), user_primitives=user)
-    r = res[i]
+    r = reconstruct_primitives(scene.cloud(), one, user_primitives=user)[0]
     assert r.ok and r.attributes["primitive_choice"] == "user"
     assert r.attributes["primitive_roof_height"] == pytest.approx(t["roof_height"], abs=0.1)
-    forced = reconstruct_primitives(scene.cloud(), scene.footprint_set(),
-                                    user_primitives={fid: {"primitive": "box"}})
-    assert forced[i].attributes["primitive"] == "box"
+    forced = reconstruct_primitives(scene.cloud(), one, user_primitives={fid: {"primitive": "box"}})
+    assert forced[0].attributes["primitive"] == "box"
     with pytest.raises(InputError, match="pyramid"):
         reconstruct_primitives(scene.cloud(), scene.footprint_set(),
                                user_primitives={fid: {"primitive": "pyramid"}})

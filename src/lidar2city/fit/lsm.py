@@ -167,7 +167,7 @@ def _jacobian(fun, x, r0):
 
 
 def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_scale=1.0,
-                        max_nfev=200, full=False):
+                        max_nfev=200, full=False, sigma_floor=0.0):
     """Run ``scipy.optimize.least_squares`` and derive the parameter covariance.
 
     Levenberg-Marquardt when unbounded with a plain quadratic loss and enough
@@ -177,7 +177,8 @@ def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_s
     -------
     x : ndarray (P,)
     std : ndarray (P,)
-        ``sqrt(diag((J^T J)^+ * s0^2))`` with ``s0^2 = r^T r / (n - P)``.
+        ``sqrt(diag((J^T J)^+ * s0^2))`` with ``s0^2 = r^T r / (n - P)``, s0 not
+        below ``sigma_floor`` (an a-priori sigma the data cannot undercut).
     residuals : ndarray (N,)
     nfev : int
     sigma0 : float
@@ -218,7 +219,7 @@ def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_s
         rw = r * np.sqrt(w)
         s02 = float(rw @ rw) / dof
         J = J * np.sqrt(w)[:, None]
-    cov = np.linalg.pinv(J.T @ J) * s02
+    cov = np.linalg.pinv(J.T @ J) * max(s02, sigma_floor ** 2)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     if full:
         return res.x, std, r, int(res.nfev), float(np.sqrt(s02)), cov
@@ -356,7 +357,7 @@ def _compact(families):
 
 def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
                   outline: OutlineObservations | None = None, sample_sigma: float = 1.0,
-                  callback=None) -> PlanFit:
+                  sigma_floor: float = 0.0, callback=None) -> PlanFit:
     """Fit a rectangle to boundary samples by least squares (LSMDF).
 
     Parameters
@@ -375,6 +376,8 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
         the model edge moved outwards by an unknown overhang per family.
     sample_sigma : float, default 1
         Standard deviation of one footprint sample (weights against ``outline``).
+    sigma_floor : float, default 0
+        Smallest sigma naught scaling the covariance (the a-priori sigma).
     callback : callable, optional
         Called as ``callback(round, params)`` after each solve.
 
@@ -414,7 +417,7 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
             ro = (_rect_residuals(p[:5], outline.points, outline.edge) - p[5 + fam]) / outline.sigma
             return np.concatenate([r, ro])
 
-        x, std, r, nfe, s0 = solve_least_squares(fun, params)
+        x, std, r, nfe, s0 = solve_least_squares(fun, params, sigma_floor=sigma_floor)
         nfev += nfe
         params = x
         params[3:5] = np.abs(params[3:5])
@@ -440,7 +443,7 @@ def _poly_residuals(flat, samples, i0, i1, prior, lam):
 
 def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, prior_weight=1e-3,
                 outline: OutlineObservations | None = None, sample_sigma: float = 1.0,
-                callback=None) -> PlanFit:
+                sigma_floor: float = 0.0, callback=None) -> PlanFit:
     """Fit polygon vertex coordinates to boundary samples (LSMDF for prisms).
 
     Each sample is assigned to its nearest edge; its residual is the signed
@@ -507,7 +510,7 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
             ro = (ro[: len(outline)] - p[nv2 + fam]) / outline.sigma
             return np.concatenate([r, ro])
 
-        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat)
+        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat, sigma_floor=sigma_floor)
         r = rr[: len(s)] * sample_sigma
         nfev += nfe
         if callback is not None:
@@ -547,7 +550,7 @@ def _rectilinear_vertices(p, m, prev):
 
 def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_outer: int = 10,
                     tolerance: float = 10.0, outline: OutlineObservations | None = None,
-                    sample_sigma: float = 1.0) -> PlanFit | None:
+                    sample_sigma: float = 1.0, sigma_floor: float = 0.0) -> PlanFit | None:
     """Fit a rectilinear polygon (all corners right angles) to boundary samples.
 
     Parameters are one azimuth and one offset per edge (the edge's line
@@ -633,7 +636,7 @@ def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_ou
             ro = (edge_resid(p, opts, outline.edge) - p[1 + ne + fam]) / outline.sigma
             return np.concatenate([r, ro])
 
-        params, std, rr, nfe, s0, cov = solve_least_squares(fun, params, full=True)
+        params, std, rr, nfe, s0, cov = solve_least_squares(fun, params, full=True, sigma_floor=sigma_floor)
         nfev += nfe
     r = rr[: len(s)] * sample_sigma
     verts = _rectilinear_vertices(params[: 1 + ne], m, prev)

@@ -672,10 +672,14 @@ def _density(points, polygon):
 
 
 def _decorrelate(plan, polygon):
-    """Scale footprint-only std devs: the resampled boundary holds only the vertices' information."""
+    """Footprint-only std devs: the resampled boundary holds only the vertices' information.
+
+    The samples are interpolated between the footprint's vertices, so the
+    normal matrix is scaled down by ``n_samples / n_vertices``.
+    """
     nv = sum(len(r) for r in polygon_rings(polygon))
-    f = math.sqrt(max(int(plan.used.sum()), 1) / max(nv, 1))
-    return dataclasses.replace(plan, std=plan.std * max(f, 1.0))
+    f = max(math.sqrt(max(int(plan.used.sum()), 1) / max(nv, 1)), 1.0)
+    return dataclasses.replace(plan, std=plan.std * f)
 
 
 def _shift_limit(cfg, corner_std):
@@ -703,8 +707,8 @@ def _snoop(fit, outline, *, k: float = 3.0, max_drop: int = 3):
 
 
 def _plan_rectangle(polygon, samples, approx, cfg, context=None, density=0.0):
-    plan = _decorrelate(fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer),
-                        polygon)
+    plan = _decorrelate(fit_rectangle(samples, _rect_from_approx(approx, polygon), buffer=cfg.plan_buffer,
+                                      sigma_floor=cfg.footprint_sigma), polygon)
     if not cfg.lidar_outline or context is None or len(context) == 0 or density <= 0:
         return plan
     c = rectangle_corners(*plan.params)
@@ -714,7 +718,8 @@ def _plan_rectangle(polygon, samples, approx, cfg, context=None, density=0.0):
     if len(outline) < 2:
         return plan
     refined = _snoop(lambda o: fit_rectangle(samples, plan.params, buffer=cfg.plan_buffer, outline=o,
-                                             sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon)),
+                                             sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon),
+                                             sigma_floor=1.0),
                      outline)
     if refined is None:
         return plan
@@ -750,6 +755,12 @@ def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygo
     for name, val, sd in zip(cls.roof_names, q[1:], qstd[1:], strict=True):
         params[name] = float(val)
         std[name] = float(sd)
+    # the eaves sit where the walls are: plan (width) uncertainty moves them along the slope
+    if cls is not BoxPrimitive:
+        slope = 2.0 * q[1] / wd if cls is not ShedPrimitive else q[1] / wd
+        dz = abs(slope) * sw / 2.0
+        std["height"] = math.hypot(std["height"], dz)
+        std["roof_height"] = math.hypot(std["roof_height"], dz if cls is not ShedPrimitive else 2 * dz)
     if cls is ShedPrimitive and params["roof_height"] < 0:
         # canonical: rising towards +v; turn the model by 180 degrees
         params["azimuth"] = (params["azimuth"] + 180.0) % 360.0
@@ -884,7 +895,7 @@ def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
                 return f
         return fit_polygon(samples, approx_rings, buffer=cfg.plan_buffer, **kw)
 
-    plan = _decorrelate(fit(rings), polygon)
+    plan = _decorrelate(fit(rings, sigma_floor=cfg.footprint_sigma), polygon)
     if cfg.lidar_outline and context is not None and len(context) and density > 0:
         flat = plan.params.reshape(-1, 2)
         offs = plan.extra["offsets"]
@@ -899,7 +910,8 @@ def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
         if len(outline) >= 2:
             approx = [flat[o0:o1] for o0, o1 in zip(offs[:-1], offs[1:], strict=True)]
             refined = _snoop(lambda o: fit(approx, plan.extra.get("azimuth"), outline=o,
-                                           sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon)),
+                                           sample_sigma=_sample_sigma(cfg, int(plan.used.sum()), polygon),
+                                           sigma_floor=1.0),
                              outline)
             moved = None
             if refined is not None and refined.params.size == flat.size:
