@@ -121,7 +121,11 @@ def delft(data: Path, images: Path | None):
     from lidar2city.fit.primitives import PrimitivesConfig
     from lidar2city.io.las import read_points
     from lidar2city.io.vector import read_footprints
-    from lidar2city.tools.primitives import building_points, reconstruct_primitives, write_check_images
+    from lidar2city.tools.primitives import (
+        building_points,
+        reconstruct_primitives,
+        write_check_images,
+    )
 
     cloud = read_points([data / "delft" / "ahn3_cropped_1.laz"], crs="EPSG:7415")
     fps, _ = read_footprints(data / "delft" / "footprints_bgt.gpkg", origin=cloud.origin[:2],

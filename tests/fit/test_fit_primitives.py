@@ -33,7 +33,6 @@ from lidar2city.fit.primitives import (
 )
 from lidar2city.fit.synthetic_primitives import synthetic_scene
 
-
 # ---------------------------------------------------------------------------
 # an independent closedness / orientation / planarity check
 

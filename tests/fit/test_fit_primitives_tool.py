@@ -5,14 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
+from test_fit_primitives import solid_problems  # noqa: E402  (same folder)
 
 from lidar2city.datamodel import Footprints, PointCloud
 from lidar2city.errors import FileFormatError, InputError
 from lidar2city.fit.synthetic_primitives import synthetic_scene
 from lidar2city.io.primitives import read_primitives
 from lidar2city.tools.primitives import reconstruct_primitives, write_check_images
-
-from test_fit_primitives import solid_problems  # noqa: E402  (same folder)
 
 
 @pytest.fixture(scope="module")

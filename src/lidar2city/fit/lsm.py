@@ -616,7 +616,7 @@ def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_ou
     nfev = 0
     k = 0
     cov = None
-    for k in range(1, max_outer + 1):
+    for k in range(1, max_outer + 1):  # noqa: B007 - k is the round count returned
         v = _rectilinear_vertices(params[: 1 + ne], m, prev)
         d = segment_distances(smp, v, v[nxt])
         edge = d.argmin(axis=1)

@@ -5,41 +5,54 @@ centre, ``z`` the ground height), a pose (translation and ``azimuth``, the
 direction of the length / ridge axis in degrees counter-clockwise from +x;
 tilt and swing fixed at 0) and shape parameters:
 
-========  ==========================================================
-box       length, width, height (flat roof above the datum)
-gable     + roof_height (ridge above the eaves; ridge along the length)
-hip       + roof_height, hip_length (horizontal run of the end faces)
-shed      + roof_height (rise from the low eave at -width/2 to the
-          high eave at +width/2; slope = atan(roof_height / width))
-prism     the footprint polygon (vertices fitted) and height
-========  ==========================================================
+===========  ==========================================================
+box          length, width, height (flat roof above the datum)
+gable        + roof_height (ridge above the eaves, ridge along the
+             length) and ridge_offset (0 for a symmetric roof)
+hip          + roof_height, hip_length (horizontal run of the end faces)
+shed         + roof_height (rise from the low eave at -width/2 to the
+             high eave at +width/2; slope = atan(roof_height / width))
+prism        the footprint polygon (vertices fitted) and height
+prism_gable  a gable roof (ridge point x, y, azimuth, width, height,
+             roof_height) over the fitted polygon
+prism_shed   a shed roof over the fitted polygon
+===========  ==========================================================
 
-``height`` is always the eave height above the datum (for flat roofs the
-roof height). Fitting runs in two steps, as in the floating-model method:
+``height`` is the eave height above the datum (for flat roofs the roof
+height). Fitting runs in two steps, as in the floating-model method:
 
 1. **Plan (LSMDF)**: the footprint boundary is resampled at a fixed interval
    and the plan parameters minimise the squared distances of the samples
-   (within a buffer) to the model edges (:mod:`lidar2city.fit.lsm`).
+   (within a buffer) to the model edges (:mod:`lidar2city.fit.lsm`); polygon
+   plans keep right angles when the footprint is rectilinear. When building
+   points around the footprint are given (``context``), the roof outline
+   seen in them along the free edges (not along shared walls) is added as a
+   second group of observations of the same edges moved by an unknown
+   overhang (one per edge direction), with data snooping; the footprint
+   fixes the overhang, the LiDAR the shape.
 2. **Heights**: the datum from a DTM or ground points; the roof parameters
    from the building's points transformed into the model's local frame
    ``(u, v, z)``: flat roofs from the refined histogram mode of the heights,
-   sloped roofs by least squares of the points' perpendicular distances to
-   the roof faces (the eave / ridge profile), again keeping only points within
-   a buffer of the model and iterating.
+   sloped roofs by robust least squares of the points' perpendicular
+   distances to the roof faces (the eave / ridge profile), keeping only
+   points within a buffer of the model and iterating.
 
-Standard deviations come from ``(J^T J)^-1 s0^2`` of each step; the eave
-height's combines the datum's.
+Standard deviations come from ``(J^T J)^-1 s0^2`` of each step, with s0 not
+below the a-priori sigma (``footprint_sigma`` for footprints), the footprint
+samples counted as the vertices they interpolate, and the plan uncertainty
+propagated into the eave heights (an eave moves along the roof slope with
+its wall).
 
-:func:`fit_best` fits every candidate and picks the one with the smallest
-Bayesian information criterion (see its docstring); :func:`fit_primitive`
-is the semi-automatic entry point (a chosen primitive from approximate
-parameters).
+:func:`fit_best` fits every candidate and picks one by the Bayesian
+information criterion (see its docstring); :func:`fit_primitive` is the
+semi-automatic entry point (a chosen primitive from approximate parameters).
 
 References
 ----------
 The floating-model seed (parametric primitives fitted by least-squares model
 matching to map data, eq. 1-2); Schwarz, G. (1978), Estimating the dimension
-of a model, *Annals of Statistics* 6(2) — the BIC.
+of a model, *Annals of Statistics* 6(2) — the BIC; Baarda, W. (1968), A
+testing procedure for use in geodetic networks — data snooping.
 """
 
 from __future__ import annotations
@@ -56,10 +69,10 @@ from ..config import field
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 from .lsm import (
+    drop_observation,
     fit_polygon,
     fit_rectangle,
     fit_rectilinear,
-    drop_observation,
     outline_observations,
     polygon_rings,
     rectangle_approx,
@@ -1022,8 +1035,13 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), context=None,
     """Fit every candidate primitive and choose one by BIC (automatic mode).
 
     Candidates: a box, gable, hip and shed on the LSMDF rectangle (gable, hip
-    and shed in both ridge directions), and a prism on the fitted footprint
-    polygon. The chosen one minimises
+    and shed in both ridge directions), and a flat prism, a gable and a shed
+    roof over the fitted footprint polygon. First the plan family is chosen
+    from the footprint alone (the polygon only with a plan BIC lower by 2
+    than the rectangle's), then the roof within it by the whole BIC (the
+    plan terms being equal there); a sloped roof rising less than
+    ``min_roof_height`` or 3 std, and a hip shorter than ``min_hip_length``
+    or 3 std, are not candidates. The BIC is
 
     ``BIC = n_r ln(max(RSS_r / n_r, s_r^2)) + k_r ln(n_r)
     + (n_v / n_s) RSS_p / sigma_fp^2 + k_p ln(n_v)``
@@ -1031,20 +1049,44 @@ def fit_best(footprint, points, *, datum=(0.0, 0.0), context=None,
     - roof term: ``RSS_r`` the sum of squared perpendicular distances of all
       ``n_r`` points to the roof, each truncated at ``roof_buffer`` (a dormer
       or tree does not decide the roof type), with unknown variance floored at
-      ``roof_sigma_floor``; ``k_r`` roof parameters (box and prism 1, gable and
-      shed 2, hip 3);
+      ``roof_sigma_floor``; ``k_r`` roof parameters (box and prism 1, shed and
+      prism_shed 2, gable, hip and prism_gable 3);
     - plan term: ``RSS_p`` the squared distances of the ``n_s`` boundary
       samples to the model outline (truncated at twice ``plan_buffer``) with
       the known footprint accuracy ``footprint_sigma``; the samples are
       interpolated between the ``n_v`` footprint vertices, so they count as
-      ``n_v`` observations; ``k_p`` plan parameters (5 for a rectangle, 2 per
-      vertex for the prism).
+      ``n_v`` observations; ``k_p`` plan parameters (5 for a rectangle, 1 + one
+      per edge for a rectilinear polygon, 2 per vertex otherwise).
+
+    Parameters
+    ----------
+    footprint : shapely Polygon or MultiPolygon
+        Local metric plan (the largest part of a MultiPolygon is used).
+    points : ndarray, shape (N, 3)
+        The building's roof points (inside the footprint).
+    datum : (float, float)
+        Ground height and its standard deviation.
+    context : ndarray, shape (M, 2) or (M, 3), optional
+        Building points around the footprint for the LiDAR outline.
+    config : PrimitivesConfig, optional
 
     Returns
     -------
     best : Primitive or FitFailure
     fits : dict of str to Primitive or FitFailure
         Every candidate (``"gable"`` and ``"gable90"`` for the two ridge directions...).
+
+    Examples
+    --------
+    >>> import numpy as np, shapely
+    >>> from lidar2city.fit.primitives import GablePrimitive, fit_best
+    >>> truth = GablePrimitive({"x": 0, "y": 0, "z": 0, "azimuth": 0, "length": 12,
+    ...                         "width": 8, "height": 5, "roof_height": 3})
+    >>> xy = np.stack(np.meshgrid(np.arange(-5.9, 6, 0.5), np.arange(-3.9, 4, 0.5)), -1).reshape(-1, 2)
+    >>> pts = np.column_stack([xy, truth.roof_z(xy)[0]])
+    >>> best, _ = fit_best(shapely.box(-6, -4, 6, 4), pts)
+    >>> best.kind, round(best.params["roof_height"], 3)
+    ('gable', 3.0)
     """
     cfg = config or PrimitivesConfig()
     fits: dict = {}
