@@ -118,7 +118,8 @@ def synthetic(label, seed, n, sizes):
 
 
 def delft(data: Path, images: Path | None):
-    from lidar2city.fit.primitives import PrimitivesConfig
+    from lidar2city.fit.lsm import polygon_rings
+    from lidar2city.fit.primitives import PrimitivesConfig, PrismPrimitive, main_polygon
     from lidar2city.io.las import read_points
     from lidar2city.io.vector import read_footprints
     from lidar2city.tools.primitives import (
@@ -137,14 +138,23 @@ def delft(data: Path, images: Path | None):
     invalid = [r.id for r in ok if solid_problems(r.solids["2.2"])]
     kinds = Counter(r.attributes["primitive"] for r in ok)
     idx = building_points(cloud, fps)
-    rmse, fit_rmse = [], []
+    rmse, fit_rmse, base = [], [], []
     for r, ii in zip(res, idx, strict=True):
         if not r.ok or len(ii) == 0:
             continue
         d = point_surface_distance(cloud.xyz[ii], r.solids["2.2"])
         rmse.append(float(np.sqrt(np.mean(d ** 2))))
         fit_rmse.append(r.attributes["primitive_residual_rmse"])
+        # LoD1-style baseline: the footprint extruded to the 70th percentile of its points
+        poly = main_polygon(r.footprint)
+        z0 = r.solids["2.2"].vertices[:, 2].min()
+        box = PrismPrimitive({"x": 0.0, "y": 0.0, "z": z0, "azimuth": 0.0,
+                              "height": float(np.percentile(cloud.xyz[ii, 2], 70)) - z0},
+                             rings=polygon_rings(poly))
+        db = point_surface_distance(cloud.xyz[ii], box.to_solid())
+        base.append(float(np.sqrt(np.mean(db ** 2))))
     rmse = np.array(rmse)
+    base = np.array(base)
     print(f"[delft] {len(cloud):,} points, {len(fps)} footprints, {dt:.1f} s")
     print(f"  modelled {len(ok)}/{len(fps)}, invalid solids {len(invalid)}, failed: "
           f"{[(r.id, r.reason) for r in res if not r.ok][:5]}")
@@ -152,6 +162,9 @@ def delft(data: Path, images: Path | None):
     print(f"  per-building RMSE of class-6 points to the model surface (m): median {np.median(rmse):.3f}, "
           f"mean {rmse.mean():.3f}, p90 {np.percentile(rmse, 90):.3f}, max {rmse.max():.3f}; "
           f"<= 0.5 m: {np.mean(rmse <= 0.5) * 100:.0f} %")
+    print(f"  LoD1 baseline (footprint prism at the 70th percentile), same points: median {np.median(base):.3f}, "
+          f"mean {base.mean():.3f}, p90 {np.percentile(base, 90):.3f}; primitive better for "
+          f"{np.mean(rmse < base) * 100:.0f} % of the buildings")
     print(f"  fit residual RMSE (roof points within the buffer): median {np.median(fit_rmse):.3f} m")
     if images is not None:
         images.mkdir(parents=True, exist_ok=True)

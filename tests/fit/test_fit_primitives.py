@@ -495,3 +495,23 @@ def test_lidar_outline_improves_corners():
     assert out[True].completeness == out[False].completeness == 1.0
     assert out[True].rmse_xy < 0.8 * out[False].rmse_xy
     assert out[True].rmse_xy < 0.10
+
+
+@settings(max_examples=40, deadline=None)
+@given(boxes=st.lists(st.tuples(st.floats(0, 20), st.floats(0, 20), st.floats(2, 12), st.floats(2, 12)),
+                      min_size=1, max_size=4),
+       az=st.floats(0, 180), off=st.floats(-3, 3), slope=st.floats(0.1, 1.5), kind=st.sampled_from([1, 2, 4]))
+def test_envelope_solids_over_random_footprints_are_closed(boxes, az, off, slope, kind):
+    geom = shapely.union_all([shapely.box(x, y, x + w, y + h) for x, y, w, h in boxes])
+    poly = max(getattr(geom, "geoms", [geom]), key=lambda g: g.area)
+    c = np.array(poly.centroid.coords[0])
+    t = math.radians(az)
+    n = np.array([-math.sin(t), math.cos(t)])
+    d = np.array([math.cos(t), math.sin(t)])
+    top = 100.0  # the roof never reaches the ground here
+    # planes falling away from a ridge line (kind 2), a hip (4) or a single shed plane (1)
+    dirs = [n, -n, d, -d][:kind]
+    planes = [[top + slope * (g @ (c + off * n)), -slope * g[0], -slope * g[1]] for g in dirs]
+    solid = envelope_solid(poly, planes, 0.0)
+    assert solid_problems(solid, tol=1e-5) == []
+    assert solid_volume(solid) > 0
