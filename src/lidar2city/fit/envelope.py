@@ -95,7 +95,8 @@ def envelope_solid(polygon, planes, z0: float) -> Solid:
     from shapely.geometry.polygon import orient
 
     planes = np.asarray(planes, dtype=np.float64).reshape(-1, 3)
-    poly = orient(shapely.set_precision(polygon, _GRID), 1.0)
+    with np.errstate(all="ignore"):  # subnormal coordinates warn inside GEOS snapping
+        poly = orient(shapely.set_precision(polygon, _GRID), 1.0)
     if poly.is_empty or poly.geom_type != "Polygon":
         raise FitError("footprint polygon degenerates when snapped")
     minx, miny, maxx, maxy = poly.bounds
@@ -105,7 +106,8 @@ def envelope_solid(polygon, planes, z0: float) -> Solid:
     for reg in regions:
         if reg.is_empty:
             continue
-        piece = shapely.set_precision(poly.intersection(reg), _GRID)
+        with np.errstate(all="ignore"):
+            piece = shapely.set_precision(poly.intersection(reg), _GRID)
         faces.extend(orient(p, 1.0) for p in _polys(piece))
     if not faces:
         raise FitError("no roof face over the footprint")
