@@ -267,12 +267,12 @@ class OutlineObservations:
 
 
 def outline_observations(xy, a, b, *, density: float, family=None, strip: float = 1.5,
-                         sigma: float = 0.05, min_piece: float = 2.0) -> OutlineObservations:
+                         sigma: float = 0.05, min_piece: float = 1.5) -> OutlineObservations:
     """Find the roof outline in the LiDAR points along model edges (free edges only).
 
     For each edge a->b of a counter-clockwise outline (outward normal on the
     right), the points in a strip ``strip`` metres either side of it are
-    split along the edge in pieces of at least ``min_piece`` metres (1 m kept
+    split along the edge in pieces of at least ``min_piece`` metres (0.5 m kept
     clear of the corners). In each piece the outline is the second outermost
     point plus its expected gap ``2 / (density * piece length)`` (the points of
     a uniform Poisson process; the second, not the first, so one stray point
@@ -307,7 +307,7 @@ def outline_observations(xy, a, b, *, density: float, family=None, strip: float 
     for k in range(len(a)):
         d = b[k] - a[k]
         L = float(np.hypot(*d))
-        margin = 1.0
+        margin = 0.5
         usable = L - 2 * margin
         if usable < min_piece:
             continue
