@@ -114,6 +114,17 @@ def synthetic(label, seed, n, sizes):
           f"correctness {100 * m.correctness:.1f} %, completeness {100 * m.completeness:.1f} % (tol 0.5 m)")
     print(f"  mean  X {m.mean_x:+.3f}  Y {m.mean_y:+.3f}  Z {m.mean_z:+.3f} m")
     print(f"  RMSE  X {m.rmse_x:.3f}  Y {m.rmse_y:.3f}  Z {m.rmse_z:.3f}  XY {m.rmse_xy:.3f} m")
+    # realism of the std devs: RMS of (estimate - truth) / reported std (1 = realistic)
+    z = {}
+    for r, tr in zip(res, sc.truth, strict=True):
+        if not r.ok or r.attributes["primitive"] != tr.kind:
+            continue
+        for k in ("x", "y", "length", "width", "height", "roof_height"):
+            if k in tr.params and f"primitive_{k}_std" in r.attributes:
+                z.setdefault(k, []).append((r.attributes[f"primitive_{k}"] - tr.params[k])
+                                           / r.attributes[f"primitive_{k}_std"])
+    print("  std-dev realism, RMS of error/std: " + ", ".join(
+        f"{k} {np.sqrt(np.mean(np.square(v))):.2f}" for k, v in z.items()))
     return m
 
 
@@ -180,6 +191,7 @@ def main():
     a = ap.parse_args()
     synthetic("development", 1, 40, (8.0, 20.0, 6.0, 12.0, 3.0, 9.0))
     synthetic("held-out", 20261121, 40, (6.0, 26.0, 5.0, 15.0, 2.5, 14.0))
+    synthetic("small buildings", 12, 40, (5.0, 12.0, 4.0, 9.0, 2.5, 6.0))
     data = Path(a.data)
     if (data / "delft" / "ahn3_cropped_1.laz").exists():
         delft(data, Path(a.images) if a.images else None)

@@ -64,6 +64,8 @@ class SyntheticScene:
 
 
 def _truth_model(kind, rng, x, y, sizes, z0):
+    import shapely
+
     lmin, lmax, wmin, wmax, hmin, hmax = sizes
     length = rng.uniform(lmin, lmax)
     width = rng.uniform(wmin, min(wmax, length))
@@ -90,7 +92,8 @@ def _truth_model(kind, rng, x, y, sizes, z0):
     t = math.radians(az)
     rot = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
     ring = uv @ rot.T + [x, y]
-    return PrismPrimitive({"x": x, "y": y, "z": z0, "azimuth": 0.0, "height": height}, rings=[ring])
+    c = shapely.Polygon(ring).centroid  # the prism's datum point is its centroid, as when fitted
+    return PrismPrimitive({"x": c.x, "y": c.y, "z": z0, "azimuth": 0.0, "height": height}, rings=[ring])
 
 
 def synthetic_scene(n_buildings: int = 25, *, seed: int = 0, density: float = 8.0,
