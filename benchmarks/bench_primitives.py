@@ -39,7 +39,7 @@ def solid_problems(solid, *, planar_tol=1e-6) -> list[str]:
             vol += np.einsum("ij,ij->i", p[0][None].repeat(len(r) - 2, 0),
                              np.cross(p[1:-1], p[2:])).sum() / 6.0
         ext = v[np.asarray(s.rings[0])]
-        n = np.cross(np.roll(ext, -1, 0) - ext, ext - np.roll(ext, 1, 0)).sum(0)
+        n = np.cross(ext, np.roll(ext, -1, 0)).sum(0)
         if np.linalg.norm(n) > 0:
             n = n / np.linalg.norm(n)
             d = (np.vstack([v[np.asarray(r)] for r in s.rings]) - ext[0]) @ n
@@ -63,7 +63,7 @@ def point_surface_distance(points, solid) -> np.ndarray:
     v = solid.vertices
     for s in solid.surfaces:
         ext = v[np.asarray(s.rings[0])]
-        n = np.cross(np.roll(ext, -1, 0) - ext, ext - np.roll(ext, 1, 0)).sum(0)
+        n = np.cross(ext, np.roll(ext, -1, 0)).sum(0)
         if np.linalg.norm(n) == 0:
             continue
         n = n / np.linalg.norm(n)

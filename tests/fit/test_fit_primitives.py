@@ -53,7 +53,7 @@ def solid_problems(solid, tol=1e-6):
             p = v[r]
             volume += sum(np.dot(p[0], np.cross(p[i], p[i + 1])) for i in range(1, len(p) - 1)) / 6.0
         ext = v[np.asarray(s.rings[0])]
-        n = np.cross(ext - np.roll(ext, 1, 0), np.roll(ext, -1, 0) - ext).sum(0)
+        n = np.cross(ext, np.roll(ext, -1, 0)).sum(0)  # Newell's normal (any simple polygon)
         n = n / np.linalg.norm(n)
         allp = np.vstack([v[np.asarray(r)] for r in s.rings])
         if np.abs((allp - ext[0]) @ n).max() > tol * max(1.0, np.abs(v).max()):

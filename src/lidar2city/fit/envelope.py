@@ -83,8 +83,9 @@ def envelope_solid(polygon, planes, z0: float) -> Solid:
     Returns
     -------
     Solid
-        Ground (one face with holes), walls (one quad per outline segment),
-        roof faces (one per connected piece of each plane's region).
+        Ground (one face with holes), walls (one per footprint edge, its top
+        following the roof), roof faces (one per connected piece of each
+        plane's region).
 
     Raises
     ------
@@ -115,21 +116,21 @@ def envelope_solid(polygon, planes, z0: float) -> Solid:
     face_pts = np.unique(np.vstack([np.asarray(r.coords)[:-1] for f in faces
                                     for r in [f.exterior, *f.interiors]]), axis=0)
     rings = [np.asarray(poly.exterior.coords)[:-1]] + [np.asarray(r.coords)[:-1] for r in poly.interiors]
-    dense = []
+    # per original edge: its top polyline (start vertex + outline crossings of the roof faces)
+    edge_tops = []
     for ring in rings:
-        out = []
+        per_edge = []
         for a, b in zip(ring, np.roll(ring, -1, axis=0), strict=True):
-            out.append(a)
+            pts = [a]
             ab = b - a
             L2 = ab @ ab
-            if L2 == 0:
-                continue
-            t = ((face_pts - a) @ ab) / L2
-            d = np.abs((face_pts[:, 0] - a[0]) * ab[1] - (face_pts[:, 1] - a[1]) * ab[0]) / np.sqrt(L2)
-            on = (t > 1e-9) & (t < 1 - 1e-9) & (d < 2 * _GRID)
-            for k in np.argsort(t[on]):
-                out.append(face_pts[on][k])
-        dense.append(np.asarray(out))
+            if L2 > 0:
+                t = ((face_pts - a) @ ab) / L2
+                d = np.abs((face_pts[:, 0] - a[0]) * ab[1] - (face_pts[:, 1] - a[1]) * ab[0]) / np.sqrt(L2)
+                on = (t > 1e-9) & (t < 1 - 1e-9) & (d < 2 * _GRID)
+                pts.extend(face_pts[on][np.argsort(t[on])])
+            per_edge.append(pts)
+        edge_tops.append(per_edge)
     key = {}
     top_xy = []
 
@@ -140,26 +141,32 @@ def envelope_solid(polygon, planes, z0: float) -> Solid:
             top_xy.append(p)
         return key[k]
 
-    ring_top = [[top(p) for p in ring] for ring in dense]
+    tops = [[[top(p) for p in pts] for pts in per_edge] for per_edge in edge_tops]
     face_idx = [[[top(p) for p in np.asarray(r.coords)[:-1]] for r in [f.exterior, *f.interiors]]
                 for f in faces]
     top_xy = np.asarray(top_xy)
     top_z = envelope_z(planes, top_xy)
-    if np.any(top_z[np.concatenate(ring_top)] <= z0 + 1e-6):
+    outline_tops = [i for per_edge in tops for pts in per_edge for i in pts]
+    if np.any(top_z[outline_tops] <= z0 + 1e-6):
         raise FitError("the roof reaches the ground on the outline")
     nt = len(top_xy)
-    base_xy = np.vstack(dense)
+    base_xy = np.vstack(rings)
     verts = np.vstack([np.column_stack([top_xy, top_z]),
                        np.column_stack([base_xy, np.full(len(base_xy), z0)])])
     surfaces = []
-    offs = np.concatenate([[0], np.cumsum([len(r) for r in dense])]) + nt
+    offs = np.concatenate([[0], np.cumsum([len(r) for r in rings])]) + nt
     surfaces.append(Surface([np.arange(o0, o1)[::-1].copy() for o0, o1 in zip(offs[:-1], offs[1:], strict=True)],
                             "GroundSurface"))
-    for (o0, o1), tops in zip(zip(offs[:-1], offs[1:], strict=True), ring_top, strict=True):
+    for (o0, o1), per_edge in zip(zip(offs[:-1], offs[1:], strict=True), tops, strict=True):
         base = np.arange(o0, o1)
-        for i in range(len(base)):
-            j = (i + 1) % len(base)
-            surfaces.append(Surface([np.array([base[i], base[j], tops[j], tops[i]])], "WallSurface"))
+        n = len(base)
+        for i in range(n):
+            j = (i + 1) % n
+            # one vertical wall per footprint edge: up the end, back along the roof line
+            up = per_edge[j][0]
+            along = per_edge[i][::-1]
+            surfaces.append(Surface([np.array([base[i], base[j], up, *along], dtype=np.int64)],
+                                    "WallSurface"))
     for rings_f in face_idx:
         surfaces.append(Surface([np.asarray(r, dtype=np.int64) for r in rings_f], "RoofSurface"))
     solid = Solid(verts, surfaces)
