@@ -32,6 +32,8 @@ def test_reconstruct_every_building_with_attributes(scene):
                   "primitive_residual_rmse", "primitive_iterations"):
             assert k in r.attributes, k
         assert r.attributes["primitive_height"] == pytest.approx(truth.params["height"], abs=0.1)
+    # the roof outline in the LiDAR refined most plans
+    assert sum(r.attributes["primitive_n_outline"] > 0 for r in res) >= 4
 
 
 def test_batch_survives_a_bad_footprint(scene):

@@ -881,6 +881,7 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
         "iterations": int(plan.iterations + nfev),
         "n_points": int(sel.sum()),
         "n_samples": int(plan.used.sum()),
+        "n_outline": int(plan.extra.get("n_outline", 0)),
         "bic": bic, "bic_roof": broof, "bic_plan": bplan,
     })
     return model, bic
@@ -1025,6 +1026,7 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
         "iterations": int(plan.iterations + nfev),
         "n_points": int(sel.sum()),
         "n_samples": int(plan.used.sum()),
+        "n_outline": int(plan.extra.get("n_outline", 0)),
         "bic": bic, "bic_roof": broof, "bic_plan": bplan,
     })
     return model, bic
