@@ -42,6 +42,7 @@ STAGES: dict[str, str] = {
     "lod1": "lidar2city.lod.lod1:Lod1Config",
     "lod22": "lidar2city.roof.building:Lod22Config",
     "polygon_fit": "lidar2city.fit.polygon:PolygonFitConfig",
+    "primitives": "lidar2city.fit.primitives:PrimitivesConfig",
     "snake": "lidar2city.regularize.snake:SnakeConfig",
 }
 

@@ -1,0 +1,1 @@
+"""Model fitting: plan and height fitting of parametric primitives (and polygons)."""
