@@ -1,10 +1,8 @@
 """``lidar2city classify`` through click's CliRunner."""
 
-import importlib.util
 
 import laspy
 import numpy as np
-import pytest
 
 from lidar2city.cli.main import cli
 
@@ -100,13 +98,3 @@ def test_classify_bad_inputs(runner, tmp_path):
     assert "ground" in res.output
     assert not dst.exists()
     assert not list(tmp_path.glob(".out*"))  # no temporary left behind
-
-
-@pytest.mark.skipif(importlib.util.find_spec("lidar2city.ground") is not None,
-                    reason="the ground package is installed: the default path runs it")
-def test_classify_without_ground_package(runner, tmp_path):
-    src = tmp_path / "in.las"
-    _write_scene(src)
-    res = runner.invoke(cli, ["classify", str(src), "-o", str(tmp_path / "o.las")])
-    _one_line_error(res)
-    assert "--ground-from-file" in res.output

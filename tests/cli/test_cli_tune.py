@@ -70,7 +70,7 @@ def test_tune_writes_weights(runner, tmp_path):
 
 
 @pytest.mark.parametrize("case", ["missing_reference", "bad_output", "grid_mismatch",
-                                  "no_dtm_or_derived", "bad_population"])
+                                  "bad_population"])
 def test_tune_bad_input_one_line_error(runner, tmp_path, case):
     from lidar2city.cli.main import cli
 
@@ -89,14 +89,6 @@ def test_tune_bad_input_one_line_error(runner, tmp_path, case):
 
         write_raster(d / "small.tif", Raster(np.zeros((10, 10)), Affine(2, 0, 0, 0, -2, 0)))
         args[args.index("--dtm") + 1] = str(d / "small.tif")
-    elif case == "no_dtm_or_derived":
-        i = args.index("--dtm")
-        del args[i:i + 2]
-        try:
-            import lidar2city.segment.dsm  # noqa: F401
-            pytest.skip("a DTM can be derived from the DSM in this build")
-        except ImportError:
-            pass
     elif case == "bad_population":
         args[args.index("--population") + 1] = "2"
     res = runner.invoke(cli, args)

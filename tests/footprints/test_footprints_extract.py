@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely import affinity
 
-from lidar2city.errors import ConfigError, DependencyError, EmptyInputError, InputError
+from lidar2city.errors import ConfigError, EmptyInputError, InputError
 from lidar2city.footprints import (
     REGULARIZERS,
     FootprintsConfig,
@@ -210,23 +210,7 @@ def test_callback_reports_every_building():
     assert calls == [(1, 2), (2, 2)]
 
 
-def _snake_importable():
-    try:
-        import lidar2city.regularize.snake  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-@pytest.mark.skipif(_snake_importable(), reason="the snake regulariser is installed")
-def test_snake_missing_is_a_clear_error():
-    xyz, cls = scan([L_SHAPE])
-    with pytest.raises(DependencyError, match="snake regulariser"):
-        extract_footprints(xyz, cls, regularize="snake")
-
-
 def test_snake_regularises_a_rotated_l_shape():
-    pytest.importorskip("lidar2city.regularize.snake")
     from lidar2city.metrics.footprints import axis_alignment
 
     truth = affinity.rotate(L_SHAPE, 23.0, origin=(25, 27))
@@ -311,7 +295,6 @@ def test_any_rotated_rectangle_gives_one_valid_closed_ring(w, h, angle, seed):
 
 @pytest.mark.slow
 def test_delft_snake_footprints(data):
-    pytest.importorskip("lidar2city.regularize.snake")
     from lidar2city.io.las import read_points
     from lidar2city.io.vector import read_footprints
     from lidar2city.metrics.footprints import area_metrics, axis_alignment

@@ -168,7 +168,6 @@ def boundary_chains(grid: LabelGrid):
     deg = np.bincount(u, minlength=n_nodes) + np.bincount(v, minlength=n_nodes)
     # adjacency lists
     order_u = np.concatenate([u, v])
-    order_v = np.concatenate([v, u])
     eid = np.concatenate([np.arange(len(u)), np.arange(len(u))])
     srt = np.argsort(order_u, kind="stable")
     starts = np.searchsorted(order_u[srt], np.arange(n_nodes + 1))

@@ -49,11 +49,8 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     zs = d.array * z_unit
     cell = d.cell_size
     if dtm is None:
-        try:
-            from ..segment.dsm import dtm_from_dsm
-        except ImportError:
-            raise InputError("no --dtm given, and this build cannot derive a DTM from the DSM: "
-                             "pass --dtm") from None
+        from ..segment.dsm import dtm_from_dsm
+
         ground = dtm_from_dsm(zs, cell=cell)
         if isinstance(ground, tuple):  # (dtm, ground mask)
             ground = ground[0]
