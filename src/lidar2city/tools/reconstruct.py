@@ -192,7 +192,7 @@ def point_roles(cloud, config):
         cls = classify_cloud(cloud)
         if not np.isin(cls, config.building_classes).any():
             raise EmptyInputError("no building point found in the input, even after classification")
-    return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes)
+    return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes), cls
 
 
 def load_footprints(path, cloud, *, id_field=None, layer=None):
@@ -263,7 +263,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
 
     cfg = config or Lod1Config()
     if building is None or ground is None:
-        building, ground = point_roles(cloud, cfg)
+        building, ground, _ = point_roles(cloud, cfg)
     bxyz = cloud.xyz[building]
     gxyz = cloud.xyz[ground]
     bgrid = PointGrid(bxyz[:, :2], cell=10.0)
@@ -312,24 +312,47 @@ def add_lod22(result, footprint, building_xyz, config) -> None:
     """
     from ..errors import AlgorithmError
     from ..roof.building import reconstruct_lod22
-    from ..validate.solid import check_solid
 
     ground_z = result.attributes.get("ground_height")
     try:
         out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config)
-        issues = [i for s in out.solids for i in check_solid(s)]
-        if issues:
-            raise AlgorithmError(f"LoD2.2 solid invalid ({issues[0].code})")
     except AlgorithmError as exc:
-        lod12 = result.solids.get("1.2")
-        if lod12 is None:
-            result.attributes["lod22_fallback"] = str(exc)
-            return
-        result.solids["2.2"] = lod12
-        result.attributes["lod22_fallback"] = f"LoD1.2 prism: {exc}"
+        set_lod22(result, None, {}, str(exc))
         return
-    result.solids["2.2"] = out.solids[0] if len(out.solids) == 1 else out.solids
-    result.attributes.update(out.attributes)
+    set_lod22(result, out.solids, out.attributes)
+
+
+def set_lod22(result, solids, attributes, reason="") -> None:
+    """Store LoD2.2 ``solids`` in ``result`` once they validate; else the LoD1.2 prism, with why."""
+    from ..validate.solid import check_solid
+
+    if solids:
+        issues = [i for s in solids for i in check_solid(s)]
+        if not issues:
+            result.solids["2.2"] = solids[0] if len(solids) == 1 else list(solids)
+            result.attributes.update(attributes)
+            return
+        reason = f"LoD2.2 solid invalid ({issues[0].code} {issues[0].detail})"
+    lod12 = result.solids.get("1.2")
+    if lod12 is not None:
+        result.solids["2.2"] = lod12
+        reason = f"LoD1.2 prism: {reason}"
+    result.attributes["lod22_fallback"] = reason
+
+
+def add_primitives(results, cloud, footprints, *, config=None, user_primitives=None,
+                   progress=None) -> None:
+    """LoD2.2 as fitted primitives (floating models) for every LoD1 result (in place)."""
+    from .primitives import reconstruct_primitives
+
+    prims = reconstruct_primitives(cloud, footprints, config=config,
+                                   user_primitives=user_primitives, progress=progress)
+    for r, p in zip(results, prims, strict=True):
+        if not r.ok:
+            continue
+        solid = p.solids.get("2.2") if p.ok else None
+        solids = None if solid is None else (solid if isinstance(solid, list) else [solid])
+        set_lod22(r, solids, p.attributes, p.reason or "no primitive fitted")
 
 
 def _fields_for_output(footprints):
@@ -419,8 +442,13 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
                  z_unit=cloud.z_unit, metadata=meta)
 
 
+#: how LoD2.2 roofs are made: the roof-topology framework or fitted primitives
+LOD22_METHODS = ("roof", "primitives")
+
+
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
-                id_field=None, layer=None, progress=None) -> ReconstructSummary:
+                id_field=None, layer=None, progress=None, method="roof",
+                primitives=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     Parameters
@@ -439,6 +467,12 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         Run configuration (TOML).
     progress : callable, optional
         ``progress(done, total, result)``.
+    method : {"roof", "primitives"}
+        LoD2.2 from the roof topology (facets, snake, intersection edges) or
+        from floating primitives fitted by least squares.
+    primitives : path, optional
+        With ``method="primitives"``: a CSV / TOML / vector file naming a
+        primitive and approximate parameters per footprint id (semi-automatic).
 
     Returns
     -------
@@ -456,10 +490,19 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     if cloud.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
-    building, ground = point_roles(cloud, cfg)
+    building, ground, classes = point_roles(cloud, cfg)
     fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
+    if method not in LOD22_METHODS:
+        raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
     results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
-                                    progress=progress, lod22=lod22)
+                                    progress=progress,
+                                    lod22=lod22 if method == "roof" else None)
+    if lod22 is not None and method == "primitives":
+        from ..io.primitives import read_primitives
+
+        add_primitives(results, cloud.with_attributes(classification=classes), fps,
+                       config=others.get("primitives"),
+                       user_primitives=read_primitives(primitives) if primitives else None)
     for r in results:  # LoD1 built only as the base of LoD2.2 is not written
         for lod in [k for k in r.solids if k not in want]:
             del r.solids[lod]

@@ -1,0 +1,43 @@
+"""reconstruct --lod 2.2 with both methods on a synthetic town written to files."""
+
+import numpy as np
+import pytest
+
+from lidar2city.datamodel import ASPRS
+from lidar2city.io.cityjson import read_cityjson
+from lidar2city.io.las import write_points
+from lidar2city.io.vector import write_polygons
+from lidar2city.synthetic import make_town
+from lidar2city.tools.reconstruct import reconstruct
+
+
+@pytest.fixture(scope="module")
+def town_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("town")
+    town = make_town(size=(120.0, 90.0), density=6.0, seed=5)
+    raw = town.cloud.with_attributes(
+        classification=np.full(len(town.cloud), ASPRS.UNCLASSIFIED, dtype=np.uint8))
+    write_points(d / "raw.laz", raw)
+    write_polygons(d / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    return town, d
+
+
+@pytest.mark.parametrize("method", ["roof", "primitives"])
+def test_lod22_from_a_raw_tile(town_files, tmp_path, method):
+    town, d = town_files
+    out = tmp_path / "m.city.json"
+    s = reconstruct([d / "raw.laz"], out, footprints=d / "fp.gpkg", lods=("2.2",), method=method)
+    assert s.done == s.total == len(town.buildings) and s.failed == 0 and s.invalid == 0
+    model = read_cityjson(out)
+    assert len(model.objects) == len(town.buildings)
+    assert all(g["lod"] == "2.2" for o in model.objects.values() for g in o["geometry"])
+
+
+def test_unknown_method(town_files, tmp_path):
+    from lidar2city.errors import InputError
+
+    _, d = town_files
+    with pytest.raises(InputError, match="method"):
+        reconstruct([d / "raw.laz"], tmp_path / "m.city.json", footprints=d / "fp.gpkg",
+                     lods=("2.2",), method="magic")
