@@ -63,7 +63,7 @@ class FootprintsConfig:
     regularize: Literal["none", "snake"] = cfield("none", "Outline regulariser: none or snake.")
     snake_cell: float | None = cfield(
         None, "Grid cell (m) of the snake's candidate positions; default the cell.")
-    snake_window: int = cfield(2, "Snake search half-window w (cells): (2w+1)^2 states per vertex.")
+    snake_window: int = cfield(3, "Snake search half-window w (cells): (2w+1)^2 states per vertex.")
     snake_threshold: float | None = cfield(
         None, "Snake threshold T (m): an edge whose smaller x/y extent (building frame) is within "
         "T is pulled onto the building axes, others stay oblique; default 2 x snake_window x "
@@ -128,7 +128,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        min_area: float = 4.0,
                        min_hole_area: float = 4.0, edge_offset: float = 0.0,
                        simplify: float | None = None, regularize: str = "none",
-                       snake_cell: float | None = None, snake_window: int = 2,
+                       snake_cell: float | None = None, snake_window: int = 3,
                        snake_threshold: float | None = None, callback=None) -> list[Footprint]:
     """Building footprints (one polygon per building block, with courtyards) from classified points.
 

@@ -453,6 +453,14 @@ def regularize_polygon(
     info.update(n_vertices_in=int(len(xy)), reductions=dict(sol.reductions), energy=float(sol.energy))
     cleaned = [_clean_ring(grid[s : s + k]) for s, k in zip(starts, sizes, strict=True)]
     if len(cleaned[0]) < 3:
+        if window > 1:
+            # a window wider than the building lets every vertex gather in one place:
+            # the global minimum of a smaller window is the best non-degenerate outline
+            return regularize_polygon(
+                polygon, cell=cell, window=window - 1, t_adjust=t_adjust, c_dir=c_dir,
+                c_dis=c_dis, c_move=c_move, direction=direction,
+                simplify_tolerance=simplify_tolerance, refine=refine, c_short=c_short,
+                short_length=short_length, strategy=strategy)
         info["reason"] = "outline collapsed"
         return done(polygon)
     holes = [h for h in cleaned[1:] if len(h) >= 3]
