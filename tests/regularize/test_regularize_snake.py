@@ -312,3 +312,14 @@ def test_jog_energy_removes_small_steps():
 
     with pytest.raises(InputError, match="unknown option"):
         regularize_polygons([bump], cel=0.5)
+
+
+def test_window_wider_than_the_building_does_not_collapse():
+    from shapely.geometry import box
+
+    from lidar2city.regularize.snake import regularize_polygon
+
+    small = box(0, 0, 1.6, 1.1)  # about as big as the candidate window
+    out, info = regularize_polygon(small, cell=0.5, window=4, direction=0.0)
+    assert info["status"] == "regularized", info["reason"]
+    assert out.is_valid and out.area > 0.5 * small.area
