@@ -27,7 +27,8 @@ from pathlib import Path
 
 from .errors import ConfigError, FileFormatError
 
-__all__ = ["STAGES", "stage_class", "build_stage", "load_config", "resolved_dict", "field"]
+__all__ = ["STAGES", "stage_class", "build_stage", "read_config", "load_config", "stage_config",
+           "resolved_dict", "field"]
 
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
@@ -128,29 +129,70 @@ def build_stage(stage: str, values: dict | None = None, cls=None):
         raise ConfigError(f"{stage}: {exc}") from None
 
 
-def load_config(source=None) -> dict:
-    """Read a TOML file (path) or a dict of sections; return ``{stage: dataclass}``.
+def read_config(source=None) -> dict:
+    """The sections of a run configuration: ``None`` gives ``{}``, a dict is copied, a path is
+    read as TOML.
 
-    Stages absent from the source get their defaults.
+    Raises
+    ------
+    FileFormatError
+        The file does not exist.
+    ConfigError
+        It is not valid TOML, or a section is not a table.
     """
     if source is None:
         data = {}
     elif isinstance(source, dict):
-        data = source
+        data = dict(source)
     else:
         path = Path(source)
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise FileFormatError(f"{str(path)!r}: no such config file") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"{str(path)!r} is not a text TOML file") from None
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"{str(path)!r} is not valid TOML: {exc}") from None
+    for stage, section in data.items():
+        if not isinstance(section, dict):
+            raise ConfigError(f"[{stage}] must be a table of options")
+    return data
+
+
+def load_config(source=None) -> dict:
+    """Read a TOML file (path) or a dict of sections; return ``{stage: dataclass}``.
+
+    Stages absent from the source get their defaults; unknown sections are errors.
+    """
+    data = read_config(source)
     for stage in data:
         if stage not in STAGES:
             raise ConfigError(f"unknown config section [{stage}]; known: {', '.join(sorted(STAGES))}")
-        if not isinstance(data[stage], dict):
-            raise ConfigError(f"[{stage}] must be a table of options")
     return {stage: build_stage(stage, data.get(stage)) for stage in STAGES}
+
+
+def stage_config(stage: str, source=None, **overrides):
+    """One stage's resolved dataclass from a run configuration.
+
+    Parameters
+    ----------
+    stage : str
+        A key of :data:`STAGES`.
+    source : None, path, dict of sections, or the stage's dataclass
+        The whole run configuration (its other sections are validated too).
+    **overrides
+        Field values taking precedence (e.g. command-line options); ``None``
+        values are ignored.
+    """
+    cls = stage_class(stage)
+    if isinstance(source, cls):
+        values = dataclasses.asdict(source)
+    else:
+        configs = load_config(source)
+        values = dataclasses.asdict(configs[stage])
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    return build_stage(stage, values, cls=cls)
 
 
 def resolved_dict(configs: dict) -> dict:

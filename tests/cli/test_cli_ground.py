@@ -75,7 +75,7 @@ def test_ground_pmf_and_config(runner, tmp_path):
     src = tmp_path / "town.las"
     truth = _write_town(src)
     cfg = tmp_path / "run.toml"
-    cfg.write_text('[ground]\nmethod = "pmf"\nslope = 0.3\n\n[other]\nx = 1\n')
+    cfg.write_text('[ground]\nmethod = "pmf"\nslope = 0.3\n\n[lod1]\nroof_statistic = 70\n')
     out = tmp_path / "o.las"
     res = runner.invoke(_cli(), ["ground", str(src), "-o", str(out), "--config", str(cfg)])
     assert res.exit_code == 0, res.output
@@ -84,6 +84,9 @@ def test_ground_pmf_and_config(runner, tmp_path):
     cfg.write_text("[ground]\nwindows = 3\n")
     res = runner.invoke(_cli(), ["ground", str(src), "-o", str(out), "--config", str(cfg)])
     assert res.exit_code == 1 and "ground.windows" in res.output
+    cfg.write_text("[grund]\nmethod = 'pmf'\n")  # a misspelt section is an error, not ignored
+    res = runner.invoke(_cli(), ["ground", str(src), "-o", str(out), "--config", str(cfg)])
+    assert res.exit_code == 1 and "[grund]" in res.output
 
 
 def _one_line_error(res):

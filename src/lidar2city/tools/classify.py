@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..datamodel import ASPRS
-from ..errors import ConfigError, EmptyInputError, FileFormatError
+from ..errors import EmptyInputError
 from ..io.las import read_las, write_las
 
 logger = logging.getLogger(__name__)
@@ -22,35 +22,9 @@ def classify_config(source=None):
 
     Other sections are validated by :func:`lidar2city.config.load_config`.
     """
-    import tomllib
-    from pathlib import Path
+    from ..config import stage_config
 
-    from ..classify import ClassifyConfig
-    from ..config import STAGES, build_stage, load_config
-
-    if source is None:
-        return ClassifyConfig()
-    if isinstance(source, ClassifyConfig):
-        return source
-    if isinstance(source, dict):
-        data = dict(source)
-    else:
-        path = Path(source)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FileFormatError(f"{str(path)!r}: no such config file") from None
-        except UnicodeDecodeError:
-            raise ConfigError(f"{str(path)!r} is not a text TOML file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{str(path)!r} is not valid TOML: {exc}") from None
-    section = data.pop("classify", None)
-    if section is not None and not isinstance(section, dict):
-        raise ConfigError("[classify] must be a table of options")
-    if "classify" in STAGES:
-        return load_config({**data, "classify": section or {}})["classify"]
-    load_config(data)  # validates the other sections
-    return build_stage("classify", section, cls=ClassifyConfig)
+    return stage_config("classify", source)
 
 
 def _ground(cloud, *, ground_from_file: bool, method: str, config=None):

@@ -22,35 +22,16 @@ FIELDS = ("id", "area", "direction", "n_vertices", "mean_deviation", "n_points",
 def load_footprints_config(path=None, **overrides):
     """The ``[footprints]`` section of a TOML run config (defaults when absent), with overrides.
 
-    Other sections of the file are left to their own stages. ``None`` values in
+    The file's other sections are validated too. ``None`` values in
     ``overrides`` mean "not given" and are ignored.
 
     Raises
     ------
     ConfigError, FileFormatError
     """
-    import tomllib
-    from pathlib import Path
+    from ..config import stage_config
 
-    from ..config import build_stage
-    from ..errors import ConfigError, FileFormatError
-    from ..footprints import FootprintsConfig
-
-    values = {}
-    if path is not None:
-        p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FileFormatError(f"{str(p)!r}: no such config file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
-        section = data.get("footprints", {})
-        if not isinstance(section, dict):
-            raise ConfigError("[footprints] must be a table of options")
-        values.update(section)
-    values.update({k: v for k, v in overrides.items() if v is not None})
-    return build_stage("footprints", values, cls=FootprintsConfig)
+    return stage_config("footprints", path, **overrides)
 
 
 def _building_classes(cloud, building_class):

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..datamodel import ASPRS
-from ..errors import ConfigError, EmptyInputError, FileFormatError, InputError
+from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -32,31 +32,9 @@ def ground_config(config=None, **overrides):
     ------
     ConfigError, FileFormatError
     """
-    from ..config import build_stage
-    from ..ground import GroundConfig
+    from ..config import stage_config
 
-    if isinstance(config, GroundConfig):
-        values = dataclasses.asdict(config)
-    elif config is None:
-        values = {}
-    elif isinstance(config, dict):
-        values = dict(config)
-    else:
-        import tomllib
-        from pathlib import Path
-
-        path = Path(config)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FileFormatError(f"{str(path)!r}: no such config file") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{str(path)!r} is not valid TOML: {exc}") from None
-        values = data.get("ground", {})
-        if not isinstance(values, dict):
-            raise ConfigError("[ground] must be a table of options")
-    values.update({k: v for k, v in overrides.items() if v is not None})
-    return build_stage("ground", values, cls=GroundConfig)
+    return stage_config("ground", config, **overrides)
 
 
 def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=None,

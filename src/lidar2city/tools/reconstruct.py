@@ -21,7 +21,6 @@ import logging
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -137,33 +136,15 @@ def lod1_config(config=None, *, lods=None):
     ``lods`` (e.g. from ``--lod``) overrides the file's ``lod1.lods``; "2.2" is built by
     the ``lod22`` stage on top of LoD1.2 (which gives its ground height and its fallback).
     """
-    import tomllib
-
-    from ..config import STAGES, build_stage, load_config, resolved_dict
-    from ..errors import ConfigError, FileFormatError
+    from ..config import load_config, resolved_dict
     from ..lod.lod1 import Lod1Config
 
     if isinstance(config, Lod1Config):
-        cfg, others = config, {}
+        others, cfg = load_config(None), config
     else:
-        if config is None:
-            data = {}
-        elif isinstance(config, dict):
-            data = dict(config)
-        else:
-            p = Path(config)
-            try:
-                data = tomllib.loads(p.read_text(encoding="utf-8"))
-            except FileNotFoundError:
-                raise FileFormatError(f"{str(p)!r}: no such config file") from None
-            except tomllib.TOMLDecodeError as exc:
-                raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
-        section = data.pop("lod1", {})
-        if not isinstance(section, dict):
-            raise ConfigError("[lod1] must be a table of options")
-        others = load_config(data) if (data or STAGES) else {}
-        others.pop("lod1", None)
-        cfg = build_stage("lod1", section, cls=Lod1Config)
+        others = load_config(config)
+        cfg = others["lod1"]
+    others.pop("lod1", None)
     if lods:
         lod1_lods = tuple(v for v in lods if v != "2.2") or ("1.2",)
         cfg = cfg.replace(lods=lod1_lods)
