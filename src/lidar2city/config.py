@@ -180,7 +180,7 @@ def stage_config(stage: str, source=None, **overrides):
     stage : str
         A key of :data:`STAGES`.
     source : None, path, dict of sections, or the stage's dataclass
-        The whole run configuration (its other sections are validated too).
+        The whole run configuration (its other sections' names are checked too).
     **overrides
         Field values taking precedence (e.g. command-line options); ``None``
         values are ignored.
@@ -189,8 +189,13 @@ def stage_config(stage: str, source=None, **overrides):
     if isinstance(source, cls):
         values = dataclasses.asdict(source)
     else:
-        configs = load_config(source)
-        values = dataclasses.asdict(configs[stage])
+        # only this stage's class is imported (start-up time); the other sections'
+        # names are checked, their values when their own stage reads them
+        data = read_config(source)
+        for name in data:
+            if name not in STAGES:
+                raise ConfigError(f"unknown config section [{name}]; known: {', '.join(sorted(STAGES))}")
+        values = dict(data.get(stage, {}))
     values.update({k: v for k, v in overrides.items() if v is not None})
     return build_stage(stage, values, cls=cls)
 

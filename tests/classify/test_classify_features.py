@@ -6,13 +6,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lidar2city.classify import (
-    ground_grid,
-    height_above_ground,
     local_shape,
     planar_regions,
     point_spacing,
 )
-from lidar2city.errors import EmptyInputError, InputError
+
+
+def height_above_ground(xyz, ground):
+    from lidar2city.ground import dtm_from_ground
+    from lidar2city.ground import height_above_ground as hag
+
+    return hag(xyz, dtm_from_ground(xyz, ground, cell=1.0))
 
 
 def _plane(n_side, step, a, b, c, rng, noise=0.0):
@@ -73,9 +77,16 @@ def test_two_roof_facets_are_two_regions_and_a_blob_none():
     assert all(regions.area[r] < 2.0 for r in blob_regions)
 
 
+def _ground_sample(rng, side, density, a, b, c):
+    """Ground points at random positions (as a scan samples them) on z = a x + b y + c."""
+    n = int(side * side * density)
+    xy = rng.uniform(0, side, (n, 2))
+    return np.column_stack([xy, a * xy[:, 0] + b * xy[:, 1] + c])
+
+
 def test_height_above_ground_on_a_slope_with_a_hole():
     rng = np.random.default_rng(4)
-    g = _plane(80, 0.5, 0.1, 0.05, 2.0, rng)
+    g = _ground_sample(rng, 40.0, 4.0, 0.1, 0.05, 2.0)
     hole = (g[:, 0] > 10) & (g[:, 0] < 25) & (g[:, 1] > 10) & (g[:, 1] < 25)
     g = g[~hole]
     roof = np.column_stack([rng.uniform(11, 24, 200), rng.uniform(11, 24, 200), np.zeros(200)])
@@ -83,31 +94,20 @@ def test_height_above_ground_on_a_slope_with_a_hole():
     xyz = np.concatenate([g, roof])
     ground = np.arange(len(xyz)) < len(g)
     hag = height_above_ground(xyz, ground)
-    assert np.allclose(hag[ground], 0, atol=0.06)
+    assert np.allclose(hag[ground], 0, atol=0.08)
     # the plane is harmonic: the relaxed fill under the building reproduces it
-    assert np.allclose(hag[~ground], 6.0, atol=0.15)
-
-
-def test_ground_grid_marks_filled_cells_and_errors():
-    xyz = np.array([[0.0, 0, 1], [4, 0, 1], [0, 4, 1], [4, 4, 1], [2, 2, 9]])
-    grid = ground_grid(xyz, np.array([1, 1, 1, 1, 0], bool), cell=1.0)
-    assert not grid.observed.all() and grid.observed.any()
-    assert np.allclose(grid.z, 1.0)
-    with pytest.raises(EmptyInputError):
-        ground_grid(xyz, np.zeros(5, bool))
-    with pytest.raises(InputError):
-        ground_grid(xyz, np.ones(4, bool))
-    with pytest.raises(InputError):
-        ground_grid(xyz, np.ones(5, bool), cell=0)
+    assert np.allclose(hag[~ground], 6.0, atol=0.1)
 
 
 @settings(max_examples=25, deadline=None)
 @given(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-50, 50), st.floats(0.5, 12))
 def test_hag_of_points_above_a_plane(a, b, c, h):
     rng = np.random.default_rng(5)
-    g = _plane(30, 1.0, a, b, c, rng)
+    g = _ground_sample(rng, 30.0, 4.0, a, b, c)
     p = np.column_stack([rng.uniform(2, 27, 20), rng.uniform(2, 27, 20), np.zeros(20)])
     p[:, 2] = a * p[:, 0] + b * p[:, 1] + c + h
     xyz = np.concatenate([g, p])
     hag = height_above_ground(xyz, np.arange(len(xyz)) < len(g))
-    assert np.allclose(hag[len(g):], h, atol=1e-6)
+    # a plane sampled at random (4 points per 1 m cell) is recovered within half the height
+    # change across a cell (cells whose points do not span them take their mean)
+    assert np.allclose(hag[len(g):], h, atol=0.02 + 0.5 * max(abs(a), abs(b)))

@@ -43,8 +43,8 @@ import numpy as np
 from ..config import field
 from ..datamodel import ASPRS
 from ..errors import ConfigError, InputError
+from ..ground.dtm import dtm_from_ground, height_above_ground
 from .features import local_shape, point_spacing
-from .hag import height_above_ground
 from .regions import planar_regions
 
 logger = logging.getLogger(__name__)
@@ -194,7 +194,7 @@ def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_retu
         Ground points (e.g. from :func:`lidar2city.ground.ground_mask`).
     hag : ndarray, shape (N,), optional
         Height above ground (m); computed from ``ground`` with
-        :func:`~lidar2city.classify.hag.height_above_ground` when omitted.
+        :func:`lidar2city.ground.dtm_from_ground` when omitted.
     return_number, number_of_returns : ndarray, shape (N,), optional
         Pulse return information; vegetation cue when present.
     rgb : ndarray, shape (N, 3), optional
@@ -259,7 +259,7 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         return {"classes": cls}
     cls[ground] = ASPRS.GROUND
     if hag is None:
-        hag = height_above_ground(xyz, ground, cell=c.dtm_cell)
+        hag = height_above_ground(xyz, dtm_from_ground(xyz, ground, cell=c.dtm_cell))
     hag = np.asarray(hag, dtype=np.float64)
     spacing = point_spacing(xyz[:, :2])
 

@@ -128,6 +128,41 @@ def mean_surface(xyz, spec: GridSpec) -> np.ndarray:
     return grid.reshape(spec.shape)
 
 
+def centre_surface(xyz, spec: GridSpec) -> np.ndarray:
+    """Height at each cell centre from the points in the cell; NaN where a cell holds none.
+
+    A cell whose points span it in both directions takes their least-squares
+    plane evaluated at its centre, so a slope sampled unevenly within a cell is
+    not biased by up to slope x cell / 2 as a plain mean would be; other cells
+    take the mean height.
+    """
+    r, c = cell_of(xyz[:, :2], spec)
+    flat = r * spec.shape[1] + c
+    size = spec.shape[0] * spec.shape[1]
+    cx = spec.x0 + (c + 0.5) * spec.cell
+    cy = spec.y_top - (r + 0.5) * spec.cell
+    # moments about the cell centre, per cell
+    dx, dy, z = xyz[:, 0] - cx, xyz[:, 1] - cy, xyz[:, 2]
+    m = [np.bincount(flat, weights=w, minlength=size)
+         for w in (np.ones_like(z), dx, dy, z, dx * dx, dx * dy, dy * dy, dx * z, dy * z)]
+    n, sx, sy, sz, sxx, sxy, syy, sxz, syz = m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = sz / n
+        # centred second moments and the plane's gradient
+        vxx, vxy, vyy = sxx - sx * sx / n, sxy - sx * sy / n, syy - sy * sy / n
+        vxz, vyz = sxz - sx * sz / n, syz - sy * sz / n
+        det = vxx * vyy - vxy * vxy
+        gx = (vxz * vyy - vyz * vxy) / det
+        gy = (vyz * vxx - vxz * vxy) / det
+        # plane value at the centre (dx = dy = 0): mean - g . (mean offset)
+        at_centre = mean - gx * sx / n - gy * sy / n
+    # well spread: both axes covered by at least a third of a cell (std), 3+ points
+    spread = (n >= 3) & (vxx > n * (spec.cell / 6) ** 2) & (vyy > n * (spec.cell / 6) ** 2) \
+        & (det > 0.25 * vxx * vyy)
+    out = np.where(spread, at_centre, mean)
+    return out.reshape(spec.shape)
+
+
 def _relax(values, unknown, iterations, omega=1.6):
     """Red-black SOR relaxation of Laplace's equation on ``unknown`` cells (known fixed).
 

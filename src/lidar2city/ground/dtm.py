@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import EmptyInputError, InputError
-from ._grid import GridSpec, grid_spec, inpaint, mean_surface, sample_bilinear
+from ._grid import GridSpec, centre_surface, grid_spec, inpaint, sample_bilinear
 from .outliers import _check_xyz
 
 __all__ = ["Dtm", "dtm_from_ground", "height_above_ground"]
@@ -108,7 +108,8 @@ def dtm_from_ground(xyz, ground, *, cell: float = 1.0, bounds=None,
                     iterations: int = 10) -> Dtm:
     """Grid the ground points into a gap-free terrain model.
 
-    Each cell holding ground points takes their mean height; cells without
+    Each cell holding ground points takes their height at its centre (their
+    plane where they spread over the cell, else their mean); cells without
     any (under buildings, water, data gaps) are filled with a smooth
     (approximately harmonic, Laplace) interpolation of the measured cells,
     which keeps measured cells exactly and never overshoots them.
@@ -161,7 +162,7 @@ def dtm_from_ground(xyz, ground, *, cell: float = 1.0, bounds=None,
         pts = pts[inside]
     if len(pts) == 0:
         raise EmptyInputError("no ground points: cannot build a terrain model")
-    grid = mean_surface(pts, spec)
+    grid = centre_surface(pts, spec)
     measured = np.isfinite(grid)
     return Dtm(inpaint(grid, iterations=iterations), spec.x0, spec.y_top, spec.cell, measured)
 
