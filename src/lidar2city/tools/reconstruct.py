@@ -129,22 +129,24 @@ class PointGrid:
         return np.sort(idx[keep])
 
 
-def lod1_config(config=None, *, lods=None):
-    """``(Lod1Config, resolved configuration dict, other stages)`` from None, a dict, a TOML
-    path or a config.
+def lod1_config(config=None, *, lods=None, stages=()):
+    """``(Lod1Config, resolved configuration dict, {stage: config})`` for a reconstruct run.
 
+    ``config`` is None, a dict of sections, a TOML path or a :class:`Lod1Config`.
     ``lods`` (e.g. from ``--lod``) overrides the file's ``lod1.lods``; "2.2" is built by
-    the ``lod22`` stage on top of LoD1.2 (which gives its ground height and its fallback).
+    the ``lod22`` (or ``primitives``) stage on top of LoD1.2, which gives its ground height
+    and its fallback. Only ``lod1``, the ``stages`` named and the sections the file holds
+    are resolved (and imported): a LoD1 run does not load the LoD2 machinery.
     """
-    from ..config import load_config, resolved_dict
+    from ..config import read_config, resolved_dict, stage_config
     from ..lod.lod1 import Lod1Config
 
     if isinstance(config, Lod1Config):
-        others, cfg = load_config(None), config
+        data, cfg = {}, config
     else:
-        others = load_config(config)
-        cfg = others["lod1"]
-    others.pop("lod1", None)
+        data = read_config(config)
+        cfg = stage_config("lod1", data)
+    others = {name: stage_config(name, data) for name in sorted({*data, *stages} - {"lod1"})}
     if lods:
         lod1_lods = tuple(v for v in lods if v != "2.2") or ("1.2",)
         cfg = cfg.replace(lods=lod1_lods)
@@ -463,9 +465,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
 
     t0 = time.perf_counter()
     fmt = format_from_name(output, fmt)
-    cfg, resolved, others = lod1_config(config, lods=lods)
+    want22 = "2.2" in (lods or ())
+    cfg, resolved, others = lod1_config(
+        config, lods=lods, stages=(("lod22" if method == "roof" else "primitives"),) if want22 else ())
     want = tuple(lods) if lods else cfg.lods
-    lod22 = others.get("lod22") if "2.2" in want else None
+    lod22 = others.get("lod22") if want22 and method == "roof" else None
     cloud = read_points(inputs, crs=crs)
     cloud.require_points()
     if cloud.crs is None:
@@ -477,8 +481,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
     results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
                                     progress=progress,
-                                    lod22=lod22 if method == "roof" else None)
-    if lod22 is not None and method == "primitives":
+                                    lod22=lod22)
+    if want22 and method == "primitives":
         from ..io.primitives import read_primitives
 
         add_primitives(results, cloud.with_attributes(classification=classes), fps,
