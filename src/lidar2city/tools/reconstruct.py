@@ -72,6 +72,7 @@ class ReconstructSummary:
     seconds: float = 0.0
     lods: tuple = ()
     format: str = ""
+    lod22: dict = field(default_factory=dict)
 
     def lines(self) -> list[str]:
         out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
@@ -79,6 +80,11 @@ class ReconstructSummary:
                f"{self.output} ({self.format})"]
         for reason, n in self.reasons.most_common():
             out.append(f"  failed: {n} x {reason}")
+        if self.lod22:
+            d = self.lod22
+            out.append(f"  LoD2.2: {d['modelled']} roofs, {d['fallbacks']} LoD1.2 fallbacks, "
+                       f"{d['type_iv']} building(s) needed type IV reductions, "
+                       f"{1000 * d['time_per_building']:.0f} ms per building")
         return out
 
 
@@ -502,6 +508,15 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         else:
             summary.failed += 1
             summary.reasons[_reason_kind(r.reason)] += 1
+    if want22:
+        ok = [r for r in results if r.ok and "2.2" in r.solids]
+        times = [r.attributes.get("lod22_time", 0.0) for r in ok if "lod22_time" in r.attributes]
+        summary.lod22 = {
+            "modelled": sum("lod22_fallback" not in r.attributes for r in ok),
+            "fallbacks": sum("lod22_fallback" in r.attributes for r in ok),
+            "type_iv": sum(r.attributes.get("type_iv", 0) > 0 for r in ok),
+            "time_per_building": float(np.mean(times)) if times else 0.0,
+        }
     summary.seconds = time.perf_counter() - t0
     return summary
 
