@@ -40,6 +40,8 @@ class Lod22Config:
     flat_slope: float = field(3.0, "Facets flatter than this (deg) become horizontal.")
     min_height: float = field(0.5, "Smallest roof height above the floor (m).")
     snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
+    snake_cell: float = field(0.5, "Snake grid step as a fraction of the label grid cell.")
+    snake_window: int = field(3, "Snake half-window w: (2w+1)^2 candidate positions per vertex.")
 
     def __post_init__(self):
         for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
@@ -300,8 +302,8 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
         faces, face_labels = part.faces, part.face_labels
         if cfg.snake:
-            faces, info_snake = _snake_adjust(faces, poly, part.raw_chains, cell=cell / 2, direction=d,
-                                              window=3)
+            faces, info_snake = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
+                                              direction=d, window=cfg.snake_window)
             type4 += info_snake.get("IV", 0)
             snake_fallbacks += bool(info_snake.get("snake_fallback"))
         faces, info = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
@@ -374,23 +376,44 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in raw_chains if len(c) > 1])
     new, info = adjust_planar_graph(xy, e, original_segments=segs, cell=cell, window=window,
                                     direction=direction, fixed=fixed)
-    out = []
-    for f in faces:
-        rings = []
-        for ring in [f.exterior, *f.interiors]:
-            pts = [new[keys[_key(p)]] for p in np.asarray(ring.coords)[:-1]]
-            dedup = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
-            if len(dedup) > 1 and np.hypot(*(dedup[0] - dedup[-1])) < 1e-9:
-                dedup.pop()
-            rings.append(_remove_spikes(dedup))
-        if len(rings[0]) < 3:
-            continue  # a face the snake collapsed
-        out.append(Polygon(rings[0], [r for r in rings[1:] if len(r) >= 3]))
+    face_ids = [[keys[_key(p)] for ring in [f.exterior, *f.interiors]
+                 for p in np.asarray(ring.coords)[:-1]] for f in faces]
+
+    def rebuild():
+        out = []
+        for f in faces:
+            rings = []
+            for ring in [f.exterior, *f.interiors]:
+                pts = [new[keys[_key(p)]] for p in np.asarray(ring.coords)[:-1]]
+                dedup = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+                if len(dedup) > 1 and np.hypot(*(dedup[0] - dedup[-1])) < 1e-9:
+                    dedup.pop()
+                rings.append(_remove_spikes(dedup))
+            out.append(Polygon(rings[0], [r for r in rings[1:] if len(r) >= 3])
+                       if len(rings[0]) >= 3 else None)
+        return out
+
     total = footprint.area
-    ok = (len(out) == len(faces) and all(f.is_valid and f.area > 1e-6 for f in out)
+    red = dict(info.get("reductions", {}))
+    # the snake's grid can push a vertex across a neighbour's edge; the moves of the faces
+    # that broke are undone (a few rounds), the rest of the global minimum is kept
+    for _ in range(4):
+        out = rebuild()
+        bad = {i for i, f in enumerate(out) if f is None or not f.is_valid or f.area <= 1e-6
+               or f.difference(footprint).area > 1e-6}
+        good = [i for i in range(len(out)) if i not in bad]
+        if good:
+            tree = shapely.STRtree([out[i] for i in good])
+            for a, b in zip(*tree.query([out[i] for i in good], predicate="overlaps"), strict=True):
+                if a != b and out[good[a]].intersection(out[good[b]]).area > 1e-6:
+                    bad.update((good[a], good[b]))
+        if not bad:
+            break
+        for i in bad:
+            new[face_ids[i]] = xy[face_ids[i]]
+    ok = (all(f is not None and f.is_valid and f.area > 1e-6 for f in out)
           and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
           and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
-    red = dict(info.get("reductions", {}))
     if not ok:
         logger.debug("snake adjustment broke the roof partition; keeping the simplified one")
         return faces, {**red, "snake_fallback": True}
