@@ -217,13 +217,15 @@ class Solid:
 class BuildingResult:
     """What a batch produced for one building: models by LoD, status and attributes.
 
+    ``solids`` maps a LoD ("1.2", "1.3", "2.2") to a :class:`Solid`, or to a list
+    of them (a MultiSolid) when the footprint has several polygons.
     ``status`` is ``"ok"`` or ``"failed"``; ``reason`` says why when it failed.
     ``parts`` holds BuildingPart solids per LoD (LoD1.3 height clusters).
     """
 
     id: str
     footprint: Any = None
-    solids: dict[str, Solid] = field(default_factory=dict)
+    solids: dict[str, Solid | list] = field(default_factory=dict)
     parts: dict[str, list] = field(default_factory=dict)
     status: str = "ok"
     reason: str = ""
