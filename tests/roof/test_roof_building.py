@@ -90,3 +90,21 @@ def test_ridges_land_on_truth(town, models):
         seg = shapely.LineString([(x0, y0), (x1, y1)])
         d = [seg.distance(shapely.Point(p[:2])) for p in top]
         assert max(d) < 0.3, (b.id, d)
+
+
+def test_eave_corners_land_on_truth(town, models):
+    """Roof corners over the footprint corners sit at the true eave height."""
+    for b in town.buildings:
+        if b.roof_type not in ("gable", "hip", "shed", "flat"):
+            continue
+        (solid,) = models[b.id].solids
+        V = solid.vertices
+        roof_ids = np.unique(np.concatenate([np.concatenate(s.rings) for s in solid.surfaces
+                                             if s.semantic == "RoofSurface"]))
+        R = V[roof_ids]
+        planes = b.parts[0].planes
+        for cx, cy in np.asarray(b.footprint.exterior.coords)[:-1]:
+            at = R[np.hypot(R[:, 0] - cx, R[:, 1] - cy) < 0.05]
+            assert len(at), (b.id, cx, cy)
+            true_z = np.min(planes[:, 0] * cx + planes[:, 1] * cy + planes[:, 2])
+            assert abs(at[:, 2].max() - true_z) < 0.15, (b.id, b.roof_type)
