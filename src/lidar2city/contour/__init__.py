@@ -21,7 +21,7 @@ from .outlines import (
     prepare_scene,
     run_scene,
 )
-from .raster import PixelFrame, evaluation_domain, rasterize_polygons
+from .raster import PixelFrame, evaluation_domain, object_segments, rasterize_polygons, reference_neighbourhood_domain
 from .snake import evolve_contours, resample_contour
 
 __all__ = [
@@ -29,5 +29,6 @@ __all__ = [
     "roughness_index", "DEFAULT_WEIGHTS", "WEIGHT_BOUNDS", "WEIGHT_NAMES", "ActiveContourConfig",
     "ContourScene", "active_contour_outlines", "contours_to_polygons", "normalize_weights",
     "prepare_scene", "run_scene", "PixelFrame", "evaluation_domain", "rasterize_polygons",
+    "reference_neighbourhood_domain", "object_segments",
     "evolve_contours", "resample_contour",
 ]

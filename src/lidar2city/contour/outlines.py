@@ -46,6 +46,8 @@ class ActiveContourConfig:
     min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
+    split_distance: int = field(3, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (pixels; 0: no split).")
+    relative_height: float = field(0.5, "Each piece keeps its pixels higher than this share of its 90th height percentile (a blurred wall's mid-height; drops low crowns and sheds leaning on buildings; 0: off).")
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
     min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
@@ -79,6 +81,10 @@ class ActiveContourConfig:
             raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
             raise ConfigError(f"active_contour.step_decay: must be in (0, 1], got {self.step_decay}")
+        if self.split_distance < 0:
+            raise ConfigError(f"active_contour.split_distance: must be >= 0, got {self.split_distance}")
+        if not 0 <= self.relative_height < 1:
+            raise ConfigError(f"active_contour.relative_height: must be in [0, 1), got {self.relative_height}")
         if self.max_gap < 0 or self.min_area < 0 or self.simplify < 0 or self.smooth < 0:
             raise ConfigError("active_contour.max_gap, min_area, simplify and smooth must be >= 0")
 
@@ -166,7 +172,9 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     nd = np.where(np.isfinite(nd), nd, 0.0)
     edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
     labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
-                              max_roughness=cfg.max_roughness, min_area=cfg.min_area, edges=edges)
+                              max_roughness=cfg.max_roughness, min_area=cfg.min_area,
+                              split_distance=cfg.split_distance, relative_height=cfg.relative_height,
+                              edges=edges)
     contours = initial_contours(labels)
     if cfg.edge_map == "canny":
         f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0
