@@ -62,7 +62,8 @@ class ActiveContourConfig:
     tol: float = field(0.02, "Convergence: RMS vertex move per iteration below this (pixels).")
     spacing: float = field(1.0, "Vertex spacing after resampling (pixels).")
     resample_every: int = field(5, "Resample contours and update region statistics every N iterations.")
-    band: float = field(3.0, "Width of the outside band for region statistics (pixels).")
+    band: float = field(3.0, "Width of the outside band for region statistics (pixels; used when local_sigma is 0).")
+    local_sigma: float = field(3.0, "Gaussian window (pixels) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
     smooth: float = field(0.7, "Gaussian sigma applied to the region-term images (pixels; 0: none).")
     simplify: float = field(0.5, "Douglas-Peucker tolerance of the output outlines (pixels; 0: none).")
 
@@ -81,6 +82,8 @@ class ActiveContourConfig:
             raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
             raise ConfigError(f"active_contour.step_decay: must be in (0, 1], got {self.step_decay}")
+        if self.local_sigma < 0:
+            raise ConfigError(f"active_contour.local_sigma: must be >= 0, got {self.local_sigma}")
         if self.split_distance < 0:
             raise ConfigError(f"active_contour.split_distance: must be >= 0, got {self.split_distance}")
         if not 0 <= self.relative_height < 1:
@@ -208,7 +211,7 @@ def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig 
         alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
         tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
         spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band,
-        callback=callback)
+        local_sigma=cfg.local_sigma, callback=callback)
 
 
 def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:
