@@ -5,6 +5,7 @@ import pytest
 
 from lidar2city.contour import (
     ActiveContourConfig,
+    aspect_coherence,
     building_regions,
     object_segments,
     reference_neighbourhood_domain,
@@ -71,3 +72,35 @@ def test_config_checks_the_new_fields():
         ActiveContourConfig(relative_height=1.5)
     with pytest.raises(ConfigError):
         ActiveContourConfig(split_distance=-1)
+
+
+def _gable_and_crown():
+    """A 16 x 30 px gable-roofed house and a round 8 m crown of radius 8 px, 2-m pixels."""
+    z = np.zeros((60, 80))
+    r, c = np.mgrid[0:60, 0:80]
+    house = (r >= 10) & (r < 26) & (c >= 10) & (c < 40)
+    z[house] = 6.0 + 2.0 * (1.0 - np.abs(r[house] - 17.5) / 8.0)  # ridge along the columns
+    d = np.hypot(r - 40, c - 60)
+    crown = d < 8
+    z[crown] = 8.0 * np.sqrt(1.0 - (d[crown] / 8.0) ** 2) + 2.0
+    return z, house, crown
+
+
+def test_aspect_coherence_separates_a_gable_roof_from_a_round_crown():
+    z, house, crown = _gable_and_crown()
+    lab = house.astype(int) + 2 * crown
+    coh = aspect_coherence(z, lab, cell=2.0)
+    assert coh.shape == (2,)
+    assert coh[0] > 0.5
+    assert coh[1] < 0.1
+    # rotating the scene by 90 degrees does not change it (four-fold)
+    assert np.allclose(aspect_coherence(np.rot90(z), np.rot90(lab), cell=2.0), coh, atol=1e-9)
+    assert aspect_coherence(z, np.zeros_like(lab)).shape == (0,)
+
+
+def test_building_regions_drop_the_incoherent_crown():
+    z, house, crown = _gable_and_crown()
+    lab = building_regions(z, z, cell=2.0, max_roughness=99.0)
+    assert (lab > 0)[house].mean() > 0.9 and not (lab > 0)[crown].any()
+    kept = building_regions(z, z, cell=2.0, max_roughness=99.0, min_aspect_coherence=0.0)
+    assert (kept > 0)[crown].mean() > 0.8

@@ -15,7 +15,7 @@ from ..errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["roughness_index", "linked_edges", "building_regions", "initial_contours"]
+__all__ = ["roughness_index", "aspect_coherence", "linked_edges", "building_regions", "initial_contours"]
 
 
 def _filled(a):
@@ -63,6 +63,50 @@ def roughness_index(dsm, *, cell=1.0) -> np.ndarray:
             if dr or dc:
                 acc += np.abs(centre - z[1 + dr:1 + dr + h, 1 + dc:1 + dc + w])
     return acc / 8.0 / float(cell)
+
+
+def aspect_coherence(dsm, labels, *, cell=1.0, sigma=0.7) -> np.ndarray:
+    """Four-fold coherence of the slope directions (aspects) of each labelled region.
+
+    ``|sum_p s_p exp(4 i theta_p)| / sum_p s_p`` over the region's pixels, with
+    ``theta`` the aspect and ``s`` the slope of the Gaussian-smoothed DSM. A
+    building's walls and roof planes face a few directions 90 degrees apart
+    (a rectangle's four sides, a gable's two or a hip roof's four planes), all
+    equal modulo 90 degrees: the four-fold mean resultant length is high. A
+    tree crown slopes away from its top in every direction: it is near 0.
+
+    Parameters
+    ----------
+    dsm : ndarray, shape (H, W)
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    cell : float
+        Pixel size (m).
+    sigma : float
+        Gaussian smoothing of the DSM before the gradient (pixels).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Coherence in [0, 1] of regions 1..n (0 for empty or flat ones).
+    """
+    z = _filled(dsm)
+    lab = np.asarray(labels)
+    if lab.shape != z.shape:
+        raise InputError(f"dsm {z.shape} and labels {lab.shape} differ in shape")
+    n = int(lab.max()) if lab.size else 0
+    if n == 0:
+        return np.zeros(0)
+    if sigma > 0:
+        z = ndi.gaussian_filter(z, sigma)
+    gr, gc = np.gradient(z, float(cell))
+    slope = np.hypot(gr, gc)
+    four = 4.0 * np.arctan2(gr, gc)
+    idx = np.arange(1, n + 1)
+    re = ndi.sum_labels(slope * np.cos(four), lab, idx)
+    im = ndi.sum_labels(slope * np.sin(four), lab, idx)
+    tot = ndi.sum_labels(slope, lab, idx)
+    return np.where(tot > 0, np.hypot(re, im) / np.maximum(tot, 1e-12), 0.0)
 
 
 def linked_edges(dsm, *, sigma=1.0, low_threshold=None, high_threshold=None,
@@ -116,7 +160,8 @@ def linked_edges(dsm, *, sigma=1.0, low_threshold=None, high_threshold=None,
 
 def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
                      canny_sigma=1.0, max_gap=1, min_edge_length=4, min_area=20.0,
-                     split_distance=3, relative_height=0.5, edges=None) -> np.ndarray:
+                     split_distance=3, relative_height=0.5, min_aspect_coherence=0.1,
+                     edges=None) -> np.ndarray:
     """Label image of candidate building regions.
 
     1. Pixels higher than ``min_height`` above the terrain form the candidate
@@ -130,8 +175,9 @@ def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
        ramp whose mid-point (``h / 2``) is the wall, and the lower crowns or
        sheds leaning on a building fall below it.
     4. Regions whose median roughness index exceeds ``max_roughness``
-       (vegetation: rough, irregular canopy) or smaller than ``min_area`` are
-       dropped; the cut pixels (edges) are given back to their neighbouring
+       (vegetation: rough, irregular canopy), whose slope directions are not
+       coherent (:func:`aspect_coherence` below ``min_aspect_coherence``: tree
+       crowns slope every way) or smaller than ``min_area`` are dropped; the cut pixels (edges) are given back to their neighbouring
        region, within the candidate mask and the region's height cut.
 
     Parameters
@@ -141,6 +187,9 @@ def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
     relative_height : float
         Share of a piece's 90th height percentile (above terrain) its pixels
         must exceed, in [0, 1); 0: no cut.
+    min_aspect_coherence : float
+        Smallest four-fold aspect coherence of a building region, in [0, 1];
+        0: no test.
 
     Returns
     -------
@@ -178,9 +227,11 @@ def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
     area = ndi.sum_labels(np.ones_like(lab), lab, idx) * cell * cell
     med = ndi.labeled_comprehension(rough, lab, idx, np.median, np.float64, 0.0)
     keep = np.zeros(n + 1, bool)
-    keep[1:] = (area >= min_area) & (med <= max_roughness)
-    logger.debug("%d regions, %d kept (%d too small, %d too rough)", n, int(keep.sum()),
-                 int((area < min_area).sum()), int((med > max_roughness).sum()))
+    coh = aspect_coherence(z, lab, cell=cell) if min_aspect_coherence > 0 else np.ones(n)
+    keep[1:] = (area >= min_area) & (med <= max_roughness) & (coh >= min_aspect_coherence)
+    logger.debug("%d regions, %d kept (%d too small, %d too rough, %d incoherent aspects)", n,
+                 int(keep.sum()), int((area < min_area).sum()), int((med > max_roughness).sum()),
+                 int((coh < min_aspect_coherence).sum()))
     thr = _label_threshold(nd, lab, relative_height) if relative_height > 0 else np.zeros(n + 1)
     lab = np.where(keep[lab], lab, 0)
     lab = expand_labels(lab, 1.5) * cand  # 1.5: diagonal neighbours (corners) too

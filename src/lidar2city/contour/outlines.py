@@ -47,6 +47,7 @@ class ActiveContourConfig:
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
     split_distance: int = field(3, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (pixels; 0: no split).")
+    min_aspect_coherence: float = field(0.1, "Regions whose four-fold slope-direction coherence is below this are dropped (tree crowns slope every way, buildings a few ways 90 degrees apart; 0: off).")
     relative_height: float = field(0.5, "Each piece keeps its pixels higher than this share of its 90th height percentile (a blurred wall's mid-height; drops low crowns and sheds leaning on buildings; 0: off).")
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
@@ -86,6 +87,8 @@ class ActiveContourConfig:
             raise ConfigError(f"active_contour.local_sigma: must be >= 0, got {self.local_sigma}")
         if self.split_distance < 0:
             raise ConfigError(f"active_contour.split_distance: must be >= 0, got {self.split_distance}")
+        if not 0 <= self.min_aspect_coherence <= 1:
+            raise ConfigError(f"active_contour.min_aspect_coherence: must be in [0, 1], got {self.min_aspect_coherence}")
         if not 0 <= self.relative_height < 1:
             raise ConfigError(f"active_contour.relative_height: must be in [0, 1), got {self.relative_height}")
         if self.max_gap < 0 or self.min_area < 0 or self.simplify < 0 or self.smooth < 0:
@@ -177,6 +180,7 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
                               max_roughness=cfg.max_roughness, min_area=cfg.min_area,
                               split_distance=cfg.split_distance, relative_height=cfg.relative_height,
+                              min_aspect_coherence=cfg.min_aspect_coherence,
                               edges=edges)
     contours = initial_contours(labels)
     if cfg.edge_map == "canny":
