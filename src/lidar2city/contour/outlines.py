@@ -27,9 +27,12 @@ WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
 #: Range searched by the genetic algorithm for every weight.
 WEIGHT_BOUNDS = (0.0, 3.0)
 #: Weights used when none are given: tuned by the GA (objective 1 - kappa, population
-#: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage
-#: (benchmarks/bench_active_contour.py). Retune for other data with ``lidar2city tune``.
-DEFAULT_WEIGHTS = {"alpha": 0.83, "beta": 2.72, "gamma": 2.78, "mu": 0.26, "epsilon": 1.18}
+#: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage,
+#: scored around the reference footprints (``reference_neighbourhood_domain``), with the
+#: split / half-height / aspect-coherence initialisation and localised region
+#: statistics (benchmarks/bench_active_contour.py). Retune for other data with
+#: ``lidar2city tune``.
+DEFAULT_WEIGHTS = {"alpha": 0.488, "beta": 0.206, "gamma": 1.879, "mu": 2.896, "epsilon": 1.817}
 #: Hand-set weights before tuning (kept as the untuned baseline of the benchmark).
 UNTUNED_WEIGHTS = {"alpha": 0.2, "beta": 0.2, "gamma": 1.0, "mu": 1.0, "epsilon": 1.0}
 
