@@ -52,6 +52,13 @@ def test_tune_writes_weights(runner, tmp_path):
     res = runner.invoke(cli, [str(out2) if a == str(out) else a for a in args])
     assert res.exit_code == 0, res.output
     assert tomllib.loads(out2.read_text())["active_contour"] == w
+    assert data["tune"]["domain"] == "reference"
+    # a complete reference can be scored on its whole bounding box
+    out3 = d / "w3.toml"
+    res = runner.invoke(cli, [str(out3) if a == str(out) else a for a in args] + ["--domain", "bbox"])
+    assert res.exit_code == 0, res.output
+    bbox = tomllib.loads(out3.read_text())["tune"]
+    assert bbox["domain"] == "bbox" and bbox["cost"] < 0.02
 
     # the weights drive the outlines
     from lidar2city.tools.active_contour import footprints_active_contour

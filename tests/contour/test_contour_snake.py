@@ -48,7 +48,8 @@ def _iou(contour):
     (0.2, 0.2, 0.0, 1.0, 0.0),   # regional variance alone
     (0.2, 0.2, 1.0, 1.0, 1.0),   # all terms
 ])
-def test_snake_converges_onto_rectangle(corners, weights):
+@pytest.mark.parametrize("local_sigma", [0.0, 3.0])
+def test_snake_converges_onto_rectangle(corners, weights, local_sigma):
     _, sc = _scene()
     rng = np.random.default_rng(1)
     init = resample_contour(np.array(corners, float), 1.0)
@@ -56,8 +57,33 @@ def test_snake_converges_onto_rectangle(corners, weights):
     assert _iou(init) < 0.8
     a, b, g, m, e = weights
     out = evolve_contours([init], sc.gvf, sc.image, sc.ndsm, alpha=a, beta=b, gamma=g, mu=m,
-                          epsilon=e, max_iter=300)[0]
+                          epsilon=e, max_iter=300, local_sigma=local_sigma)[0]
     assert _iou(out) > 0.9
+
+
+def test_local_statistics_keep_a_low_annex_of_a_tall_building():
+    # a 15 m block with a 4 m annex: one mean inside (about 11 m) puts the
+    # mid-height above the annex, local means give each part its own
+    nd = np.zeros((60, 70))
+    nd[15:45, 10:35] = 15.0
+    nd[20:40, 35:55] = 4.0
+    truth = shapely.box(9.5, 14.5, 34.5, 44.5).union(shapely.box(34.5, 19.5, 54.5, 39.5))
+    init = resample_contour(np.array([[13, 8], [13, 57], [47, 57], [47, 8]], float), 1.0)
+    gvf = np.zeros((2,) + nd.shape)
+
+    def iou(c):
+        p = shapely.make_valid(shapely.Polygon(c[:, ::-1]))
+        return p.intersection(truth).area / p.union(truth).area
+
+    kw = dict(alpha=0.1, beta=0.1, gamma=0.0, max_iter=300)
+    # regional term (DSM means): one mean per contour loses the annex
+    local = evolve_contours([init], gvf, nd, nd, mu=1.0, epsilon=0.0, local_sigma=3.0, **kw)[0]
+    whole = evolve_contours([init], gvf, nd, nd, mu=1.0, epsilon=0.0, local_sigma=0.0, **kw)[0]
+    assert iou(local) > 0.95
+    assert iou(whole) < 0.8
+    # altitudinal term: pulled off the flat ground (small variance) onto both parts
+    local = evolve_contours([init], gvf, nd, nd, mu=0.0, epsilon=1.0, local_sigma=3.0, **kw)[0]
+    assert iou(local) > 0.95
 
 
 def test_gvf_points_toward_a_known_edge():

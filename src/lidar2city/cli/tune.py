@@ -23,8 +23,11 @@ _path = click.Path(dir_okay=False)
               help="Fitness: (FP + FN) / N pixels (eq. 4), or 1 - kappa.")
 @click.option("--config", "config_path", type=_path, default=None, help="Run config TOML; its [active_contour] section sets the other snake parameters.")
 @click.option("--figure", type=_path, default=None, help="Also write the cost per generation as a PNG.")
+@click.option("--domain", type=click.Choice(["reference", "bbox"]), default="reference", show_default=True,
+              help="Pixels scored: around the reference buildings, skipping above-ground objects the "
+                   "reference does not hold (incomplete reference), or its whole bounding box (complete).")
 def command(dsm, dtm, ortho, reference, output, seed, population, generations, jobs, objective,
-            config_path, figure):
+            config_path, figure, domain):
     """Tune the five active-contour weights (alpha, beta, gamma, mu, epsilon) with a genetic algorithm.
 
     The cost is the share of wrongly classified pixels, (FP + FN) / N, of the
@@ -48,7 +51,7 @@ def command(dsm, dtm, ortho, reference, output, seed, population, generations, j
 
         res = tune(dsm, dtm=dtm, ortho=ortho, reference=reference, output=output, seed=seed,
                    population=population, generations=generations, n_jobs=jobs, objective=objective,
-                   config=cfg, figure=figure, callback=step)
+                   config=cfg, figure=figure, callback=step, domain=domain)
     for r in res["history"]:
         click.echo(f"generation {r['generation']:3d}  best cost {r['best_cost']:.5f}  "
                    f"mean {r['mean']:.5f}  same {100 * r['same']:.0f} %", err=True)

@@ -8,7 +8,13 @@ and its configuration (:mod:`.outlines`); rasterisation and scoring domain
 """
 
 from .gvf import edge_map, gradient_vector_flow
-from .initial import building_regions, initial_contours, linked_edges, roughness_index
+from .initial import (
+    aspect_coherence,
+    building_regions,
+    initial_contours,
+    linked_edges,
+    roughness_index,
+)
 from .outlines import (
     DEFAULT_WEIGHTS,
     WEIGHT_BOUNDS,
@@ -21,13 +27,20 @@ from .outlines import (
     prepare_scene,
     run_scene,
 )
-from .raster import PixelFrame, evaluation_domain, rasterize_polygons
+from .raster import (
+    PixelFrame,
+    evaluation_domain,
+    object_segments,
+    rasterize_polygons,
+    reference_neighbourhood_domain,
+)
 from .snake import evolve_contours, resample_contour
 
 __all__ = [
-    "edge_map", "gradient_vector_flow", "building_regions", "initial_contours", "linked_edges",
+    "aspect_coherence", "edge_map", "gradient_vector_flow", "building_regions", "initial_contours", "linked_edges",
     "roughness_index", "DEFAULT_WEIGHTS", "WEIGHT_BOUNDS", "WEIGHT_NAMES", "ActiveContourConfig",
     "ContourScene", "active_contour_outlines", "contours_to_polygons", "normalize_weights",
     "prepare_scene", "run_scene", "PixelFrame", "evaluation_domain", "rasterize_polygons",
+    "reference_neighbourhood_domain", "object_segments",
     "evolve_contours", "resample_contour",
 ]

@@ -15,7 +15,7 @@ from ..errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["roughness_index", "linked_edges", "building_regions", "initial_contours"]
+__all__ = ["roughness_index", "aspect_coherence", "linked_edges", "building_regions", "initial_contours"]
 
 
 def _filled(a):
@@ -63,6 +63,50 @@ def roughness_index(dsm, *, cell=1.0) -> np.ndarray:
             if dr or dc:
                 acc += np.abs(centre - z[1 + dr:1 + dr + h, 1 + dc:1 + dc + w])
     return acc / 8.0 / float(cell)
+
+
+def aspect_coherence(dsm, labels, *, cell=1.0, sigma=0.7) -> np.ndarray:
+    """Four-fold coherence of the slope directions (aspects) of each labelled region.
+
+    ``|sum_p s_p exp(4 i theta_p)| / sum_p s_p`` over the region's pixels, with
+    ``theta`` the aspect and ``s`` the slope of the Gaussian-smoothed DSM. A
+    building's walls and roof planes face a few directions 90 degrees apart
+    (a rectangle's four sides, a gable's two or a hip roof's four planes), all
+    equal modulo 90 degrees: the four-fold mean resultant length is high. A
+    tree crown slopes away from its top in every direction: it is near 0.
+
+    Parameters
+    ----------
+    dsm : ndarray, shape (H, W)
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    cell : float
+        Pixel size (m).
+    sigma : float
+        Gaussian smoothing of the DSM before the gradient (pixels).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Coherence in [0, 1] of regions 1..n (0 for empty or flat ones).
+    """
+    z = _filled(dsm)
+    lab = np.asarray(labels)
+    if lab.shape != z.shape:
+        raise InputError(f"dsm {z.shape} and labels {lab.shape} differ in shape")
+    n = int(lab.max()) if lab.size else 0
+    if n == 0:
+        return np.zeros(0)
+    if sigma > 0:
+        z = ndi.gaussian_filter(z, sigma)
+    gr, gc = np.gradient(z, float(cell))
+    slope = np.hypot(gr, gc)
+    four = 4.0 * np.arctan2(gr, gc)
+    idx = np.arange(1, n + 1)
+    re = ndi.sum_labels(slope * np.cos(four), lab, idx)
+    im = ndi.sum_labels(slope * np.sin(four), lab, idx)
+    tot = ndi.sum_labels(slope, lab, idx)
+    return np.where(tot > 0, np.hypot(re, im) / np.maximum(tot, 1e-12), 0.0)
 
 
 def linked_edges(dsm, *, sigma=1.0, low_threshold=None, high_threshold=None,
@@ -116,31 +160,66 @@ def linked_edges(dsm, *, sigma=1.0, low_threshold=None, high_threshold=None,
 
 def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
                      canny_sigma=1.0, max_gap=1, min_edge_length=4, min_area=20.0,
+                     split_distance=3, relative_height=0.5, min_aspect_coherence=0.1,
                      edges=None) -> np.ndarray:
     """Label image of candidate building regions.
 
-    Pixels higher than ``min_height`` above the terrain form the candidate
-    mask; linked Canny edges of the DSM cut it where buildings touch trees or
-    each other; regions whose median roughness index exceeds ``max_roughness``
-    (vegetation: rough, irregular canopy) or smaller than ``min_area`` are
-    dropped; the cut pixels are given back to their neighbouring region.
+    1. Pixels higher than ``min_height`` above the terrain form the candidate
+       mask; linked Canny edges of the DSM cut it where buildings touch trees
+       or each other.
+    2. What is still joined is cut at its necks: watershed of the distance
+       transform, one piece per distance maximum at least ``split_distance``
+       pixels from the others (:func:`~.raster.object_segments`).
+    3. Each piece keeps only its pixels higher than ``relative_height`` times
+       its 90th height percentile: a DSM blurs a wall of height ``h`` into a
+       ramp whose mid-point (``h / 2``) is the wall, and the lower crowns or
+       sheds leaning on a building fall below it.
+    4. Regions whose median roughness index exceeds ``max_roughness``
+       (vegetation: rough, irregular canopy), whose slope directions are not
+       coherent (:func:`aspect_coherence` below ``min_aspect_coherence``: tree
+       crowns slope every way) or smaller than ``min_area`` are dropped; the cut pixels (edges) are given back to their neighbouring
+       region, within the candidate mask and the region's height cut.
+
+    Parameters
+    ----------
+    split_distance : int
+        Smallest distance between two pieces' centres (pixels); 0: no split.
+    relative_height : float
+        Share of a piece's 90th height percentile (above terrain) its pixels
+        must exceed, in [0, 1); 0: no cut.
+    min_aspect_coherence : float
+        Smallest four-fold aspect coherence of a building region, in [0, 1];
+        0: no test.
 
     Returns
     -------
     ndarray of int32, shape (H, W)
         0 for background, 1..n for regions.
     """
+    from skimage.measure import label as cc_label
     from skimage.segmentation import expand_labels
+
+    from .raster import object_segments
 
     z = _filled(dsm)
     nd = np.asarray(ndsm, dtype=np.float64)
     if nd.shape != z.shape:
         raise InputError(f"dsm and ndsm differ in shape: {z.shape} vs {nd.shape}")
-    cand = np.nan_to_num(nd, nan=0.0) > min_height
+    if not 0 <= relative_height < 1:
+        raise InputError(f"relative_height must be in [0, 1), got {relative_height}")
+    nd = np.nan_to_num(nd, nan=0.0)
+    cand = nd > min_height
     if edges is None:
         edges = linked_edges(z, sigma=canny_sigma, max_gap=max_gap, min_length=min_edge_length)
     core = cand & ~edges
-    lab, n = ndi.label(core)
+    if split_distance > 0:
+        lab = object_segments(core, min_distance=split_distance)
+    else:
+        lab, _ = ndi.label(core)
+    if relative_height > 0 and lab.max() > 0:
+        lab = np.where(nd > _label_threshold(nd, lab, relative_height)[lab], lab, 0)
+    lab = cc_label(lab, background=0, connectivity=1)
+    n = int(lab.max())
     if n == 0:
         return lab.astype(np.int32)
     rough = roughness_index(z, cell=cell)
@@ -148,13 +227,25 @@ def building_regions(dsm, ndsm, *, cell=1.0, min_height=3.0, max_roughness=1.0,
     area = ndi.sum_labels(np.ones_like(lab), lab, idx) * cell * cell
     med = ndi.labeled_comprehension(rough, lab, idx, np.median, np.float64, 0.0)
     keep = np.zeros(n + 1, bool)
-    keep[1:] = (area >= min_area) & (med <= max_roughness)
-    logger.debug("%d regions, %d kept (%d too small, %d too rough)", n, int(keep.sum()),
-                 int((area < min_area).sum()), int((med > max_roughness).sum()))
+    coh = aspect_coherence(z, lab, cell=cell) if min_aspect_coherence > 0 else np.ones(n)
+    keep[1:] = (area >= min_area) & (med <= max_roughness) & (coh >= min_aspect_coherence)
+    logger.debug("%d regions, %d kept (%d too small, %d too rough, %d incoherent aspects)", n,
+                 int(keep.sum()), int((area < min_area).sum()), int((med > max_roughness).sum()),
+                 int((coh < min_aspect_coherence).sum()))
+    thr = _label_threshold(nd, lab, relative_height) if relative_height > 0 else np.zeros(n + 1)
     lab = np.where(keep[lab], lab, 0)
     lab = expand_labels(lab, 1.5) * cand  # 1.5: diagonal neighbours (corners) too
+    lab = np.where(nd > thr[lab], lab, 0)
     lab, _, _ = _relabel(lab)
     return lab.astype(np.int32)
+
+
+def _label_threshold(nd, lab, share):
+    """``share`` x the 90th height percentile of every label; index 0 (background) is +inf."""
+    n = int(lab.max())
+    idx = np.arange(1, n + 1)
+    top = ndi.labeled_comprehension(nd, lab, idx, lambda v: np.percentile(v, 90), np.float64, 0.0)
+    return np.concatenate([[np.inf], share * np.asarray(top)])
 
 
 def _relabel(lab):

@@ -27,9 +27,12 @@ WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
 #: Range searched by the genetic algorithm for every weight.
 WEIGHT_BOUNDS = (0.0, 3.0)
 #: Weights used when none are given: tuned by the GA (objective 1 - kappa, population
-#: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage
-#: (benchmarks/bench_active_contour.py). Retune for other data with ``lidar2city tune``.
-DEFAULT_WEIGHTS = {"alpha": 0.83, "beta": 2.72, "gamma": 2.78, "mu": 0.26, "epsilon": 1.18}
+#: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage,
+#: scored around the reference footprints (``reference_neighbourhood_domain``), with the
+#: split / half-height / aspect-coherence initialisation and localised region
+#: statistics (benchmarks/bench_active_contour.py). Retune for other data with
+#: ``lidar2city tune``.
+DEFAULT_WEIGHTS = {"alpha": 0.488, "beta": 0.206, "gamma": 1.879, "mu": 2.896, "epsilon": 1.817}
 #: Hand-set weights before tuning (kept as the untuned baseline of the benchmark).
 UNTUNED_WEIGHTS = {"alpha": 0.2, "beta": 0.2, "gamma": 1.0, "mu": 1.0, "epsilon": 1.0}
 
@@ -46,6 +49,9 @@ class ActiveContourConfig:
     min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
+    split_distance: int = field(3, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (pixels; 0: no split).")
+    min_aspect_coherence: float = field(0.1, "Regions whose four-fold slope-direction coherence is below this are dropped (tree crowns slope every way, buildings a few ways 90 degrees apart; 0: off).")
+    relative_height: float = field(0.5, "Each piece keeps its pixels higher than this share of its 90th height percentile (a blurred wall's mid-height; drops low crowns and sheds leaning on buildings; 0: off).")
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
     min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
@@ -60,7 +66,8 @@ class ActiveContourConfig:
     tol: float = field(0.02, "Convergence: RMS vertex move per iteration below this (pixels).")
     spacing: float = field(1.0, "Vertex spacing after resampling (pixels).")
     resample_every: int = field(5, "Resample contours and update region statistics every N iterations.")
-    band: float = field(3.0, "Width of the outside band for region statistics (pixels).")
+    band: float = field(3.0, "Width of the outside band for region statistics (pixels; used when local_sigma is 0).")
+    local_sigma: float = field(3.0, "Gaussian window (pixels) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
     smooth: float = field(0.7, "Gaussian sigma applied to the region-term images (pixels; 0: none).")
     simplify: float = field(0.5, "Douglas-Peucker tolerance of the output outlines (pixels; 0: none).")
 
@@ -79,6 +86,14 @@ class ActiveContourConfig:
             raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
             raise ConfigError(f"active_contour.step_decay: must be in (0, 1], got {self.step_decay}")
+        if self.local_sigma < 0:
+            raise ConfigError(f"active_contour.local_sigma: must be >= 0, got {self.local_sigma}")
+        if self.split_distance < 0:
+            raise ConfigError(f"active_contour.split_distance: must be >= 0, got {self.split_distance}")
+        if not 0 <= self.min_aspect_coherence <= 1:
+            raise ConfigError(f"active_contour.min_aspect_coherence: must be in [0, 1], got {self.min_aspect_coherence}")
+        if not 0 <= self.relative_height < 1:
+            raise ConfigError(f"active_contour.relative_height: must be in [0, 1), got {self.relative_height}")
         if self.max_gap < 0 or self.min_area < 0 or self.simplify < 0 or self.smooth < 0:
             raise ConfigError("active_contour.max_gap, min_area, simplify and smooth must be >= 0")
 
@@ -166,7 +181,10 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     nd = np.where(np.isfinite(nd), nd, 0.0)
     edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
     labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
-                              max_roughness=cfg.max_roughness, min_area=cfg.min_area, edges=edges)
+                              max_roughness=cfg.max_roughness, min_area=cfg.min_area,
+                              split_distance=cfg.split_distance, relative_height=cfg.relative_height,
+                              min_aspect_coherence=cfg.min_aspect_coherence,
+                              edges=edges)
     contours = initial_contours(labels)
     if cfg.edge_map == "canny":
         f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0
@@ -200,7 +218,7 @@ def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig 
         alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
         tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
         spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band,
-        callback=callback)
+        local_sigma=cfg.local_sigma, callback=callback)
 
 
 def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:

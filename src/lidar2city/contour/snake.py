@@ -18,7 +18,7 @@ from ..errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["evolve_contours", "resample_contour", "region_forces"]
+__all__ = ["evolve_contours", "resample_contour", "region_forces", "local_region_fields"]
 
 
 def resample_contour(v, spacing=1.0, *, min_vertices=8, max_vertices=None) -> np.ndarray:
@@ -232,9 +232,51 @@ def region_forces(contours, shape, image, ndsm, *, band=3.0, var_floor=0.25):
     return out
 
 
+def local_region_fields(contours, shape, image, ndsm, *, sigma=3.0, var_floor=0.25,
+                        min_weight=0.05) -> np.ndarray:
+    """Localised inside / outside statistics around every pixel (Lankton & Tannenbaum 2008).
+
+    With ``chi`` the union of the contours' interiors and ``G`` a Gaussian of
+    ``sigma`` pixels, the local inside mean of a quantity ``q`` is
+    ``G*(chi q) / G*chi`` and the outside mean ``G*((1-chi) q) / G*(1-chi)``.
+    A vertex on a wall then compares the roof just behind it with the ground
+    (or the neighbour) just in front of it, not with the mean of a whole,
+    possibly composite, building and its whole surroundings; a low annex or a
+    crown beside a tall roof gets its own local mid-height.
+
+    Returns
+    -------
+    ndarray, shape (8, H, W)
+        ``c_in, c_out`` (image means), ``m_in, m_out`` (nDSM means),
+        ``v_in, v_out`` (nDSM variances floored at ``var_floor``), and the
+        ``ok`` flag (both sides have at least ``min_weight`` of the window)
+        twice (so the array samples as pairs).
+
+    References
+    ----------
+    Lankton, S., Tannenbaum, A. (2008). Localizing region-based active
+    contours. IEEE TIP 17(11).
+    """
+    chi = (_labels(contours, shape) > 0).astype(np.float64)
+    out_m = 1.0 - chi
+
+    def g(a):
+        return ndi.gaussian_filter(a, sigma, mode="nearest")
+
+    w_in, w_out = g(chi), g(out_m)
+    ok = ((w_in >= min_weight) & (w_out >= min_weight)).astype(np.float64)
+    si, so = np.maximum(w_in, 1e-9), np.maximum(w_out, 1e-9)
+    c_in, c_out = g(chi * image) / si, g(out_m * image) / so
+    m_in, m_out = g(chi * ndsm) / si, g(out_m * ndsm) / so
+    q = ndsm * ndsm
+    v_in = np.maximum(g(chi * q) / si - m_in ** 2, var_floor)
+    v_out = np.maximum(g(out_m * q) / so - m_out ** 2, var_floor)
+    return np.stack([c_in, c_out, m_in, m_out, v_in, v_out, ok, ok])
+
+
 def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.0, mu=1.0,
                     epsilon=1.0, tau=0.5, max_step=1.0, step_decay=0.9, max_iter=200, tol=0.02,
-                    spacing=1.0, resample_every=5, band=3.0, var_floor=0.25,
+                    spacing=1.0, resample_every=5, band=3.0, var_floor=0.25, local_sigma=0.0,
                     min_vertices=8, callback=None) -> list:
     """Evolve closed contours by minimising the snake energy.
 
@@ -253,7 +295,8 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
       pixels that look like its outside.
     * AVE (altitudinal variance): the Gaussian log-likelihood ratio of the
       nDSM height under the inside and outside height distributions (means and
-      variances), divided by its value at the inside mean and clipped to
+      variances), divided by its value at the inside mean (where positive) or
+      by its magnitude at the outside mean (where negative) and clipped to
       [-1, 1], along the normal: unlike RVE it weighs each side by its height
       variance, so a rough canopy outside a flat roof pulls less.
 
@@ -323,7 +366,14 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     tau, limit = tau0, max_step
     rag = _Ragged(contours)
     lu = rag.system(alpha, beta, tau)
-    stats = region_forces(contours, shape, image, ndsm, band=band, var_floor=var_floor)
+    local = local_sigma > 0 and (mu > 0 or epsilon > 0)
+
+    def update_stats(cs):
+        if local:
+            return local_region_fields(cs, shape, image, ndsm, sigma=local_sigma, var_floor=var_floor)
+        return region_forces(cs, shape, image, ndsm, band=band, var_floor=var_floor)
+
+    stats = update_stats(contours)
     v = rag.v
     it = 0
     for it in range(1, max_iter + 1):
@@ -336,20 +386,31 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
             normal, _ = rag.outward_normals(v)
             push = np.zeros(len(v))
             sid = rag.sid
-            if mu > 0:
+            if local:
+                c_in, c_out, m_in, m_out, v_in, v_out, ok, _ = _sample(stats, v)
+                empty = ok < 0.5
+            else:
                 c_in, c_out = stats["c_in"][sid], stats["c_out"][sid]
-                contrast = np.maximum((c_in - c_out) ** 2, 1e-12)
-                f_rve = ((val - c_out) ** 2 - (val - c_in) ** 2) / contrast
-                f_rve[(stats["n_in"][sid] == 0) | (stats["n_out"][sid] == 0)] = 0.0
-                push += mu * np.clip(f_rve, -1.0, 1.0)
-            if epsilon > 0:
                 m_in, m_out = stats["m_in"][sid], stats["m_out"][sid]
                 v_in, v_out = stats["v_in"][sid], stats["v_out"][sid]
+                empty = (stats["n_in"][sid] == 0) | (stats["n_out"][sid] == 0)
+            if mu > 0:
+                contrast = np.maximum((c_in - c_out) ** 2, 1e-12)
+                f_rve = ((val - c_out) ** 2 - (val - c_in) ** 2) / contrast
+                f_rve[empty] = 0.0
+                push += mu * np.clip(f_rve, -1.0, 1.0)
+            if epsilon > 0:
                 llr = (h - m_out) ** 2 / v_out - (h - m_in) ** 2 / v_in + np.log(v_out / v_in)
-                # normalised by its value at the inside mean: +1 there, linear-ish across the edge
-                ref = (m_in - m_out) ** 2 / v_out + np.log(v_out / v_in)
-                f_ave = np.where(ref > 1e-9, llr / np.maximum(ref, 1e-9), 0.0)
-                f_ave[(stats["n_in"][sid] == 0) | (stats["n_out"][sid] == 0)] = 0.0
+                # normalised by its value at the inside mean where it pushes outward (+1
+                # there) and by its magnitude at the outside mean where it pulls inward
+                # (-1 there): one normaliser for both sides would make the pull off a flat
+                # ground (small variance) vanish next to the push over it
+                d2 = (m_in - m_out) ** 2
+                at_in = d2 / v_out + np.log(v_out / v_in)
+                at_out = d2 / v_in - np.log(v_out / v_in)
+                norm = np.where(llr > 0, at_in, at_out)
+                f_ave = np.where(norm > 1e-9, llr / np.maximum(norm, 1e-9), 0.0)
+                f_ave[empty] = 0.0
                 push += epsilon * np.clip(f_ave, -1.0, 1.0)
             # a normal force that alternates along the contour folds it: smooth it (1-2-1)
             push = 0.5 * push + 0.25 * (push[rag.nb[-1]] + push[rag.nb[1]])
@@ -374,7 +435,7 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
             decay = step_decay ** (it // resample_every)
             tau, limit = tau0 * decay, max_step * decay
             lu = rag.system(alpha, beta, tau)
-            stats = region_forces(contours, shape, image, ndsm, band=band, var_floor=var_floor)
+            stats = update_stats(contours)
             v = rag.v
     logger.debug("snakes stopped after %d iterations", it)
     out = []

@@ -12,7 +12,7 @@ from ..errors import InputError
 logger = logging.getLogger(__name__)
 
 __all__ = ["load_scene_inputs", "reference_mask", "footprints_active_contour", "tune",
-           "resolve_weights"]
+           "resolve_weights", "scoring_domain"]
 
 
 def _same_grid(a, b, what):
@@ -133,13 +133,34 @@ def footprints_active_contour(dsm, *, output, dtm=None, ortho=None, weights=None
     return {"buildings": len(polys), "weights": used, "output": str(output)}
 
 
+def scoring_domain(reference_mask, objects, kind="reference", *, buffer=5) -> np.ndarray:
+    """The pixels a reference footprint set is scored on.
+
+    ``"reference"`` (:func:`~lidar2city.contour.raster.reference_neighbourhood_domain`):
+    ``buffer`` pixels around the reference buildings, minus the above-ground
+    pieces holding no reference pixel -- for reference sets that leave out
+    buildings inside their extent. ``"bbox"``
+    (:func:`~lidar2city.contour.raster.evaluation_domain`): the reference's
+    bounding box, minus a border margin and the objects cut by the raster edge
+    -- for complete reference sets.
+    """
+    from ..contour.raster import evaluation_domain, reference_neighbourhood_domain
+
+    if kind == "reference":
+        return reference_neighbourhood_domain(reference_mask, objects, buffer=buffer)
+    if kind == "bbox":
+        return evaluation_domain(reference_mask, objects)
+    raise InputError(f"unknown scoring domain {kind!r}; expected 'reference' or 'bbox'")
+
+
 def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30, generations=15,
-         n_jobs=1, objective="cost", config=None, figure=None, callback=None) -> dict:
+         n_jobs=1, objective="cost", config=None, figure=None, callback=None,
+         domain="reference") -> dict:
     """Learn the five weights on a DSM with reference footprints; write them as TOML.
 
-    The cost is scored on :func:`~lidar2city.contour.raster.evaluation_domain`
-    (the reference's extent, minus a border margin and the objects cut by the
-    raster edge, which reference sets leave out).
+    The cost is scored on :func:`scoring_domain` ``domain``: by default the
+    surroundings of the reference buildings (reference sets seldom hold every
+    building of their extent); ``"bbox"`` for a complete reference.
 
     Returns
     -------
@@ -148,7 +169,6 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
         same pixels), ``history`` (per generation), ``stopped``.
     """
     from ..contour.outlines import ActiveContourConfig, normalize_weights
-    from ..contour.raster import evaluation_domain
     from ..io.weights import write_weights
     from ..tune.ga import _init_worker, tune_weights, weights_cost
 
@@ -158,7 +178,8 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
     inp = load_scene_inputs(dsm, dtm=dtm, ortho=ortho)
     ref = reference_mask(reference, inp["raster"])
     objects = np.nan_to_num(inp["ndsm"], nan=0.0) > cfg.min_height
-    domain = evaluation_domain(ref, objects)
+    kind = domain
+    domain = scoring_domain(ref, objects, kind)
     weights, history = tune_weights(inp["dsm"], inp["ndsm"], ref, ortho=inp["ortho"], cell=inp["cell"],
                                     domain=domain, config=cfg, population=population,
                                     generations=generations, seed=seed, n_jobs=n_jobs,
@@ -178,7 +199,7 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
         weights, cost = default, default_cost
     write_weights(output, weights, metadata={
         "objective": objective, "cost": round(cost, 6), "default_cost": round(default_cost, 6),
-        "seed": seed,
+        "seed": seed, "domain": kind,
         "population": population, "generations": len(history) - 1,
         "stopped": "converged" if history and history[-1]["same"] >= 0.95 else "generations",
         "dsm": str(dsm), "reference": str(reference)})
