@@ -78,3 +78,30 @@ def test_trim_to_edges_keeps_ids_and_validates():
         trim_to_edges(lab[:5], nd)
     with pytest.raises(InputError):
         roof_regions(nd, nd, cell=1.0, edge_fraction=-0.1)
+
+
+def test_split_at_saddles_separates_house_and_crown_keeps_gable():
+    from lidar2city.segment.dsm import split_at_saddles
+
+    yy, xx = np.mgrid[0:40, 0:60].astype(float)
+    nd = np.zeros((40, 60))
+    house = np.zeros((40, 60), bool)
+    house[10:30, 5:25] = True
+    # a gable roof: eaves 5 m, ridge 8 m, one summit line
+    nd[house] = 8.0 - 3.0 * np.abs(yy[house] - 19.5) / 10.0
+    # a dome-shaped crown 9 m high touching the house through a 6 m saddle
+    crown = (yy - 20) ** 2 + (xx - 36) ** 2 <= 11**2
+    nd = np.where(crown, np.maximum(nd, 9.0 - 3.0 * ((yy - 20) ** 2 + (xx - 36) ** 2) / 121.0), nd)
+    region = (nd > 2.0).astype(int)
+    assert ndimage.label(region)[1] == 1
+    out, n = split_at_saddles(region, nd, depth=1.0, min_pixels=30)
+    assert n == 2
+    ids, counts = np.unique(out[house], return_counts=True)
+    h_id = ids[np.argmax(counts)]
+    assert (out[house] == h_id).mean() > 0.95  # the gable is not split at its ridge
+    assert (out[crown & ~house] != h_id).mean() > 0.9
+    # a saddle shallower than the depth, or summits below min_pixels, keep one region
+    assert split_at_saddles(region, nd, depth=4.0)[1] == 1
+    assert split_at_saddles(region, nd, depth=1.0, min_pixels=500)[1] == 1
+    with pytest.raises(InputError):
+        split_at_saddles(region, nd, depth=0.0)
