@@ -35,8 +35,22 @@ Measured 2026-11-21 (2-core shared machine), see the closing note of issue 6.
 First version (roof regions grown and expanded by 2 m):
 given DTM: quality 0.564, 69.6 % matched, 86.0 % aligned, heights 0.28 m;
 DTM from the DSM: quality 0.569, 71.4 % matched, 86.8 % aligned, heights 0.60 m.
-With the saddle split and the half-height trimming (dsm2): see the report /
-the script's output.
+With the saddle split (regions holding two summits separated by a saddle at
+least 1 m deep are divided along the valley) and the half-height trimming
+(regions cut back to half their roof height, the edge of a blurred step):
+given DTM: quality 0.564, 75.0 % matched, 89.6 % aligned, heights 0.32 m;
+DTM from the DSM: quality 0.572, 71.4 % matched, 86.3 % aligned, heights 0.52 m;
+oracle (fitting alone): quality 0.905, 100 % matched, 94.7 % aligned.
+Still short of the targets (0.75 / 85 % / 90 %): the loss is in the
+segmentation of this heavily smoothed 2 m DSM, where small steep-roofed
+houses look like tree crowns and touching houses of one height have no step
+between them. Tried and not adopted (each traded one figure for another):
+adding the elevated blobs left over by the growing as regions (44/56 matched
+but hull quality 0.43 and 87 % aligned), merging touching regions without a
+height step (aligned 91 %, matched 71 %), watershed on the nDSM gradient with
+ground and tree markers, distance-transform neck splitting, component-tree
+(threshold-decomposition) selection by rectangularity, slope-continuity
+growing, per-region rectangularity filtering.
 """
 
 from __future__ import annotations

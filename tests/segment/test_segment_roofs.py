@@ -105,3 +105,16 @@ def test_split_at_saddles_separates_house_and_crown_keeps_gable():
     assert split_at_saddles(region, nd, depth=1.0, min_pixels=500)[1] == 1
     with pytest.raises(InputError):
         split_at_saddles(region, nd, depth=0.0)
+
+
+def test_split_at_saddles_keeps_flat_shapes_whole():
+    from lidar2city.segment.dsm import split_at_saddles
+
+    nd = np.zeros((60, 60))
+    nd[5:45, 5:20] = 6.0
+    nd[30:45, 20:50] = 6.0 + 1e-12 * np.arange(30)  # an L, flat up to rounding
+    nd[50:56, 5:50] = 1.0  # a low wall: its plateau's height equals nothing special
+    lab, _ = ndimage.label(nd > 0.5)
+    for depth in (0.5, 1.0, 6.0, 20.0):
+        out, n = split_at_saddles(lab, nd, depth=depth)
+        assert n == 2 and np.array_equal(out > 0, lab > 0)

@@ -519,7 +519,8 @@ def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
             continue
         m = labels[sl] == i
         z = np.where(m & np.isfinite(ndsm[sl]), ndsm[sl], 0.0)
-        z = np.where(m, z - z[m].min() + 1.0, 0.0)  # region above its surroundings
+        # the region well above its surroundings, so that only its own saddles count
+        z = np.where(m, z - z[m].min() + 2.0 * depth + 1.0, 0.0)
         parts = m.astype(np.int32)
         markers, k = ndimage.label(h_maxima(z, depth) & m, structure=eight)
         if k > 1:
