@@ -135,3 +135,19 @@ def test_footprints_metadata_holds_the_resolved_config(runner, tmp_path):
     resolved = json.loads(meta["lidar2city_footprints_resolved"])
     assert resolved["point_spacing"] == pytest.approx(0.3, rel=0.05)
     assert resolved["cell"] == pytest.approx(1.5 * resolved["point_spacing"], rel=1e-3)
+
+
+def test_footprints_fit_regulariser_on_points(runner, tmp_path):
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+
+    house = _tile(tmp_path / "t.laz")
+    out = tmp_path / "fp.gpkg"
+    res = runner.invoke(cli, ["footprints", str(tmp_path / "t.laz"), "-o", str(out),
+                              "--regularize", "fit"])
+    assert res.exit_code == 0, res.output
+    fp, _ = read_footprints(out)
+    (g,) = fp.geometries
+    assert fp.attributes["status"][0] == "ok"
+    assert fp.attributes["n_vertices"][0] == 6  # the L as a union of two rectangles
+    assert g.intersection(house).area / g.union(house).area > 0.95
