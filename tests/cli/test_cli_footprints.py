@@ -81,38 +81,6 @@ def test_footprints_bad_input(runner, tmp_path):
     assert not (tmp_path / "o.gpkg").exists()
 
 
-def test_footprints_without_building_class(runner, tmp_path):
-    from lidar2city.cli.main import cli
-
-    try:
-        import lidar2city.classify  # noqa: F401
-        import lidar2city.ground  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        pytest.skip("classification is installed: unclassified input gets classified")
-    _tile(tmp_path / "u.laz", classes=False)
-    res = runner.invoke(cli, ["footprints", str(tmp_path / "u.laz"), "-o", str(tmp_path / "o.gpkg")])
-    assert res.exit_code == 1
-    assert "input has no building class (6): run lidar2city classify first" in res.output
-
-
-def test_footprints_snake_missing(runner, tmp_path):
-    from lidar2city.cli.main import cli
-
-    try:
-        import lidar2city.regularize.snake  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        pytest.skip("the snake regulariser is installed")
-    _tile(tmp_path / "t.laz")
-    res = runner.invoke(cli, ["footprints", str(tmp_path / "t.laz"), "-o", str(tmp_path / "o.gpkg"),
-                              "--regularize", "snake"])
-    assert res.exit_code == 1
-    assert "snake regulariser" in res.output
-
-
 def test_cli_choices_are_the_regularizers():
     from lidar2city.cli.footprints import REGULARIZER_NAMES
     from lidar2city.footprints import REGULARIZERS
@@ -135,3 +103,33 @@ def test_footprints_metadata_holds_the_resolved_config(runner, tmp_path):
     resolved = json.loads(meta["lidar2city_footprints_resolved"])
     assert resolved["point_spacing"] == pytest.approx(0.3, rel=0.05)
     assert resolved["cell"] == pytest.approx(1.5 * resolved["point_spacing"], rel=1e-3)
+
+
+def test_footprints_fit_regulariser_on_points(runner, tmp_path):
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+
+    house = _tile(tmp_path / "t.laz")
+    out = tmp_path / "fp.gpkg"
+    res = runner.invoke(cli, ["footprints", str(tmp_path / "t.laz"), "-o", str(out),
+                              "--regularize", "fit"])
+    assert res.exit_code == 0, res.output
+    fp, _ = read_footprints(out)
+    (g,) = fp.geometries
+    assert fp.attributes["status"][0] == "ok"
+    assert fp.attributes["n_vertices"][0] == 6  # the L as a union of two rectangles
+    assert g.intersection(house).area / g.union(house).area > 0.95
+
+
+def test_footprints_from_a_raw_tile(runner, tmp_path):
+    """Without a building class the points are ground-filtered and classified first."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+
+    house = _tile(tmp_path / "u.laz", classes=False)
+    out = tmp_path / "o.gpkg"
+    res = runner.invoke(cli, ["footprints", str(tmp_path / "u.laz"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    fps, _ = read_footprints(out)
+    (g,) = [g for g in fps.geometries if g is not None]  # world coordinates (origin 0)
+    assert g.intersection(house).area / g.union(house).area > 0.9

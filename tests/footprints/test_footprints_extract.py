@@ -183,7 +183,11 @@ def test_config_fields_are_the_function_keywords():
     kw = {p.name for p in inspect.signature(extract_footprints).parameters.values()
           if p.kind is p.KEYWORD_ONLY} - {"callback"}
     assert names == kw
-    assert set(REGULARIZERS) == {"none", "snake"}
+    import typing
+
+    assert set(REGULARIZERS) == {"none", "snake", "fit"}
+    hints = typing.get_type_hints(FootprintsConfig)
+    assert set(typing.get_args(hints["regularize"])) == set(REGULARIZERS)
     for f in dataclasses.fields(FootprintsConfig):
         assert f.metadata["doc"]
 
@@ -208,6 +212,21 @@ def test_callback_reports_every_building():
     calls = []
     extract_footprints(xyz, cls, callback=lambda d, t: calls.append((d, t)))
     assert calls == [(1, 2), (2, 2)]
+
+
+def test_fit_regularises_a_rotated_l_shape_and_a_rectangle():
+    from lidar2city.metrics.footprints import axis_alignment
+
+    truth = affinity.rotate(L_SHAPE, 23.0, origin=(25, 27))
+    rect = affinity.rotate(shapely.box(44, 5, 56, 13), -10.0, origin=(50, 9))
+    xyz, cls = scan([truth, rect], seed=11)
+    fps = sorted(extract_footprints(xyz, cls, regularize="fit"), key=lambda f: -f.polygon.area)
+    assert [f.status for f in fps] == ["ok", "ok"]
+    ell, box = fps
+    assert iou(ell.polygon, truth) > 0.93 and iou(box.polygon, rect) > 0.9
+    assert ell.attributes["n_vertices"] == 6 and box.attributes["n_vertices"] == 4
+    assert axis_alignment([ell.polygon, box.polygon])["aligned_share"] > 0.95
+    assert ell.attributes["direction"] % 90 == pytest.approx(23.0, abs=2.0)
 
 
 def test_snake_regularises_a_rotated_l_shape():

@@ -51,3 +51,16 @@ def test_axis_alignment_multipolygon():
 
     rect = affinity.rotate(box(0, 0, 20, 10), 12, origin=(0, 0))
     assert axis_alignment([MultiPolygon([rect])])["aligned_share"] == pytest.approx(1.0)
+
+
+def test_report_pixel_scores():
+    from lidar2city.metrics.footprints import footprint_report
+
+    ref = [box(0, 0, 10, 10)]
+    rep = footprint_report(ref, ref, pixel_cell=0.5)
+    assert rep["pixels"]["kappa"] == pytest.approx(1.0)
+    rep = footprint_report([box(0, 0, 10, 5)], ref, pixel_cell=0.5, area=box(-10, -10, 20, 20))
+    # 50 of 100 m2 found, no false positive, inside a 900 m2 area
+    assert rep["pixels"]["producers_accuracy"] == pytest.approx(0.5)
+    assert rep["pixels"]["users_accuracy"] == pytest.approx(1.0)
+    assert rep["pixels"]["overall_accuracy"] == pytest.approx(1 - 50 / 900)

@@ -12,7 +12,6 @@ from lidar2city.io.raster import Raster, read_raster, write_raster
 from lidar2city.tools.dsm import (
     footprints_from_dsm,
     lod1_from_dsm,
-    prism,
     rasters_from_las,
 )
 
@@ -75,7 +74,7 @@ def test_lod1_prisms_closed_and_oriented(scene):
     for b in res["buildings"]:
         solid = b.solids["1.2"]
         kinds = [s.semantic for s in solid.surfaces]
-        assert kinds[0] == "GroundSurface" and kinds[-1] == "RoofSurface"
+        assert kinds[:2] == ["GroundSurface", "RoofSurface"]
         assert kinds.count("WallSurface") == len(b.footprint.exterior.coords) - 1
         assert b.attributes["ground_z"] == pytest.approx(20.0)
         v = solid.vertices
@@ -86,14 +85,16 @@ def test_lod1_prisms_closed_and_oriented(scene):
             for i in range(1, len(ring) - 1):
                 vol += np.dot(ring[0], np.cross(ring[i], ring[i + 1])) / 6.0
         h = b.attributes["roof_z"] - b.attributes["ground_z"]
-        assert vol == pytest.approx(b.footprint.area * h, rel=1e-6)
+        assert vol == pytest.approx(b.footprint.area * h, rel=1e-4)  # vertices snapped to 1 mm
 
 
 def test_prism_with_courtyard_volume():
     import shapely
 
+    from lidar2city.lod.prism import prism_solid  # the one prism builder, used by lod1_from_dsm
+
     poly = shapely.Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(3, 3), (3, 6), (6, 6), (6, 3)]])
-    s = prism(poly, 1.0, 4.0)
+    s = prism_solid(poly, 1.0, 4.0)
     vol = 0.0
     for surf in s.surfaces:
         for ring_idx in surf.rings:
@@ -171,6 +172,7 @@ def test_alexandria_quality(data, tmp_path):
     assert mo["recall"] > RECALL_MIN
 
 
-# measured 0.564 and 0.696 (benchmarks/bench_dsm_fit.py, given DTM)
-QUALITY_MIN = 0.5
-RECALL_MIN = 0.6
+# measured 0.564 and 0.750 (benchmarks/bench_dsm_fit.py, given DTM; 0.564 / 0.696 before
+# the saddle split and the half-height trimming)
+QUALITY_MIN = 0.53
+RECALL_MIN = 0.70

@@ -41,3 +41,20 @@ def test_unknown_method(town_files, tmp_path):
     with pytest.raises(InputError, match="method"):
         reconstruct([d / "raw.laz"], tmp_path / "m.city.json", footprints=d / "fp.gpkg",
                      lods=("2.2",), method="magic")
+
+
+def test_cli_primitives_with_check_images(town_files, tmp_path):
+    from click.testing import CliRunner
+
+    from lidar2city.cli.main import cli
+
+    town, d = town_files
+    out, imgs = tmp_path / "p.city.json", tmp_path / "imgs"
+    res = CliRunner().invoke(cli, ["reconstruct", str(d / "raw.laz"), "--footprints", str(d / "fp.gpkg"),
+                                   "--lod", "2.2", "--method", "primitives", "--check-images", str(imgs),
+                                   "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    assert len(list(imgs.glob("*.png"))) == len(town.buildings)
+    res = CliRunner().invoke(cli, ["reconstruct", str(d / "raw.laz"), "--footprints", str(d / "fp.gpkg"),
+                                   "--check-images", str(imgs), "-o", str(out), "-q"])
+    assert res.exit_code == 1 and "--method primitives" in res.output

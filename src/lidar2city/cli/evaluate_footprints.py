@@ -69,3 +69,8 @@ def command(pred, reference, crs, min_iou, extent, hull_margin, as_json):
                    f"{o['hausdorff_median']:.2f} m (matched pairs)")
     click.echo(f"  alignment     {100 * rep['alignment']['aligned_share']:.1f} % of outline length "
                "within 3 deg of the dominant axes")
+    if "pixels" in rep:
+        px = rep["pixels"]
+        click.echo(f"  pixels        overall accuracy {px['overall_accuracy']:.3f}  kappa "
+                   f"{px['kappa']:.3f}  producer's {px['producers_accuracy']:.3f}  user's "
+                   f"{px['users_accuracy']:.3f} ({px['cell']:g} m cells)")

@@ -1,4 +1,4 @@
-"""``lidar2city reconstruct IN... -o OUT``."""
+"""``lidar2city reconstruct IN... -o OUT`` and ``lidar2city reconstruct --dsm DSM.tif -o OUT``."""
 
 from __future__ import annotations
 
@@ -8,8 +8,14 @@ from ._options import crs_option, output_option, progress
 
 
 @click.command("reconstruct")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=False, type=click.Path(dir_okay=False))
 @output_option()
+@click.option("--dsm", type=click.Path(dir_okay=False), default=None,
+              help="Build LoD1.2 prisms from this DSM raster instead of point clouds.")
+@click.option("--dtm", type=click.Path(dir_okay=False), default=None,
+              help="With --dsm: terrain raster on the DSM's grid (default: built from the DSM).")
+@click.option("--ortho", type=click.Path(dir_okay=False), default=None,
+              help="With --dsm: RGB orthoimage on the DSM's grid (vegetation by colour).")
 @click.option("--footprints", type=click.Path(dir_okay=False), default=None,
               help="Building footprints (any OGR source: GPKG, SHP, GeoJSON...).")
 @click.option("--lod", "lods", multiple=True, type=click.Choice(["1.2", "1.3", "2.2"]),
@@ -21,16 +27,61 @@ from ._options import crs_option, output_option, progress
               default=None, help="Output format; default from the output name.")
 @click.option("--id-field", default=None, help="Footprint field holding the building id.")
 @click.option("--layer", default=None, help="Footprint layer (default: the first).")
+@click.option("--method", type=click.Choice(["roof", "primitives"]), default="roof",
+              show_default=True,
+              help="LoD2.2 from the roof topology (facets, snake, intersection edges) or from "
+                   "floating primitives (box, gable, hip, shed, prism) fitted by least squares.")
+@click.option("--primitives", "primitives_file", type=click.Path(dir_okay=False), default=None,
+              help="With --method primitives: CSV, TOML or vector file naming a primitive and "
+                   "approximate parameters per footprint id (semi-automatic).")
+@click.option("--check-images", type=click.Path(file_okay=False), default=None,
+              help="With --method primitives: folder for a PNG per building (wire frame over "
+                   "its points).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
-def command(inputs, output, footprints, lods, crs, config, fmt, id_field, layer, quiet):
-    """Build 3D buildings from point cloud tiles INPUTS (read as one area).
+def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
+            method, primitives_file, check_images, quiet):
+    """Build 3D buildings from point cloud tiles INPUTS (read as one area) or from a DSM.
+
+    \b
+    lidar2city reconstruct TILE.laz [TILE.laz...] [--footprints FP] [--lod ...] -o OUT
+    lidar2city reconstruct --dsm DSM.tif [--dtm DTM.tif] [--ortho RGB.tif]
+                           [--footprints FP] [--lod 1.2] -o OUT
 
     LoD1.2: one prism per footprint (roof at a percentile of the building
     points, ground at a low percentile of the ground points around it);
     LoD1.3: one prism per roof-height part; LoD2.2: roof facets, ridges and
     steps, one closed solid per footprint. Every footprint gets a model or a
     stated reason. Output: .city.json (CityJSON 2.0), .city.jsonl, .obj or .gpkg.
+
+    With --dsm (LoD1.2 only): the buildings segmented from the DSM and fitted
+    with regular outlines, or the --footprints given, extruded from the median
+    DTM inside to the median nDSM (config [dsm_lod1]), in the raster's CRS.
     """
+    from ..errors import InputError
+
+    if dsm is None:
+        if not inputs:
+            raise InputError("give point-cloud INPUTS or --dsm DSM.tif (see lidar2city reconstruct "
+                             "--help)")
+        for opt, v in (("--dtm", dtm), ("--ortho", ortho)):
+            if v is not None:
+                raise InputError(f"{opt} needs --dsm (it does not apply to point clouds)")
+    else:
+        if inputs:
+            raise InputError("give either point-cloud INPUTS or --dsm, not both")
+        if method != "roof" or primitives_file or check_images:
+            raise InputError("--method, --primitives and --check-images apply to point clouds")
+        if any(lod != "1.2" for lod in lods):
+            raise InputError("--dsm builds LoD1.2 only; drop --lod or use --lod 1.2")
+        if crs is not None:
+            raise InputError("--crs does not apply to --dsm (the raster's own CRS is used; "
+                             "footprints are reprojected to it)")
+        if footprints is None and (id_field is not None or layer is not None):
+            raise InputError("--id-field and --layer need --footprints")
+        _dsm(dsm, output, dtm=dtm, ortho=ortho, footprints=footprints, config=config, fmt=fmt,
+             quiet=quiet, layer=layer, id_field=id_field)
+        return
+
     from ..tools.reconstruct import reconstruct
 
     bar_state = {"bar": None}
@@ -45,10 +96,31 @@ def command(inputs, output, footprints, lods, crs, config, fmt, id_field, layer,
     try:
         summary = reconstruct(list(inputs), output, footprints=footprints, lods=lods or None,
                               crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
-                              progress=on_progress)
+                              progress=on_progress, method=method, primitives=primitives_file,
+                              check_images=check_images)
     finally:
         if bar_state["bar"] is not None:
             bar_state["bar"].__exit__(None, None, None)
+    if not quiet:
+        for line in summary.lines():
+            click.echo(line, err=True)
+
+
+def _dsm(dsm, output, *, dtm, ortho, footprints, config, fmt, quiet, layer, id_field):
+    from ..tools.dsm import load_dsm_config, reconstruct_from_dsm
+
+    cfg = load_dsm_config(config)
+    with progress(length=1, label="buildings", quiet=quiet) as bar:
+        state = {"done": 0}
+
+        def callback(done, total):
+            bar.length = total
+            bar.update(done - state["done"])
+            state["done"] = done
+
+        summary = reconstruct_from_dsm(dsm, output, dtm=dtm, ortho=ortho, footprints=footprints,
+                                       fmt=fmt, config=cfg, progress=callback, layer=layer,
+                                       id_field=id_field)
     if not quiet:
         for line in summary.lines():
             click.echo(line, err=True)

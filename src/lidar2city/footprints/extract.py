@@ -60,7 +60,9 @@ class FootprintsConfig:
         0.0, "Outline offset (m) after tracing; negative shrinks (roof overhang over the walls).")
     simplify: float | None = cfield(
         None, "Douglas-Peucker tolerance (m); default the cell; 0 disables.")
-    regularize: Literal["none", "snake"] = cfield("none", "Outline regulariser: none or snake.")
+    regularize: Literal["none", "snake", "fit"] = cfield(
+        "none", "Outline regulariser: none, snake, or fit (polygon fitting with "
+        "complexity-penalised selection on the rasterised outline).")
     snake_cell: float | None = cfield(
         None, "Grid cell (m) of the snake's candidate positions; default the cell.")
     snake_window: int = cfield(3, "Snake search half-window w (cells): (2w+1)^2 states per vertex.")
@@ -149,7 +151,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         Smallest building and smallest courtyard kept (m2).
     edge_offset : float
         Offset (m) of the traced outline; negative shrinks.
-    regularize : {"none", "snake"}
+    regularize : {"none", "snake", "fit"}
         A key of :data:`~lidar2city.footprints.regularizers.REGULARIZERS`.
     snake_window : int
         Half-window (cells of ``snake_cell``) of the snake's candidate positions.

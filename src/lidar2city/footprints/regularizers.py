@@ -20,8 +20,8 @@ from ..errors import DependencyError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["REGULARIZERS", "regularize_none", "regularize_snake", "outline_direction",
-           "vertex_count", "mean_deviation", "require"]
+__all__ = ["REGULARIZERS", "regularize_none", "regularize_snake", "regularize_fit",
+           "outline_direction", "vertex_count", "mean_deviation", "require"]
 
 
 def outline_direction(polygon) -> float:
@@ -147,8 +147,63 @@ def regularize_snake(traced, *, cell: float, window: int, tolerance: float | Non
     }
 
 
+def regularize_fit(traced, *, cell: float, simplified=None, **_ignored):
+    """Polygon fitting with complexity-penalised selection on the rasterised outline.
+
+    The traced outline is rasterised at ``cell`` metres (pixel centres inside)
+    and described by :func:`lidar2city.fit.polygon.fit_building_outline` with
+    its default :class:`~lidar2city.fit.polygon.PolygonFitConfig`: the simplest
+    of rectangle / right trapezoid / trapezoid / union of rectangles / general
+    polygon whose overlap error plus complexity penalty is lowest. The same
+    fitter describes the buildings segmented from a DSM
+    (``lidar2city footprints --dsm``). ``info`` also holds ``shape_type``.
+
+    Raises
+    ------
+    FitError
+        When the outline covers no pixel centre or no shape fits (the caller
+        keeps the simplified outline, status "unregularised").
+    """
+    import shapely
+    from affine import Affine
+    from rasterio import features
+
+    from ..errors import EmptyInputError, FitError
+    from ..fit.polygon import fit_building_outline
+
+    cell = float(cell)
+    if not cell > 0:
+        raise FitError(f"cell must be positive, got {cell}")
+    x0, y0, x1, y1 = traced.bounds
+    x0, y1 = np.floor(x0 / cell) * cell - cell, np.ceil(y1 / cell) * cell + cell
+    w = int(np.ceil((x1 - x0) / cell)) + 2
+    h = int(np.ceil((y1 - y0) / cell)) + 2
+    mask = features.rasterize([(traced, 1)], out_shape=(h, w),
+                              transform=Affine(cell, 0.0, x0, 0.0, -cell, y1),
+                              fill=0, dtype="uint8").astype(bool)
+    if not mask.any():
+        raise FitError("the outline covers no pixel centre at this cell size")
+    try:
+        poly, kind, info = fit_building_outline(mask, cell=cell, offset=(x0, y1))
+    except EmptyInputError as exc:
+        raise FitError(str(exc)) from None
+    if poly.geom_type != "Polygon" or not poly.is_valid or poly.is_empty:
+        raise FitError("the fitted outline is not a valid polygon")
+    poly = shapely.set_precision(poly, 1e-6)
+    return poly, {
+        "direction": outline_direction(poly),
+        "n_vertices": vertex_count(poly),
+        "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
+        "mean_deviation": mean_deviation(poly, traced),
+        "status": "ok",
+        "reason": "",
+        "shape_type": kind,
+    }
+
+
 #: Regularisers by name (the CLI choice and the ``footprints.regularize`` config value).
 REGULARIZERS = {
     "none": regularize_none,
     "snake": regularize_snake,
+    "fit": regularize_fit,
 }

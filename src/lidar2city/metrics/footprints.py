@@ -22,6 +22,7 @@ __all__ = [
     "match_objects",
     "axis_alignment",
     "pixel_metrics",
+    "rasterize",
     "footprint_report",
 ]
 
@@ -211,9 +212,53 @@ def pixel_metrics(pred_mask, ref_mask) -> dict:
     }
 
 
-def footprint_report(pred, ref, *, min_iou=0.5, tolerance_deg=3.0) -> dict:
-    """Area, object and regularity measures together (what ``evaluate footprints`` prints)."""
+def rasterize(polygons, bounds, cell) -> np.ndarray:
+    """Boolean grid (rows north to south) of the cells whose centres lie in ``polygons``.
+
+    ``bounds`` = (xmin, ymin, xmax, ymax) of the grid, ``cell`` its cell size.
+    """
+    import shapely
+
+    xmin, ymin, xmax, ymax = bounds
+    w = max(int(np.ceil((xmax - xmin) / cell)), 1)
+    h = max(int(np.ceil((ymax - ymin) / cell)), 1)
+    out = np.zeros((h, w), dtype=bool)
+    for g in polygons:
+        if g is None or g.is_empty:
+            continue
+        gx0, gy0, gx1, gy1 = g.bounds
+        c0, c1 = max(int((gx0 - xmin) / cell), 0), min(int(np.ceil((gx1 - xmin) / cell)), w)
+        r0, r1 = max(int((ymax - gy1) / cell), 0), min(int(np.ceil((ymax - gy0) / cell)), h)
+        if c0 >= c1 or r0 >= r1:
+            continue
+        cc, rr = np.meshgrid(np.arange(c0, c1), np.arange(r0, r1))
+        x = xmin + (cc + 0.5) * cell
+        y = ymax - (rr + 0.5) * cell
+        out[r0:r1, c0:c1] |= shapely.contains_xy(g, x, y)
+    return out
+
+
+def footprint_report(pred, ref, *, min_iou=0.5, tolerance_deg=3.0, pixel_cell=0.5,
+                     area=None) -> dict:
+    """Area, object, regularity and pixel measures together (what ``evaluate footprints`` prints).
+
+    The pixel measures (overall accuracy, kappa, producer's and user's accuracy)
+    are taken on a ``pixel_cell`` grid over ``area`` (a polygon; default the
+    bounding box of all footprints).
+    """
+    import shapely
+
     out = {"area": area_metrics(pred, ref)}
+    geoms = [g for g in list(pred) + list(ref) if g is not None and not g.is_empty]
+    if geoms and pixel_cell:
+        bounds = area.bounds if area is not None else shapely.total_bounds(np.array(geoms, dtype=object))
+        pm, rm = rasterize(pred, bounds, pixel_cell), rasterize(ref, bounds, pixel_cell)
+        if area is not None:
+            inside = rasterize([area], bounds, pixel_cell)
+            pm, rm = pm[inside], rm[inside]
+        out["pixels"] = {k: v for k, v in pixel_metrics(pm, rm).items()
+                         if k in ("overall_accuracy", "kappa", "producers_accuracy", "users_accuracy")}
+        out["pixels"]["cell"] = pixel_cell
     m = match_objects(pred, ref, min_iou=min_iou)
     m.pop("best_iou")
     m.pop("pairs")

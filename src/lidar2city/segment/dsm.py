@@ -42,6 +42,8 @@ __all__ = [
     "building_mask",
     "RoofRegionsConfig",
     "roof_regions",
+    "trim_to_edges",
+    "split_at_saddles",
     "label_buildings",
     "grid_points",
 ]
@@ -459,10 +461,139 @@ class RoofRegionsConfig:
     roughness_threshold: float = field(0.0, "without an orthoimage, regions whose interior "
                                             "mean plane-fit residual exceeds this (m) are "
                                             "vegetation; 0 disables the test")
+    saddle_depth: float = field(1.0, "a grown region holding two summits (or plateaus) of at "
+                                     "least min_area each, separated by a saddle at least this "
+                                     "deep (m), is split at the saddle (a tree crown or a "
+                                     "neighbour reached by the growing); 0 disables")
+    edge_fraction: float = field(0.5, "after growing, a region keeps the pixels whose nDSM "
+                                      "reaches this fraction of its roof height (the upper "
+                                      "quartile of its nDSM): the edge of a blurred step lies "
+                                      "at half its height; 0 disables the trimming")
+
+
+def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
+    """Split regions that hold several summits separated by saddles at least ``depth`` deep.
+
+    Inside each region the summits are the regional maxima of the nDSM whose
+    dynamic is at least ``depth`` (:func:`skimage.morphology.h_maxima`); with
+    two or more, the region is divided by a marker-controlled watershed of the
+    inverted nDSM, so the boundaries follow the valleys between the summits.
+    Parts smaller than ``min_pixels`` are not kept as markers (they join a
+    neighbour). A house and a tree crown, or two roofs, that region growing
+    joined along a smooth slope are separated this way; a roof with one
+    summit (a gable, a flat roof) stays whole.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    ndsm : ndarray, shape (H, W)
+        Normalised heights (m), NaN for nodata.
+
+    Returns
+    -------
+    labels : ndarray of int32, shape (H, W)
+        Relabelled 1..m (m >= n).
+    m : int
+
+    Examples
+    --------
+    >>> z = np.zeros((5, 11)); z[1:4, 1:5] = 6.0; z[1:4, 6:10] = 7.0; z[1:4, 5] = 4.0
+    >>> split_at_saddles((z > 2).astype(int), z, depth=1.0)[1]
+    2
+    """
+    from skimage.morphology import h_maxima
+    from skimage.segmentation import watershed
+
+    labels = np.asarray(labels)
+    ndsm = _check_grid(ndsm, "ndsm")
+    if labels.shape != ndsm.shape:
+        raise InputError(f"labels {labels.shape} and nDSM {ndsm.shape} differ in shape")
+    if not depth > 0:
+        raise InputError(f"depth must be positive, got {depth}")
+    out = np.zeros(labels.shape, dtype=np.int32)
+    nxt = 1
+    eight = np.ones((3, 3), bool)
+    for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        m = labels[sl] == i
+        z = np.where(m & np.isfinite(ndsm[sl]), ndsm[sl], 0.0)
+        # the region well above its surroundings, so that only its own saddles count
+        z = np.where(m, z - z[m].min() + 2.0 * depth + 1.0, 0.0)
+        parts = m.astype(np.int32)
+        markers, k = ndimage.label(h_maxima(z, depth) & m, structure=eight)
+        if k > 1:
+            ws = watershed(-z, markers, mask=m)
+            sizes = np.bincount(ws.ravel(), minlength=k + 1)
+            big = np.nonzero(sizes[1:] >= min_pixels)[0] + 1
+            if len(big) > 1:
+                parts = watershed(-z, np.where(np.isin(markers, big), markers, 0), mask=m)
+        for j in np.unique(parts[parts > 0]):
+            out[sl][parts == j] = nxt
+            nxt += 1
+    return out, nxt - 1
+
+
+def trim_to_edges(labels, ndsm, *, fraction=0.5, roof_quantile=75.0):
+    """Cut every region back to the pixels above ``fraction`` of its roof height.
+
+    In a smoothed or coarse DSM a wall becomes a ramp, and the outline of a
+    building is best placed where the ramp crosses half the roof height (the
+    edge of a blurred step). The roof height of a region is the
+    ``roof_quantile`` percentile of its nDSM (robust to the ramp pixels); a
+    region keeps its pixels at or above ``fraction`` of it and, of those, the
+    largest 4-connected piece (lower appendages such as a tree crown or a
+    garage reached by the growing are cut off at their necks).
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    ndsm : ndarray, shape (H, W)
+        Normalised heights (m), NaN for nodata (never kept).
+
+    Returns
+    -------
+    ndarray of int32, shape (H, W)
+        The trimmed labels (same ids; a region may vanish only if it has no
+        valid pixel).
+
+    Examples
+    --------
+    >>> z = np.zeros((7, 9)); z[1:6, 1:8] = 2.5; z[2:5, 2:7] = 6.0
+    >>> lab = (z > 2).astype(int)
+    >>> int((trim_to_edges(lab, z) == 1).sum())  # the 2.5 m skirt is below 0.5 x 6 m
+    15
+    """
+    labels = np.asarray(labels)
+    ndsm = _check_grid(ndsm, "ndsm")
+    if labels.shape != ndsm.shape:
+        raise InputError(f"labels {labels.shape} and nDSM {ndsm.shape} differ in shape")
+    if not 0 <= fraction < 1:
+        raise InputError(f"fraction must be in [0, 1), got {fraction}")
+    if not 0 < roof_quantile <= 100:
+        raise InputError(f"roof_quantile must be in (0, 100], got {roof_quantile}")
+    z = np.where(np.isfinite(ndsm), ndsm, -np.inf)
+    out = np.zeros(labels.shape, dtype=np.int32)
+    for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        m = (labels[sl] == i) & np.isfinite(z[sl])
+        if not m.any():
+            continue
+        roof = np.percentile(z[sl][m], roof_quantile)
+        keep = m & (z[sl] >= fraction * roof)
+        pieces, n = ndimage.label(keep)
+        if n > 1:
+            keep = pieces == np.argmax(np.bincount(pieces.ravel())[1:]) + 1
+        out[sl][keep] = i
+    return out
 
 
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0.5,
-                 min_area=30.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0):
+                 min_area=30.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
+                 saddle_depth=1.0, edge_fraction=0.5):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -472,7 +603,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     another height and from tree crowns, whose rough surfaces break into
     fragments smaller than ``min_area`` and are dropped. Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
-    smoothed DSM), small holes are filled and large ones kept as courtyards.
+    smoothed DSM), are split where they hold several summits separated by
+    saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
+    half their roof height (:func:`trim_to_edges` with ``edge_fraction``),
+    small holes are filled and large ones kept as courtyards.
 
     Parameters
     ----------
@@ -498,6 +632,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
         raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
     if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0:
         raise InputError("max_step must be > 0; min_area, expand, max_hole_area >= 0")
+    if not 0 <= edge_fraction < 1:
+        raise InputError(f"edge_fraction must be in [0, 1), got {edge_fraction}")
+    if saddle_depth < 0:
+        raise InputError(f"saddle_depth must be >= 0, got {saddle_depth}")
     elevated = np.isfinite(ndsm) & np.isfinite(dsm) & (ndsm > min_height)
     if vegetation is not None:
         vegetation = np.asarray(vegetation, dtype=bool)
@@ -521,6 +659,11 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     if expand > 0:
         grown = expand_labels(lab, distance=expand / cell)
         lab = np.where(elevated, grown, 0)
+    if saddle_depth > 0:
+        lab, _ = split_at_saddles(lab, ndsm, depth=saddle_depth,
+                                  min_pixels=max(1, int(np.ceil(min_area / cell**2))))
+    if edge_fraction > 0:
+        lab = trim_to_edges(lab, ndsm, fraction=edge_fraction)
     # fill small holes region by region (courtyards stay)
     hole_px = int(np.floor(max_hole_area / cell**2))
     if hole_px > 0:

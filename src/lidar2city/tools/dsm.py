@@ -18,10 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import field
-from ..datamodel import BuildingResult, Solid, Surface
+from ..datamodel import BuildingResult
 from ..errors import EmptyInputError, FitError, InputError
 from ..fit.polygon import PolygonFitConfig, fit_building_outline, region_polygon
 from ..io.raster import Raster, read_raster, write_raster
+from ..lod.prism import lod12_solids
 from ..segment.dsm import (
     BuildingMaskConfig,
     DtmConfig,
@@ -41,13 +42,15 @@ __all__ = [
     "Lod1DsmConfig",
     "REGULARIZERS",
     "SEGMENTERS",
+    "DSM_STAGES",
+    "load_dsm_config",
     "building_height",
-    "prism",
     "segment_dsm",
     "outlines_from_labels",
     "footprints_from_dsm",
     "lod1_from_dsm",
     "rasters_from_las",
+    "reconstruct_from_dsm",
 ]
 
 
@@ -117,34 +120,53 @@ def building_height(ndsm, polygon, *, cell, roof_stat="median", inner_margin=1.0
     return _stat(vals, roof_stat)
 
 
-def prism(polygon, ground_z, roof_z) -> Solid:
-    """LoD1.2 prism of a polygon (with holes): ground, one wall per edge, roof.
+#: output precision (m) of the prism vertices (as the LoD1 writer's default)
+PRECISION = 0.001
 
-    Every surface's exterior ring is counter-clockwise seen from outside the
-    solid (the ground reversed, walls outward), holes the other way.
+#: the configuration stages a DSM run reads (sections of a TOML run config)
+DSM_STAGES = ("dsm_dtm", "dsm_roofs", "dsm_buildings", "polygon_fit", "dsm_lod1")
+
+
+def load_dsm_config(path=None, **overrides) -> dict:
+    """``{stage: dataclass}`` for :data:`DSM_STAGES` from a TOML run config.
+
+    Other sections of the file are left to their own stages. ``overrides`` are
+    ``{"stage.field": value}`` pairs (``None`` = not given), e.g.
+    ``load_dsm_config(None, **{"dsm_roofs.min_area": 20.0})``.
+
+    Raises
+    ------
+    ConfigError, FileFormatError
     """
-    from shapely.geometry.polygon import orient
+    import tomllib
+    from pathlib import Path
 
-    if not roof_z > ground_z:
-        raise FitError(f"roof {roof_z:.2f} m is not above the ground {ground_z:.2f} m")
-    poly = orient(polygon, sign=1.0)
-    rings = [np.asarray(poly.exterior.coords)[:-1, :2]]
-    rings += [np.asarray(r.coords)[:-1, :2] for r in poly.interiors]
-    pts = np.concatenate(rings)
-    n = len(pts)
-    verts = np.vstack([np.column_stack([pts, np.full(n, ground_z)]),
-                       np.column_stack([pts, np.full(n, roof_z)])])
-    idx_rings, start = [], 0
-    for r in rings:
-        idx_rings.append(np.arange(start, start + len(r)))
-        start += len(r)
-    surfaces = [Surface([r[::-1].copy() for r in idx_rings], "GroundSurface")]
-    for r in idx_rings:
-        nxt = np.roll(r, -1)
-        for a, b in zip(r, nxt, strict=True):
-            surfaces.append(Surface([np.array([a, b, b + n, a + n])], "WallSurface"))
-    surfaces.append(Surface([r + n for r in idx_rings], "RoofSurface"))
-    return Solid(verts, surfaces)
+    from ..config import build_stage
+    from ..errors import ConfigError, FileFormatError
+
+    data = {}
+    if path is not None:
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise FileFormatError(f"{str(p)!r}: no such config file") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
+    values = {}
+    for stage in DSM_STAGES:
+        section = data.get(stage, {})
+        if not isinstance(section, dict):
+            raise ConfigError(f"[{stage}] must be a table of options")
+        values[stage] = dict(section)
+    for key, v in overrides.items():
+        if v is None:
+            continue
+        stage, _, name = key.partition(".")
+        if stage not in values or not name:
+            raise ConfigError(f"{key}: not an option of the DSM stages {', '.join(DSM_STAGES)}")
+        values[stage][name] = v
+    return {stage: build_stage(stage, values[stage]) for stage in DSM_STAGES}
 
 
 def _configs(config):
@@ -422,7 +444,7 @@ def _figure(path, raster, ndsm, results, origin):
 
 
 def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit", config=None,
-                  progress=None, segmentation="roofs") -> dict:
+                  progress=None, segmentation="roofs", layer=None, id_field=None) -> dict:
     """LoD1.2 buildings from a DSM: fitted outlines (or given footprints) extruded.
 
     The ground height is the median DTM inside the outline, the roof the ground
@@ -433,6 +455,8 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
     footprints : str or Path, optional
         Vector footprints (any OGR source, any CRS: reprojected to the DSM's);
         default: outlines fitted to the segmented DSM.
+    layer, id_field : optional
+        Layer and id field of ``footprints`` (see :func:`lidar2city.io.vector.read_footprints`).
 
     Returns
     -------
@@ -459,7 +483,8 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
     else:
         from ..io.vector import read_footprints
 
-        fp, _ = read_footprints(footprints, origin=origin, xy_unit=d.xy_unit, target_crs=d.crs)
+        fp, _ = read_footprints(footprints, origin=origin, xy_unit=d.xy_unit, target_crs=d.crs,
+                                layer=layer, id_field=id_field)
         if dt is None:
             dtm_arr, _ = dtm_from_dsm(d.array, cell=cell, **dataclasses.asdict(cfg["dsm_dtm"]))
         else:
@@ -493,10 +518,11 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
             continue
         ground = float(np.median(dtm_arr[pix]))
         try:
-            r.solids["1.2"] = prism(r.footprint, ground, ground + h)
-        except FitError as exc:
+            solids = lod12_solids(r.footprint, ground, ground + h, grid=PRECISION)
+        except InputError as exc:
             r.status, r.reason = "failed", str(exc)
             continue
+        r.solids["1.2"] = solids[0] if len(solids) == 1 else solids
         r.attributes.update({"ground_z": ground, "roof_z": ground + h})
     return {
         "buildings": results, "origin": np.array([origin[0], origin[1], 0.0]), "crs": d.crs,
@@ -538,3 +564,44 @@ def rasters_from_las(paths, *, cell, dsm_out, ortho_out=None, crs=None) -> dict:
                      dtype="uint16", nodata=0)
     return {"points": len(cloud), "shape": g["dsm"].shape, "cell_m": cell,
             "dsm": str(dsm_out), "ortho": None if ortho_out is None else str(ortho_out)}
+
+
+def reconstruct_from_dsm(dsm, output, *, dtm=None, ortho=None, footprints=None, fmt=None,
+                         config=None, regularize="fit", progress=None, segmentation="roofs",
+                         layer=None, id_field=None):
+    """LoD1.2 buildings from a DSM written as CityJSON / CityJSONSeq / OBJ / GPKG.
+
+    :func:`lod1_from_dsm` (fitted outlines, or ``footprints`` extruded) written
+    through :func:`lidar2city.tools.reconstruct.write_buildings` in the DSM's
+    CRS, the format from ``fmt`` or the output name. The resolved DSM stages
+    go into the output's metadata.
+
+    Returns
+    -------
+    ReconstructSummary
+    """
+    from types import SimpleNamespace
+
+    from ..config import resolved_dict
+    from .reconstruct import ReconstructSummary, format_from_name, write_buildings
+
+    t0 = time.perf_counter()
+    fmt = format_from_name(output, fmt)  # fail on an unknown format before any work
+    cfg = _configs(config)
+    res = lod1_from_dsm(dsm, dtm=dtm, ortho=ortho, footprints=footprints, regularize=regularize,
+                        config=cfg, progress=progress, segmentation=segmentation, layer=layer,
+                        id_field=id_field)
+    frame = SimpleNamespace(origin=res["origin"], crs=res["crs"], xy_unit=res["xy_unit"],
+                            z_unit=res["z_unit"])
+    results = res["buildings"]
+    write_buildings(output, results, frame, fmt=fmt, configuration=resolved_dict(cfg),
+                    lods=("1.2",))
+    summary = ReconstructSummary(str(output), total=len(results), lods=("1.2",), format=fmt)
+    for r in results:
+        if r.ok:
+            summary.done += 1
+        else:
+            summary.failed += 1
+            summary.reasons[r.reason] += 1
+    summary.seconds = time.perf_counter() - t0
+    return summary

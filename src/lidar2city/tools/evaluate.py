@@ -171,7 +171,10 @@ def evaluate_footprints(pred_path, ref_path, *, crs=None, min_iou: float = 0.5,
         p, r, info = fair_subset(p, r, extent=ext, border=border, hull_margin=hull_margin)
     else:
         info = {"pred_cut": 0, "ref_cut": 0, "area": None}
-    report = footprint_report(p, r, min_iou=min_iou, tolerance_deg=tolerance_deg)
+    area = None
+    if hull_margin is not None:
+        area = shapely.convex_hull(shapely.union_all(r)).buffer(hull_margin)
+    report = footprint_report(p, r, min_iou=min_iou, tolerance_deg=tolerance_deg, area=area)
     report["protocol"] = {"pred_total": n_pred, "ref_total": n_ref, **info,
                           "extent": list(extent) if extent is not None else None,
                           "hull_margin": hull_margin, "min_iou": min_iou}

@@ -21,6 +21,7 @@ import logging
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -330,8 +331,11 @@ def set_lod22(result, solids, attributes, reason="") -> None:
 
 
 def add_primitives(results, cloud, footprints, *, config=None, user_primitives=None,
-                   progress=None) -> None:
-    """LoD2.2 as fitted primitives (floating models) for every LoD1 result (in place)."""
+                   progress=None) -> list:
+    """LoD2.2 as fitted primitives (floating models) for every LoD1 result (in place).
+
+    Returns the primitive fits (one result per footprint, for check images).
+    """
     from .primitives import reconstruct_primitives
 
     prims = reconstruct_primitives(cloud, footprints, config=config,
@@ -342,6 +346,7 @@ def add_primitives(results, cloud, footprints, *, config=None, user_primitives=N
         solid = p.solids.get("2.2") if p.ok else None
         solids = None if solid is None else (solid if isinstance(solid, list) else [solid])
         set_lod22(r, solids, p.attributes, p.reason or "no primitive fitted")
+    return prims
 
 
 def _fields_for_output(footprints):
@@ -437,7 +442,7 @@ LOD22_METHODS = ("roof", "primitives")
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None) -> ReconstructSummary:
+                primitives=None, check_images=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     Parameters
@@ -462,6 +467,9 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     primitives : path, optional
         With ``method="primitives"``: a CSV / TOML / vector file naming a
         primitive and approximate parameters per footprint id (semi-automatic).
+    check_images : path, optional
+        With ``method="primitives"``: a folder for one PNG per building, the fitted
+        wire frame over its points, for checking by eye.
 
     Returns
     -------
@@ -491,9 +499,16 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     if want22 and method == "primitives":
         from ..io.primitives import read_primitives
 
-        add_primitives(results, cloud.with_attributes(classification=classes), fps,
-                       config=others.get("primitives"),
-                       user_primitives=read_primitives(primitives) if primitives else None)
+        classified = cloud.with_attributes(classification=classes)
+        prims = add_primitives(results, classified, fps, config=others.get("primitives"),
+                               user_primitives=read_primitives(primitives) if primitives else None)
+        if check_images is not None:
+            from .primitives import write_check_images
+
+            Path(check_images).mkdir(parents=True, exist_ok=True)
+            write_check_images(check_images, classified, prims)
+    elif primitives is not None or check_images is not None:
+        raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
     for r in results:  # LoD1 built only as the base of LoD2.2 is not written
         for lod in [k for k in r.solids if k not in want]:
             del r.solids[lod]

@@ -1,0 +1,180 @@
+"""``lidar2city footprints --dsm`` and ``lidar2city reconstruct --dsm``: synthetic rasters, errors, Alexandria."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+
+CRS_UTM = CRS.from_epsg(26918)
+T = Affine(1.0, 0.0, 500000.0, 0.0, -1.0, 4300000.0)
+
+
+@pytest.fixture
+def rasters(tmp_path):
+    """A 1 m DSM/DTM pair: ground at 20 m, a 30 x 16 m box 9 m high, an L 6 m high."""
+    from lidar2city.io.raster import Raster, write_raster
+
+    h, w = 90, 110
+    dsm = np.full((h, w), 20.0)
+    dsm[10:26, 10:40] = 29.0
+    dsm[40:80, 60:75] = 26.0
+    dsm[65:80, 75:100] = 26.0
+    dtm = np.full((h, w), 20.0)
+    p_dsm, p_dtm = tmp_path / "dsm.tif", tmp_path / "dtm.tif"
+    write_raster(p_dsm, Raster(dsm, T, CRS_UTM, np.isfinite(dsm)))
+    write_raster(p_dtm, Raster(dtm, T, CRS_UTM, np.isfinite(dtm)))
+    return p_dsm, p_dtm
+
+
+def test_footprints_dsm(runner, rasters, tmp_path):
+    from lidar2city.cli.main import cli
+    from lidar2city.io.raster import read_raster
+    from lidar2city.io.vector import read_footprints
+
+    p_dsm, p_dtm = rasters
+    out, fig, dtm_out = tmp_path / "fp.gpkg", tmp_path / "fig.png", tmp_path / "dtm_out.tif"
+    res = runner.invoke(cli, ["footprints", "--dsm", str(p_dsm), "--dtm", str(p_dtm), "-o", str(out),
+                              "--figure", str(fig), "--dtm-out", str(dtm_out)])
+    assert res.exit_code == 0, res.output
+    assert "2 footprints (1 composite, 1 rectangle), 0 failed" in res.output
+    fp, crs = read_footprints(out)
+    assert crs.equals(CRS_UTM)
+    assert sorted(fp.attributes["shape_type"]) == ["composite", "rectangle"]
+    assert sorted(np.round(fp.attributes["height"], 2)) == [6.0, 9.0]
+    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert np.allclose(read_raster(dtm_out).array, 20.0)
+    # the DTM built from the DSM, raw pixel outlines, and a config file
+    (tmp_path / "run.toml").write_text("[dsm_roofs]\nmin_area = 500.0\n")
+    res = runner.invoke(cli, ["footprints", "--dsm", str(p_dsm), "-o", str(out),
+                              "--regularize", "none", "--config", str(tmp_path / "run.toml")])
+    assert res.exit_code == 0, res.output
+    assert "1 footprints (1 pixels)" in res.output  # the 480 m2 box is below min_area, the L is not
+    assert "DTM built from the DSM" in res.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-o", "x.gpkg"], "give point-cloud INPUTS or --dsm"),
+    (["--dsm", "D", "--regularize", "snake", "-o", "x.gpkg"], "--regularize snake works on point clouds"),
+    (["t.laz", "--dsm", "D", "-o", "x.gpkg"], "not both"),
+    (["t.laz", "--dtm", "D", "-o", "x.gpkg"], "--dtm needs --dsm"),
+    (["t.laz", "--figure", "f.png", "-o", "x.gpkg"], "--figure needs --dsm"),
+    (["--dsm", "D", "--cell", "1", "-o", "x.gpkg"], "--cell applies to point clouds"),
+])
+def test_footprints_dsm_wrong_combinations(runner, tmp_path, args, message):
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, ["footprints", *args])
+    assert res.exit_code == 1
+    lines = [ln for ln in res.output.strip().splitlines() if ln]
+    assert len(lines) == 1 and lines[0].startswith("Error:") and message in lines[0], res.output
+
+
+def test_dsm_choices_are_the_dsm_regularizers():
+    from lidar2city.cli.footprints import DSM_REGULARIZER_NAMES
+    from lidar2city.tools.dsm import REGULARIZERS
+
+    # the polygon-fitting outlines, plus the active contours (their own tool)
+    assert set(DSM_REGULARIZER_NAMES) == set(REGULARIZERS) | {"active-contour"}
+
+
+def test_footprints_dsm_active_contour(runner, tmp_path, data):
+    import pyogrio
+
+    from lidar2city.cli.main import cli
+
+    a = data / "alexandria"
+    out = tmp_path / "ac.gpkg"
+    res = runner.invoke(cli, ["footprints", "--dsm", str(a / "dsm_west.tif"), "--dtm",
+                              str(a / "dtm_west.tif"), "--regularize", "active-contour", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert pyogrio.read_info(out)["features"] > 50
+    res = runner.invoke(cli, ["footprints", "--dsm", str(a / "dsm_west.tif"), "--weights", "w.toml",
+                              "-o", str(out)])
+    assert res.exit_code == 1 and "--weights goes with" in res.output
+
+
+def test_reconstruct_dsm(runner, rasters, tmp_path):
+    import pyogrio
+    import shapely
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.tools.validate import validate_file
+
+    p_dsm, p_dtm = rasters
+    out = tmp_path / "o.city.json"
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "--dtm", str(p_dtm), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "2 of 2 buildings reconstructed (LoD 1.2), 0 failed" in res.output
+    doc = json.loads(out.read_text())
+    assert doc["metadata"]["referenceSystem"].endswith("/26918")
+    tops = []
+    for obj in doc["CityObjects"].values():
+        assert obj["type"] == "Building" and obj["geometry"][0]["lod"] == "1.2"
+        a = obj["attributes"]
+        assert a["ground_z"] == pytest.approx(20.0) and a["shape_type"] in ("rectangle", "composite")
+        tops.append(round(a["roof_z"] - a["ground_z"], 2))
+    assert sorted(tops) == [6.0, 9.0]
+    rep = validate_file(out, schema=False)
+    assert rep.objects and all(o.valid for o in rep.objects)
+    # given footprints (another CRS: reprojected), OBJ and GPKG by extension
+    fp = tmp_path / "given.gpkg"
+    box = shapely.box(500010, 4299974, 500040, 4299990)
+    write_polygons(fp, [box], {"id": ["A"]}, origin=(0, 0), crs=CRS_UTM)
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "--dtm", str(p_dtm), "--footprints",
+                              str(fp), "-o", str(tmp_path / "o.gpkg")])
+    assert res.exit_code == 0, res.output
+    assert "1 of 1 buildings" in res.output
+    layers = [name for name, _ in pyogrio.list_layers(tmp_path / "o.gpkg")]
+    assert layers[0] == "footprints" and len(layers) == 2, layers
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "-o", str(tmp_path / "o.obj")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "o.obj").read_text().count("\nv ") >= 16
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--dsm", "D", "--lod", "2.2", "-o", "x.city.json"], "LoD1.2 only"),
+    (["--dsm", "D", "--crs", "EPSG:4326", "-o", "x.city.json"], "--crs does not apply"),
+    (["-o", "x.city.json"], "give point-cloud INPUTS or --dsm"),
+    (["t.laz", "--dsm", "D", "-o", "x.city.json"], "not both"),
+    (["t.laz", "--ortho", "o.tif", "-o", "x.city.json"], "--ortho needs --dsm"),
+])
+def test_reconstruct_dsm_wrong_combinations(runner, args, message):
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, ["reconstruct", *args])
+    assert res.exit_code == 1
+    lines = [ln for ln in res.output.strip().splitlines() if ln]
+    assert len(lines) == 1 and lines[0].startswith("Error:") and message in lines[0], res.output
+
+
+@pytest.mark.slow
+def test_dsm_commands_on_alexandria(runner, data, tmp_path):
+    """Both commands on the shared Alexandria rasters (figures: benchmarks/bench_dsm_fit.py)."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.tools.validate import validate_file
+
+    a = data / "alexandria"
+    out = tmp_path / "fp.gpkg"
+    res = runner.invoke(cli, ["footprints", "--dsm", str(a / "dsm_west.tif"), "--dtm",
+                              str(a / "dtm_west.tif"), "-o", str(out), "--figure",
+                              str(tmp_path / "f.png")])
+    assert res.exit_code == 0, res.output
+    fp, crs = read_footprints(out)
+    assert crs.to_epsg() == 26918 and len(fp) > 100
+    assert set(fp.attributes["shape_type"]) <= {"rectangle", "right_trapezoid", "trapezoid",
+                                                "composite", "polygon", ""}
+    city = tmp_path / "a.city.json"
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(a / "dsm_west.tif"), "--dtm",
+                              str(a / "dtm_west.tif"), "--footprints",
+                              str(a / "footprints_west.gpkg"), "-o", str(city)])
+    assert res.exit_code == 0, res.output
+    assert "56 of 56 buildings reconstructed" in res.output
+    rep = validate_file(city, schema_dir=data / "cityjson" / "schemas-2.0.2")
+    assert rep.schema_errors == [] and len(rep.objects) == 56
+    assert all(o.valid for o in rep.objects)
