@@ -284,7 +284,8 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
                                        fallback_ground_z=fallback)
             if lod22 is not None and res.ok:
                 m = lod22.overhang
-                add_lod22(res, g, bxyz[bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)], lod22)
+                add_lod22(res, g, bxyz[bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)], lod22,
+                          precision=cfg.precision)
         if notes[i]:
             res.attributes["footprint_note"] = notes[i]
         results[i] = res
@@ -293,7 +294,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     return results
 
 
-def add_lod22(result, footprint, building_xyz, config) -> None:
+def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> None:
     """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
 
     The LoD1.2 ground height is the floor. When no roof can be fitted the LoD1.2
@@ -309,13 +310,20 @@ def add_lod22(result, footprint, building_xyz, config) -> None:
     except AlgorithmError as exc:
         set_lod22(result, None, {}, str(exc))
         return
-    set_lod22(result, out.solids, out.attributes)
+    set_lod22(result, out.solids, out.attributes, precision=precision)
 
 
-def set_lod22(result, solids, attributes, reason="") -> None:
-    """Store LoD2.2 ``solids`` in ``result`` once they validate; else the LoD1.2 prism, with why."""
+def set_lod22(result, solids, attributes, reason="", *, precision=0.001) -> None:
+    """Store LoD2.2 ``solids`` in ``result`` once they validate; else the LoD1.2 prism, with why.
+
+    The vertices are first put on the output's ``precision`` grid (the CityJSON
+    quantisation), so the solid validated is the one written.
+    """
+    from ..datamodel import Solid
     from ..validate.solid import check_solid
 
+    if solids and precision:
+        solids = [Solid(np.round(s.vertices / precision) * precision, s.surfaces) for s in solids]
     if solids:
         issues = [i for s in solids for i in check_solid(s)]
         if not issues:
