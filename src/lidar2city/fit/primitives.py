@@ -875,16 +875,21 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
                                  polygon, cfg, orientation_swap=swap)
     all_r = model.residuals(points)
     bic, broof, bplan = _bic(all_r, len(q), plan_d, 5, len(polygon_rings(polygon)[0]), cfg)
-    model.info.update({
+    model.info.update(_fit_info(r, plan, nfev, sel, bic, broof, bplan))
+    return model, bic
+
+
+def _fit_info(r, plan, nfev, sel, bic, broof, bplan) -> dict:
+    """What a fitted model reports: residuals, iterations, observations, BIC terms."""
+    return {
         "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
-        "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))),
+        "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))) if len(plan.residuals) else 0.0,
         "iterations": int(plan.iterations + nfev),
         "n_points": int(sel.sum()),
         "n_samples": int(plan.used.sum()),
         "n_outline": int(plan.extra.get("n_outline", 0)),
         "bic": bic, "bic_roof": broof, "bic_plan": bplan,
-    })
-    return model, bic
+    }
 
 
 def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
@@ -1020,15 +1025,7 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
         model.to_solid()  # raises FitError when the roof does not close over the polygon
     bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], pp["n_plan_params"],
                              pp["n_footprint_vertices"], cfg)
-    model.info.update({
-        "residual_rmse": float(np.sqrt(np.mean(r ** 2))),
-        "plan_rmse": float(np.sqrt(np.mean(plan.residuals ** 2))) if len(plan.residuals) else 0.0,
-        "iterations": int(plan.iterations + nfev),
-        "n_points": int(sel.sum()),
-        "n_samples": int(plan.used.sum()),
-        "n_outline": int(plan.extra.get("n_outline", 0)),
-        "bic": bic, "bic_roof": broof, "bic_plan": bplan,
-    })
+    model.info.update(_fit_info(r, plan, nfev, sel, bic, broof, bplan))
     return model, bic
 
 

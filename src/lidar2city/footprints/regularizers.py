@@ -66,17 +66,23 @@ def mean_deviation(polygon, reference, *, step: float = 0.25) -> float:
     return float(np.mean(shapely.distance(pts, reference.boundary)))
 
 
-def regularize_none(traced, *, simplified=None, **_ignored):
-    """No regularisation: the simplified outline (or ``traced``) with its descriptive ``info``."""
-    poly = simplified if simplified is not None else traced
-    return poly, {
+def _plain_info(poly, traced, **extra) -> dict:
+    """The descriptive ``info`` of an outline made without the snake."""
+    return {
         "direction": outline_direction(poly),
         "n_vertices": vertex_count(poly),
         "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
         "mean_deviation": mean_deviation(poly, traced),
         "status": "ok",
         "reason": "",
+        **extra,
     }
+
+
+def regularize_none(traced, *, simplified=None, **_ignored):
+    """No regularisation: the simplified outline (or ``traced``) with its descriptive ``info``."""
+    poly = simplified if simplified is not None else traced
+    return poly, _plain_info(poly, traced)
 
 
 def _snake():
@@ -190,15 +196,7 @@ def regularize_fit(traced, *, cell: float, simplified=None, **_ignored):
     if poly.geom_type != "Polygon" or not poly.is_valid or poly.is_empty:
         raise FitError("the fitted outline is not a valid polygon")
     poly = shapely.set_precision(poly, 1e-6)
-    return poly, {
-        "direction": outline_direction(poly),
-        "n_vertices": vertex_count(poly),
-        "reductions": {"I": 0, "II": 0, "III": 0, "IV": 0},
-        "mean_deviation": mean_deviation(poly, traced),
-        "status": "ok",
-        "reason": "",
-        "shape_type": kind,
-    }
+    return poly, _plain_info(poly, traced, shape_type=kind)
 
 
 #: Regularisers by name (the CLI choice and the ``footprints.regularize`` config value).
