@@ -76,7 +76,7 @@ def conform(rings_per_face, *, tol=1e-3):
     return out
 
 
-def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
+def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
     """Insert a vertex where two adjacent faces' planes cross along their shared edge.
 
     A wall between two faces is only a simple polygon when one face stays above
@@ -91,6 +91,8 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
         Height differences below this (m) count as equal (the solid's level tolerance).
     min_gap : float
         No vertex is inserted closer than this (m) to an edge's end.
+    grid : float
+        Inserted vertices are snapped to this grid (m), the output's precision.
 
     Returns
     -------
@@ -118,6 +120,7 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3):
                     x = p + t * (q - p)
                     if min(np.hypot(*(x - p)), np.hypot(*(x - q))) < min_gap:
                         continue  # the levels at that end merge instead
+                    x = np.round(x / grid) * grid  # on the output grid, as the faces are
                     inserts[(_key(p), _key(q))] = x
                     inserts[(_key(q), _key(p))] = x
     if not inserts:
