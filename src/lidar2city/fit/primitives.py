@@ -645,7 +645,7 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
     return q, std, r, sel, nfev, s0
 
 
-def _roof_start(kind, z, ln, wd, approx):
+def _roof_start(kind, z, ln, wd):
     lo, hi = np.percentile(z, [5, 95])
     rh = max(hi - lo, 0.2)
     q = {"box": [lo], "gable": [lo, rh, 0.0], "hip": [lo, rh, min(wd / 2, ln / 2 * 0.95)],
@@ -754,8 +754,7 @@ def _check_inputs(footprint, points):
     return polygon, points
 
 
-def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygon, cfg,
-                 orientation_swap=False):
+def _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=False):
     x, y, az, ln, wd = plan.params
     sx, sy, saz, sl, sw = plan.std
     if orientation_swap:
@@ -848,7 +847,7 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
         q0 = [histogram_mode(points[:, 2], bin=cfg.mode_bin)]
         bounds = None
     else:
-        q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g, approx)
+        q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g)
         tmax = math.tan(math.radians(cfg.max_slope))
         if cls is HipPrimitive:
             bounds = ([-np.inf, 0.0, 0.05], [np.inf, tmax * wd_g / 2, ln_g / 2.0])
@@ -871,8 +870,7 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
         raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
     if cls is HipPrimitive and q[2] < max(cfg.min_hip_length, 3.0 * qstd[2]):
         raise FitError(f"hip length {q[2]:.2f} m +- {qstd[2]:.2f} not significant (a gable)")
-    model, plan_d = _finish_rect(cls, plan, q, qstd, r, int(sel.sum()), nfev, datum, samples,
-                                 polygon, cfg, orientation_swap=swap)
+    model, plan_d = _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=swap)
     all_r = model.residuals(points)
     bic, broof, bplan = _bic(all_r, len(q), plan_d, 5, len(polygon_rings(polygon)[0]), cfg)
     model.info.update(_fit_info(r, plan, nfev, sel, bic, broof, bplan))

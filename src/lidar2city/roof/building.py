@@ -126,7 +126,7 @@ def _direction(footprint):
     return float(dominant_direction(footprint))
 
 
-def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels):
+def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     """Faces whose plane dips below the floor get a horizontal plane at their points' median."""
     planes = list(map(np.asarray, planes))
     face_labels = np.array(face_labels, copy=True)
@@ -313,7 +313,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         moved += info["moved"]
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
-                                             pts, labels)
+                                             pts)
         solids.append(_manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2))
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
