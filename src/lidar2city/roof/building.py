@@ -99,22 +99,21 @@ def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_s
 def roof_type(planes, n_step_edges=0, *, flat_slope=5.0) -> str:
     """flat, shed, gable, hip or complex, from the distinct roof planes (K, 3) and step edges."""
     p = np.unique(np.round(np.asarray(planes, dtype=float), 9), axis=0)
-    used = np.arange(len(p))
+    n = len(p)
     slopes = np.degrees(np.arctan(np.hypot(p[:, 0], p[:, 1])))
     if np.all(slopes < flat_slope):
         return "flat"
-    if len(used) == 1:
+    if n == 1:
         return "shed"
-    steps = n_step_edges
+    if n_step_edges != 0 or np.any(slopes < flat_slope):
+        return "complex"
     az = np.degrees(np.arctan2(-p[:, 1], -p[:, 0])) % 360
-    if len(used) == 2 and np.all(slopes >= flat_slope) and steps == 0:
-        d = abs((az[0] - az[1]) % 360 - 180)
-        if d < 20:
-            return "gable"
-    if len(used) >= 4 and np.all(slopes >= flat_slope) and steps == 0:
-        q = np.round((az - az[0]) / 90.0) % 4
-        dev = np.abs((az - az[0]) - np.round((az - az[0]) / 90.0) * 90)
-        if len(np.unique(q)) == 4 and np.all(dev < 20) and len(used) == 4:
+    if n == 2 and abs((az[0] - az[1]) % 360 - 180) < 20:
+        return "gable"
+    if n == 4:
+        turns = np.round((az - az[0]) / 90.0)
+        dev = np.abs((az - az[0]) - turns * 90)
+        if len(np.unique(turns % 4)) == 4 and np.all(dev < 20):
             return "hip"
     return "complex"
 
