@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import FitError
+from ..errors import FitError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ def resample_rings(rings, interval: float) -> np.ndarray:
     with the spacing closest to ``interval`` that divides the ring length.
     """
     if interval <= 0:
-        raise ValueError(f"interval must be > 0, got {interval}")
+        raise InputError(f"interval must be > 0, got {interval}")
     out = []
     for ring in rings:
         ring = np.asarray(ring, dtype=np.float64)

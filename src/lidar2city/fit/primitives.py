@@ -67,7 +67,7 @@ import numpy as np
 
 from ..config import field
 from ..datamodel import Solid, Surface
-from ..errors import FitError
+from ..errors import ConfigError, FitError, InputError
 from .lsm import (
     drop_observation,
     fit_polygon,
@@ -133,13 +133,13 @@ class PrimitivesConfig:
         object.__setattr__(self, "candidates", tuple(self.candidates))
         unknown = sorted(set(self.candidates) - set(PRIMITIVES))
         if unknown or not self.candidates:
-            raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
+            raise ConfigError(f"primitives.candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
         for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale", "outline_strip", "outline_sigma", "outline_max_shift",
                      "footprint_sigma", "roof_sigma_floor", "mode_bin", "ground_buffer"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"primitives.{name}: must be > 0, got {getattr(self, name)}")
         if not 0 <= self.ground_percentile <= 100:
-            raise ValueError(f"ground_percentile must be in [0, 100], got {self.ground_percentile}")
+            raise ConfigError(f"primitives.ground_percentile: must be in [0, 100], got {self.ground_percentile}")
 
 
 class FitFailure:
@@ -750,7 +750,7 @@ def _check_inputs(footprint, points):
     polygon = main_polygon(footprint)
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+        raise InputError(f"points must have shape (N, 3), got {points.shape}")
     return polygon, points
 
 
@@ -823,7 +823,7 @@ def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dic
     """
     cfg = config or PrimitivesConfig()
     if kind not in PRIMITIVES:
-        raise ValueError(f"kind must be one of {', '.join(PRIMITIVES)}, got {kind!r}")
+        raise InputError(f"kind must be one of {', '.join(PRIMITIVES)}, got {kind!r}")
     try:
         polygon, points = _check_inputs(footprint, points)
         samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
