@@ -246,7 +246,7 @@ def polygon_sequence(ring, *, min_vertices=4, max_vertices=None):
         counts = np.array([n])
     # for k vertices keep the points of rank < k, in ring order
     keep = rank[None, :] < counts[:, None]
-    rows, cols = np.nonzero(keep)
+    _, cols = np.nonzero(keep)
     coords = pts[cols]
     offsets = np.concatenate([[0], np.cumsum(counts)])
     return coords, offsets, counts

@@ -630,19 +630,18 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
     prev = None
     nfev = 0
     std = np.zeros_like(q)
-    s0 = 0.0
     for _ in range(max_outer):
         if sel.sum() < max(min_points, len(q) + 1):
             raise FitError(f"{int(sel.sum())} roof points within {buffer} m of the {cls.kind} roof")
-        q, std, _, nf, s0 = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
-                                                bounds=bounds, loss="soft_l1", f_scale=loss_scale)
+        q, std, _, nf, _ = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
+                                               bounds=bounds, loss="soft_l1", f_scale=loss_scale)
         nfev += nf
         sel = np.abs(resid(q, np.ones(len(z), dtype=bool))) <= buffer
         if prev is not None and np.array_equal(sel, prev):
             break
         prev = sel
     r = resid(q, sel)
-    return q, std, r, sel, nfev, s0
+    return q, std, r, sel, nfev
 
 
 def _roof_start(kind, z, ln, wd):
@@ -864,8 +863,8 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
                 q0[i] = float(approx[name])
         if bounds is not None:
             q0 = list(np.clip(q0, np.asarray(bounds[0]) + 1e-6, np.asarray(bounds[1]) - 1e-6))
-    q, qstd, r, sel, nfev, s0 = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
-                                          loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
+    q, qstd, r, sel, nfev = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
+                                       loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
     if cls is not BoxPrimitive and abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
         raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
     if cls is HipPrimitive and q[2] < max(cfg.min_hip_length, 3.0 * qstd[2]):
@@ -964,9 +963,9 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
         h0 = histogram_mode(z, bin=cfg.mode_bin)
         if approx and approx.get("height") is not None:
             h0 = z0 + float(approx["height"])
-        q, qstd, r, sel, nfev, _ = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
-                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
-                                             min_points=cfg.min_points)
+        q, qstd, r, sel, nfev = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
+                                          buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                          min_points=cfg.min_points)
         if q[0] - z0 <= 0:
             raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
         c = pp["polygon"].centroid
@@ -993,9 +992,9 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
                 q0[0] = z0 + float(approx["height"])
             if approx.get("roof_height") is not None:
                 q0[1] = float(approx["roof_height"])
-        q, qstd, r, sel, nfev, _ = _fit_roof(cls, q0, bounds, points, (x, y, az, ln, wd),
-                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
-                                             min_points=cfg.min_points)
+        q, qstd, r, sel, nfev = _fit_roof(cls, q0, bounds, points, (x, y, az, ln, wd),
+                                          buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                          min_points=cfg.min_points)
         if abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
             raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
         t = math.radians(az)
