@@ -349,7 +349,8 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     from shapely.geometry import Polygon
 
     from ..regularize.snake import adjust_planar_graph
-    from .refine import _key, _remove_spikes
+    from .refine import _remove_spikes
+    from .solid import _key
 
     keys, xy, edges = {}, [], set()
     for f in faces:
