@@ -268,7 +268,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     Raises
     ------
     FitError
-        When no roof plane can be found (the caller records the reason).
+        When a footprint part has fewer than 3 points within ``overhang``, or a
+        roof plane stays below the floor (the caller records the reason). A part
+        without any planar facet gets one horizontal roof at its median height.
 
     References
     ----------
