@@ -515,3 +515,20 @@ def test_envelope_solids_over_random_footprints_are_closed(boxes, az, off, slope
     solid = envelope_solid(poly, planes, 0.0)
     assert solid_problems(solid, tol=1e-5) == []
     assert solid_volume(solid) > 0
+
+
+def test_bad_arguments_raise_project_errors():
+    from shapely.geometry import box
+
+    from lidar2city.errors import ConfigError, InputError
+
+    with pytest.raises(ConfigError, match=r"primitives\.plan_buffer"):
+        PrimitivesConfig(plan_buffer=-1.0)
+    with pytest.raises(ConfigError, match=r"primitives\.candidates"):
+        PrimitivesConfig(candidates=("pyramid",))
+    with pytest.raises(InputError, match="kind"):
+        fit_primitive("pyramid", box(0, 0, 10, 8), np.zeros((10, 3)))
+    with pytest.raises(InputError, match="shape"):
+        fit_primitive("box", box(0, 0, 10, 8), np.zeros((10, 2)))
+    with pytest.raises(InputError, match="interval"):
+        resample_rings([np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])], 0.0)

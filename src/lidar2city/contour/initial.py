@@ -11,7 +11,7 @@ import logging
 import numpy as np
 from scipy import ndimage as ndi
 
-from ..errors import InputError
+from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -24,7 +24,7 @@ def _filled(a):
         raise InputError(f"expected a 2-D raster, got shape {a.shape}")
     ok = np.isfinite(a)
     if not ok.any():
-        raise InputError("raster holds no finite value")
+        raise EmptyInputError("raster holds no finite value")
     if ok.all():
         return a.copy()
     # nearest valid value: keeps edges sharp and gradients finite

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import FitError
+from ..errors import FitError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ def resample_rings(rings, interval: float) -> np.ndarray:
     with the spacing closest to ``interval`` that divides the ring length.
     """
     if interval <= 0:
-        raise ValueError(f"interval must be > 0, got {interval}")
+        raise InputError(f"interval must be > 0, got {interval}")
     out = []
     for ring in rings:
         ring = np.asarray(ring, dtype=np.float64)
@@ -153,6 +153,15 @@ def segment_distances(points, a, b) -> np.ndarray:
     t = np.clip(((p - a) * ab).sum(-1) / den, 0.0, 1.0)
     proj = a + t[..., None] * ab
     return np.sqrt(((p - proj) ** 2).sum(-1))
+
+
+def _nearest_edges(samples, a, b, buffer):
+    """Each sample's nearest segment a->b, whether it lies within ``buffer``, and the
+    assignment key (edge index, -1 when unused) whose stability ends the outer loops."""
+    d = segment_distances(samples, a, b)
+    edge = d.argmin(axis=1)
+    used = d.min(axis=1) <= buffer
+    return edge, used, np.where(used, edge, -1)
 
 
 def _jacobian(fun, x, r0):
@@ -399,10 +408,7 @@ def fit_rectangle(samples, approx, *, buffer: float = 1.0, max_outer: int = 10,
     nfev = 0
     for k in range(1, max_outer + 1):
         c = rectangle_corners(*params[:5])
-        d = segment_distances(samples, c, np.roll(c, -1, axis=0))
-        edge = d.argmin(axis=1)
-        used = d.min(axis=1) <= buffer
-        key = np.where(used, edge, -1)
+        edge, used, key = _nearest_edges(samples, c, np.roll(c, -1, axis=0), buffer)
         if prev is not None and np.array_equal(key, prev):
             break
         prev = key
@@ -490,10 +496,7 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
     lam = prior_weight / sample_sigma
     for k in range(1, max_outer + 1):
         v = flat[:nv2].reshape(-1, 2)
-        d = segment_distances(samples, v[i0], v[i1])
-        edge = d.argmin(axis=1)
-        used = d.min(axis=1) <= buffer
-        key = np.where(used, edge, -1)
+        edge, used, key = _nearest_edges(samples, v[i0], v[i1], buffer)
         if prev is not None and np.array_equal(key, prev):
             break
         prev = key
@@ -618,10 +621,7 @@ def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_ou
     cov = None
     for k in range(1, max_outer + 1):  # noqa: B007 - k is the round count returned
         v = _rectilinear_vertices(params[: 1 + ne], m, prev)
-        d = segment_distances(smp, v, v[nxt])
-        edge = d.argmin(axis=1)
-        used = d.min(axis=1) <= buffer
-        key = np.where(used, edge, -1)
+        edge, used, key = _nearest_edges(smp, v, v[nxt], buffer)
         if prev_key is not None and np.array_equal(key, prev_key):
             break
         prev_key = key

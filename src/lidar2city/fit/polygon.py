@@ -45,6 +45,7 @@ import numpy as np
 
 from ..config import field
 from ..errors import EmptyInputError, FitError, InputError
+from .lsm import segment_distances
 
 logger = logging.getLogger(__name__)
 
@@ -170,16 +171,6 @@ def overlap_error(polygons, region) -> np.ndarray:
 # ---------------------------------------------------------------------- Douglas–Peucker
 
 
-def _point_segment_distance(p, a, b):
-    ab = b - a
-    denom = float(ab @ ab)
-    if denom == 0.0:
-        return np.hypot(*(p - a).T)
-    t = np.clip(((p - a) @ ab) / denom, 0.0, 1.0)
-    d = p - (a + t[:, None] * ab)
-    return np.hypot(d[:, 0], d[:, 1])
-
-
 def douglas_peucker_ranking(ring):
     """Cost and depth of every point of a closed ring under Douglas–Peucker splitting.
 
@@ -221,7 +212,7 @@ def douglas_peucker_ranking(ring):
         if span < 2:
             continue
         idx = (a + np.arange(1, span)) % n
-        d = _point_segment_distance(pts[idx], pts[a], pts[b])
+        d = segment_distances(pts[idx], pts[a][None], pts[b][None])[:, 0]
         k = int(np.argmax(d))
         j = int(idx[k])
         cost[j] = min(float(d[k]), cap)
@@ -255,7 +246,7 @@ def polygon_sequence(ring, *, min_vertices=4, max_vertices=None):
         counts = np.array([n])
     # for k vertices keep the points of rank < k, in ring order
     keep = rank[None, :] < counts[:, None]
-    rows, cols = np.nonzero(keep)
+    _, cols = np.nonzero(keep)
     coords = pts[cols]
     offsets = np.concatenate([[0], np.cumsum(counts)])
     return coords, offsets, counts
@@ -328,14 +319,8 @@ _NEXT = np.array([1, 2, 3, 0])
 
 
 def _segments_distance(p, verts):
-    """Squared distances (n, k) of points p (n, 2) to the closed polygon's k edges."""
-    a = verts
-    ab = np.roll(verts, -1, axis=0) - a
-    denom = np.maximum((ab * ab).sum(axis=1), 1e-18)
-    ap = p[:, None, :] - a[None]
-    t = np.clip((ap * ab[None]).sum(axis=2) / denom, 0.0, 1.0)
-    d = ap - t[..., None] * ab[None]
-    return d[..., 0] ** 2 + d[..., 1] ** 2
+    """Distances (n, k) of points p (n, 2) to the closed polygon's k edges."""
+    return segment_distances(p, verts, np.roll(verts, -1, axis=0))
 
 
 def _refine_edges(q, boundary, *, step, max_iterations, corner_margin=1.0, tol=0.01):

@@ -67,7 +67,7 @@ import numpy as np
 
 from ..config import field
 from ..datamodel import Solid, Surface
-from ..errors import FitError
+from ..errors import ConfigError, FitError, InputError
 from .lsm import (
     drop_observation,
     fit_polygon,
@@ -133,13 +133,13 @@ class PrimitivesConfig:
         object.__setattr__(self, "candidates", tuple(self.candidates))
         unknown = sorted(set(self.candidates) - set(PRIMITIVES))
         if unknown or not self.candidates:
-            raise ValueError(f"candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
+            raise ConfigError(f"primitives.candidates: {unknown or 'empty'} not among {', '.join(PRIMITIVES)}")
         for name in ("plan_interval", "plan_buffer", "roof_buffer", "roof_loss_scale", "outline_strip", "outline_sigma", "outline_max_shift",
                      "footprint_sigma", "roof_sigma_floor", "mode_bin", "ground_buffer"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"primitives.{name}: must be > 0, got {getattr(self, name)}")
         if not 0 <= self.ground_percentile <= 100:
-            raise ValueError(f"ground_percentile must be in [0, 100], got {self.ground_percentile}")
+            raise ConfigError(f"primitives.ground_percentile: must be in [0, 100], got {self.ground_percentile}")
 
 
 class FitFailure:
@@ -630,22 +630,21 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
     prev = None
     nfev = 0
     std = np.zeros_like(q)
-    s0 = 0.0
     for _ in range(max_outer):
         if sel.sum() < max(min_points, len(q) + 1):
             raise FitError(f"{int(sel.sum())} roof points within {buffer} m of the {cls.kind} roof")
-        q, std, _, nf, s0 = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
-                                                bounds=bounds, loss="soft_l1", f_scale=loss_scale)
+        q, std, _, nf, _ = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
+                                               bounds=bounds, loss="soft_l1", f_scale=loss_scale)
         nfev += nf
         sel = np.abs(resid(q, np.ones(len(z), dtype=bool))) <= buffer
         if prev is not None and np.array_equal(sel, prev):
             break
         prev = sel
     r = resid(q, sel)
-    return q, std, r, sel, nfev, s0
+    return q, std, r, sel, nfev
 
 
-def _roof_start(kind, z, ln, wd, approx):
+def _roof_start(kind, z, ln, wd):
     lo, hi = np.percentile(z, [5, 95])
     rh = max(hi - lo, 0.2)
     q = {"box": [lo], "gable": [lo, rh, 0.0], "hip": [lo, rh, min(wd / 2, ln / 2 * 0.95)],
@@ -750,12 +749,11 @@ def _check_inputs(footprint, points):
     polygon = main_polygon(footprint)
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+        raise InputError(f"points must have shape (N, 3), got {points.shape}")
     return polygon, points
 
 
-def _finish_rect(cls, plan, q, qstd, roof_r, n_sel, nfev, datum, samples, polygon, cfg,
-                 orientation_swap=False):
+def _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=False):
     x, y, az, ln, wd = plan.params
     sx, sy, saz, sl, sw = plan.std
     if orientation_swap:
@@ -824,7 +822,7 @@ def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dic
     """
     cfg = config or PrimitivesConfig()
     if kind not in PRIMITIVES:
-        raise ValueError(f"kind must be one of {', '.join(PRIMITIVES)}, got {kind!r}")
+        raise InputError(f"kind must be one of {', '.join(PRIMITIVES)}, got {kind!r}")
     try:
         polygon, points = _check_inputs(footprint, points)
         samples = resample_rings(polygon_rings(polygon), cfg.plan_interval)
@@ -848,7 +846,7 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
         q0 = [histogram_mode(points[:, 2], bin=cfg.mode_bin)]
         bounds = None
     else:
-        q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g, approx)
+        q0 = _roof_start(cls.kind, points[:, 2], ln_g, wd_g)
         tmax = math.tan(math.radians(cfg.max_slope))
         if cls is HipPrimitive:
             bounds = ([-np.inf, 0.0, 0.05], [np.inf, tmax * wd_g / 2, ln_g / 2.0])
@@ -865,14 +863,13 @@ def _fit_rect_kind(cls, plan, polygon, points, samples, datum, cfg, approx, *, s
                 q0[i] = float(approx[name])
         if bounds is not None:
             q0 = list(np.clip(q0, np.asarray(bounds[0]) + 1e-6, np.asarray(bounds[1]) - 1e-6))
-    q, qstd, r, sel, nfev, s0 = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
-                                          loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
+    q, qstd, r, sel, nfev = _fit_roof(cls, q0, bounds, points, geo, buffer=cfg.roof_buffer,
+                                       loss_scale=cfg.roof_loss_scale, min_points=cfg.min_points)
     if cls is not BoxPrimitive and abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
         raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
     if cls is HipPrimitive and q[2] < max(cfg.min_hip_length, 3.0 * qstd[2]):
         raise FitError(f"hip length {q[2]:.2f} m +- {qstd[2]:.2f} not significant (a gable)")
-    model, plan_d = _finish_rect(cls, plan, q, qstd, r, int(sel.sum()), nfev, datum, samples,
-                                 polygon, cfg, orientation_swap=swap)
+    model, plan_d = _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=swap)
     all_r = model.residuals(points)
     bic, broof, bplan = _bic(all_r, len(q), plan_d, 5, len(polygon_rings(polygon)[0]), cfg)
     model.info.update(_fit_info(r, plan, nfev, sel, bic, broof, bplan))
@@ -966,9 +963,9 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
         h0 = histogram_mode(z, bin=cfg.mode_bin)
         if approx and approx.get("height") is not None:
             h0 = z0 + float(approx["height"])
-        q, qstd, r, sel, nfev, _ = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
-                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
-                                             min_points=cfg.min_points)
+        q, qstd, r, sel, nfev = _fit_roof(BoxPrimitive, [h0], None, points, (0.0, 0.0, 0.0, 1.0, 1.0),
+                                          buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                          min_points=cfg.min_points)
         if q[0] - z0 <= 0:
             raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
         c = pp["polygon"].centroid
@@ -995,9 +992,9 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
                 q0[0] = z0 + float(approx["height"])
             if approx.get("roof_height") is not None:
                 q0[1] = float(approx["roof_height"])
-        q, qstd, r, sel, nfev, _ = _fit_roof(cls, q0, bounds, points, (x, y, az, ln, wd),
-                                             buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
-                                             min_points=cfg.min_points)
+        q, qstd, r, sel, nfev = _fit_roof(cls, q0, bounds, points, (x, y, az, ln, wd),
+                                          buffer=cfg.roof_buffer, loss_scale=cfg.roof_loss_scale,
+                                          min_points=cfg.min_points)
         if abs(q[1]) < max(cfg.min_roof_height, 3.0 * qstd[1]):
             raise FitError(f"roof rise {abs(q[1]):.2f} m +- {qstd[1]:.2f} not significant (flat)")
         t = math.radians(az)

@@ -148,7 +148,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     lab = _merge_small(lab, pairs, mask, max(1, int(np.ceil(min_area / (cell * cell)))))
     lab = np.where(mask.ravel(), lab, -1).reshape(rows, cols)
     # compact labels 0..k-1
-    uniq, inv = np.unique(lab[mask], return_inverse=True)
+    _, inv = np.unique(lab[mask], return_inverse=True)
     out = np.full(lab.shape, -1, dtype=np.int64)
     out[mask] = inv
     return out, transform

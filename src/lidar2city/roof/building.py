@@ -99,22 +99,21 @@ def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_s
 def roof_type(planes, n_step_edges=0, *, flat_slope=5.0) -> str:
     """flat, shed, gable, hip or complex, from the distinct roof planes (K, 3) and step edges."""
     p = np.unique(np.round(np.asarray(planes, dtype=float), 9), axis=0)
-    used = np.arange(len(p))
+    n = len(p)
     slopes = np.degrees(np.arctan(np.hypot(p[:, 0], p[:, 1])))
     if np.all(slopes < flat_slope):
         return "flat"
-    if len(used) == 1:
+    if n == 1:
         return "shed"
-    steps = n_step_edges
+    if n_step_edges != 0 or np.any(slopes < flat_slope):
+        return "complex"
     az = np.degrees(np.arctan2(-p[:, 1], -p[:, 0])) % 360
-    if len(used) == 2 and np.all(slopes >= flat_slope) and steps == 0:
-        d = abs((az[0] - az[1]) % 360 - 180)
-        if d < 20:
-            return "gable"
-    if len(used) >= 4 and np.all(slopes >= flat_slope) and steps == 0:
-        q = np.round((az - az[0]) / 90.0) % 4
-        dev = np.abs((az - az[0]) - np.round((az - az[0]) / 90.0) * 90)
-        if len(np.unique(q)) == 4 and np.all(dev < 20) and len(used) == 4:
+    if n == 2 and abs((az[0] - az[1]) % 360 - 180) < 20:
+        return "gable"
+    if n == 4:
+        turns = np.round((az - az[0]) / 90.0)
+        dev = np.abs((az - az[0]) - turns * 90)
+        if len(np.unique(turns % 4)) == 4 and np.all(dev < 20):
             return "hip"
     return "complex"
 
@@ -126,7 +125,7 @@ def _direction(footprint):
     return float(dominant_direction(footprint))
 
 
-def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz, labels):
+def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     """Faces whose plane dips below the floor get a horizontal plane at their points' median."""
     planes = list(map(np.asarray, planes))
     face_labels = np.array(face_labels, copy=True)
@@ -269,7 +268,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     Raises
     ------
     FitError
-        When no roof plane can be found (the caller records the reason).
+        When a footprint part has fewer than 3 points within ``overhang``, or a
+        roof plane stays below the floor (the caller records the reason). A part
+        without any planar facet gets one horizontal roof at its median height.
 
     References
     ----------
@@ -313,7 +314,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         moved += info["moved"]
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
-                                             pts, labels)
+                                             pts)
         solids.append(_manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2))
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
@@ -350,7 +351,8 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     from shapely.geometry import Polygon
 
     from ..regularize.snake import adjust_planar_graph
-    from .refine import _key, _remove_spikes
+    from .refine import _remove_spikes
+    from .solid import _key
 
     keys, xy, edges = {}, [], set()
     for f in faces:

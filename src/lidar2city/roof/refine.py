@@ -20,15 +20,11 @@ import logging
 
 import numpy as np
 
+from .solid import _KEY, _key
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["edge_types", "refine_partition"]
-
-_KEY = 1e6
-
-
-def _key(p):
-    return (int(round(p[0] * _KEY)), int(round(p[1] * _KEY)))
 
 
 def _plane_line(pa, pb):

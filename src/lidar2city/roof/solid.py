@@ -39,6 +39,16 @@ def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
 
+def _edge_owner(rings_per_face) -> dict:
+    """Directed edge ``(key(p), key(q))`` -> index of the face whose ring runs p -> q."""
+    owner = {}
+    for fi, rs in enumerate(rings_per_face):
+        for r in rs:
+            for k in range(len(r)):
+                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    return owner
+
+
 def conform(rings_per_face, *, tol=1e-3):
     """Insert every partition vertex lying on another face's edge into that edge (no T-junctions).
 
@@ -100,11 +110,7 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
         Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
     """
     rings = conform([_rings(f) for f in faces])
-    owner = {}
-    for fi, rs in enumerate(rings):
-        for r in rs:
-            for k in range(len(r)):
-                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    owner = _edge_owner(rings)
     inserts = {}
     for fi, rs in enumerate(rings):
         for r in rs:
@@ -179,11 +185,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
             for p, zz in zip(r, z, strict=True):
                 levels.setdefault(_key(p), []).append(zz)
     # directed edges and which face uses them
-    owner = {}
-    for fi, rs in enumerate(rings):
-        for r in rs:
-            for k in range(len(r)):
-                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    owner = _edge_owner(rings)
     outer_edges = [e for e in owner if (e[1], e[0]) not in owner]
     for e in outer_edges:
         levels[e[0]].append(ground_z)

@@ -34,7 +34,6 @@ __all__ = [
     "DtmConfig",
     "BuildingMaskConfig",
     "dtm_from_dsm",
-    "normalized_dsm",
     "fill_nodata",
     "roughness",
     "vegetation_from_roughness",
@@ -224,15 +223,6 @@ def fill_nodata(grid, where) -> np.ndarray:
     if not known.any():
         raise EmptyInputError("no valid cell to interpolate from")
     return _interpolate(grid, known, where)
-
-
-def normalized_dsm(dsm, dtm) -> np.ndarray:
-    """nDSM = DSM - DTM (m), NaN where either is missing."""
-    dsm = _check_grid(dsm, "dsm")
-    dtm = _check_grid(dtm, "dtm")
-    if dsm.shape != dtm.shape:
-        raise InputError(f"DSM and DTM differ in shape: {dsm.shape} vs {dtm.shape}")
-    return dsm - dtm
 
 
 # ------------------------------------------------------------------------ vegetation

@@ -117,7 +117,7 @@ def _polygon_checks(verts, rings, i, issues, planarity_tolerance):
     pts = verts[allidx]
     # planarity: distance of every vertex to the least-squares plane
     c = pts.mean(axis=0)
-    _, sv, vt = np.linalg.svd(pts - c, full_matrices=False)
+    vt = np.linalg.svd(pts - c, full_matrices=False)[2]
     normal = vt[-1]
     dist = np.abs((pts - c) @ normal)
     if dist.max() > planarity_tolerance:
