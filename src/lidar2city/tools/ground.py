@@ -83,8 +83,7 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     t0 = time.perf_counter()
     tile = read_las(input_path, crs=crs)
     cloud = tile.point_cloud()
-    if len(cloud) == 0:
-        raise EmptyInputError(f"{tile.path!r} holds no points")
+    cloud.require_points(repr(tile.path))
     mask = ground_mask(cloud.xyz, method=cfg.method, **cfg.method_params())
     n_ground = int(mask.sum())
     if n_ground == 0:
