@@ -110,14 +110,14 @@ def regularize_snake(traced, *, cell: float, window: int, tolerance: float | Non
         kwargs["simplify_tolerance"] = tolerance
     out, raw = regularize_polygon(traced, cell=cell, window=window, **kwargs)
     raw = dict(raw)
-    if raw.get("status", "regularized") not in ("regularized", "ok") or out is None:
+    if raw.get("status") != "regularized" or out is None:
         fallback, info = regularize_none(traced, simplified=simplified)
         info["status"] = "unregularised"
         info["reason"] = str(raw.get("reason", "the snake fell back"))
         info["reductions"] = dict(raw.get("reductions", info["reductions"]))
         return fallback, info
-    direction = raw.get("direction_deg", raw.get("direction"))
-    deviation = raw.get("mean_deviation_m", raw.get("mean_deviation"))
+    direction = raw.get("direction_deg")
+    deviation = raw.get("mean_deviation_m")
     return out, {
         "direction": float(np.mod(direction, 90.0)) if direction is not None
         else outline_direction(out),
