@@ -93,3 +93,13 @@ def test_bad_arguments():
         pair_buildings({}, {}, by="name")
     m = corner_metrics({}, {})
     assert m.n_matched == 0 and np.isnan(m.correctness)
+
+
+def test_bad_arguments_are_lidar2city_errors():
+    """User mistakes raise the package's InputError, which the CLI prints as one line."""
+    from lidar2city.errors import InputError
+
+    with pytest.raises(InputError):
+        corner_metrics({}, {}, tolerance=-1)
+    with pytest.raises(InputError):
+        pair_buildings({}, {}, by="name")

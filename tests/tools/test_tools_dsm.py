@@ -176,3 +176,22 @@ def test_alexandria_quality(data, tmp_path):
 # the saddle split and the half-height trimming)
 QUALITY_MIN = 0.53
 RECALL_MIN = 0.70
+
+
+def test_dsm_config_file_errors_are_one_line_errors(tmp_path):
+    """load_dsm_config reads TOML through config.read_config: every file mistake is an error class."""
+    from lidar2city.errors import ConfigError, FileFormatError
+    from lidar2city.tools.dsm import load_dsm_config
+
+    binary = tmp_path / "run.toml"
+    binary.write_bytes(b"\xff\xfe\x00 not text")
+    with pytest.raises(ConfigError):
+        load_dsm_config(binary)
+    with pytest.raises(FileFormatError):
+        load_dsm_config(tmp_path / "missing.toml")
+    good = tmp_path / "good.toml"
+    good.write_text("[dsm_roofs]\nmin_area = 20.0\n[ground]\ncell = 1.0\n")
+    cfg = load_dsm_config(good, **{"dsm_lod1.roof_stat": None})
+    assert cfg["dsm_roofs"].min_area == 20.0
+    with pytest.raises(ConfigError):
+        load_dsm_config(None, **{"ground.cell": 2.0})

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["crs_option", "output_option", "progress"]
+__all__ = ["crs_option", "output_option", "progress", "progress_callback"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -37,3 +37,15 @@ def progress(iterable=None, *, length=None, label="", quiet=False):
 
         return _Null()
     return click.progressbar(iterable, length=length, label=label, file=sys.stderr)
+
+
+def progress_callback(bar):
+    """A ``callback(done, total)`` for the library's jobs that advances ``bar`` to ``done``."""
+    state = {"done": 0}
+
+    def callback(done, total):
+        bar.length = total
+        bar.update(done - state["done"])
+        state["done"] = done
+
+    return callback

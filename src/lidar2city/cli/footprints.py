@@ -101,17 +101,12 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
 
 def _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset):
     from ..tools.footprints import footprints_job, load_footprints_config
-    from ._options import progress
+    from ._options import progress, progress_callback
 
     cfg = load_footprints_config(config_path, regularize=regularize, cell=cell,
                                  min_area=min_area, edge_offset=edge_offset)
     with progress(length=1, label="footprints") as bar:
-        state = {"done": 0}
-
-        def callback(done, total):
-            bar.length = total
-            bar.update(done - state["done"])
-            state["done"] = done
+        callback = progress_callback(bar)
 
         summary = footprints_job(list(inputs), output, crs=crs, config=cfg, callback=callback)
     click.echo(f"{summary['buildings']} footprints, {summary['area']:.0f} m2 "
@@ -121,16 +116,11 @@ def _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_o
 
 def _dsm(dsm, output, *, dtm, ortho, dtm_out, figure, regularize, config_path, min_area):
     from ..tools.dsm import footprints_from_dsm, load_dsm_config
-    from ._options import progress
+    from ._options import progress, progress_callback
 
     cfg = load_dsm_config(config_path, **{"dsm_roofs.min_area": min_area})
     with progress(length=1, label="outlines") as bar:
-        state = {"done": 0}
-
-        def callback(done, total):
-            bar.length = total
-            bar.update(done - state["done"])
-            state["done"] = done
+        callback = progress_callback(bar)
 
         s = footprints_from_dsm(dsm, dtm=dtm, ortho=ortho, output=output, regularize=regularize,
                                 dtm_out=dtm_out, config=cfg, figure=figure, progress=callback)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option, progress
+from ._options import crs_option, output_option, progress, progress_callback
 
 
 @click.command("reconstruct")
@@ -111,12 +111,7 @@ def _dsm(dsm, output, *, dtm, ortho, footprints, config, fmt, quiet, layer, id_f
 
     cfg = load_dsm_config(config)
     with progress(length=1, label="buildings", quiet=quiet) as bar:
-        state = {"done": 0}
-
-        def callback(done, total):
-            bar.length = total
-            bar.update(done - state["done"])
-            state["done"] = done
+        callback = progress_callback(bar)
 
         summary = reconstruct_from_dsm(dsm, output, dtm=dtm, ortho=ortho, footprints=footprints,
                                        fmt=fmt, config=cfg, progress=callback, layer=layer,

@@ -36,7 +36,6 @@ from ..config import field as cfield
 from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
 from .grid import Grid, building_fraction, building_regions, point_spacing
 from .regularizers import REGULARIZERS
-from .regularizers import require as require_regularizer
 from .trace import simplify_polygon, trace_regions
 
 logger = logging.getLogger(__name__)
@@ -218,7 +217,6 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     regularizer = REGULARIZERS[regularize]
     threshold = (snake_threshold if snake_threshold is not None
                  else 2.0 * snake_window * L["snake_cell"])
-    require_regularizer(regularize)  # fail early, once, when it is not installed
     out: list[Footprint] = []
     for n_done, (label, poly) in enumerate(traced, start=1):
         parts = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,

@@ -16,12 +16,10 @@ import logging
 
 import numpy as np
 
-from ..errors import DependencyError
-
 logger = logging.getLogger(__name__)
 
 __all__ = ["REGULARIZERS", "regularize_none", "regularize_snake", "regularize_fit",
-           "outline_direction", "vertex_count", "mean_deviation", "require"]
+           "outline_direction", "vertex_count", "mean_deviation"]
 
 
 def outline_direction(polygon) -> float:
@@ -86,62 +84,40 @@ def regularize_none(traced, *, simplified=None, **_ignored):
 
 
 def _snake():
-    try:
-        from ..regularize.snake import regularize_polygon
-    except ImportError as exc:
-        raise DependencyError(
-            "the snake regulariser (lidar2city.regularize.snake) is not available in this "
-            f"installation ({exc}); use --regularize none") from None
+    """The snake solver (a function so tests can stand in for it)."""
+    from ..regularize.snake import regularize_polygon
+
     return regularize_polygon
-
-
-def require(name: str) -> None:
-    """Raise :class:`~lidar2city.errors.DependencyError` if regulariser ``name`` cannot run."""
-    if name == "snake":
-        _snake()
 
 
 def regularize_snake(traced, *, cell: float, window: int, tolerance: float | None = None,
                      simplified=None, **kwargs):
     """The exact 2-D snake (graph reduction) with direction and deviation energies.
 
-    Calls :func:`lidar2city.regularize.snake.regularize_polygon` (imported here,
-    so the footprint package works without it) on the *traced* outline, which
-    simplifies it with ``tolerance`` and measures the deviation energy against
-    it. ``kwargs`` the installed function does not take (``t_adjust``...) are
-    left out. When the snake falls back (no valid result) the status is
-    "unregularised" and the simplified outline is kept.
-
-    Raises
-    ------
-    DependencyError
-        When the snake regulariser is not part of this installation.
+    Calls :func:`lidar2city.regularize.snake.regularize_polygon` on the *traced*
+    outline, which simplifies it with ``tolerance`` and measures the deviation
+    energy against it; ``kwargs`` are its keywords (``t_adjust``...). When the
+    snake falls back (no valid result) the status is "unregularised" and the
+    simplified outline is kept.
 
     References
     ----------
     Kass, Witkin, Terzopoulos (1988) for snakes; the graph-reduction solver and
     energies (eqs. 4-6) of :mod:`lidar2city.regularize.snake`.
     """
-    import inspect
-
     regularize_polygon = _snake()
-    accepted = inspect.signature(regularize_polygon).parameters
     if tolerance is not None:
         kwargs["simplify_tolerance"] = tolerance
-    dropped = sorted(k for k in kwargs if k not in accepted)
-    if dropped:
-        logger.debug("regularize_polygon takes no %s; left out", ", ".join(dropped))
-    kwargs = {k: v for k, v in kwargs.items() if k in accepted}
     out, raw = regularize_polygon(traced, cell=cell, window=window, **kwargs)
     raw = dict(raw)
-    if raw.get("status", "regularized") not in ("regularized", "ok") or out is None:
+    if raw.get("status") != "regularized" or out is None:
         fallback, info = regularize_none(traced, simplified=simplified)
         info["status"] = "unregularised"
         info["reason"] = str(raw.get("reason", "the snake fell back"))
         info["reductions"] = dict(raw.get("reductions", info["reductions"]))
         return fallback, info
-    direction = raw.get("direction_deg", raw.get("direction"))
-    deviation = raw.get("mean_deviation_m", raw.get("mean_deviation"))
+    direction = raw.get("direction_deg")
+    deviation = raw.get("mean_deviation_m")
     return out, {
         "direction": float(np.mod(direction, 90.0)) if direction is not None
         else outline_direction(out),

@@ -18,13 +18,14 @@ __all__ = [
     "grid_spec",
     "cell_of",
     "min_surface",
-    "mean_surface",
+    "centre_surface",
     "inpaint",
     "running_extreme",
     "erode_square",
     "dilate_square",
     "open_square",
     "open_disk",
+    "open_disk_series",
     "bilinear_weights",
     "sample_bilinear",
     "gradient_magnitude",
@@ -113,18 +114,6 @@ def min_surface(xyz, spec: GridSpec, *, flat_index=None, base: float = 0.0,
         z = z - base
     np.minimum.at(grid, flat_index, z.astype(dtype, copy=False))
     grid[np.isinf(grid)] = np.nan
-    return grid.reshape(spec.shape)
-
-
-def mean_surface(xyz, spec: GridSpec) -> np.ndarray:
-    """Mean z per cell, shape ``spec.shape``; NaN where a cell holds no point."""
-    r, c = cell_of(xyz[:, :2], spec)
-    flat = r * spec.shape[1] + c
-    size = spec.shape[0] * spec.shape[1]
-    total = np.bincount(flat, weights=xyz[:, 2], minlength=size)
-    count = np.bincount(flat, minlength=size)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        grid = total / count
     return grid.reshape(spec.shape)
 
 

@@ -23,6 +23,12 @@ def _check_xyz(xyz) -> np.ndarray:
     return xyz
 
 
+def _check_positive(**values):
+    for name, value in values.items():
+        if not (isinstance(value, (int, float, np.floating, np.integer)) and value > 0):
+            raise InputError(f"{name} must be a number > 0, got {value!r}")
+
+
 def low_outliers(xyz, *, radius: float = 5.0, depth: float = 1.5, iterations: int = 2,
                  block: float = 10.0, block_depth: float = 6.0,
                  block_percentile: float = 25.0, block_reach: int = 2,

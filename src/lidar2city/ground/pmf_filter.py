@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._grid import cell_of, grid_spec, inpaint, min_surface, open_square
-from .outliers import _check_xyz, low_outliers
+from .outliers import _check_positive, _check_xyz, low_outliers
 
 logger = logging.getLogger(__name__)
 
@@ -109,11 +109,9 @@ def pmf(xyz, *, cell: float = 1.0, max_window: float = 33.0, slope: float = 0.3,
     (True, False)
     """
     xyz = _check_xyz(xyz)
-    for name, value in dict(cell=cell, max_window=max_window, slope=slope,
-                            initial_distance=initial_distance, max_distance=max_distance,
-                            outlier_radius=outlier_radius, outlier_depth=outlier_depth).items():
-        if not value > 0:
-            raise InputError(f"{name} must be > 0, got {value!r}")
+    _check_positive(cell=cell, max_window=max_window, slope=slope,
+                    initial_distance=initial_distance, max_distance=max_distance,
+                    outlier_radius=outlier_radius, outlier_depth=outlier_depth)
     if max_distance < initial_distance:
         raise InputError("max_distance must be >= initial_distance")
     n = len(xyz)

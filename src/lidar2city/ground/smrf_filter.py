@@ -16,17 +16,11 @@ from ._grid import (
     open_disk_series,
     sample_bilinear,
 )
-from .outliers import _check_xyz, low_outliers
+from .outliers import _check_positive, _check_xyz, low_outliers
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["smrf", "smrf_surface"]
-
-
-def _check_positive(**values):
-    for name, value in values.items():
-        if not (isinstance(value, (int, float, np.floating, np.integer)) and value > 0):
-            raise InputError(f"{name} must be a number > 0, got {value!r}")
 
 
 def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,

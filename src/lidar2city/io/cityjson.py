@@ -313,8 +313,8 @@ class CityModel:
 def _apply_transform(vertices, transform):
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     if transform:
-        v = v * np.asarray(transform["scale"], dtype=np.float64) + \
-            np.asarray(transform["translate"], dtype=np.float64)
+        v = v * np.asarray(transform.get("scale", [1, 1, 1]), dtype=np.float64) + \
+            np.asarray(transform.get("translate", [0, 0, 0]), dtype=np.float64)
     return v
 
 

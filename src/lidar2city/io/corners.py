@@ -6,13 +6,13 @@ geometry uses (transform applied), in the file's coordinates.
 
 from __future__ import annotations
 
-import json
 import logging
 
 import numpy as np
 
 from ..errors import FileFormatError
 from ._atomic import check_input_file
+from .cityjson import read_cityjson
 
 logger = logging.getLogger(__name__)
 
@@ -66,20 +66,14 @@ def read_cityjson_corners(path, *, lod: str | None = None) -> dict[str, np.ndarr
     ------
     FileFormatError
         Not JSON, or not a CityJSON object.
+
+    Notes
+    -----
+    The file is read with :func:`lidar2city.io.cityjson.read_cityjson`, so
+    CityJSONSeq files are read too.
     """
-    p = check_input_file(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"{str(p)!r} is not JSON: {exc}") from None
-    if not isinstance(doc, dict) or doc.get("type") != "CityJSON":
-        raise FileFormatError(f"{str(p)!r} is not a CityJSON file")
-    verts = np.asarray(doc.get("vertices", []), dtype=np.float64).reshape(-1, 3)
-    tr = doc.get("transform")
-    if tr:
-        verts = verts * np.asarray(tr.get("scale", [1, 1, 1]), dtype=np.float64) + \
-            np.asarray(tr.get("translate", [0, 0, 0]), dtype=np.float64)
-    objects = doc.get("CityObjects", {})
+    model = read_cityjson(path)
+    verts, objects = model.vertices, model.objects
     idx_by_building: dict[str, list] = {}
 
     def root(oid):
@@ -113,7 +107,7 @@ def read_cityjson_corners(path, *, lod: str | None = None) -> dict[str, np.ndarr
             continue
         ii = np.unique(np.asarray(idx, dtype=np.int64))
         if ii.max() >= len(verts) or ii.min() < 0:
-            raise FileFormatError(f"{str(p)!r}: building {key} refers to a missing vertex")
+            raise FileFormatError(f"{str(path)!r}: building {key} refers to a missing vertex")
         out[key] = _unique_rows(verts[ii])
     return out
 

@@ -2,6 +2,8 @@
 
 matplotlib is optional (``pip install lidar2city[plot]``); it is imported
 only when an image is written, with the non-interactive Agg backend.
+:func:`figure_class` is the one entry to matplotlib for every PNG writer of
+:mod:`lidar2city.io`.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import numpy as np
 from ..errors import DependencyError
 from ._atomic import atomic_path
 
-__all__ = ["write_check_image", "solid_edges"]
+__all__ = ["write_check_image", "solid_edges", "figure_class"]
 
 
 def solid_edges(solid) -> np.ndarray:
@@ -27,14 +29,17 @@ def solid_edges(solid) -> np.ndarray:
     return np.unique(e, axis=0)
 
 
-def _pyplot():
+def figure_class():
+    """matplotlib's ``Figure`` class, or :class:`~lidar2city.errors.DependencyError`.
+
+    A bare Figure renders with the Agg canvas when saved as PNG: no pyplot, no
+    GUI backend and no global state.
+    """
     try:
         import matplotlib
     except ImportError:
         raise DependencyError("check images need matplotlib: install lidar2city[plot]") from None
     del matplotlib
-    # a bare Figure renders with the Agg canvas when saved as PNG: no pyplot, no GUI
-    # backend and no global state
     from matplotlib.figure import Figure
 
     return Figure
@@ -59,7 +64,7 @@ def write_check_image(path, points, solid, *, footprint=None, title: str = "", o
         An orthoimage cut-out and its (xmin, xmax, ymin, ymax) in local
         metres, drawn under the plan view.
     """
-    Figure = _pyplot()
+    Figure = figure_class()
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     v = solid.vertices
     edges = solid_edges(solid)

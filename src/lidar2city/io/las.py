@@ -142,8 +142,6 @@ def write_las(path, tile: LasTile, *, classification=None) -> None:
     name and renamed on success. The CRS is written as a WKT VLR when the file
     had none and one was supplied.
     """
-    import laspy
-
     las = tile.data
     if classification is not None:
         classification = np.asarray(classification)
@@ -157,6 +155,13 @@ def write_las(path, tile: LasTile, *, classification=None) -> None:
             las.header.add_crs(tile.crs)
         except Exception as exc:  # older point formats cannot hold WKT in every case
             logger.warning("could not store the CRS in %s: %s", path, exc)
+    _write(las, path)
+
+
+def _write(las, path) -> None:
+    """Write ``las`` to ``path`` (LAZ with lazrs when the extension says so), atomically."""
+    import laspy
+
     laz = str(path).lower().endswith(".laz")
     with atomic_path(path) as tmp:
         las.write(str(tmp), do_compress=laz,
@@ -186,7 +191,4 @@ def write_points(path, cloud: PointCloud, *, scale=0.001) -> None:
     for name, values in cloud.attributes.items():
         if name in las.point_format.dimension_names:
             las[name] = values
-    laz = str(path).lower().endswith(".laz")
-    with atomic_path(path) as tmp:
-        las.write(str(tmp), do_compress=laz,
-                  laz_backend=laspy.LazBackend.Lazrs if laz else None)
+    _write(las, path)

@@ -1,10 +1,11 @@
-"""Figures written as PNG files (matplotlib, Agg backend, imported lazily)."""
+"""Figures written as PNG files (matplotlib, Agg canvas, imported lazily)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ._atomic import atomic_path
+from .figures import figure_class
 
 __all__ = ["SHAPE_COLOURS", "plot_outlines"]
 
@@ -33,11 +34,9 @@ def plot_outlines(path, ndsm, extent, polygons, shape_types, *, title="", vmax=N
     shape_types : sequence of str
         One per polygon (keys of :data:`SHAPE_COLOURS`).
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import shapely
-    from matplotlib.figure import Figure
+
+    Figure = figure_class()
     from matplotlib.lines import Line2D
 
     h, w = np.asarray(ndsm).shape

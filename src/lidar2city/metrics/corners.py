@@ -20,6 +20,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["CornerMetrics", "match_corners", "corner_metrics", "pair_buildings"]
 
 
@@ -112,7 +114,7 @@ def pair_buildings(pred: dict, ref: dict, *, by: str = "auto", min_overlap: floa
         when they share any, overlap otherwise.
     """
     if by not in ("auto", "id", "overlap"):
-        raise ValueError(f"by must be 'auto', 'id' or 'overlap', got {by!r}")
+        raise InputError(f"by must be 'auto', 'id' or 'overlap', got {by!r}")
     common = [k for k in pred if k in ref]
     if by == "id" or (by == "auto" and common):
         return [(k, k) for k in common]
@@ -162,7 +164,7 @@ def corner_metrics(pred: dict, ref: dict, *, tolerance: float = 0.5, by: str = "
     (1.0, 0.1)
     """
     if tolerance <= 0:
-        raise ValueError(f"tolerance must be > 0, got {tolerance}")
+        raise InputError(f"tolerance must be > 0, got {tolerance}")
     pairs = pair_buildings(pred, ref, by=by, min_overlap=min_overlap)
     n_pred = sum(len(np.asarray(v).reshape(-1, 3)) for v in pred.values())
     n_ref = sum(len(np.asarray(v).reshape(-1, 3)) for v in ref.values())

@@ -27,7 +27,7 @@ def classify_config(source=None):
     return stage_config("classify", source)
 
 
-def _ground(cloud, *, ground_from_file: bool, method: str, config=None):
+def _ground(cloud, *, ground_from_file: bool, method: str):
     if ground_from_file:
         cls = cloud.get("classification")
         if cls is None or not (cls == ASPRS.GROUND).any():
@@ -36,16 +36,14 @@ def _ground(cloud, *, ground_from_file: bool, method: str, config=None):
         return cls == ASPRS.GROUND
     from ..ground import ground_mask
 
-    params = {} if config is None else {k: v for k, v in dataclasses.asdict(config).items()
-                                        if k != "method"}
-    ground = np.asarray(ground_mask(cloud.xyz, method=method, **params), dtype=bool)
+    ground = np.asarray(ground_mask(cloud.xyz, method=method), dtype=bool)
     if not ground.any():
         raise EmptyInputError("the ground filter found no ground point in the input")
     return ground
 
 
 def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str = "smrf",
-                   config=None, ground_config=None) -> np.ndarray:
+                   config=None) -> np.ndarray:
     """ASPRS classes of every point of a :class:`PointCloud`: ground filter, then classification.
 
     The cloud's returns and colours are used when present. This is what
@@ -54,8 +52,7 @@ def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str 
     from ..classify import classify_points
 
     cfg = config if config is not None else classify_config(None)
-    ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method,
-                     config=ground_config)
+    ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method)
     rgb = None
     if all(k in cloud.attributes for k in ("red", "green", "blue")):
         rgb = np.column_stack([cloud.attributes[k] for k in ("red", "green", "blue")])
@@ -94,7 +91,7 @@ def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
 
     Raises
     ------
-    FileFormatError, EmptyInputError, InputError, ConfigError, DependencyError
+    FileFormatError, EmptyInputError, InputError, ConfigError
     """
     cfg = classify_config(config)
     t0 = time.perf_counter()

@@ -138,27 +138,11 @@ def load_dsm_config(path=None, **overrides) -> dict:
     ------
     ConfigError, FileFormatError
     """
-    import tomllib
-    from pathlib import Path
+    from ..config import build_stage, read_config
+    from ..errors import ConfigError
 
-    from ..config import build_stage
-    from ..errors import ConfigError, FileFormatError
-
-    data = {}
-    if path is not None:
-        p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise FileFormatError(f"{str(p)!r}: no such config file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{str(p)!r} is not valid TOML: {exc}") from None
-    values = {}
-    for stage in DSM_STAGES:
-        section = data.get(stage, {})
-        if not isinstance(section, dict):
-            raise ConfigError(f"[{stage}] must be a table of options")
-        values[stage] = dict(section)
+    data = read_config(path)
+    values = {stage: dict(data.get(stage, {})) for stage in DSM_STAGES}
     for key, v in overrides.items():
         if v is None:
             continue

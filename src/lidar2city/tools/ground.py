@@ -22,8 +22,9 @@ def ground_config(config=None, **overrides):
     Parameters
     ----------
     config : str, Path, dict, GroundConfig or None
-        A run TOML file (its ``[ground]`` table is used, other tables are
-        ignored), a dict of ``[ground]`` options, or a config.
+        A run TOML file or dict of sections (its ``[ground]`` table is used;
+        the other tables' names are checked, their values left to their own
+        stages), or a config.
     **overrides
         Options set explicitly (e.g. from the command line); ``None`` values
         are ignored.
@@ -82,30 +83,24 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     t0 = time.perf_counter()
     tile = read_las(input_path, crs=crs)
     cloud = tile.point_cloud()
-    if len(cloud) == 0:
-        raise EmptyInputError(f"{tile.path!r} holds no points")
+    cloud.require_points(repr(tile.path))
     mask = ground_mask(cloud.xyz, method=cfg.method, **cfg.method_params())
     n_ground = int(mask.sum())
     if n_ground == 0:
         raise EmptyInputError(f"{tile.path!r}: no ground point found (method {cfg.method})")
     classification = np.where(mask, ASPRS.GROUND, ASPRS.UNCLASSIFIED).astype(np.uint8)
-    raster = None
     summary = {"points": len(cloud), "ground": n_ground, "method": cfg.method,
                "config": dataclasses.asdict(cfg)}
     if dtm_path is not None:
-        from ..io.raster import Raster
+        from ..io.raster import Raster, write_raster
 
         if cloud.crs is None:
             logger.warning("%s has no CRS: the DTM is written without one (pass --crs)",
                            tile.path)
         dtm = dtm_from_ground(cloud.xyz, mask, cell=cfg.dtm_cell)
-        raster = Raster(dtm.world_heights(cloud.origin[2], cloud.z_unit),
-                        dtm.world_transform(cloud.origin, cloud.xy_unit), cloud.crs)
+        write_raster(dtm_path, Raster(dtm.world_heights(cloud.origin[2], cloud.z_unit),
+                                      dtm.world_transform(cloud.origin, cloud.xy_unit), cloud.crs))
         summary.update(dtm_shape=list(dtm.shape), dtm_cell=cfg.dtm_cell)
-    if raster is not None:
-        from ..io.raster import write_raster
-
-        write_raster(dtm_path, raster)
     from ..io.las import write_las
 
     write_las(output_path, tile, classification=classification)

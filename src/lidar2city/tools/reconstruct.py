@@ -191,8 +191,8 @@ def load_footprints(path, cloud, *, id_field=None, layer=None):
     Raises
     ------
     InputError
-        Without footprints. (Plug-in point: footprints from the points once
-        :mod:`lidar2city.footprints` exists.)
+        Without footprints: they are not derived from the points here; make them
+        first with ``lidar2city footprints`` (:mod:`lidar2city.footprints`).
     """
     import shapely
 
