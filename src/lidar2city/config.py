@@ -30,6 +30,10 @@ from .errors import ConfigError, FileFormatError
 __all__ = ["STAGES", "stage_class", "build_stage", "read_config", "load_config", "stage_config",
            "resolved_dict", "field"]
 
+#: sections a run file may hold that configure no stage (the ``[tune]`` record that
+#: ``lidar2city tune`` writes beside the weights it found)
+METADATA_SECTIONS = frozenset({"tune"})
+
 #: stage name -> "module:Class" of its frozen dataclass.
 STAGES: dict[str, str] = {
     "active_contour": "lidar2city.contour.outlines:ActiveContourConfig",
@@ -157,7 +161,7 @@ def read_config(source=None) -> dict:
     for stage, section in data.items():
         if not isinstance(section, dict):
             raise ConfigError(f"[{stage}] must be a table of options")
-    return data
+    return {k: v for k, v in data.items() if k not in METADATA_SECTIONS}
 
 
 def load_config(source=None) -> dict:

@@ -76,8 +76,9 @@ def test_reconstruct_errors(runner, tmp_path):
     from lidar2city.cli.main import cli
 
     las, gpkg, _ = _synthetic_inputs(tmp_path)
-    res = runner.invoke(cli, ["reconstruct", str(las), "-o", str(tmp_path / "o.city.json")])
-    assert res.exit_code == 1 and "--footprints is required for now" in res.output
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(tmp_path / "none.gpkg"),
+                              "-o", str(tmp_path / "o.city.json")])
+    assert res.exit_code == 1 and "no such file" in res.output
     res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(gpkg), "-o",
                               str(tmp_path / "o.xyz")])
     assert res.exit_code == 1 and "--format" in res.output

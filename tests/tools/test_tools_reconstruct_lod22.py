@@ -58,3 +58,12 @@ def test_cli_primitives_with_check_images(town_files, tmp_path):
     res = CliRunner().invoke(cli, ["reconstruct", str(d / "raw.laz"), "--footprints", str(d / "fp.gpkg"),
                                    "--check-images", str(imgs), "-o", str(out), "-q"])
     assert res.exit_code == 1 and "--method primitives" in res.output
+
+
+def test_without_footprints_they_come_from_the_points(town_files, tmp_path):
+    town, d = town_files
+    out = tmp_path / "nofp.city.json"
+    s = reconstruct([d / "raw.laz"], out, lods=("1.2", "2.2"))
+    assert s.failed == 0 and s.invalid == 0
+    # one model per building (the synthetic buildings stand apart)
+    assert s.total == len(town.buildings)

@@ -185,22 +185,45 @@ def point_roles(cloud, config):
     return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes), cls
 
 
-def load_footprints(path, cloud, *, id_field=None, layer=None):
-    """Footprints in the cloud's local frame, restricted to those meeting the points' extent.
+def footprints_from_points(cloud, classes, *, config=None):
+    """Footprints traced from the building points and regularised by the 2-D snake.
+
+    What ``reconstruct`` uses when no footprint file is given: one footprint per
+    building block (:func:`lidar2city.footprints.extract_footprints`), ids
+    ``b1``, ``b2``... in a deterministic order. ``config`` (a run file's
+    ``[footprints]`` section) replaces the default, which is the snake regulariser.
 
     Raises
     ------
-    InputError
-        Without footprints: they are not derived from the points here; make them
-        first with ``lidar2city footprints`` (:mod:`lidar2city.footprints`).
+    EmptyInputError
+        When no building region is found.
+    """
+    import dataclasses
+
+    from ..config import stage_config
+    from ..datamodel import Footprints
+    from ..footprints import extract_footprints
+
+    cfg = config if config is not None else stage_config("footprints", None, regularize="snake")
+    found = extract_footprints(cloud.xyz, classes, **dataclasses.asdict(cfg))
+    if not found:
+        raise EmptyInputError("no building footprint found in the points")
+    keys = ("area", "direction", "n_vertices", "mean_deviation")
+    return Footprints([f.polygon for f in found], [f"b{i + 1}" for i in range(len(found))],
+                      {k: [f.attributes.get(k) for f in found] for k in keys}
+                      | {"_note": [f.reason for f in found]})
+
+
+def load_footprints(path, cloud, *, id_field=None, layer=None):
+    """Footprints in the cloud's local frame, restricted to those meeting the points' extent.
+
+    ``path=None`` is handled by the caller (:func:`footprints_from_points`).
     """
     import shapely
 
     from ..datamodel import Footprints
     from ..io.vector import read_footprints
 
-    if path is None:
-        raise InputError("--footprints is required for now")
     fps, _ = read_footprints(path, layer=layer, id_field=id_field, origin=cloud.origin[:2],
                              xy_unit=cloud.xy_unit, target_crs=cloud.crs)
     lo = cloud.xyz[:, :2].min(axis=0)
@@ -459,8 +482,9 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         LAS/LAZ tiles, read as one area.
     output : path
         ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
-    footprints : path
-        Any OGR vector source with building polygons.
+    footprints : path, optional
+        Any OGR vector source with building polygons; without it footprints are
+        traced from the building points and regularised by the 2-D snake.
     lods : sequence of {"1.2", "1.3", "2.2"}, optional
         LoDs to write; overrides ``[lod1] lods`` of the configuration.
     crs : str, optional
@@ -498,7 +522,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
     building, ground, classes = point_roles(cloud, cfg)
-    fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
+    if footprints is None:
+        logger.info("no footprints given: tracing them from the building points")
+        fps = footprints_from_points(cloud, classes, config=others.get("footprints"))
+    else:
+        fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
     if method not in LOD22_METHODS:
         raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
     results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
