@@ -19,24 +19,9 @@ import time
 import numpy as np
 from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import minimum_spanning_tree
-from scipy.spatial import Delaunay
 
 from lidar2city.snake import graph_energy, minimize_energy
-
-
-def building_like_graph(n, extra, rng):
-    pts = rng.random((n, 2))
-    tri = Delaunay(pts)
-    ed = sorted({tuple(sorted((int(s[i]), int(s[(i + 1) % 3])))) for s in tri.simplices for i in range(3)})
-    ea = np.array(ed)
-    w = np.linalg.norm(pts[ea[:, 0]] - pts[ea[:, 1]], axis=1)
-    mst = minimum_spanning_tree(coo_matrix((w, (ea[:, 0], ea[:, 1])), shape=(n, n))).tocoo()
-    tree = set(zip(np.minimum(mst.row, mst.col).tolist(), np.maximum(mst.row, mst.col).tolist(), strict=True))
-    rest = [e for e in ed if e not in tree]
-    pick = rng.choice(len(rest), size=min(extra, len(rest)), replace=False)
-    return sorted(tree) + [rest[i] for i in pick]
+from lidar2city.synthetic import building_like_graph
 
 
 def wheels_graph(k, spokes=5):

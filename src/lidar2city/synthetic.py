@@ -19,7 +19,8 @@ import numpy as np
 from .datamodel import ASPRS, Footprints, PointCloud
 from .errors import InputError
 
-__all__ = ["RoofPart", "TruthBuilding", "SyntheticTown", "make_town", "roof_height"]
+__all__ = ["RoofPart", "TruthBuilding", "SyntheticTown", "make_town", "roof_height",
+           "building_like_graph"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,3 +360,26 @@ def make_town(*, size=(200.0, 150.0), density=10.0, seed=0, noise_sigma=0.05,
     fps = Footprints([b.footprint for b in buildings], [b.id for b in buildings],
                      {"roof_type": [b.roof_type for b in buildings]})
     return SyntheticTown(cloud, fps, buildings, terrain, placed)
+
+
+def building_like_graph(n, extra, rng) -> list:
+    """Edges of a random planar graph shaped like a building topology: a spanning tree of a
+    Delaunay graph of ``n`` random points plus ``extra`` of its other edges (cycles).
+
+    Serves the snake solver's tests and benchmark.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import minimum_spanning_tree
+    from scipy.spatial import Delaunay
+
+    pts = rng.random((n, 2))
+    tri = Delaunay(pts)
+    ed = sorted({tuple(sorted((int(s[i]), int(s[(i + 1) % 3])))) for s in tri.simplices for i in range(3)})
+    ea = np.array(ed)
+    w = np.linalg.norm(pts[ea[:, 0]] - pts[ea[:, 1]], axis=1)
+    mst = minimum_spanning_tree(coo_matrix((w, (ea[:, 0], ea[:, 1])), shape=(n, n))).tocoo()
+    tree = set(zip(np.minimum(mst.row, mst.col).tolist(), np.maximum(mst.row, mst.col).tolist(),
+                   strict=True))
+    rest = [e for e in ed if e not in tree]
+    pick = rng.choice(len(rest), size=min(extra, len(rest)), replace=False)
+    return sorted(tree) + [rest[i] for i in pick]

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from lidar2city.errors import InputError
 from lidar2city.snake import graph_energy, minimize_energy
+from lidar2city.synthetic import building_like_graph
 
 
 def brute_force(unary, edges, tables):
@@ -174,24 +175,6 @@ def test_invalid_inputs(unary, edges, tables, name):
 def test_unknown_strategy():
     with pytest.raises(InputError, match="strategy"):
         minimize_energy([np.zeros(1)], [], [], strategy="magic")
-
-
-def building_like_graph(n, extra, rng):
-    """A random spanning tree of a planar (Delaunay) graph plus ``extra`` planar chords."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import minimum_spanning_tree
-    from scipy.spatial import Delaunay
-
-    pts = rng.random((n, 2))
-    tri = Delaunay(pts)
-    ed = sorted({tuple(sorted((int(s[i]), int(s[(i + 1) % 3])))) for s in tri.simplices for i in range(3)})
-    ea = np.array(ed)
-    w = np.linalg.norm(pts[ea[:, 0]] - pts[ea[:, 1]], axis=1)
-    mst = minimum_spanning_tree(coo_matrix((w, (ea[:, 0], ea[:, 1])), shape=(n, n))).tocoo()
-    tree = set(zip(np.minimum(mst.row, mst.col).tolist(), np.maximum(mst.row, mst.col).tolist(), strict=True))
-    rest = [e for e in ed if e not in tree]
-    pick = rng.choice(len(rest), size=extra, replace=False)
-    return sorted(tree) + [rest[i] for i in pick]
 
 
 def test_building_topology_60_vertices_25_states_is_fast():

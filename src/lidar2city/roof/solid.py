@@ -59,6 +59,27 @@ def conform(rings_per_face, *, tol=1e-3):
 
     pts = np.unique(np.concatenate([r for rs in rings_per_face for r in rs]), axis=0)
     tree = shapely.STRtree(shapely.points(pts))
+
+    def on_edge(p, q):
+        d = q - p
+        L2 = float(d @ d)
+        if L2 == 0:
+            return []
+        cand = tree.query(shapely.LineString([p, q]).buffer(tol))
+        if not len(cand):
+            return []
+        c = pts[cand]
+        t = ((c - p) @ d) / L2
+        dist = np.abs((c[:, 0] - p[0]) * d[1] - (c[:, 1] - p[1]) * d[0]) / np.sqrt(L2)
+        ends = np.minimum(np.hypot(*(c - p).T), np.hypot(*(c - q).T))
+        on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
+        return list(c[on][np.argsort(t[on])])
+
+    return _insert_on_edges(rings_per_face, on_edge)
+
+
+def _insert_on_edges(rings_per_face, inserted):
+    """The rings with ``inserted(p, q)`` (points inside edge p -> q, in order) added."""
     out = []
     for rs in rings_per_face:
         new_rs = []
@@ -67,20 +88,7 @@ def conform(rings_per_face, *, tol=1e-3):
             for k in range(len(r)):
                 p, q = r[k], r[(k + 1) % len(r)]
                 seq.append(p)
-                d = q - p
-                L2 = float(d @ d)
-                if L2 == 0:
-                    continue
-                cand = tree.query(shapely.LineString([p, q]).buffer(tol))
-                if not len(cand):
-                    continue
-                c = pts[cand]
-                t = ((c - p) @ d) / L2
-                dist = np.abs((c[:, 0] - p[0]) * d[1] - (c[:, 1] - p[1]) * d[0]) / np.sqrt(L2)
-                ends = np.minimum(np.hypot(*(c - p).T), np.hypot(*(c - q).T))
-                on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
-                for j in np.argsort(t[on]):
-                    seq.append(c[on][j])
+                seq.extend(inserted(p, q))
             new_rs.append(np.asarray(seq))
         out.append(new_rs)
     return out
@@ -131,20 +139,8 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
                     inserts[(_key(q), _key(p))] = x
     if not inserts:
         return rings
-    out = []
-    for rs in rings:
-        new_rs = []
-        for r in rs:
-            pts = []
-            for k in range(len(r)):
-                p, q = r[k], r[(k + 1) % len(r)]
-                pts.append(p)
-                x = inserts.get((_key(p), _key(q)))
-                if x is not None:
-                    pts.append(x)
-            new_rs.append(np.asarray(pts))
-        out.append(new_rs)
-    return out
+    return _insert_on_edges(rings, lambda p, q: [x] if (x := inserts.get((_key(p), _key(q)))) is not None
+                            else [])
 
 
 def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
