@@ -37,10 +37,13 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--check-images", type=click.Path(file_okay=False), default=None,
               help="With --method primitives: folder for a PNG per building (wire frame over "
                    "its points).")
+@click.option("--block-size", type=click.FloatRange(min=10.0), default=1000.0, show_default=True,
+              help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
+                   "bounded by a few tiles and results do not depend on the tiling.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
 def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
-            method, primitives_file, check_images, quiet):
-    """Build 3D buildings from point cloud tiles INPUTS (read as one area) or from a DSM.
+            method, primitives_file, check_images, block_size, quiet):
+    """Build 3D buildings from point cloud tiles INPUTS (one area, block by block) or from a DSM.
 
     \b
     lidar2city reconstruct TILE.laz [TILE.laz...] [--footprints FP] [--lod ...] -o OUT
@@ -97,7 +100,7 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
         summary = reconstruct(list(inputs), output, footprints=footprints, lods=lods or None,
                               crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
                               progress=on_progress, method=method, primitives=primitives_file,
-                              check_images=check_images)
+                              check_images=check_images, block_size=block_size)
     finally:
         if bar_state["bar"] is not None:
             bar_state["bar"].__exit__(None, None, None)

@@ -14,7 +14,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LasTile", "read_las", "read_points", "write_las", "write_points", "POINT_ATTRIBUTES"]
+__all__ = ["LasTile", "TileInfo", "TileReader", "read_las", "read_points", "scan_tiles",
+           "write_las", "write_points", "POINT_ATTRIBUTES"]
 
 #: laspy dimension names copied into :attr:`PointCloud.attributes` when present.
 POINT_ATTRIBUTES = (
@@ -133,6 +134,140 @@ def read_points(paths, *, crs=None, require_crs=False) -> PointCloud:
         clouds[0].xy_unit, clouds[0].z_unit,
         {k: np.concatenate([c.attributes[k] for c in clouds]) for k in sorted(keys)},
     )
+
+
+@dataclass(frozen=True, eq=False)
+class TileInfo:
+    """A tile's header: path, bounds (CRS units), point count and CRS."""
+
+    path: str
+    mins: np.ndarray
+    maxs: np.ndarray
+    count: int
+    crs: object
+
+
+def scan_tiles(paths, *, crs=None) -> list:
+    """Headers of LAS/LAZ tiles (no points read): bounds, counts, one shared CRS.
+
+    Raises
+    ------
+    FileFormatError, CRSError, EmptyInputError
+    """
+    import laspy
+
+    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
+        paths = [paths]
+    forced = parse_crs(crs) if crs is not None else None
+    out = []
+    for path in paths:
+        p = check_input_file(path)
+        try:
+            with laspy.open(p) as f:
+                h = f.header
+                mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
+                tile_crs = forced if forced is not None else _read_crs(f, p)
+        except (FileFormatError, CRSError):
+            raise
+        except Exception as exc:  # laspy / lazrs errors of several kinds
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise FileFormatError(f"{str(p)!r} is not a readable LAS/LAZ file: {msg}") from None
+        out.append(TileInfo(str(p), mins, maxs, count, tile_crs))
+    if not out:
+        raise EmptyInputError("no input file given")
+    if len({t.crs.to_wkt() if t.crs is not None else None for t in out}) > 1:
+        raise CRSError("input tiles have different CRSs; pass --crs to force one or reproject them")
+    if not any(t.count for t in out):
+        raise EmptyInputError("the input files hold no points")
+    return out
+
+
+class TileReader:
+    """The points of a set of tiles inside world boxes, whatever the tiling.
+
+    A box's points come from every tile whose header bounds meet it and are
+    put in a canonical order (by x, y, z, then the other attributes), so the
+    cloud of a box is the same however the area was cut into files and in
+    whichever order they were given. Decoded tiles are kept in a small
+    least-recently-used cache (``cache`` tiles): visiting boxes in spatial
+    order reads each tile about once, and memory stays bounded by a few tiles.
+
+    Parameters
+    ----------
+    tiles : list of TileInfo
+        From :func:`scan_tiles`.
+    origin : array_like, shape (3,), optional
+        World coordinates of the local origin; default the lower corner of all
+        tiles rounded down to whole CRS units (z = 0).
+    """
+
+    def __init__(self, tiles, *, origin=None, cache: int = 9):
+        from collections import OrderedDict
+
+        self.tiles = list(tiles)
+        self.crs = self.tiles[0].crs
+        self.xy_unit, self.z_unit = unit_factors(self.crs)
+        if origin is None:
+            mins = [t.mins for t in self.tiles if t.count]
+            origin = np.floor(np.min(mins, axis=0))
+            origin[2] = 0.0
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.cache = max(1, int(cache))
+        self._tiles = OrderedDict()
+        self.reads = 0
+
+    @property
+    def count(self) -> int:
+        return sum(t.count for t in self.tiles)
+
+    def world_bounds(self) -> np.ndarray:
+        """``[xmin, ymin, xmax, ymax]`` of all tiles (CRS units)."""
+        mins = np.min([t.mins for t in self.tiles], axis=0)
+        maxs = np.max([t.maxs for t in self.tiles], axis=0)
+        return np.array([mins[0], mins[1], maxs[0], maxs[1]])
+
+    def _tile(self, k):
+        if k in self._tiles:
+            self._tiles.move_to_end(k)
+            return self._tiles[k]
+        t = read_las(self.tiles[k].path, crs=self.crs)
+        self.reads += 1
+        las = t.data
+        world = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+        # snapped to the file's resolution: offset + integer x scale is rounded
+        # differently for different offsets, and tiles cut from one survey may
+        # carry different offsets
+        scales = np.asarray(las.header.scales, dtype=np.float64)
+        world = np.round(world / scales) * scales
+        if not np.isfinite(world).all():
+            raise InputError(f"{self.tiles[k].path}: point coordinates contain NaN or infinite values")
+        names = set(las.point_format.dimension_names)
+        attrs = {n: np.asarray(las[n]) for n in POINT_ATTRIBUTES if n in names}
+        self._tiles[k] = (world, attrs)
+        while len(self._tiles) > self.cache:
+            self._tiles.popitem(last=False)
+        return self._tiles[k]
+
+    def box(self, xmin, ymin, xmax, ymax) -> PointCloud:
+        """The points with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (world CRS units)."""
+        parts, attrs = [], []
+        for k, t in enumerate(self.tiles):
+            if not t.count or t.maxs[0] < xmin or t.mins[0] > xmax or t.maxs[1] < ymin \
+                    or t.mins[1] > ymax:
+                continue
+            world, a = self._tile(k)
+            inside = ((world[:, 0] >= xmin) & (world[:, 0] <= xmax)
+                      & (world[:, 1] >= ymin) & (world[:, 1] <= ymax))
+            parts.append(world[inside])
+            attrs.append({n: v[inside] for n, v in a.items()})
+        keys = sorted(set.intersection(*(set(a) for a in attrs))) if attrs else []
+        world = np.concatenate(parts) if parts else np.zeros((0, 3))
+        values = {n: np.concatenate([a[n] for a in attrs]) for n in keys}
+        # canonical order: the same points give the same cloud whatever the tiling
+        order = np.lexsort([values[n] for n in reversed(keys)] + [world[:, 2], world[:, 1], world[:, 0]])
+        return PointCloud.from_world(world[order], crs=self.crs, xy_unit=self.xy_unit,
+                                     z_unit=self.z_unit, origin=self.origin,
+                                     attributes={n: v[order] for n, v in values.items()})
 
 
 def write_las(path, tile: LasTile, *, classification=None) -> None:

@@ -384,10 +384,22 @@ def _fields_for_output(footprints):
     return {k: v for k, v in footprints.attributes.items() if not k.startswith("_")}
 
 
+#: attributes that measure a run (wall times) rather than describe a building: kept on the
+#: results for summaries and benchmarks, never written, so that outputs are deterministic
+RUN_ATTRIBUTES = ("reconstruction_time", "lod22_time")
+
+
 def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attributes=None,
                     lods=("1.2",)) -> str:
-    """Write results in the format chosen by ``fmt`` or the file name; returns the format."""
+    """Write results in the format chosen by ``fmt`` or the file name; returns the format.
+
+    The same results give the same file: :data:`RUN_ATTRIBUTES` are left out.
+    """
+    import dataclasses
+
     fmt = format_from_name(path, fmt)
+    results = [dataclasses.replace(r, attributes={k: v for k, v in r.attributes.items()
+                                                  if k not in RUN_ATTRIBUTES}) for r in results]
     title = f"lidar2city LoD{'+'.join(lods)} buildings"
     common = dict(origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
                   configuration=configuration, attributes=attributes, title=title)
@@ -473,13 +485,24 @@ LOD22_METHODS = ("roof", "primitives")
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None, check_images=None) -> ReconstructSummary:
+                primitives=None, check_images=None, block_size=1000.0) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
+
+    The area is processed block by block: blocks are the cells of a square
+    grid of ``block_size`` metres aligned on the CRS's origin (not on the
+    tiles), a building belongs to the block holding the centre of its
+    footprint's bounding box, and each block reads only the points of its
+    buildings plus a margin (their ground ring, the area's ground level within
+    50 m, the roof overhang) from the tiles that meet it. Memory is bounded by
+    a few tiles, and a building gets the same points, hence the same model,
+    however the area is cut into files and in whichever order they are given.
+    Without footprints, a block traces the footprints in its cell plus a
+    buffer (``margin`` + 100 m) and keeps those centred in its cell.
 
     Parameters
     ----------
     inputs : path or sequence of paths
-        LAS/LAZ tiles, read as one area.
+        LAS/LAZ tiles of one area (one CRS).
     output : path
         ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
     footprints : path, optional
@@ -502,49 +525,93 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     check_images : path, optional
         With ``method="primitives"``: a folder for one PNG per building, the fitted
         wire frame over its points, for checking by eye.
+    block_size : float
+        Side (m) of the processing blocks.
 
     Returns
     -------
     ReconstructSummary
     """
-    from ..io.las import read_points
+    from ..datamodel import PointCloud
+    from ..io.las import TileReader, scan_tiles
 
     t0 = time.perf_counter()
     fmt = format_from_name(output, fmt)
+    if method not in LOD22_METHODS:
+        raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
+    if primitives is not None or check_images is not None:
+        if not ("2.2" in (lods or ()) and method == "primitives"):
+            raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
+    if not block_size > 0:
+        raise InputError(f"block_size must be positive, got {block_size}")
     want22 = "2.2" in (lods or ())
     cfg, resolved, others = lod1_config(
         config, lods=lods, stages=(("lod22" if method == "roof" else "primitives"),) if want22 else ())
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
-    cloud = read_points(inputs, crs=crs)
-    cloud.require_points()
-    if cloud.crs is None:
+    reader = TileReader(scan_tiles(inputs, crs=crs))
+    if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
-    building, ground, classes = point_roles(cloud, cfg)
-    if footprints is None:
-        logger.info("no footprints given: tracing them from the building points")
-        fps = footprints_from_points(cloud, classes, config=others.get("footprints"))
-    else:
-        fps = load_footprints(footprints, cloud, id_field=id_field, layer=layer)
-    if method not in LOD22_METHODS:
-        raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
-    results = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
-                                    progress=progress,
-                                    lod22=lod22)
-    if want22 and method == "primitives":
+    frame = PointCloud(np.zeros((0, 3)), reader.origin, reader.crs, reader.xy_unit, reader.z_unit, {})
+    user_prims = None
+    if want22 and method == "primitives" and primitives is not None:
         from ..io.primitives import read_primitives
 
-        classified = cloud.with_attributes(classification=classes)
-        prims = add_primitives(results, classified, fps, config=others.get("primitives"),
-                               user_primitives=read_primitives(primitives) if primitives else None)
-        if check_images is not None:
-            from .primitives import write_check_images
+        user_prims = read_primitives(primitives)
+    # what a building needs around its footprint: its ground ring, the area's
+    # ground level (50 m) and the roof's overhang
+    margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
+    if footprints is None:
+        logger.info("no footprints given: tracing them from the building points")
+        blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg)
+    else:
+        blocks = _footprint_blocks(reader, footprints, block_size, margin,
+                                   id_field=id_field, layer=layer)
+    total = None if footprints is None else sum(len(b[1]) for b in blocks)
+    done = 0
 
-            Path(check_images).mkdir(parents=True, exist_ok=True)
-            write_check_images(check_images, classified, prims)
-    elif primitives is not None or check_images is not None:
-        raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
+    def on_progress(_d, _t, res):
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total, res)
+
+    results, fp_parts, prims, any_points = [], [], [], False
+    for cloud, fps, classes in (_load_blocks(reader, blocks, cfg) if footprints is not None else blocks):
+        any_points |= cloud is not None
+        if cloud is None:  # no building point in this block
+            res = [_unmodelled(fid, "no building point in the block around the footprint")
+                   for fid in fps.ids]
+            for r in res:
+                on_progress(0, 0, r)
+        else:
+            building = np.isin(classes, cfg.building_classes)
+            ground = np.isin(classes, cfg.ground_classes)
+            res = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
+                                        progress=on_progress, lod22=lod22)
+            if want22 and method == "primitives":
+                classified = cloud.with_attributes(classification=classes)
+                prims.append((classified, add_primitives(res, classified, fps,
+                                                         config=others.get("primitives"),
+                                                         user_primitives=user_prims)))
+        results.extend(res)
+        fp_parts.append(fps)
+    if not any_points:
+        raise EmptyInputError("no building point found in the input, even after classification"
+                              if footprints is not None else "no building footprint found in the points")
+    fps = _concat_footprints(fp_parts)
+    if footprints is not None:  # back in the footprint file's order
+        order = np.argsort([i for _, b in blocks for i in b.attributes["_index"]], kind="stable")
+        results = [results[i] for i in order]
+        fps = _subset(fps, order)
+    if check_images is not None:
+        from .primitives import write_check_images
+
+        Path(check_images).mkdir(parents=True, exist_ok=True)
+        for classified, p in prims:
+            write_check_images(check_images, classified, p)
+    cloud = frame
     for r in results:  # LoD1 built only as the base of LoD2.2 is not written
         for lod in [k for k in r.solids if k not in want]:
             del r.solids[lod]
@@ -571,6 +638,127 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     summary.seconds = time.perf_counter() - t0
     return summary
 
+
+
+def _unmodelled(fid, reason):
+    from ..datamodel import BuildingResult
+
+    return BuildingResult(str(fid), status="failed", reason=reason)
+
+
+def _concat_footprints(parts):
+    from ..datamodel import Footprints
+
+    geoms = [g for p in parts for g in p.geometries]
+    ids = [i for p in parts for i in p.ids]
+    keys = sorted(set().union(*(p.attributes for p in parts))) if parts else []
+    attrs = {k: [v for p in parts for v in p.attributes.get(k, [None] * len(p))] for k in keys}
+    return Footprints(geoms, ids, attrs)
+
+
+def _subset(fps, idx):
+    from ..datamodel import Footprints
+
+    return Footprints([fps.geometries[i] for i in idx], [fps.ids[i] for i in idx],
+                      {k: [v[i] for i in idx] for k, v in fps.attributes.items()})
+
+
+def _block_keys(centres_local, reader, block_size):
+    """Grid cell (on the CRS's origin) of local points: ``(row, col)`` per point."""
+    world = reader.origin[:2] + np.asarray(centres_local, dtype=np.float64) / reader.xy_unit
+    return np.floor(world / (block_size / reader.xy_unit)).astype(np.int64)
+
+
+def _footprint_blocks(reader, path, block_size, margin, *, id_field=None, layer=None):
+    """``[(world box, Footprints)]``: the footprints grouped by block, blocks row by row."""
+    import shapely
+
+    from ..io.vector import read_footprints
+
+    fps, _ = read_footprints(path, layer=layer, id_field=id_field, origin=reader.origin[:2],
+                             xy_unit=reader.xy_unit, target_crs=reader.crs)
+    wb = reader.world_bounds()
+    lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
+    hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
+    area = shapely.box(lo[0], lo[1], hi[0], hi[1])
+    keep = [i for i, g in enumerate(fps.geometries) if g is None or g.intersects(area)]
+    if not keep:
+        raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
+                              "point cloud's extent (check both CRSs)")
+    if len(keep) < len(fps):
+        logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
+    fps = _subset(fps, keep)
+    fps.attributes["_index"] = list(range(len(fps)))
+    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
+                       for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    empty = ~np.isfinite(centre).all(axis=1)
+    keys = _block_keys(np.where(empty[:, None], 0.0, centre), reader, block_size)
+    blocks = []
+    for key in sorted({(int(k[1]), int(k[0])) for k in keys}):
+        idx = [i for i in range(len(fps)) if (keys[i, 1], keys[i, 0]) == key]
+        b = bounds[[i for i in idx if not empty[i]]]
+        if len(b):
+            box = np.array([b[:, 0].min() - margin, b[:, 1].min() - margin,
+                            b[:, 2].max() + margin, b[:, 3].max() + margin])
+            world = np.concatenate([reader.origin[:2] + box[:2] / reader.xy_unit,
+                                    reader.origin[:2] + box[2:] / reader.xy_unit])
+        else:
+            world = None
+        blocks.append((world, _subset(fps, idx)))
+    return blocks
+
+
+def _classified_box(reader, world_box, config):
+    """``(cloud, classes)`` of a world box, or ``(None, None)`` without building points."""
+    cloud = reader.box(*world_box)
+    if len(cloud) == 0:
+        return None, None
+    try:
+        _, _, classes = point_roles(cloud, config)
+    except EmptyInputError:
+        return None, None
+    return cloud, classes
+
+
+def _load_blocks(reader, blocks, config):
+    for world, fps in blocks:
+        cloud, classes = (None, None) if world is None else _classified_box(reader, world, config)
+        yield cloud, fps, classes
+
+
+def _traced_blocks(reader, block_size, margin, footprints_config, config):
+    """``(cloud, Footprints, classes)`` per block of the tiles' extent, traced in the block
+    plus a buffer and kept when centred in the block."""
+    buffer = margin + 100.0
+    wb = reader.world_bounds()
+    step = block_size / reader.xy_unit
+    k0 = np.floor(wb[:2] / step).astype(np.int64)
+    k1 = np.floor(wb[2:] / step).astype(np.int64)
+    n = 0
+    for row in range(k0[1], k1[1] + 1):
+        for col in range(k0[0], k1[0] + 1):
+            pad = buffer / reader.xy_unit
+            world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
+                     (row + 1) * step + pad)
+            cloud, classes = _classified_box(reader, world, config)
+            if cloud is None:
+                continue
+            try:
+                fps = footprints_from_points(cloud, classes, config=footprints_config)
+            except EmptyInputError:
+                continue
+            bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
+            centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2,
+                                      (bounds[:, 1] + bounds[:, 3]) / 2])
+            keys = _block_keys(centre, reader, block_size)
+            idx = [i for i in range(len(fps)) if keys[i, 0] == col and keys[i, 1] == row]
+            if not idx:
+                continue
+            fps = _subset(fps, idx)
+            ids = [f"b{n + j + 1}" for j in range(len(idx))]
+            n += len(idx)
+            yield cloud, type(fps)(fps.geometries, ids, fps.attributes), classes
 
 def _reason_kind(reason: str) -> str:
     """A reason without its numbers, to count failures by kind."""
