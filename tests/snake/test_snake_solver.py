@@ -238,3 +238,18 @@ def test_equals_milp_on_medium_planar_graphs(seed):
     for strategy in ("auto", "paper"):
         sol = minimize_energy(unary, edges, tables, strategy=strategy)
         assert sol.energy == pytest.approx(res.fun, abs=1e-6)
+def test_min_over_large_tables_agree_with_broadcasting():
+    """The running-minimum path for tables above the broadcast limit gives what numpy does."""
+    from lidar2city.snake.solver import _BROADCAST_LIMIT, _min_over
+
+    rng = np.random.default_rng(3)
+    n = 41
+    shape = (n, n, n, n)
+    assert np.prod(shape) > _BROADCAST_LIMIT
+    arrays = [rng.random((n, n, n, 1)), rng.random((1, n, n, n)), rng.random((n, 1, 1, n)),
+              rng.random((1, 1, 1, 1))]
+    for axis in range(4):
+        best, arg = _min_over(arrays, axis, shape)
+        total = arrays[0] + arrays[1] + arrays[2] + arrays[3]
+        assert np.array_equal(arg, total.argmin(axis=axis))
+        assert np.array_equal(best, total.min(axis=axis))

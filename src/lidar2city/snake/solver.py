@@ -324,18 +324,23 @@ def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
         arg = total.argmin(axis=axis)
         best = np.take_along_axis(total, np.expand_dims(arg, axis), axis=axis)
         return np.squeeze(best, axis=axis), arg
-    # Large table: run over the eliminated vertex's states, keeping a running minimum.
+    # Large table: run over the eliminated vertex's states, keeping a running minimum
+    # in preallocated buffers (the sums are taken in the same order as above).
     out_shape = shape[:axis] + shape[axis + 1:]
     best = np.full(out_shape, np.inf)
     arg = np.zeros(out_shape, dtype=np.int64)
+    cand = np.empty(out_shape)
+    better = np.empty(out_shape, dtype=bool)
     for j in range(shape[axis]):
-        cand = np.zeros(())
-        for a in arrays:
-            cand = cand + np.take(a, j if a.shape[axis] > 1 else 0, axis=axis)
-        cand = np.broadcast_to(cand, out_shape)
-        better = cand < best
+        for k, a in enumerate(arrays):
+            part = np.take(a, j if a.shape[axis] > 1 else 0, axis=axis)
+            if k == 0:
+                np.copyto(cand, part)
+            else:
+                np.add(cand, part, out=cand)
+        np.less(cand, best, out=better)
         np.copyto(best, cand, where=better)
-        arg[better] = j
+        np.copyto(arg, j, where=better)
     return best, arg
 
 
