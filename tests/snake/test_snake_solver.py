@@ -238,6 +238,8 @@ def test_equals_milp_on_medium_planar_graphs(seed):
     for strategy in ("auto", "paper"):
         sol = minimize_energy(unary, edges, tables, strategy=strategy)
         assert sol.energy == pytest.approx(res.fun, abs=1e-6)
+
+
 def test_min_over_large_tables_agree_with_broadcasting():
     """The running-minimum path for tables above the broadcast limit gives what numpy does."""
     from lidar2city.snake.solver import _BROADCAST_LIMIT, _min_over
