@@ -201,6 +201,28 @@ def test_ramp_reaching_the_ground_is_no_building():
     assert (classify_points(xyz, ground)[~ground] == 6).all()
 
 
+def test_long_narrow_deck_is_no_building():
+    """A flat 5 m x 50 m deck 6 m up with no ground contact (a footbridge over a river)
+    is a linear structure; an 8 m x 40 m flat roof (a long row of houses) is a building."""
+    rng = np.random.default_rng(12)
+    g = _grid(0, 70, 0, 40, 0.35, rng)
+
+    def scene_with(x0, x1, y0, y1):
+        top = _grid(x0, x1, y0, y1, 0.35, rng)
+        under = (g[:, 0] > x0) & (g[:, 0] < x1) & (g[:, 1] > y0) & (g[:, 1] < y1)
+        xyz = np.concatenate([np.column_stack([g[~under], np.zeros((~under).sum())]),
+                              np.column_stack([top, np.full(len(top), 6.0)])])
+        return xyz, np.arange(len(xyz)) < (~under).sum()
+
+    xyz, ground = scene_with(10, 60, 18, 23)
+    assert not np.any(classify_points(xyz, ground) == 6)
+    # the aspect test is what drops it
+    off = classify_points(xyz, ground, config=ClassifyConfig(max_linear_aspect=0))
+    assert (off[~ground] == 6).mean() > 0.9
+    xyz, ground = scene_with(10, 50, 16, 24)
+    assert (classify_points(xyz, ground)[~ground] == 6).all()
+
+
 def test_low_points_by_height():
     """Rough multi-return bushes: medium vegetation above medium_height, low below."""
     rng = np.random.default_rng(4)

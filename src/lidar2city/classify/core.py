@@ -22,7 +22,8 @@ Rabbani et al. 2006; Vosselman 2009):
 5. **Morphology on a grid**: roof seed cells are closed, small holes filled,
    and connected building areas dropped when smaller than
    ``min_building_area``, narrower than ``min_building_width`` everywhere
-   (bridges, walls) or too sparsely covered by seeds (``min_seed_coverage``:
+   (bridges, walls), long and narrow (``max_linear_aspect``: footbridges and
+   viaducts clear of the ground) or too sparsely covered by seeds (``min_seed_coverage``:
    trees give scattered planar patches, roofs are covered).
 6. **Point decision**: object points inside a building area and not above
    the roof as vegetation (rough, multi-return, optionally green) are
@@ -91,6 +92,8 @@ class ClassifyConfig:
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
     min_seed_coverage: float = field(0.5, "Smallest fraction of a building area's elevated cells holding roof seed points.")
     min_building_width: float = field(3.0, "Building areas narrower than this everywhere (m) are dropped (bridges, walls).")
+    max_linear_aspect: float = field(8.0, "Building areas narrower than linear_max_width and longer than this many times their width are linear structures (bridges, viaducts, covered walkways), not buildings; 0 disables.")
+    linear_max_width: float = field(6.0, "Widest (m) a linear structure can be (see max_linear_aspect).")
     min_building_area: float = field(15.0, "Smallest building area (m2); smaller ones are dropped.")
     max_roof_object_area: float = field(4.0, "Rough clusters above a roof up to this area (m2), mostly single returns, stay building (chimneys, dormers).")
     edge_buffer: float = field(0.5, "Points this close (m) outside a building area (walls, eaves) can join it (at least one cell).")
@@ -108,7 +111,7 @@ class ClassifyConfig:
                 raise ConfigError(f"classify.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("medium_height", "wall_min_height", "min_facet_area", "max_facet_rms",
                      "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance",
-                     "edge_buffer", "max_roof_object_area"):
+                     "edge_buffer", "max_roof_object_area", "max_linear_aspect", "linear_max_width"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"classify.{name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.max_angle < 90:
@@ -164,6 +167,27 @@ def _check(xyz, ground, hag, return_number, number_of_returns, rgb):
             if name == "hag" and not np.isfinite(arr).all():
                 raise InputError("hag contains NaN or infinite values")
         out.append(arr)
+    return out
+
+
+def _linear_structures(labels, n, cell, max_aspect, max_width) -> np.ndarray:
+    """Which of the ``n`` labelled areas are long and narrow (length and width along
+    their principal axes, in metres): ``width < max_width`` and ``length > max_aspect * width``."""
+    rows, cols = np.nonzero(labels)
+    lab = labels[rows, cols]
+    out = np.zeros(n, dtype=bool)
+    order = np.argsort(lab, kind="stable")
+    starts = np.searchsorted(lab[order], np.arange(1, n + 2))
+    for i in range(n):
+        idx = order[starts[i]:starts[i + 1]]
+        if len(idx) < 3:
+            continue
+        xy = np.column_stack([cols[idx], rows[idx]]).astype(np.float64) * cell
+        xy -= xy.mean(axis=0)
+        _, vec = np.linalg.eigh(xy.T @ xy)
+        uv = xy @ vec
+        width, length = np.ptp(uv, axis=0) + cell
+        out[i] = width < max_width and length > max_aspect * width
     return out
 
 
@@ -392,6 +416,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
                                           structure=disk_w)[pw:-pw, pw:-pw]
             wide = np.bincount(lab_flat, core.ravel(), minlength=nb + 1)[1:] > 0
             keep_b &= wide
+        if c.max_linear_aspect > 0:
+            keep_b &= ~_linear_structures(bl, nb, cell, c.max_linear_aspect,
+                                          c.linear_max_width)
         big = np.concatenate([[False], keep_b])
         building_grid = big[bl]
     else:
