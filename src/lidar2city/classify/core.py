@@ -192,12 +192,20 @@ def _linear_structures(labels, n, cell, max_aspect, max_width) -> np.ndarray:
 
 
 def _voxel_thin(xyz, size: float) -> np.ndarray:
-    """Indices of one point per cubic voxel of ``size`` metres (the first in input order)."""
-    v = np.floor((xyz - xyz.min(axis=0)) / size).astype(np.int64)
+    """Indices of one point per cubic voxel of ``size`` metres, sorted.
+
+    Voxels sit on a grid anchored at the local origin and a voxel keeps its
+    lowest point (then the least x, y): the same points are kept whatever
+    the extent or the order of the input (a tile alone, or with neighbours).
+    """
+    v = np.floor(xyz / size).astype(np.int64)
+    v -= v.min(axis=0)
     dims = v.max(axis=0) + 1
     key = (v[:, 0] * dims[1] + v[:, 1]) * dims[2] + v[:, 2]
-    _, first = np.unique(key, return_index=True)
-    return np.sort(first)
+    order = np.lexsort((xyz[:, 1], xyz[:, 0], xyz[:, 2], key))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = key[order[1:]] != key[order[:-1]]
+    return np.sort(order[first])
 
 
 def _disk(radius_cells: float) -> np.ndarray:
@@ -373,7 +381,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     # --- building grid: seed cells, closing, holes, area filter ------------
     from scipy import ndimage
 
-    x0, y0 = p[:, 0].min(), p[:, 1].min()
+    # the grid is anchored on the local origin, not on the points' extent, so a
+    # tile processed alone or with its neighbours puts cell edges in the same places
+    x0, y0 = np.floor(p[:, 0].min() / cell) * cell, np.floor(p[:, 1].min() / cell) * cell
     ncol = int(np.floor((p[:, 0].max() - x0) / cell)) + 1
     nrow = int(np.floor((p[:, 1].max() - y0) / cell)) + 1
     if nrow * ncol > _MAX_CELLS:

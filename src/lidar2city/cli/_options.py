@@ -4,12 +4,23 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["crs_option", "output_option", "progress", "progress_callback"]
+__all__ = ["crs_option", "neighbours_options", "output_option", "progress", "progress_callback"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
     help="CRS of the input (EPSG:xxxx, WKT or PROJ); overrides or supplies the file's own.",
 )
+
+
+def neighbours_options(f):
+    """``--neighbour`` (repeatable) and ``--buffer``: adjacent tiles filtered with the input."""
+    f = click.option("--buffer", type=click.FloatRange(min=0.0), default=50.0, show_default=True,
+                     help="Width (m) of the strip of the neighbouring tiles taken.")(f)
+    return click.option("--neighbour", "neighbours", multiple=True,
+                        type=click.Path(dir_okay=False),
+                        help="An adjacent tile (repeatable): its points near INPUT are "
+                             "processed with it so that INPUT's border sees beyond it; only "
+                             "INPUT's points are written.")(f)
 
 
 def output_option(**kwargs):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option
+from ._options import crs_option, neighbours_options, output_option
 
 NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
          5: "high vegetation", 6: "building", 7: "noise"}
@@ -21,7 +21,8 @@ NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
               help="Ground filter used when the ground is not taken from the file.")
 @click.option("--config", "config", default=None, type=click.Path(dir_okay=False),
               help="Run configuration (TOML); its [classify] table sets the parameters.")
-def command(input, output, crs, ground_from_file, ground_method, config):
+@neighbours_options
+def command(input, output, crs, ground_from_file, ground_method, config, neighbours, buffer):
     """Classify INPUT into ground (2), building (6), vegetation (3/4/5), noise (7), other (1).
 
     Every point is written to OUTPUT with all its attributes and its new class.
@@ -29,7 +30,8 @@ def command(input, output, crs, ground_from_file, ground_method, config):
     from ..tools.classify import classify_file
 
     summary = classify_file(input, output, crs=crs, ground_from_file=ground_from_file,
-                            ground_method=ground_method, config=config)
+                            ground_method=ground_method, config=config,
+                            neighbours=neighbours, buffer=buffer)
     parts = ", ".join(f"{NAMES.get(k, k)} {v:,}" for k, v in summary["classes"].items())
     click.echo(f"{output}: {summary['points']:,} points classified in "
                f"{summary['seconds']:.1f} s ({parts})")

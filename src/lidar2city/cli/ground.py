@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option
+from ._options import crs_option, neighbours_options, output_option
 
 METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
@@ -21,14 +21,15 @@ METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept lite
 @crs_option
 @click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
               help="Run configuration TOML; its [ground] table sets the filter parameters.")
-def command(input, output, method, dtm, cell, crs, config):
+@neighbours_options
+def command(input, output, method, dtm, cell, crs, config, neighbours, buffer):
     """Classify ground (ASPRS 2) and the rest (1) in INPUT; write every point to OUTPUT."""
     from ..tools.ground import ground_file
 
     if cell is not None and not cell > 0:
         raise click.BadParameter("must be > 0", param_hint="--cell")
     summary = ground_file(input, output, dtm_path=dtm, config=config, method=method,
-                          dtm_cell=cell, crs=crs)
+                          dtm_cell=cell, crs=crs, neighbours=neighbours, buffer=buffer)
     click.echo(f"{output}: {summary['ground']:,} of {summary['points']:,} points ground "
                f"({100.0 * summary['ground'] / summary['points']:.1f} %, {summary['method']})",
                err=True)

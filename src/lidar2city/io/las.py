@@ -15,6 +15,7 @@ from ._atomic import atomic_path, check_input_file
 logger = logging.getLogger(__name__)
 
 __all__ = ["LasTile", "TileInfo", "TileReader", "read_las", "read_points", "scan_tiles",
+           "with_neighbours",
            "write_las", "write_points", "POINT_ATTRIBUTES"]
 
 #: laspy dimension names copied into :attr:`PointCloud.attributes` when present.
@@ -268,6 +269,54 @@ class TileReader:
         return PointCloud.from_world(world[order], crs=self.crs, xy_unit=self.xy_unit,
                                      z_unit=self.z_unit, origin=self.origin,
                                      attributes={n: v[order] for n, v in values.items()})
+
+
+def with_neighbours(cloud, neighbours, *, buffer=50.0, crs=None):
+    """``cloud`` followed by the points of ``neighbours`` within ``buffer`` metres of its extent.
+
+    For filters that look around each point (ground, classification): a tile
+    is processed with a strip of its neighbours so that its border points see
+    the terrain and buildings beyond it, and only its own points (the first
+    ``len(cloud)``) are kept. Attributes present in both are carried.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+        The tile's points (its origin is kept).
+    neighbours : sequence of paths
+        Adjacent LAS/LAZ tiles in the same CRS (tiles outside the buffer are
+        not read).
+
+    Returns
+    -------
+    PointCloud
+    """
+    if not neighbours:
+        return cloud
+    if buffer < 0:
+        raise InputError(f"buffer must be >= 0, got {buffer}")
+    cloud.require_points()
+    reader = TileReader(scan_tiles(neighbours, crs=crs), origin=cloud.origin)
+    if cloud.crs is not None and reader.crs is not None and reader.crs != cloud.crs:
+        raise CRSError("the neighbouring tiles and the input have different CRSs; pass --crs "
+                       "to force one or reproject them")
+    lo = cloud.to_world(cloud.xyz[:, :2].min(axis=0)) - buffer / cloud.xy_unit
+    hi = cloud.to_world(cloud.xyz[:, :2].max(axis=0)) + buffer / cloud.xy_unit
+    extra = reader.box(lo[0], lo[1], hi[0], hi[1])
+    # neighbours' points inside the tile's own bounding box are left out (the list
+    # may hold the tile itself: no point is taken twice)
+    own_lo = cloud.to_world(cloud.xyz[:, :2].min(axis=0))
+    own_hi = cloud.to_world(cloud.xyz[:, :2].max(axis=0))
+    w = extra.to_world(extra.xyz[:, :2]) if len(extra) else np.zeros((0, 2))
+    outside = ~((w[:, 0] >= own_lo[0]) & (w[:, 0] <= own_hi[0]) & (w[:, 1] >= own_lo[1])
+                & (w[:, 1] <= own_hi[1]))
+    extra = extra.subset(outside)
+    logger.info("%d points of %d neighbouring tile(s) within %g m added", len(extra),
+                len(neighbours), buffer)
+    keys = sorted(set(cloud.attributes) & set(extra.attributes))
+    return PointCloud(np.concatenate([cloud.xyz, extra.xyz]), cloud.origin, cloud.crs,
+                      cloud.xy_unit, cloud.z_unit,
+                      {k: np.concatenate([cloud.attributes[k], extra.attributes[k]]) for k in keys})
 
 
 def write_las(path, tile: LasTile, *, classification=None) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..datamodel import ASPRS
 from ..errors import EmptyInputError
-from ..io.las import read_las, write_las
+from ..io.las import read_las, with_neighbours, write_las
 
 logger = logging.getLogger(__name__)
 
@@ -67,7 +67,7 @@ def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str 
 
 
 def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
-                  ground_method: str = "smrf", config=None) -> dict:
+                  ground_method: str = "smrf", config=None, neighbours=(), buffer=50.0) -> dict:
     """Classify every point of ``src`` and write them all, with every attribute, to ``dst``.
 
     Parameters
@@ -83,6 +83,12 @@ def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
     ground_method : str
         Method of :func:`lidar2city.ground.ground_mask` otherwise.
     config : ClassifyConfig, dict or path of a run TOML, optional
+    neighbours : sequence of paths
+        Adjacent tiles whose points within ``buffer`` metres are classified
+        with the input (:func:`lidar2city.io.las.with_neighbours`); only the
+        input's points are written.
+    buffer : float
+        Width (m) of that strip.
 
     Returns
     -------
@@ -98,8 +104,9 @@ def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
     tile = read_las(src, crs=crs)
     cloud = tile.point_cloud()
     cloud.require_points(str(src))
-    classes = classify_cloud(cloud, ground_from_file=ground_from_file,
-                             ground_method=ground_method, config=cfg)
+    wide = with_neighbours(cloud, neighbours, buffer=buffer, crs=crs)
+    classes = classify_cloud(wide, ground_from_file=ground_from_file,
+                             ground_method=ground_method, config=cfg)[:len(cloud)]
     write_las(dst, tile, classification=classes)
     values, counts = np.unique(classes, return_counts=True)
     summary = {

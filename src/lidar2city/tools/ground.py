@@ -39,7 +39,7 @@ def ground_config(config=None, **overrides):
 
 
 def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=None,
-                dtm_cell=None, crs=None) -> dict:
+                dtm_cell=None, crs=None, neighbours=(), buffer=50.0) -> dict:
     """Classify a LAS/LAZ tile into ground (ASPRS 2) and the rest (1); optionally write a DTM.
 
     Every input point is written with all its attributes; only the
@@ -60,6 +60,13 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
         Overrides ``ground.dtm_cell`` (metres).
     crs : str, optional
         CRS of the input (overrides the file's).
+    neighbours : sequence of paths
+        Adjacent tiles: their points within ``buffer`` metres of the input are
+        filtered with it (:func:`lidar2city.io.las.with_neighbours`), so the
+        input's border points see the terrain beyond it; only the input's
+        points are written.
+    buffer : float
+        Width (m) of the strip taken from the neighbours.
 
     Returns
     -------
@@ -77,14 +84,15 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
         NaN coordinates, bad options.
     """
     from ..ground import dtm_from_ground, ground_mask
-    from ..io.las import read_las
+    from ..io.las import read_las, with_neighbours
 
     cfg = ground_config(config, method=method, dtm_cell=dtm_cell)
     t0 = time.perf_counter()
     tile = read_las(input_path, crs=crs)
     cloud = tile.point_cloud()
     cloud.require_points(repr(tile.path))
-    mask = ground_mask(cloud.xyz, method=cfg.method, **cfg.method_params())
+    wide = with_neighbours(cloud, neighbours, buffer=buffer, crs=crs)
+    mask = ground_mask(wide.xyz, method=cfg.method, **cfg.method_params())[:len(cloud)]
     n_ground = int(mask.sum())
     if n_ground == 0:
         raise EmptyInputError(f"{tile.path!r}: no ground point found (method {cfg.method})")
