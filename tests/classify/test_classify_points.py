@@ -216,6 +216,12 @@ def test_long_narrow_deck_is_no_building():
 
     xyz, ground = scene_with(10, 60, 18, 23)
     assert not np.any(classify_points(xyz, ground) == 6)
+    # the same deck turned by 35 degrees (a diagonal strip of grid cells)
+    c, s_ = np.cos(np.radians(35.0)), np.sin(np.radians(35.0))
+    centre = np.array([35.0, 20.0])
+    turned = xyz.copy()
+    turned[:, :2] = (xyz[:, :2] - centre) @ np.array([[c, s_], [-s_, c]]) + centre
+    assert not np.any(classify_points(turned, ground) == 6)
     # the aspect test is what drops it
     off = classify_points(xyz, ground, config=ClassifyConfig(max_linear_aspect=0))
     assert (off[~ground] == 6).mean() > 0.9

@@ -43,6 +43,12 @@ def test_with_neighbours_adds_only_the_strip(halves):
     assert with_neighbours(west, []) is west
     with pytest.raises(InputError, match="buffer"):
         with_neighbours(west, [halves / "east.laz"], buffer=-1.0)
+    # a strip that reaches no neighbour point, or an empty neighbour: the tile as it is
+    far = west.subset(west.xyz[:, 0] < 20.0)
+    assert with_neighbours(far, [halves / "east.laz"], buffer=5.0) is far
+    empty = halves / "empty.laz"
+    write_points(empty, west.subset(np.zeros(len(west), bool)))
+    assert with_neighbours(west, [empty]) is west
 
 
 def test_with_neighbours_checks_the_crs(halves, tmp_path):
@@ -51,6 +57,10 @@ def test_with_neighbours_checks_the_crs(halves, tmp_path):
     write_points(tmp_path / "other.laz", east)
     with pytest.raises(CRSError, match="different CRSs"):
         with_neighbours(west, [tmp_path / "other.laz"])
+    # a tile without CRS cannot take neighbours with one (their units are unknown to it)
+    bare = west.__class__(west.xyz, west.origin, None, 1.0, 1.0, west.attributes)
+    with pytest.raises(CRSError, match="pass --crs"):
+        with_neighbours(bare, [halves / "east.laz"])
 
 
 @pytest.mark.parametrize("command", ["ground", "classify"])

@@ -38,7 +38,9 @@ def town_tiles(tmp_path_factory):
     o = raw.origin
     four = _split(raw, [o[0] + 55.0], [o[1] + 47.0], d, "four")
     strips = _split(raw, [o[0] + 33.0, o[0] + 81.0], [], d, "strip")
-    return town, d, {"whole": [d / "whole.laz"], "four": four[::-1],
+    empty = d / "empty.laz"  # an empty tile (header bounds at 0, 0) changes nothing
+    write_points(empty, raw.subset(np.zeros(len(raw), bool)))
+    return town, d, {"whole": [d / "whole.laz"], "four": four[::-1] + [empty],
                      "strips": [strips[1], strips[2], strips[0]]}
 
 
@@ -46,7 +48,7 @@ def test_tile_reader_box_is_the_same_whatever_the_tiling(town_tiles):
     _, d, sets = town_tiles
     boxes = []
     for paths in sets.values():
-        reader = TileReader(scan_tiles(paths), cache=2)
+        reader = TileReader(scan_tiles(paths, allow_empty=True), cache=2)
         o = reader.origin
         c = reader.box(o[0] + 20.0, o[1] + 10.0, o[0] + 100.0, o[1] + 60.0)
         boxes.append(c)
@@ -65,6 +67,7 @@ def test_scan_tiles_reads_headers_and_checks_crs(town_tiles, tmp_path):
     _, d, sets = town_tiles
     tiles = scan_tiles(sets["four"])
     assert sum(t.count for t in tiles) == read_las(d / "whole.laz").data.header.point_count
+    assert TileReader(tiles).world_bounds()[0] > 0  # the empty tile's zeros are left out
     bad = tmp_path / "bad.laz"
     bad.write_bytes(b"not a las file")
     with pytest.raises(FileFormatError, match="bad.laz"):
@@ -117,3 +120,37 @@ def test_delft_is_the_same_whatever_the_tiling(data, tmp_path):
         assert s.done == s.total == 132 and s.invalid == 0
         outs.append(out.read_bytes())
     assert outs[1] == outs[0] and outs[2] == outs[0]
+
+
+def test_classified_input_is_never_reclassified_block_by_block(tmp_path, monkeypatch):
+    """A classified input keeps its classes in every block, even a block without
+    building points (it is not ground-filtered and classified on its own)."""
+    import shapely
+
+    import lidar2city.tools.classify as tc
+    from lidar2city.io.cityjson import read_cityjson
+
+    def no_classification(*a, **k):
+        raise AssertionError("a block of a classified input was classified again")
+
+    monkeypatch.setattr(tc, "classify_cloud", no_classification)
+    town = make_town(size=(160.0, 60.0), density=4.0, seed=3)
+    # a field east of the town (ground only) and a footprint over it, more than the
+    # 50 m margin away from any building point: its block holds no building point
+    c = town.cloud
+    gx, gy = np.meshgrid(np.arange(200.0, 300.0, 0.5), np.arange(0.0, 60.0, 0.5))
+    field = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    attrs = {k: np.concatenate([v, np.full(len(field), ASPRS.GROUND if k == "classification" else 1,
+                                           dtype=v.dtype)]) for k, v in c.attributes.items()}
+    cloud = c.__class__(np.concatenate([c.xyz, field]), c.origin, c.crs, c.xy_unit, c.z_unit, attrs)
+    write_points(tmp_path / "c.laz", cloud)
+    lone = shapely.box(250.0, 20.0, 258.0, 28.0)
+    assert not any(g.intersects(lone.buffer(5.0)) for g in town.footprints.geometries)
+    write_polygons(tmp_path / "fp.gpkg", [*town.footprints.geometries, lone],
+                   {"id": [*town.footprints.ids, "lone"]}, origin=town.cloud.origin,
+                   crs=town.cloud.crs)
+    s = reconstruct([tmp_path / "c.laz"], tmp_path / "m.city.json", footprints=tmp_path / "fp.gpkg",
+                    block_size=50.0)
+    assert s.total == len(town.buildings) + 1 and s.failed == 1
+    assert next(iter(s.reasons)) == "no building point in the block around the footprint"
+    assert len(read_cityjson(tmp_path / "m.city.json").objects) == len(town.buildings) + 1

@@ -171,8 +171,9 @@ def _check(xyz, ground, hag, return_number, number_of_returns, rgb):
 
 
 def _linear_structures(labels, n, cell, max_aspect, max_width) -> np.ndarray:
-    """Which of the ``n`` labelled areas are long and narrow (length and width along
-    their principal axes, in metres): ``width < max_width`` and ``length > max_aspect * width``."""
+    """Which of the ``n`` labelled areas are long and narrow: ``width < max_width`` and
+    ``length > max_aspect * width``, with the length along the principal axis and the
+    width the area divided by it (metres)."""
     rows, cols = np.nonzero(labels)
     lab = labels[rows, cols]
     out = np.zeros(n, dtype=bool)
@@ -185,8 +186,10 @@ def _linear_structures(labels, n, cell, max_aspect, max_width) -> np.ndarray:
         xy = np.column_stack([cols[idx], rows[idx]]).astype(np.float64) * cell
         xy -= xy.mean(axis=0)
         _, vec = np.linalg.eigh(xy.T @ xy)
-        uv = xy @ vec
-        width, length = np.ptp(uv, axis=0) + cell
+        length = float(np.ptp(xy @ vec[:, 1])) + cell
+        # the mean width (area / length): the spread across the axis would count
+        # the stair steps of a diagonal strip of cells
+        width = len(idx) * cell * cell / length
         out[i] = width < max_width and length > max_aspect * width
     return out
 

@@ -37,7 +37,7 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--check-images", type=click.Path(file_okay=False), default=None,
               help="With --method primitives: folder for a PNG per building (wire frame over "
                    "its points).")
-@click.option("--block-size", type=click.FloatRange(min=10.0), default=1000.0, show_default=True,
+@click.option("--block-size", type=click.FloatRange(min=50.0), default=1000.0, show_default=True,
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
                    "bounded by a few tiles and results do not depend on the tiling.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")

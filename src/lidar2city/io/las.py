@@ -148,8 +148,10 @@ class TileInfo:
     crs: object
 
 
-def scan_tiles(paths, *, crs=None) -> list:
+def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     """Headers of LAS/LAZ tiles (no points read): bounds, counts, one shared CRS.
+
+    ``allow_empty``: tiles without points are accepted (neighbour lists).
 
     Raises
     ------
@@ -178,7 +180,7 @@ def scan_tiles(paths, *, crs=None) -> list:
         raise EmptyInputError("no input file given")
     if len({t.crs.to_wkt() if t.crs is not None else None for t in out}) > 1:
         raise CRSError("input tiles have different CRSs; pass --crs to force one or reproject them")
-    if not any(t.count for t in out):
+    if not allow_empty and not any(t.count for t in out):
         raise EmptyInputError("the input files hold no points")
     return out
 
@@ -202,7 +204,7 @@ class TileReader:
         tiles rounded down to whole CRS units (z = 0).
     """
 
-    def __init__(self, tiles, *, origin=None, cache: int = 9):
+    def __init__(self, tiles, *, origin=None, cache: int = 4):
         from collections import OrderedDict
 
         self.tiles = list(tiles)
@@ -222,10 +224,27 @@ class TileReader:
         return sum(t.count for t in self.tiles)
 
     def world_bounds(self) -> np.ndarray:
-        """``[xmin, ymin, xmax, ymax]`` of all tiles (CRS units)."""
-        mins = np.min([t.mins for t in self.tiles], axis=0)
-        maxs = np.max([t.maxs for t in self.tiles], axis=0)
+        """``[xmin, ymin, xmax, ymax]`` of the tiles holding points (CRS units)."""
+        full = [t for t in self.tiles if t.count]
+        mins = np.min([t.mins for t in full], axis=0)
+        maxs = np.max([t.maxs for t in full], axis=0)
         return np.array([mins[0], mins[1], maxs[0], maxs[1]])
+
+    def has_classes(self, classes) -> bool:
+        """Whether any point of the tiles carries one of ``classes`` (read in chunks,
+        stopping at the first hit)."""
+        import laspy
+
+        for t in self.tiles:
+            if not t.count:
+                continue
+            with laspy.open(t.path) as f:
+                if "classification" not in f.header.point_format.dimension_names:
+                    continue
+                for chunk in f.chunk_iterator(1_000_000):
+                    if np.isin(np.asarray(chunk.classification), classes).any():
+                        return True
+        return False
 
     def _tile(self, k):
         if k in self._tiles:
@@ -296,27 +315,49 @@ def with_neighbours(cloud, neighbours, *, buffer=50.0, crs=None):
     if buffer < 0:
         raise InputError(f"buffer must be >= 0, got {buffer}")
     cloud.require_points()
-    reader = TileReader(scan_tiles(neighbours, crs=crs), origin=cloud.origin)
-    if cloud.crs is not None and reader.crs is not None and reader.crs != cloud.crs:
-        raise CRSError("the neighbouring tiles and the input have different CRSs; pass --crs "
-                       "to force one or reproject them")
-    lo = cloud.to_world(cloud.xyz[:, :2].min(axis=0)) - buffer / cloud.xy_unit
-    hi = cloud.to_world(cloud.xyz[:, :2].max(axis=0)) + buffer / cloud.xy_unit
-    extra = reader.box(lo[0], lo[1], hi[0], hi[1])
-    # neighbours' points inside the tile's own bounding box are left out (the list
-    # may hold the tile itself: no point is taken twice)
+    tiles = scan_tiles(neighbours, crs=crs, allow_empty=True)
+    if crs is None:
+        theirs = tiles[0].crs
+        if theirs is not None and cloud.crs is None:
+            raise CRSError("the neighbouring tiles have a CRS and the input has none; pass --crs")
+        if theirs is None and cloud.crs is not None:
+            logger.warning("the neighbouring tiles have no CRS: taken to be the input's")
+            tiles = scan_tiles(neighbours, crs=cloud.crs, allow_empty=True)
+        elif theirs is not None and theirs != cloud.crs:
+            raise CRSError("the neighbouring tiles and the input have different CRSs; pass --crs "
+                           "to force one or reproject them")
+    tiles = [t for t in tiles if t.count]
+    if not tiles:
+        return cloud
+    reader = TileReader(tiles, origin=cloud.origin)
     own_lo = cloud.to_world(cloud.xyz[:, :2].min(axis=0))
     own_hi = cloud.to_world(cloud.xyz[:, :2].max(axis=0))
+    lo = own_lo - buffer / cloud.xy_unit
+    hi = own_hi + buffer / cloud.xy_unit
+    extra = reader.box(lo[0], lo[1], hi[0], hi[1])
+    # neighbours' points inside the tile's own bounding box are left out (the list
+    # may hold the tile itself: no point is taken twice; the tolerance covers the
+    # snapping of the neighbours' coordinates to their file's resolution)
+    tol = 1e-6  # CRS units: far below any file resolution
     w = extra.to_world(extra.xyz[:, :2]) if len(extra) else np.zeros((0, 2))
-    outside = ~((w[:, 0] >= own_lo[0]) & (w[:, 0] <= own_hi[0]) & (w[:, 1] >= own_lo[1])
-                & (w[:, 1] <= own_hi[1]))
+    outside = ~((w[:, 0] >= own_lo[0] - tol) & (w[:, 0] <= own_hi[0] + tol)
+                & (w[:, 1] >= own_lo[1] - tol) & (w[:, 1] <= own_hi[1] + tol))
     extra = extra.subset(outside)
     logger.info("%d points of %d neighbouring tile(s) within %g m added", len(extra),
                 len(neighbours), buffer)
-    keys = sorted(set(cloud.attributes) & set(extra.attributes))
+    if len(extra) == 0:
+        return cloud
+    attrs = {}
+    for k, own in cloud.attributes.items():
+        if k in extra.attributes:
+            attrs[k] = np.concatenate([own, extra.attributes[k].astype(own.dtype)])
+        else:
+            # a neighbour without the field (another point format): a neutral value
+            fill = 1 if k in ("classification", "return_number", "number_of_returns") else 0
+            logger.warning("the neighbouring tiles have no %r: their points get %d", k, fill)
+            attrs[k] = np.concatenate([own, np.full(len(extra), fill, dtype=own.dtype)])
     return PointCloud(np.concatenate([cloud.xyz, extra.xyz]), cloud.origin, cloud.crs,
-                      cloud.xy_unit, cloud.z_unit,
-                      {k: np.concatenate([cloud.attributes[k], extra.attributes[k]]) for k in keys})
+                      cloud.xy_unit, cloud.z_unit, attrs)
 
 
 def write_las(path, tile: LasTile, *, classification=None) -> None:

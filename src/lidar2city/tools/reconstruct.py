@@ -161,13 +161,15 @@ def lod1_config(config=None, *, lods=None, stages=()):
     return cfg, resolved, others
 
 
-def point_roles(cloud, config):
-    """Boolean masks ``(building, ground)`` of the cloud's points.
+def point_roles(cloud, config, *, classified=None):
+    """Boolean masks ``(building, ground)`` of the cloud's points, and the classes.
 
     Uses the classification the input carries (ASPRS 6 building, 2 ground by
     default; ``config.building_classes`` / ``ground_classes``); a raw tile
     without building points is ground-filtered and classified first
-    (:func:`lidar2city.tools.classify.classify_cloud`).
+    (:func:`lidar2city.tools.classify.classify_cloud`). ``classified`` makes
+    that choice for the caller (a run over many blocks decides it once for
+    all of them): True keeps the input's classes, False classifies.
 
     Raises
     ------
@@ -175,7 +177,12 @@ def point_roles(cloud, config):
         When no building point is found even after classification.
     """
     cls = cloud.get("classification")
-    if cls is None or not np.isin(cls, config.building_classes).any():
+    if classified is None:
+        classified = cls is not None and np.isin(cls, config.building_classes).any()
+    if classified and cls is not None:
+        if not np.isin(cls, config.building_classes).any():
+            raise EmptyInputError("no building point in the input's classes")
+    else:
         from .classify import classify_cloud
 
         logger.info("no building class in the input: filtering ground and classifying")
@@ -550,6 +557,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
     reader = TileReader(scan_tiles(inputs, crs=crs))
+    # classified input (some building points anywhere) or raw: decided once for
+    # the run, so that every block is treated alike whatever it holds
+    classified = reader.has_classes(cfg.building_classes)
+    if not classified:
+        logger.info("no building class in the input: every block is ground-filtered and classified")
     if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
@@ -559,12 +571,19 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         from ..io.primitives import read_primitives
 
         user_prims = read_primitives(primitives)
+        from ..fit.primitives import PRIMITIVES
+
+        for fid, spec in user_prims.items():  # checked before any block runs
+            if spec.get("primitive") not in PRIMITIVES:
+                raise InputError(f"{primitives}: footprint {fid}: unknown primitive "
+                                 f"{spec.get('primitive')!r}; known: {', '.join(PRIMITIVES)}")
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang
     margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
     if footprints is None:
         logger.info("no footprints given: tracing them from the building points")
-        blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg)
+        blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg,
+                                classified)
     else:
         blocks = _footprint_blocks(reader, footprints, block_size, margin,
                                    id_field=id_field, layer=layer)
@@ -577,12 +596,13 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         if progress is not None:
             progress(done, total, res)
 
-    results, fp_parts, prims, any_points = [], [], [], False
-    for cloud, fps, classes in (_load_blocks(reader, blocks, cfg) if footprints is not None else blocks):
+    results, fp_parts, any_points = [], [], False
+    for cloud, fps, classes in (_load_blocks(reader, blocks, cfg, classified) if footprints is not None else blocks):
         any_points |= cloud is not None
         if cloud is None:  # no building point in this block
-            res = [_unmodelled(fid, "no building point in the block around the footprint")
-                   for fid in fps.ids]
+            res = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
+                               else "no building point in the block around the footprint")
+                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
             for r in res:
                 on_progress(0, 0, r)
         else:
@@ -591,10 +611,14 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             res = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
                                         progress=on_progress, lod22=lod22)
             if want22 and method == "primitives":
-                classified = cloud.with_attributes(classification=classes)
-                prims.append((classified, add_primitives(res, classified, fps,
-                                                         config=others.get("primitives"),
-                                                         user_primitives=user_prims)))
+                with_classes = cloud.with_attributes(classification=classes)
+                fitted = add_primitives(res, with_classes, fps, config=others.get("primitives"),
+                                        user_primitives=user_prims)
+                if check_images is not None:  # block by block: nothing is kept
+                    from .primitives import write_check_images
+
+                    Path(check_images).mkdir(parents=True, exist_ok=True)
+                    write_check_images(check_images, with_classes, fitted)
         results.extend(res)
         fp_parts.append(fps)
     if not any_points:
@@ -605,12 +629,6 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         order = np.argsort([i for _, b in blocks for i in b.attributes["_index"]], kind="stable")
         results = [results[i] for i in order]
         fps = _subset(fps, order)
-    if check_images is not None:
-        from .primitives import write_check_images
-
-        Path(check_images).mkdir(parents=True, exist_ok=True)
-        for classified, p in prims:
-            write_check_images(check_images, classified, p)
     cloud = frame
     for r in results:  # LoD1 built only as the base of LoD2.2 is not written
         for lod in [k for k in r.solids if k not in want]:
@@ -709,25 +727,26 @@ def _footprint_blocks(reader, path, block_size, margin, *, id_field=None, layer=
     return blocks
 
 
-def _classified_box(reader, world_box, config):
+def _classified_box(reader, world_box, config, classified):
     """``(cloud, classes)`` of a world box, or ``(None, None)`` without building points."""
     cloud = reader.box(*world_box)
     if len(cloud) == 0:
         return None, None
     try:
-        _, _, classes = point_roles(cloud, config)
+        _, _, classes = point_roles(cloud, config, classified=classified)
     except EmptyInputError:
         return None, None
     return cloud, classes
 
 
-def _load_blocks(reader, blocks, config):
+def _load_blocks(reader, blocks, config, classified):
     for world, fps in blocks:
-        cloud, classes = (None, None) if world is None else _classified_box(reader, world, config)
+        cloud, classes = ((None, None) if world is None
+                          else _classified_box(reader, world, config, classified))
         yield cloud, fps, classes
 
 
-def _traced_blocks(reader, block_size, margin, footprints_config, config):
+def _traced_blocks(reader, block_size, margin, footprints_config, config, classified):
     """``(cloud, Footprints, classes)`` per block of the tiles' extent, traced in the block
     plus a buffer and kept when centred in the block."""
     buffer = margin + 100.0
@@ -741,7 +760,7 @@ def _traced_blocks(reader, block_size, margin, footprints_config, config):
             pad = buffer / reader.xy_unit
             world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
                      (row + 1) * step + pad)
-            cloud, classes = _classified_box(reader, world, config)
+            cloud, classes = _classified_box(reader, world, config, classified)
             if cloud is None:
                 continue
             try:
