@@ -1,16 +1,21 @@
-"""``reconstruct``: point cloud tiles (+ footprints) to LoD1 buildings in a file.
+"""``reconstruct``: point cloud tiles (+ footprints) to LoD1 / LoD2.2 buildings in a file.
 
 The job, for any number of tiles and buildings:
 
-1. read the tiles as one area (:func:`lidar2city.io.las.read_points`);
-2. split building and ground points by class (:func:`point_roles`);
-3. read the footprints into the same local frame (:func:`load_footprints`);
-4. index the points on a grid and give each building exactly the points within
-   its footprint's bounding box plus ``search_radius`` metres, so a result
-   does not depend on tiling, chunking or order (buildings are visited chunk
-   by chunk, spatially, for locality), and call the pure per-building
-   :func:`lidar2city.lod.reconstruct_building` (a Dask engine can map it);
-5. write CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`).
+1. index the tiles by their headers (:func:`lidar2city.io.las.scan_tiles`) and
+   decide once whether the input is classified or raw;
+2. read the footprints into one local frame (:func:`load_footprints`) and group
+   them by the cell of a CRS-aligned grid of ``block_size`` metres holding the
+   centre of their bounding box (without footprints, trace them per block);
+3. per block, read the points of its buildings plus a margin from the tiles
+   that meet it (:class:`lidar2city.io.las.TileReader`), classify them if the
+   input is raw (:func:`point_roles`), and give each building exactly the
+   points within its footprint's bounding box plus ``search_radius`` metres,
+   so a result does not depend on tiling, blocks or order; the pure
+   per-building :func:`lidar2city.lod.reconstruct_building` is what a Dask
+   engine would map;
+4. write CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`) in the
+   footprint file's order.
 
 ``progress(done, total, result)`` is called after every building.
 """
@@ -221,29 +226,29 @@ def footprints_from_points(cloud, classes, *, config=None):
                       | {"_note": [f.reason for f in found]})
 
 
-def load_footprints(path, cloud, *, id_field=None, layer=None):
+def load_footprints(path, cloud, *, id_field=None, layer=None, extent=None):
     """Footprints in the cloud's local frame, restricted to those meeting the points' extent.
 
+    ``cloud`` gives the frame (origin, units, CRS); ``extent`` (local
+    ``(xmin, ymin, xmax, ymax)``) replaces the extent of its points.
     ``path=None`` is handled by the caller (:func:`footprints_from_points`).
     """
     import shapely
 
-    from ..datamodel import Footprints
     from ..io.vector import read_footprints
 
     fps, _ = read_footprints(path, layer=layer, id_field=id_field, origin=cloud.origin[:2],
                              xy_unit=cloud.xy_unit, target_crs=cloud.crs)
-    lo = cloud.xyz[:, :2].min(axis=0)
-    hi = cloud.xyz[:, :2].max(axis=0)
-    area = shapely.box(lo[0], lo[1], hi[0], hi[1])
+    if extent is None:
+        extent = (*cloud.xyz[:, :2].min(axis=0), *cloud.xyz[:, :2].max(axis=0))
+    area = shapely.box(*extent)
     keep = [i for i, g in enumerate(fps.geometries) if g is None or g.intersects(area)]
     if not keep:
         raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
                               "point cloud's extent (check both CRSs)")
     if len(keep) < len(fps):
         logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
-    return Footprints([fps.geometries[i] for i in keep], [fps.ids[i] for i in keep],
-                      {k: [v[i] for i in keep] for k, v in fps.attributes.items()})
+    return _subset(fps, keep)
 
 
 def _chunk_order(geometries, chunk):
@@ -585,7 +590,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg,
                                 classified)
     else:
-        blocks = _footprint_blocks(reader, footprints, block_size, margin,
+        blocks = _footprint_blocks(reader, frame, footprints, block_size, margin,
                                    id_field=id_field, layer=layer)
     total = None if footprints is None else sum(len(b[1]) for b in blocks)
     done = 0
@@ -687,25 +692,12 @@ def _block_keys(centres_local, reader, block_size):
     return np.floor(world / (block_size / reader.xy_unit)).astype(np.int64)
 
 
-def _footprint_blocks(reader, path, block_size, margin, *, id_field=None, layer=None):
+def _footprint_blocks(reader, frame, path, block_size, margin, *, id_field=None, layer=None):
     """``[(world box, Footprints)]``: the footprints grouped by block, blocks row by row."""
-    import shapely
-
-    from ..io.vector import read_footprints
-
-    fps, _ = read_footprints(path, layer=layer, id_field=id_field, origin=reader.origin[:2],
-                             xy_unit=reader.xy_unit, target_crs=reader.crs)
     wb = reader.world_bounds()
     lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
     hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-    area = shapely.box(lo[0], lo[1], hi[0], hi[1])
-    keep = [i for i, g in enumerate(fps.geometries) if g is None or g.intersects(area)]
-    if not keep:
-        raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
-                              "point cloud's extent (check both CRSs)")
-    if len(keep) < len(fps):
-        logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
-    fps = _subset(fps, keep)
+    fps = load_footprints(path, frame, id_field=id_field, layer=layer, extent=(*lo, *hi))
     fps.attributes["_index"] = list(range(len(fps)))
     bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
                        for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
