@@ -704,9 +704,14 @@ def _footprint_blocks(reader, frame, path, block_size, margin, *, id_field=None,
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     empty = ~np.isfinite(centre).all(axis=1)
     keys = _block_keys(np.where(empty[:, None], 0.0, centre), reader, block_size)
+    # group by block, row by row (y, then x); footprint order kept inside a block
+    _, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
+    which = np.asarray(which).reshape(-1)
+    order = np.argsort(which, kind="stable")
+    cuts = np.flatnonzero(np.diff(which[order])) + 1
     blocks = []
-    for key in sorted({(int(k[1]), int(k[0])) for k in keys}):
-        idx = [i for i in range(len(fps)) if (keys[i, 1], keys[i, 0]) == key]
+    for idx in np.split(order, cuts):
+        idx = idx.tolist()
         b = bounds[[i for i in idx if not empty[i]]]
         if len(b):
             box = np.array([b[:, 0].min() - margin, b[:, 1].min() - margin,
