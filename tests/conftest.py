@@ -37,3 +37,29 @@ def runner():
     from click.testing import CliRunner
 
     return CliRunner()
+
+
+@pytest.fixture(scope="session")
+def raw_town():
+    """``make(folder, **make_town options) -> (town, raw cloud)``.
+
+    A synthetic town with its classes wiped (a raw tile), written to
+    ``folder / "whole.laz"``, and its footprints to ``folder / "fp.gpkg"``.
+    """
+    import numpy as np
+
+    from lidar2city.datamodel import ASPRS
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.synthetic import make_town
+
+    def make(folder, **options):
+        town = make_town(**options)
+        raw = town.cloud.with_attributes(
+            classification=np.full(len(town.cloud), ASPRS.UNCLASSIFIED, dtype=np.uint8))
+        write_points(folder / "whole.laz", raw)
+        write_polygons(folder / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                       origin=town.cloud.origin, crs=town.cloud.crs)
+        return town, raw
+
+    return make

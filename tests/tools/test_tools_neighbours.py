@@ -4,21 +4,16 @@ import laspy
 import numpy as np
 import pytest
 
-from lidar2city.datamodel import ASPRS
 from lidar2city.errors import CRSError, InputError
 from lidar2city.io.las import read_las, with_neighbours, write_points
-from lidar2city.synthetic import make_town
 
 
 @pytest.fixture(scope="module")
-def halves(tmp_path_factory):
+def halves(tmp_path_factory, raw_town):
     d = tmp_path_factory.mktemp("halves")
-    town = make_town(size=(140.0, 80.0), density=5.0, seed=21)
-    raw = town.cloud.with_attributes(
-        classification=np.full(len(town.cloud), ASPRS.UNCLASSIFIED, dtype=np.uint8))
+    _, raw = raw_town(d, size=(140.0, 80.0), density=5.0, seed=21)
     world_x = raw.to_world(raw.xyz)[:, 0]
     cut = raw.origin[0] + 70.0
-    write_points(d / "whole.laz", raw)
     write_points(d / "west.laz", raw.subset(world_x < cut))
     write_points(d / "east.laz", raw.subset(world_x >= cut))
     return d

@@ -27,14 +27,9 @@ def _split(cloud, cuts_x, cuts_y, folder, prefix):
 
 
 @pytest.fixture(scope="module")
-def town_tiles(tmp_path_factory):
+def town_tiles(tmp_path_factory, raw_town):
     d = tmp_path_factory.mktemp("tiles")
-    town = make_town(size=(120.0, 90.0), density=6.0, seed=11)
-    raw = town.cloud.with_attributes(
-        classification=np.full(len(town.cloud), ASPRS.UNCLASSIFIED, dtype=np.uint8))
-    write_points(d / "whole.laz", raw)
-    write_polygons(d / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
-                   origin=town.cloud.origin, crs=town.cloud.crs)
+    town, raw = raw_town(d, size=(120.0, 90.0), density=6.0, seed=11)
     o = raw.origin
     four = _split(raw, [o[0] + 55.0], [o[1] + 47.0], d, "four")
     strips = _split(raw, [o[0] + 33.0, o[0] + 81.0], [], d, "strip")
