@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["crs_option", "neighbours_options", "output_option", "progress", "progress_callback"]
+__all__ = ["check_output", "crs_option", "neighbours_options", "output_option", "progress",
+           "progress_callback"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -23,7 +24,18 @@ def neighbours_options(f):
                              "INPUT's points are written.")(f)
 
 
+def check_output(ctx, param, value):
+    """click callback of output file options: a folder that cannot be written fails at once,
+    in one line, before any work is done."""
+    if value is not None:
+        from ..io._atomic import check_output_path
+
+        check_output_path(value)
+    return value
+
+
 def output_option(**kwargs):
+    kwargs.setdefault("callback", check_output)
     return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                         help="Output file.", **kwargs)
 

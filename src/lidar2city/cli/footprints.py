@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option
+from ._options import check_output, crs_option, output_option
 
 #: outline regularisers of point-cloud footprints (``lidar2city.footprints.REGULARIZERS``)
 REGULARIZER_NAMES = ("none", "snake", "fit")
@@ -28,9 +28,9 @@ _DSM_ONLY = {"--dtm": "dtm", "--ortho": "ortho", "--dtm-out": "dtm_out", "--figu
               help="With --dsm: terrain raster on the DSM's grid (default: built from the DSM).")
 @click.option("--ortho", type=click.Path(dir_okay=False), default=None,
               help="With --dsm: RGB orthoimage on the DSM's grid (vegetation by colour).")
-@click.option("--dtm-out", type=click.Path(dir_okay=False), default=None,
+@click.option("--dtm-out", type=click.Path(dir_okay=False), default=None, callback=check_output,
               help="With --dsm: write the DTM used (given or built) as a GeoTIFF.")
-@click.option("--figure", type=click.Path(dir_okay=False), default=None,
+@click.option("--figure", type=click.Path(dir_okay=False), default=None, callback=check_output,
               help="With --dsm: PNG of the outlines over the nDSM coloured by shape type.")
 @click.option("--regularize", type=click.Choice(_CHOICES), default=None,
               help="Outline method. Point clouds: none (default, or the config's), snake or fit; "

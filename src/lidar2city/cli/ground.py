@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, neighbours_options, output_option
+from ._options import check_output, crs_option, neighbours_options, output_option
 
 METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
@@ -14,7 +14,7 @@ METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept lite
 @output_option()
 @click.option("--method", type=click.Choice(METHODS), default=None,
               help="Ground filter (default smrf, or ground.method of --config).")
-@click.option("--dtm", "dtm", type=click.Path(dir_okay=False), default=None,
+@click.option("--dtm", "dtm", type=click.Path(dir_okay=False), default=None, callback=check_output,
               help="Also write a DTM GeoTIFF interpolated from the ground points (holes filled).")
 @click.option("--cell", type=float, default=None,
               help="DTM cell size in metres (default 1, or ground.dtm_cell of --config).")

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import signal
 import sys
+import threading
 
 import click
 
@@ -13,19 +17,66 @@ __all__ = ["cli"]
 
 
 class _RootGroup(LazyGroup):
-    """Turns lidar2city errors into one-line messages and a non-zero exit."""
+    """Turns lidar2city errors into one-line messages and a non-zero exit.
+
+    A run records its outputs (:mod:`lidar2city.io._atomic`): when it fails or
+    is interrupted (SIGINT, SIGTERM) everything it wrote is removed. An
+    interrupt ends the process at once with status 130 (143 for SIGTERM),
+    without unwinding: worker threads of the compression and JIT libraries
+    are never torn down half-way, so no traceback and no crash.
+    """
 
     def invoke(self, ctx):
         from ..errors import Lidar2CityError
+        from ..io import _atomic
 
+        _atomic.begin_run()
+        previous = _install_interrupt_handlers()
         try:
             return super().invoke(ctx)
         except Lidar2CityError as exc:
-            click.echo(f"Error: {exc}", err=True)
-            ctx.exit(1)
+            _fail(ctx, str(exc))
         except MemoryError:
-            click.echo("Error: out of memory; process fewer or smaller tiles", err=True)
-            ctx.exit(1)
+            _fail(ctx, "out of memory; process fewer or smaller tiles")
+        except OSError as exc:  # an OS-level failure no tool turned into one of ours
+            logging.getLogger(__name__).debug("OS error", exc_info=True)
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            _fail(ctx, f"{where}{exc.strerror or exc}")
+        finally:
+            _restore_handlers(previous)
+            _atomic.end_run()
+
+
+def _fail(ctx, message):
+    from ..io._atomic import remove_run_outputs
+
+    remove_run_outputs()
+    click.echo(f"Error: {message}", err=True)
+    ctx.exit(1)
+
+
+def _on_interrupt(signum, frame):  # pragma: no cover - exercised in a subprocess
+    from ..io._atomic import remove_run_outputs
+
+    removed = remove_run_outputs()
+    note = f"; {len(removed)} partial output(s) removed" if removed else ""
+    with contextlib.suppress(Exception):
+        os.write(2, f"\nError: interrupted{note}\n".encode())
+    os._exit(130 if signum == signal.SIGINT else 143)
+
+
+def _install_interrupt_handlers():
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, _on_interrupt)
+    return previous
+
+
+def _restore_handlers(previous):
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
 
 
 def _version() -> str:

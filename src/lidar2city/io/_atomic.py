@@ -1,14 +1,162 @@
-"""Write outputs under a temporary name and rename them on success."""
+"""Write outputs under a temporary name and rename them on success.
+
+Every output of the package goes through :func:`atomic_path`, which also keeps
+a registry of what the running process is writing (temporary files) and, while
+a run is open (:func:`begin_run`), what it has finished writing. The command
+line removes both when a run fails or is interrupted
+(:func:`remove_run_outputs`), so an interrupted run leaves nothing behind.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import signal
+import threading
 from pathlib import Path
 
-from ..errors import FileFormatError
+from ..errors import FileFormatError, Lidar2CityError
 
-__all__ = ["atomic_path", "check_input_file"]
+__all__ = ["atomic_path", "check_input_file", "check_output_path", "make_output_dir",
+           "begin_run", "end_run", "remove_run_outputs"]
+
+#: temporary files being written by this process
+_PENDING: set = set()
+#: final outputs (files, then folders created) of the open run; None when no run is open
+_RUN: dict | None = None
+
+#: error types raised by the writers' libraries for an OS-level failure (matched by the
+#: module that defines them, so that none of those libraries is imported here)
+_WRITER_MODULES = ("rasterio", "pyogrio", "lazrs", "laspy", "fiona")
+
+
+def begin_run() -> None:
+    """Start recording the outputs finished from now on (see :func:`remove_run_outputs`)."""
+    global _RUN
+    _RUN = {"files": [], "dirs": []}
+
+
+def end_run() -> None:
+    """Stop recording outputs: what was written is kept."""
+    global _RUN
+    _RUN = None
+
+
+def remove_run_outputs() -> list[str]:
+    """Remove the temporary files being written and every output of the open run.
+
+    Returns the paths removed (folders created by the run are removed when
+    they are left empty). Safe to call from a signal handler.
+    """
+    removed = []
+    for p in list(_PENDING):
+        with contextlib.suppress(OSError):
+            os.unlink(p)
+            removed.append(str(p))
+    _PENDING.clear()
+    if _RUN is not None:
+        for p in reversed(_RUN["files"]):
+            with contextlib.suppress(OSError):
+                os.unlink(p)
+                removed.append(str(p))
+        for d in reversed(_RUN["dirs"]):
+            with contextlib.suppress(OSError):
+                os.rmdir(d)
+                removed.append(str(d))
+        _RUN["files"].clear()
+        _RUN["dirs"].clear()
+    return removed
+
+
+def _reason(exc) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _is_write_failure(exc) -> bool:
+    """An OS-level or writer-library failure (not one of ours, not an interrupt)."""
+    if isinstance(exc, Lidar2CityError) or not isinstance(exc, Exception):
+        return False
+    if isinstance(exc, OSError):
+        return True
+    return type(exc).__module__.split(".")[0] in _WRITER_MODULES
+
+
+def check_output_path(path) -> Path:
+    """Check that ``path`` can be written, before any work is done.
+
+    The folder must exist, be a folder and accept a new file (tried, so that
+    read-only mounts and permissions are caught whoever runs); ``path`` itself
+    must not be a folder.
+
+    Raises
+    ------
+    FileFormatError
+        With the reason, naming the path.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise FileFormatError(f"output {str(path)!r} is a folder, not a file")
+    if not parent.exists():
+        # a file on the way ("out.txt/x.laz") is reported as such
+        up = parent
+        while not up.exists() and up != up.parent:
+            up = up.parent
+        if up.exists() and not up.is_dir():
+            raise FileFormatError(f"cannot write {str(path)!r}: {str(up)!r} is a file, not a folder")
+        raise FileFormatError(f"output folder {str(parent)!r} does not exist")
+    if not parent.is_dir():
+        raise FileFormatError(f"cannot write {str(path)!r}: {str(parent)!r} is a file, not a folder")
+    probe = parent / f".lidar2city-probe{os.getpid()}-{threading.get_ident()}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        raise FileFormatError(f"cannot write to {str(parent)!r}: {_reason(exc)}") from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return path
+
+
+def make_output_dir(path) -> Path:
+    """Create the output folder ``path`` (and its parents) if needed, and check it is writable.
+
+    Folders created are recorded in the open run (removed if it fails).
+
+    Raises
+    ------
+    FileFormatError
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise FileFormatError(f"output {str(path)!r} is a file, not a folder")
+    missing = []
+    up = path
+    while not up.exists() and up != up.parent:
+        missing.append(up)
+        up = up.parent
+    if up.exists() and not up.is_dir():
+        raise FileFormatError(f"cannot create {str(path)!r}: {str(up)!r} is a file, not a folder")
+    for d in reversed(missing):
+        try:
+            d.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise FileFormatError(f"cannot create the folder {str(d)!r}: {_reason(exc)}") from None
+        if _RUN is not None:
+            _RUN["dirs"].append(str(d))
+    check_output_path(path / "x")
+    return path
+
+
+def _temp_name(path: Path, parent: Path) -> Path:
+    if path.name.endswith(".city.json") or path.name.endswith(".city.jsonl"):
+        return parent / f".tmp{os.getpid()}.{path.name}"
+    return parent / f".{path.stem}.tmp{os.getpid()}{''.join(path.suffixes[-1:])}"
 
 
 @contextlib.contextmanager
@@ -18,21 +166,44 @@ def atomic_path(path):
     On any exception the temporary file is removed, so no half-written output
     is ever left under the final name. The temporary name keeps the final
     suffixes so format drivers that look at the extension still work.
+
+    Raises
+    ------
+    FileFormatError
+        When the folder does not exist or cannot be written, and for every
+        OS-level failure while writing (permission, disk full, a writer
+        library's I/O error), naming the output and the reason.
     """
     path = Path(path)
+    check_output_path(path)
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.exists():
-        raise FileFormatError(f"output folder {str(parent)!r} does not exist")
-    tmp = parent / f".{path.stem}.tmp{os.getpid()}{''.join(path.suffixes[-1:])}"
-    if path.name.endswith(".city.json") or path.name.endswith(".city.jsonl"):
-        tmp = parent / f".tmp{os.getpid()}.{path.name}"
+    tmp = _temp_name(path, parent)
+    _PENDING.add(tmp)
     try:
         yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+        _commit(tmp, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if _is_write_failure(exc):
+            raise FileFormatError(f"cannot write {str(path)!r}: {_reason(exc)}") from exc
         raise
+    finally:
+        _PENDING.discard(tmp)
+
+
+def _commit(tmp: Path, path: Path) -> None:
+    """Rename ``tmp`` to ``path`` and record it, with SIGINT held off in between (main thread)."""
+    main = threading.current_thread() is threading.main_thread()
+    if main:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        os.replace(tmp, path)
+        if _RUN is not None:
+            _RUN["files"].append(str(path))
+    finally:
+        if main:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def check_input_file(path) -> Path:

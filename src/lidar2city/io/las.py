@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 
@@ -47,6 +48,27 @@ class LasTile:
         return _to_point_cloud(self.data, self.crs, origin=origin)
 
 
+@contextlib.contextmanager
+def _reading(path):
+    """Reading ``path`` with laspy: its errors become one :class:`FileFormatError`.
+
+    laspy logs a decompression failure before raising it; that log is silenced
+    here since the error raised says the same in one line.
+    """
+    laspy_log = logging.getLogger("laspy")
+    level = laspy_log.level
+    laspy_log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    except (FileFormatError, CRSError, InputError):
+        raise
+    except Exception as exc:  # laspy.LaspyException, OSError, lazrs.LazrsError, ValueError
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise FileFormatError(f"{str(path)!r} is not a readable LAS/LAZ file: {msg}") from None
+    finally:
+        laspy_log.setLevel(level)
+
+
 def _read_crs(las, path):
     try:
         return las.header.parse_crs()
@@ -72,11 +94,8 @@ def read_las(path, *, crs=None) -> LasTile:
     import laspy
 
     p = check_input_file(path)
-    try:
+    with _reading(p):
         las = laspy.read(p)
-    except Exception as exc:  # laspy.LaspyException, OSError, ValueError from lazrs
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise FileFormatError(f"{str(p)!r} is not a readable LAS/LAZ file: {msg}") from None
     resolved = parse_crs(crs) if crs is not None else _read_crs(las, p)
     return LasTile(str(p), las, resolved)
 
@@ -165,16 +184,10 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     out = []
     for path in paths:
         p = check_input_file(path)
-        try:
-            with laspy.open(p) as f:
-                h = f.header
-                mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
-                tile_crs = forced if forced is not None else _read_crs(f, p)
-        except (FileFormatError, CRSError):
-            raise
-        except Exception as exc:  # laspy / lazrs errors of several kinds
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise FileFormatError(f"{str(p)!r} is not a readable LAS/LAZ file: {msg}") from None
+        with _reading(p), laspy.open(p) as f:
+            h = f.header
+            mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
+            tile_crs = forced if forced is not None else _read_crs(f, p)
         out.append(TileInfo(str(p), mins, maxs, count, tile_crs))
     if not out:
         raise EmptyInputError("no input file given")
@@ -238,7 +251,7 @@ class TileReader:
         for t in self.tiles:
             if not t.count:
                 continue
-            with laspy.open(t.path) as f:
+            with _reading(t.path), laspy.open(t.path) as f:
                 if "classification" not in f.header.point_format.dimension_names:
                     continue
                 for chunk in f.chunk_iterator(1_000_000):

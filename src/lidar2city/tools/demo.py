@@ -96,6 +96,7 @@ def run_demo(outdir, *, seed: int = 0, size=(200.0, 150.0), density: float = 10.
     from ..metrics.model import model_rmse
     from ..roof.building import Lod22Config
     from ..synthetic import make_town
+    from ..io._atomic import make_output_dir
     from ..validate.solid import check_solid
     from .reconstruct import reconstruct_buildings, write_buildings
 
@@ -105,8 +106,7 @@ def run_demo(outdir, *, seed: int = 0, size=(200.0, 150.0), density: float = 10.
             progress(name)
 
     t0 = time.perf_counter()
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_output_dir(outdir)
     report = DemoReport()
     step("generating the town")
     town = make_town(size=size, density=density, seed=seed)

@@ -1,0 +1,316 @@
+"""Bad inputs and interruptions, tried as a new user would (issue 17).
+
+Every bad input must give one line on stderr starting with ``Error:`` and a
+non-zero exit, never a traceback; an output that cannot be written, a write
+failing half-way or an interrupt must leave nothing behind.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from shapely.geometry import box
+
+
+def _error_line(res):
+    """The single ``Error:`` line of a failed run (asserts there is nothing else)."""
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code not in (0, None), res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+    assert len(lines) == 1 and lines[0].startswith("Error: "), res.output
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def block(tmp_path_factory):
+    """A classified tile of two buildings on flat ground and their footprints (RD New)."""
+    from pyproj import CRS
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+
+    folder = tmp_path_factory.mktemp("block")
+    rng = np.random.default_rng(3)
+    fps = [box(6, 6, 18, 16), box(24, 8, 34, 20)]
+    xy = rng.uniform(0, 40, (16000, 2))
+    z = rng.normal(0, 0.02, len(xy))
+    cls = np.full(len(xy), 2, dtype=np.uint8)
+    for fp, h in zip(fps, (7.0, 10.0), strict=True):
+        x0, y0, x1, y1 = fp.bounds
+        inside = (xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1)
+        z[inside] += h
+        cls[inside] = 6
+    crs = CRS.from_epsg(28992)
+    origin = np.array([85000.0, 447000.0])
+    cloud = PointCloud.from_world(np.column_stack([xy + origin, z]), crs=crs,
+                                  attributes={"classification": cls})
+    write_points(folder / "t.laz", cloud)
+    write_polygons(folder / "f.gpkg", fps, {"id": ["A", "B"]}, origin=origin, crs=crs)
+    return folder
+
+
+def _left(folder, keep=()):
+    return sorted(p.name for p in folder.iterdir() if p.name not in keep)
+
+
+# --- 4: an output folder that cannot be written, in every command ---------------------------
+
+def _commands(block, out):
+    t, f = str(block / "t.laz"), str(block / "f.gpkg")
+    return {
+        "ground": ["ground", t, "-o", str(out / "g.laz")],
+        "ground --dtm": ["ground", t, "-o", str(block / "never.laz"), "--dtm", str(out / "d.tif")],
+        "classify": ["classify", t, "-o", str(out / "c.laz")],
+        "reconstruct json": ["reconstruct", t, "--footprints", f, "-o", str(out / "r.city.json")],
+        "reconstruct gpkg": ["reconstruct", t, "--footprints", f, "-o", str(out / "r.gpkg")],
+        "footprints": ["footprints", t, "-o", str(out / "f.gpkg")],
+        "demo": ["demo", "-o", str(out / "demo")],
+    }
+
+
+@pytest.mark.parametrize("name", ["ground", "ground --dtm", "classify", "reconstruct json",
+                                  "reconstruct gpkg", "footprints", "demo"])
+def test_output_under_a_file_is_one_line(runner, block, tmp_path, name):
+    from lidar2city.cli.main import cli
+
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    res = runner.invoke(cli, _commands(block, blocker)[name])
+    assert "not-a-folder" in _error_line(res)
+    assert not (block / "never.laz").exists()
+
+
+@pytest.mark.parametrize("name", ["ground", "ground --dtm", "classify", "reconstruct json",
+                                  "reconstruct gpkg", "footprints", "demo"])
+def test_read_only_folder_is_one_line(runner, block, tmp_path, monkeypatch, name):
+    """A folder refusing new files (what a read-only folder does to a non-root user)."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io import _atomic
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_open = os.open
+
+    def refusing_open(path, flags, *a, **k):
+        if str(path).startswith(str(ro)) and flags & os.O_CREAT:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_open(path, flags, *a, **k)
+
+    real_mkdir = _atomic.Path.mkdir
+
+    def refusing_mkdir(self, *a, **k):
+        if str(self).startswith(str(ro)):
+            raise PermissionError(errno.EACCES, "Permission denied", str(self))
+        return real_mkdir(self, *a, **k)
+
+    monkeypatch.setattr(_atomic.os, "open", refusing_open)
+    monkeypatch.setattr(_atomic.Path, "mkdir", refusing_mkdir)
+    res = runner.invoke(cli, _commands(block, ro)[name])
+    assert "Permission denied" in _error_line(res)
+    assert _left(ro) == []
+
+
+@pytest.mark.parametrize("exc", [PermissionError(errno.EACCES, "Permission denied"),
+                                 OSError(errno.ENOSPC, "No space left on device")])
+@pytest.mark.parametrize("name", ["ground --dtm", "reconstruct json", "reconstruct gpkg"])
+def test_rename_failing_is_one_line_and_leaves_nothing(runner, block, tmp_path, monkeypatch,
+                                                       name, exc):
+    from lidar2city.cli.main import cli
+    from lidar2city.io import _atomic
+
+    def failing_replace(src, dst):
+        raise exc
+
+    monkeypatch.setattr(_atomic.os, "replace", failing_replace)
+    out = tmp_path / "out"
+    out.mkdir()
+    res = runner.invoke(cli, _commands(block, out)[name])
+    assert exc.strerror in _error_line(res)
+    assert _left(out) == []
+    assert not (block / "never.laz").exists()
+
+
+def test_writer_library_errors_become_one_line(runner, block, tmp_path, monkeypatch):
+    """pyogrio's and rasterio's own I/O errors (not OSError for pyogrio) are write failures."""
+    import pyogrio
+    import rasterio
+
+    from lidar2city.cli.main import cli
+
+    def pyogrio_fails(*a, **k):
+        raise pyogrio.errors.DataSourceError("sqlite3_open(/x/r.gpkg) failed: unable to open")
+
+    monkeypatch.setattr(pyogrio.raw, "write", pyogrio_fails)
+    res = runner.invoke(cli, _commands(block, tmp_path)["reconstruct gpkg"])
+    assert "cannot write" in _error_line(res) and "unable to open" in res.output
+    monkeypatch.undo()
+
+    real = rasterio.open
+
+    def rasterio_fails(path, mode="r", *a, **k):
+        if mode == "w":
+            raise rasterio.errors.RasterioIOError(f"Attempt to create new tiff file '{path}' failed")
+        return real(path, mode, *a, **k)
+
+    monkeypatch.setattr(rasterio, "open", rasterio_fails)
+    res = runner.invoke(cli, _commands(block, tmp_path)["ground --dtm"])
+    assert "cannot write" in _error_line(res)
+    assert _left(tmp_path) == []
+
+
+# --- beyond: a write failing half-way (disk full) ---------------------------------------------
+
+class _FullDisk:
+    """A file that takes ``room`` bytes, then fails as a full disk does."""
+
+    def __init__(self, f, room):
+        self._f, self._room = f, room
+
+    def write(self, data):
+        if len(data) > self._room:
+            self._f.write(data[:self._room])
+            self._room = 0
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self._room -= len(data)
+        return self._f.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._f.close()
+        return False
+
+
+@pytest.mark.parametrize("name,output", [("reconstruct json", "r.city.json"),
+                                         ("reconstruct jsonl", "r.city.jsonl"),
+                                         ("reconstruct obj", "r.obj"),
+                                         ("ground", "g.laz"),
+                                         ("ground las", "g.las")])
+def test_disk_full_half_way_leaves_nothing(runner, block, tmp_path, monkeypatch, name, output):
+    import builtins
+
+    from lidar2city.cli.main import cli
+
+    out = tmp_path / "out"
+    out.mkdir()
+    real_open = builtins.open
+
+    def open_on_small_disk(file, mode="r", *a, **k):
+        f = real_open(file, mode, *a, **k)
+        if str(file).startswith(str(out)) and ("w" in mode or "+" in mode):
+            return _FullDisk(f, 300)
+        return f
+
+    monkeypatch.setattr(builtins, "open", open_on_small_disk)
+    t, fp = str(block / "t.laz"), str(block / "f.gpkg")
+    args = (["ground", t, "-o", str(out / output)] if name.startswith("ground") else
+            ["reconstruct", t, "--footprints", fp, "-o", str(out / output)])
+    res = runner.invoke(cli, args)
+    monkeypatch.undo()
+    line = _error_line(res)
+    assert "cannot write" in line and output in line, line
+    assert _left(out) == []
+
+
+def test_failed_run_removes_its_earlier_outputs(runner, block, tmp_path, monkeypatch):
+    """``ground --dtm``: the DTM is written first; when the LAZ then fails, neither is left."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io import las
+
+    def fails(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(las, "_write", fails)
+    res = runner.invoke(cli, ["ground", str(block / "t.laz"), "-o", str(tmp_path / "g.laz"),
+                              "--dtm", str(tmp_path / "d.tif")])
+    assert "No space left" in _error_line(res)
+    assert _left(tmp_path) == []
+
+
+# --- 5: a truncated LAZ ------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def truncated(block, tmp_path_factory):
+    data = (block / "t.laz").read_bytes()
+    p = tmp_path_factory.mktemp("trunc") / "cut.laz"
+    p.write_bytes(data[: len(data) // 2])
+    return p
+
+
+@pytest.mark.parametrize("command", [["info"], ["ground", "-o", "OUT/g.laz"],
+                                     ["classify", "-o", "OUT/c.laz"],
+                                     ["footprints", "-o", "OUT/f.gpkg"],
+                                     ["reconstruct", "-o", "OUT/r.city.json"],
+                                     ["reconstruct", "--footprints", "FP", "-o", "OUT/r.city.json"]])
+def test_truncated_laz_is_one_line(truncated, block, tmp_path, command):
+    """In a subprocess, so that the logging set up by the command line is the real one."""
+    args = [a.replace("OUT", str(tmp_path)).replace("FP", str(block / "f.gpkg")) for a in command]
+    args.insert(1, str(truncated))
+    proc = subprocess.run([sys.executable, "-m", "lidar2city.cli.main", *args],
+                          capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("Error: ") and "cut.laz" in lines[0] and "not a readable" in lines[0]
+    assert _left(tmp_path) == []
+
+
+def test_truncated_laz_in_the_classes_scan_is_an_input_error(truncated):
+    from lidar2city.errors import FileFormatError
+    from lidar2city.io.las import TileReader, scan_tiles
+
+    reader = TileReader(scan_tiles([truncated]))
+    with pytest.raises(FileFormatError, match="not a readable LAS/LAZ"):
+        reader.has_classes([17])  # no such class: every chunk is read
+
+
+# --- 6: Ctrl-C at any time ---------------------------------------------------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", ["classify", "ground"])
+def test_interrupt_is_clean_at_any_time(block, tmp_path, command):
+    """SIGINT at several moments: exit 130 with one line, no traceback, no crash, nothing left."""
+    from lidar2city.io.las import read_points, write_points
+
+    # a bigger tile, so that the run takes a few seconds: the block repeated on a 3 x 3 grid
+    cloud = read_points(block / "t.laz")
+    xyz = np.concatenate([cloud.xyz + [40.0 * i, 40.0 * j, 0.0] for i in range(3) for j in range(3)])
+    big = type(cloud)(xyz, cloud.origin, cloud.crs, cloud.xy_unit, cloud.z_unit,
+                      {k: np.tile(v, 9) for k, v in cloud.attributes.items()})
+    src = tmp_path / "big.laz"
+    write_points(src, big)
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [sys.executable, "-m", "lidar2city.cli.main", command, str(src), "-o", str(out / "x.laz")]
+    if command == "ground":
+        args += ["--dtm", str(out / "d.tif")]
+    t0 = time.perf_counter()
+    subprocess.run(args, check=True, capture_output=True, timeout=300)
+    full = time.perf_counter() - t0
+    for f in out.iterdir():
+        f.unlink()
+    for frac in (0.2, 0.6, 0.85, 0.95):
+        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(frac * full)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+        if proc.returncode == 0:  # finished before the signal: a complete run
+            assert {p.name for p in out.iterdir()} >= {"x.laz"}
+            for f in out.iterdir():
+                f.unlink()
+            continue
+        assert proc.returncode == 130, (frac, proc.returncode, err)
+        assert "Traceback" not in err and err.strip().splitlines()[-1].startswith(
+            "Error: interrupted"), err
+        assert _left(out) == [], (frac, err)
