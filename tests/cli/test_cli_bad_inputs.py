@@ -314,3 +314,193 @@ def test_interrupt_is_clean_at_any_time(block, tmp_path, command):
         assert "Traceback" not in err and err.strip().splitlines()[-1].startswith(
             "Error: interrupted"), err
         assert _left(out) == [], (frac, err)
+
+
+# --- 2: a self-intersecting footprint ----------------------------------------------------------
+
+def _footprints(folder, geoms, name="fp.gpkg"):
+    """Write world-coordinate shapely geometries as a GeoPackage (RD New), ids f0, f1..."""
+    import pyogrio
+    import shapely
+
+    path = folder / name
+    pyogrio.raw.write(str(path), shapely.to_wkb(np.array(geoms, dtype=object)),
+                      [np.array([f"f{k}" for k in range(len(geoms))], dtype=object)], ["id"],
+                      driver="GPKG", geometry_type="Unknown", crs="EPSG:28992")
+    return path
+
+
+def _world(g):
+    import shapely
+
+    return shapely.affinity.translate(g, 85000.0, 447000.0)
+
+
+@pytest.mark.parametrize("output", ["b.city.json", "b.city.jsonl"])
+def test_bow_tie_footprint_gives_a_reason_and_a_valid_file(runner, block, tmp_path, output):
+    from shapely.geometry import Polygon
+
+    from lidar2city.cli.main import cli
+    from lidar2city.tools.validate import validate_file
+
+    bow = _world(Polygon([(6, 6), (18, 16), (18, 6), (6, 16)]))  # over building A
+    fp = _footprints(tmp_path, [bow, _world(box(24, 8, 34, 20))])
+    out = tmp_path / output
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(fp),
+                              "--lod", "1.2", "--lod", "2.2", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "1 failed" in res.output and "self-intersecting" in res.output
+    report = validate_file(out)
+    assert report.valid, (report.schema_errors, report.invalid_objects)
+
+
+def test_loop_footprint_is_repaired_and_says_so(runner, block, tmp_path):
+    import json
+
+    from shapely.geometry import Polygon
+
+    from lidar2city.cli.main import cli
+    from lidar2city.tools.validate import validate_file
+
+    # building A's outline with a small loop at a corner (a digitising slip)
+    loop = _world(Polygon([(6, 6), (18, 6), (18, 16), (18.6, 16.6), (18, 17), (17.6, 16.5),
+                           (18, 16), (6, 16)]))
+    fp = _footprints(tmp_path, [loop])
+    out = tmp_path / "l.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(fp),
+                              "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    attrs = json.loads(out.read_text())["CityObjects"]["f0"]["attributes"]
+    assert attrs["status"] == "ok" and "kept the largest of 2 parts" in attrs["footprint_note"]
+    assert validate_file(out).valid
+
+
+def test_multipart_footprint_writes_building_parts_that_validate(runner, block, tmp_path):
+    import json
+
+    from shapely.geometry import MultiPolygon
+
+    from lidar2city.cli.main import cli
+    from lidar2city.tools.validate import validate_file
+
+    two = _world(MultiPolygon([box(6, 6, 18, 16), box(24, 8, 34, 20)]))
+    fp = _footprints(tmp_path, [two])
+    out = tmp_path / "m.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(fp),
+                              "--lod", "1.2", "--lod", "2.2", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert "MultiSolid" not in out.read_text()
+    assert {o["type"] for o in doc["CityObjects"].values()} == {"Building", "BuildingPart"}
+    report = validate_file(out)
+    assert report.valid, (report.schema_errors, report.invalid_objects)
+
+
+def test_validate_names_the_rule_not_the_geometry(runner, block, tmp_path):
+    import json
+
+    from lidar2city.cli.main import cli
+
+    out = tmp_path / "v.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(block / "f.gpkg"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    g = doc["CityObjects"]["A"]["geometry"][0]
+    g["type"], g["boundaries"] = "MultiSolid", [g["boundaries"]]
+    g["semantics"]["values"] = [g["semantics"]["values"]]
+    out.write_text(json.dumps(doc))
+    res = runner.invoke(cli, ["validate", str(out)])
+    assert res.exit_code == 1
+    line = next(ln for ln in res.output.splitlines() if "CityObjects/A/geometry/0" in ln)
+    assert "'MultiSolid' is not one of the types allowed here" in line and "Solid" in line
+    assert "[[" not in line and len(line) < 200
+
+
+def test_validate_survives_broken_semantics(runner, block, tmp_path):
+    import json
+
+    from lidar2city.cli.main import cli
+
+    out = tmp_path / "s.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(block / "f.gpkg"), "-o", str(out)])
+    doc = json.loads(out.read_text())
+    doc["CityObjects"]["A"]["geometry"][0]["semantics"]["values"][0] = "x"
+    doc["CityObjects"]["B"]["geometry"][0]["boundaries"][0][0] = [[10 ** 9, 0, 1]]
+    out.write_text(json.dumps(doc))
+    res = runner.invoke(cli, ["validate", str(out)])
+    assert res.exit_code == 1 and (res.exception is None or isinstance(res.exception, SystemExit))
+    assert "INVALID" in res.output and "Traceback" not in res.output
+
+
+# --- 3: OBJ with several LoDs ------------------------------------------------------------------
+
+def test_obj_holds_every_lod_asked(runner, block, tmp_path):
+    from lidar2city.cli.main import cli
+    from lidar2city.io.obj import read_obj
+
+    out = tmp_path / "x.obj"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(block / "f.gpkg"), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
+                              "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    _, objects = read_obj(out)
+    assert {"A_lod12", "B_lod12", "A_lod22", "B_lod22", "A_lod13-part1", "B_lod13-part1"} <= set(objects)
+    assert out.read_text().startswith("# lidar2city LoD1.2+1.3+2.2 buildings")
+
+
+# --- 7: the only footprint is empty ------------------------------------------------------------
+
+def test_only_footprint_empty_says_what_is_wrong(runner, block, tmp_path):
+    from shapely.geometry import Polygon
+
+    from lidar2city.cli.main import cli
+
+    fp = _footprints(tmp_path, [Polygon()])
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(fp),
+                              "-o", str(tmp_path / "e.city.json")])
+    line = _error_line(res)
+    assert "none of its 1 footprint(s) is a usable polygon: empty geometry" in line
+    assert "building point" not in line
+
+
+# --- 8: the CityJSON schemas are shipped -------------------------------------------------------
+
+def test_validate_checks_the_schema_without_any_data_folder(runner, block, tmp_path, monkeypatch):
+    from lidar2city.cli.main import cli
+
+    monkeypatch.setenv("LIDAR2CITY_DATA", str(tmp_path / "nowhere"))
+    monkeypatch.delenv("LIDAR2CITY_CITYJSON_SCHEMAS", raising=False)
+    out = tmp_path / "v.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(block / "f.gpkg"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(cli, ["validate", str(out)])
+    assert res.exit_code == 0 and "VALID - schema valid" in res.output, res.output
+
+
+def test_shipped_schemas_are_the_package_data():
+    import tomllib
+    from pathlib import Path
+
+    from lidar2city.validate.schema import SHIPPED, find_schema_dir
+
+    assert find_schema_dir() == SHIPPED
+    names = {p.name for p in SHIPPED.glob("*.json")}
+    assert {"cityjson.schema.json", "cityjsonfeature.schema.json", "cityobjects.schema.json",
+            "geomprimitives.schema.json"} <= names
+    root = Path(__file__).resolve().parents[2]
+    data = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    assert any("schemas-2.0.2" in pattern for pattern in data["lidar2city"])
+
+
+@pytest.mark.slow
+def test_demo_checks_the_schema_without_any_data_folder(tmp_path):
+    env = dict(os.environ, LIDAR2CITY_DATA=str(tmp_path / "nowhere"))
+    env.pop("LIDAR2CITY_CITYJSON_SCHEMAS", None)
+    proc = subprocess.run([sys.executable, "-m", "lidar2city.cli.main", "demo", "-o",
+                           str(tmp_path / "demo")], capture_output=True, text=True, env=env,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "CityJSON schema valid" in proc.stdout

@@ -2,10 +2,10 @@
 
 Writing: one ``Building`` per :class:`~lidar2city.datamodel.BuildingResult`
 with its attributes (failed buildings too, without geometry, with
-``status`` and ``reason``); the LoD1.2 model is the Building's ``Solid``
-(a ``MultiSolid`` for a multi-part footprint); LoD1.3 parts are
-``BuildingPart`` children (``"parents"`` / ``"children"``), one ``Solid``
-each. Surfaces carry CityJSON semantics (GroundSurface, WallSurface,
+``status`` and ``reason``); the LoD1.2 and LoD2.2 models are the Building's
+``Solid``; LoD1.3 parts, and the solids of a multi-part footprint (CityJSON
+2.0 allows no ``MultiSolid`` on a Building), are ``BuildingPart`` children
+(``"parents"`` / ``"children"``), one ``Solid`` each. Surfaces carry CityJSON semantics (GroundSurface, WallSurface,
 RoofSurface). Vertices are quantised integers with a ``transform``
 (``scale`` 0.001 CRS units, ``translate`` the local origin) and shared
 between solids. The CRS goes to ``metadata.referenceSystem`` as an OGC URL.
@@ -128,13 +128,19 @@ def _building_objects(result, pool, extra_attributes=None):
     building: dict[str, Any] = {"type": "Building", "attributes": attrs}
     objects = {bid: building}
     geoms = []
+    parts_by_lod = dict(result.parts)
     for lod, solids in sorted(result.solids.items()):
-        if solids is not None and (not isinstance(solids, (list, tuple)) or len(solids)):
+        if isinstance(solids, (list, tuple)) and len(solids) == 1:
+            solids = solids[0]
+        if isinstance(solids, (list, tuple)):
+            if solids:  # a multi-part footprint: one BuildingPart per solid
+                parts_by_lod[lod] = list(parts_by_lod.get(lod, [])) + list(solids)
+        elif solids is not None:
             geoms.append(_geometry(solids, lod, pool))
     if geoms:
         building["geometry"] = geoms
     children = []
-    for lod, parts in sorted(result.parts.items()):
+    for lod, parts in sorted(parts_by_lod.items()):
         for k, part in enumerate(parts):
             pid = f"{bid}-lod{lod.replace('.', '')}-part{k + 1}"
             z = np.asarray(part.vertices)[:, 2]
@@ -464,8 +470,10 @@ def object_solids(model: CityModel, object_id: str, *, lod: str | None = None,
             if not shell:
                 continue
             used = np.unique(np.concatenate([r for s in shell for r in s.rings]))
-            new = np.full(int(used.max()) + 1, -1, dtype=np.int64)
-            new[used] = np.arange(len(used))
-            surfaces = [Surface([new[r] for r in s.rings], s.semantic) for s in shell]
+            if len(used) and (used[0] < 0 or used[-1] >= len(verts)):
+                raise InputError(f"City Object {object_id!r}: vertex index {int(used[-1])} out of range "
+                                 f"(the file has {len(verts)} vertices)")
+            surfaces = [Surface([np.searchsorted(used, r) for r in s.rings], s.semantic)
+                        for s in shell]
             out.append(Solid(verts[used], surfaces))
     return out

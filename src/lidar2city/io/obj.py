@@ -2,7 +2,9 @@
 
 One ``o`` object per building (``o <building id>``) and, for LoD1.3, one per
 part (``o <building id>-part<k>``), with a ``g`` group per semantic surface
-type (``g RoofSurface``...). Faces are triangles oriented outward (normals
+type (``g RoofSurface``...). Several LoDs go in one file, one object per
+building and LoD, the LoD in its name (``o <building id>_lod12``,
+``o <building id>_lod22``, ``o <building id>_lod13-part<k>``). Faces are triangles oriented outward (normals
 by the right-hand rule). Vertices are shared within the file.
 
 Coordinates: world coordinates in CRS units (``local=False``, the default,
@@ -16,22 +18,26 @@ from __future__ import annotations
 import numpy as np
 
 from ..datamodel import Solid
+from ..errors import InputError
 from ._atomic import atomic_path
 
 __all__ = ["write_obj", "read_obj"]
 
 
-def _objects(results, lod):
+def _objects(results, lods):
+    """``(object name, solids)`` per building and LoD (the LoD named when there are several)."""
     for r in results:
-        if lod in r.solids and r.solids[lod] is not None:
-            s = r.solids[lod]
-            yield str(r.id), [s] if isinstance(s, Solid) else list(s)
-        elif lod in r.parts:
-            for k, p in enumerate(r.parts[lod]):
-                yield f"{r.id}-part{k + 1}", [p]
+        for lod in lods:
+            tag = f"_lod{lod.replace('.', '')}" if len(lods) > 1 else ""
+            if lod in r.solids and r.solids[lod] is not None:
+                s = r.solids[lod]
+                yield f"{r.id}{tag}", [s] if isinstance(s, Solid) else list(s)
+            elif lod in r.parts:
+                for k, p in enumerate(r.parts[lod]):
+                    yield f"{r.id}{tag}-part{k + 1}", [p]
 
 
-def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod: str = "1.2",
+def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod="1.2",
               local: bool = False, precision: int = 3) -> None:
     """Write the ``lod`` models of ``results`` to an OBJ file, atomically.
 
@@ -42,8 +48,9 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod: str = "1.2
         World coordinates of the local origin (CRS units).
     xy_unit, z_unit : float
         Metres per CRS unit.
-    lod : str
-        ``"1.2"`` (the Building's solid) or ``"1.3"`` (one object per part).
+    lod : str or sequence of str
+        ``"1.2"``, ``"2.2"`` (the Building's solid) or ``"1.3"`` (one object per
+        part); several LoDs give one object per building and LoD (see module doc).
     local : bool
         Write coordinates relative to ``origin`` (see module doc).
     """
@@ -52,8 +59,11 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod: str = "1.2
     origin = np.asarray(origin, dtype=np.float64).reshape(3)
     unit = np.array([xy_unit, xy_unit, z_unit])
     step = 10.0 ** (-precision)
+    lods = (lod,) if isinstance(lod, str) else tuple(dict.fromkeys(lod))
+    if not lods:
+        raise InputError("no LoD to write")
     blocks, chunks, count = [], [], 0
-    for name, solids in _objects(results, lod):
+    for name, solids in _objects(results, lods):
         groups: dict[str, list] = {}
         for s in solids:
             world = np.asarray(s.vertices) / unit + (0.0 if local else origin)
@@ -72,7 +82,7 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod: str = "1.2
     else:
         uniq, inverse = np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
     with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as f:
-        f.write(f"# lidar2city LoD{lod} buildings\n")
+        f.write(f"# lidar2city LoD{'+'.join(lods)} buildings\n")
         if local:
             f.write(f"# origin {origin[0]:.{precision}f} {origin[1]:.{precision}f} "
                     f"{origin[2]:.{precision}f}\n")

@@ -40,12 +40,30 @@ def to_world(geoms, origin, xy_unit=1.0, z_unit=1.0):
     return shapely.transform(geoms, f, include_z=bool(has_z))
 
 
-def repair_polygonal(geom):
+#: a self-intersecting polygon is repaired to its largest part when that part holds at least
+#: this share of the area (a loop or spike cut off); otherwise it is refused with the reason
+KEEP_LARGEST_SHARE = 0.9
+
+
+def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
     """Return ``(polygonal geometry or None, note)`` for one input geometry.
 
-    Repeated closing vertices are fine as they are; invalid rings are repaired
-    with :func:`shapely.make_valid` keeping the polygonal parts; non-polygonal
-    or empty input gives ``None`` with the reason.
+    Repeated closing vertices are fine as they are. An invalid geometry is
+    repaired with :func:`shapely.make_valid`, keeping its polygonal parts. A
+    *Polygon* must stay one polygon: when the repair splits it (a bow-tie, a
+    loop), its largest part is kept if it holds at least
+    ``keep_largest_share`` of the area (a small loop or spike cut off), and
+    the note says so; otherwise the footprint is refused (``None``) with the
+    reason, since which part is the building cannot be told. A MultiPolygon
+    keeps its parts. Non-polygonal or empty input gives ``None`` with the
+    reason.
+
+    Examples
+    --------
+    >>> from shapely.geometry import Polygon
+    >>> g, note = repair_polygonal(Polygon([(0, 0), (2, 2), (2, 0), (0, 2)]))
+    >>> g is None, note.startswith("self-intersecting outline splits into 2 parts")
+    (True, True)
     """
     import shapely
     from shapely.geometry import MultiPolygon, Polygon
@@ -54,9 +72,14 @@ def repair_polygonal(geom):
         return None, "empty geometry"
     if geom.geom_type not in ("Polygon", "MultiPolygon"):
         return None, f"not a polygon ({geom.geom_type})"
+    if not np.isfinite(shapely.get_coordinates(geom)).all():
+        return None, "coordinates not finite (NaN or infinite)"
     geom = shapely.remove_repeated_points(geom, 1e-9)
     if geom.is_valid:
-        return geom, ""
+        if geom.area > 0:
+            return geom, ""
+        return None, "zero area"
+    why = shapely.is_valid_reason(geom).split("[")[0]
     fixed = shapely.make_valid(geom)
     polys = [g for g in getattr(fixed, "geoms", [fixed]) if isinstance(g, (Polygon, MultiPolygon))]
     parts = []
@@ -64,9 +87,19 @@ def repair_polygonal(geom):
         parts.extend(getattr(g, "geoms", [g]))
     parts = [p for p in parts if p.area > 0]
     if not parts:
-        return None, "invalid ring that could not be repaired"
-    out = parts[0] if len(parts) == 1 else MultiPolygon(parts)
-    return out, f"repaired invalid ring ({shapely.is_valid_reason(geom)})"
+        return None, f"invalid outline ({why}) that could not be repaired"
+    if len(parts) == 1:
+        return parts[0], f"repaired invalid outline ({why})"
+    if geom.geom_type == "MultiPolygon":
+        return MultiPolygon(parts), f"repaired invalid outline ({why})"
+    areas = np.array([p.area for p in parts])
+    share = float(areas.max() / areas.sum())
+    if share >= keep_largest_share:
+        return (parts[int(np.argmax(areas))],
+                f"repaired {why.lower()}: kept the largest of {len(parts)} parts "
+                f"({100 * share:.0f} % of the area)")
+    return None, (f"self-intersecting outline splits into {len(parts)} parts of comparable "
+                  f"size (largest {100 * share:.0f} % of the area): fix the footprint")
 
 
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
@@ -142,6 +175,11 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         notes.append(note)
         if note:
             logger.info("footprint %s", note)
+    if all(g is None for g in out):
+        from collections import Counter
+
+        why = "; ".join(f"{k}" + (f" (x{c})" if c > 1 else "") for k, c in Counter(notes).items())
+        raise EmptyInputError(f"{str(p)!r}: none of its {n} footprint(s) is a usable polygon: {why}")
     local = [None if g is None else to_local(g, origin, xy_unit) for g in out]
     fields["_note"] = notes
     return Footprints(local, ids, fields), src_crs

@@ -427,7 +427,7 @@ def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attri
         from ..io.obj import write_obj
 
         write_obj(path, results, origin=cloud.origin, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
-                  lod=lods[0])
+                  lod=lods)
     elif fmt == "gpkg":
         _write_gpkg(path, results, cloud, attributes=attributes, configuration=configuration,
                     lods=lods)

@@ -75,7 +75,12 @@ def validate_model(model, *, planarity_tolerance=0.01, snap_tolerance=0.001,
         rep.geometries = len(geoms)
         lods = sorted({str(g.get("lod")) for g in geoms})
         for lod in lods:
-            solids = model.solids(oid, lod=lod, include_children=False, origin=origin)
+            try:
+                solids = model.solids(oid, lod=lod, include_children=False, origin=origin)
+            except (TypeError, ValueError, IndexError, KeyError, AttributeError) as exc:
+                # boundaries or semantics not as the schema wants: nothing to check
+                rep.issues.append((lod, 0, Issue(901, None, f"geometry unreadable ({exc})")))
+                continue
             for k, s in enumerate(solids):
                 for issue in check_solid(s, **kw):
                     rep.issues.append((lod, k, issue))

@@ -1,11 +1,14 @@
 """CityJSON schema validation against the official JSON schemas (resolved locally).
 
-The CityJSON 2.0.2 schemas (cityjson/specs, CC0) are not shipped inside the
-package: they are looked up in ``schema_dir`` when given, else in
-``$LIDAR2CITY_CITYJSON_SCHEMAS``, else in
-``$LIDAR2CITY_DATA/cityjson/schemas-2.0.2`` (default data folder:
-``../shared/data`` beside the checkout). All references between the schema
-files are resolved from that folder; nothing is fetched from the network.
+The official CityJSON 2.0.2 schemas (cityjson/specs, CC0) are shipped in the
+package (``lidar2city/validate/schemas-2.0.2``); ``schema_dir`` or
+``$LIDAR2CITY_CITYJSON_SCHEMAS`` name another folder of them. All references
+between the schema files are resolved from that folder; nothing is fetched
+from the network and no data folder is needed.
+
+Error messages name the rule that fails and where (``CityObjects/b1/geometry/0:
+type 'MultiSolid' is not one of the types allowed here (MultiSurface,
+CompositeSurface, Solid, CompositeSolid)``), never the geometry itself.
 """
 
 from __future__ import annotations
@@ -19,27 +22,26 @@ from ..errors import FileFormatError
 __all__ = ["find_schema_dir", "schema_validator", "schema_errors"]
 
 _MAIN = "cityjson.schema.json"
+#: the schemas shipped with the package
+SHIPPED = Path(__file__).resolve().parent / "schemas-2.0.2"
 
 
 def find_schema_dir(schema_dir=None) -> Path | None:
-    """The folder holding ``cityjson.schema.json`` (see module doc), or None."""
-    candidates = []
-    if schema_dir is not None:
-        candidates.append(Path(schema_dir))
-    if os.environ.get("LIDAR2CITY_CITYJSON_SCHEMAS"):
-        candidates.append(Path(os.environ["LIDAR2CITY_CITYJSON_SCHEMAS"]))
-    if os.environ.get("LIDAR2CITY_DATA"):
-        candidates.append(Path(os.environ["LIDAR2CITY_DATA"]) / "cityjson" / "schemas-2.0.2")
-    here = Path(__file__).resolve()
-    for up in here.parents[2:6]:
-        candidates.append(up.parent / "shared" / "data" / "cityjson" / "schemas-2.0.2")
-        candidates.append(up / "shared" / "data" / "cityjson" / "schemas-2.0.2")
-    for c in candidates:
-        if (c / _MAIN).is_file():
-            return c
-    if schema_dir is not None:
-        raise FileFormatError(f"{str(schema_dir)!r} holds no {_MAIN}")
-    return None
+    """The folder holding ``cityjson.schema.json``: ``schema_dir``, else
+    ``$LIDAR2CITY_CITYJSON_SCHEMAS``, else the schemas shipped with the package.
+
+    Raises
+    ------
+    FileFormatError
+        When ``schema_dir`` (or the environment variable) names a folder
+        without the schemas.
+    """
+    given = schema_dir if schema_dir is not None else os.environ.get("LIDAR2CITY_CITYJSON_SCHEMAS")
+    if given:
+        if not (Path(given) / _MAIN).is_file():
+            raise FileFormatError(f"{str(given)!r} holds no {_MAIN}")
+        return Path(given)
+    return SHIPPED if (SHIPPED / _MAIN).is_file() else None
 
 
 _CACHE: dict = {}
@@ -93,10 +95,47 @@ def _object_validator(schema_dir, main, ref):
     return _CACHE[key]
 
 
-def _format(err, prefix=()):
-    where = "/".join(str(p) for p in (*prefix, *err.absolute_path)) or "(root)"
+def _where(err, prefix=()):
+    return "/".join(str(p) for p in (*prefix, *err.absolute_path)) or "(root)"
+
+
+def _short(value, limit=60) -> str:
+    text = json.dumps(value) if not isinstance(value, str) else repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _rule(err) -> str:
+    """What rule ``err`` breaks, in a line that never prints a whole geometry."""
+    kind = err.validator
+    if kind == "oneOf" and isinstance(err.instance, dict) and "type" in err.instance:
+        # each alternative fixes "type" with a const (behind a $ref): the consts missed
+        allowed = [c.validator_value for c in err.context
+                   if c.validator == "const" and list(c.relative_path) == ["type"]]
+        if allowed and err.instance.get("type") not in allowed:
+            return (f"type {err.instance.get('type')!r} is not one of the types allowed here "
+                    f"({', '.join(allowed)})")
+        from jsonschema.exceptions import best_match
+
+        best = best_match(err.context) if err.context else None
+        if best is not None:
+            return (f"matches none of the allowed forms; as {err.instance.get('type')}: "
+                    f"{_where(best)}: {_rule(best)}")
+    if kind in ("oneOf", "anyOf"):
+        return "matches none of the allowed forms"
+    if kind == "type":
+        return f"{_short(err.instance)} is not of type {err.validator_value!r}"
+    if kind in ("const", "enum"):
+        return f"{_short(err.instance)} is not {kind} {_short(err.validator_value)}"
+    if kind == "required":
+        return err.message
+    if kind == "additionalProperties":
+        return err.message[:200]
     msg = err.message
-    return f"{where}: {msg[:300] + '...' if len(msg) > 300 else msg}"
+    return f"{kind}: {msg[:200] + '...' if len(msg) > 200 else msg}"
+
+
+def _format(err, prefix=()):
+    return f"{_where(err, prefix)}: {_rule(err)}"
 
 
 def schema_errors(doc, *, schema_dir=None, limit: int = 20) -> list[str]:
