@@ -504,3 +504,41 @@ def test_demo_checks_the_schema_without_any_data_folder(tmp_path):
                           timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "CityJSON schema valid" in proc.stdout
+
+
+# --- 9: a raw tile's small buildings, with footprints ------------------------------------------
+
+def test_claim_footprint_points_only_for_footprints_without_building_points():
+    from lidar2city.footprints.points import claim_footprint_points
+
+    xy = np.array([[1.0, 1.0], [1.2, 1.0], [1.4, 1.0], [11.0, 1.0], [11.5, 1.0], [30.0, 30.0]])
+    classes = np.array([1, 5, 2, 6, 1, 1])
+    out = claim_footprint_points(xy, classes, [box(0, 0, 2, 2), box(10, 0, 12, 2), None],
+                                 min_points=1)
+    # the shed's vegetation and other points become building, its ground stays ground;
+    # the building the classifier found, and every point outside footprints, are untouched
+    assert out.tolist() == [6, 6, 2, 6, 1, 1]
+    assert classes.tolist() == [1, 5, 2, 6, 1, 1]
+
+
+@pytest.mark.slow
+def test_wiped_delft_small_buildings_get_their_points(data, tmp_path, runner):
+    """Delft with its classes wiped: every BGT footprint gets its points (8 used to get none)."""
+    import json
+
+    import laspy
+
+    from lidar2city.cli.main import cli
+
+    las = laspy.read(data / "delft" / "ahn3_cropped_1.laz")
+    las.classification = np.ones(len(las.points), dtype=np.uint8)
+    raw = tmp_path / "raw.laz"
+    las.write(str(raw))
+    out = tmp_path / "r.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(raw), "--crs", "EPSG:7415", "--footprints",
+                              str(data / "delft" / "footprints_bgt.gpkg"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    attrs = [o["attributes"] for o in json.loads(out.read_text())["CityObjects"].values()]
+    assert len(attrs) == 132
+    assert [a.get("reason") for a in attrs if a["status"] != "ok"] == []
+    assert min(a["point_count"] for a in attrs) >= 10

@@ -737,9 +737,16 @@ def _classified_box(reader, world_box, config, classified):
 
 
 def _load_blocks(reader, blocks, config, classified):
+    from ..footprints.points import claim_footprint_points
+
     for world, fps in blocks:
         cloud, classes = ((None, None) if world is None
                           else _classified_box(reader, world, config, classified))
+        if cloud is not None and not classified:  # the footprints say where buildings are
+            classes = claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
+                                             building_classes=config.building_classes,
+                                             excluded=(*config.ground_classes, 7),
+                                             min_points=config.min_points)
         yield cloud, fps, classes
 
 
