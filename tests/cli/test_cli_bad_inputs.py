@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -542,3 +543,72 @@ def test_wiped_delft_small_buildings_get_their_points(data, tmp_path, runner):
     assert len(attrs) == 132
     assert [a.get("reason") for a in attrs if a["status"] != "ok"] == []
     assert min(a["point_count"] for a in attrs) >= 10
+
+
+# --- 10: no PAM side files, defaults shown, one name per thing ---------------------------------
+
+def _all_commands():
+    import click
+
+    from lidar2city.cli.main import cli
+
+    ctx = click.Context(cli)
+
+    def walk(group, prefix):
+        for name in group.list_commands(ctx):
+            cmd = group.get_command(ctx, name)
+            if isinstance(cmd, click.Group):
+                yield from walk(cmd, [*prefix, name])
+            else:
+                yield [*prefix, name], cmd
+
+    return list(walk(cli, []))
+
+
+def test_every_default_is_shown_as_default(runner):
+    import click
+
+    from lidar2city.cli.main import cli
+
+    missing = []
+    for path, cmd in _all_commands():
+        for p in cmd.params:
+            if not isinstance(p, click.Option) or p.is_flag or p.name == "help":
+                continue
+            has_default = p.default not in (None, ()) and p.required is False and \
+                type(p.default).__name__ != "Sentinel"
+            prose = "default" in (p.help or "").lower()
+            if (has_default or prose) and not p.show_default:
+                missing.append(f"{' '.join(path)} {p.opts[-1]}")
+        res = runner.invoke(cli, [*path, "-h"])
+        assert res.exit_code == 0, res.output
+    assert missing == []
+
+
+def test_ground_method_is_one_name_with_its_choices(runner):
+    from lidar2city.cli.main import cli
+
+    for path in (["ground"], ["classify"]):
+        text = runner.invoke(cli, [*path, "-h"]).output
+        assert "--ground-method" in text and "pmf" in text and "smrf" in text, text
+        assert re.search(r"\[default: \(?smrf", " ".join(text.split())), text
+    text = " ".join(runner.invoke(cli, ["reconstruct", "-h"]).output.split())
+    assert re.search(r"\[default: \(?1\.2, or lod1\.lods of --config\)?\]", text), text
+
+
+def test_reading_a_geopackage_leaves_no_aux_xml(block, tmp_path):
+    """A GeoPackage with dataset metadata (as ``footprints`` writes it) read by evaluate."""
+    import shutil
+
+    from lidar2city.io.vector import VectorLayer, write_layers
+    from lidar2city.tools.evaluate import evaluate_footprints
+
+    pred, ref = tmp_path / "pred.gpkg", tmp_path / "ref.gpkg"
+    shutil.copy(block / "f.gpkg", ref)
+    from pyproj import CRS
+
+    write_layers(pred, [VectorLayer("footprints", [box(6, 6, 18, 16)], {"id": ["A"]})],
+                 origin=(85000.0, 447000.0), crs=CRS.from_epsg(28992),
+                 metadata={"lidar2city_version": "x"})
+    evaluate_footprints(pred, ref)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pred.gpkg", "ref.gpkg"]

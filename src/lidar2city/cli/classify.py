@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ._options import crs_option, neighbours_options, output_option
+from .ground import METHODS as GROUND_METHODS
 
 NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
          5: "high vegetation", 6: "building", 7: "noise"}
@@ -17,8 +18,10 @@ NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
 @click.option("--ground-from-file", is_flag=True,
               help="Reuse the input's class 2 points as ground (when that class is trustworthy) "
                    "instead of running the ground filter.")
-@click.option("--ground-method", default="smrf", show_default=True, metavar="METHOD",
-              help="Ground filter used when the ground is not taken from the file.")
+@click.option("--ground-method", type=click.Choice(GROUND_METHODS), default="smrf",
+              show_default=True,
+              help="Ground filter used when the ground is not taken from the file (as ground "
+                   "--method).")
 @click.option("--config", "config", default=None, type=click.Path(dir_okay=False),
               help="Run configuration (TOML); its [classify] table sets the parameters.")
 @neighbours_options

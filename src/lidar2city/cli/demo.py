@@ -11,6 +11,7 @@ import click
 @click.option("--seed", default=0, show_default=True, help="Seed of the synthetic town.")
 @click.option("--density", default=10.0, show_default=True, help="Points per square metre.")
 @click.option("--schemas", default=None, type=click.Path(file_okay=False),
+              show_default="the CityJSON 2.0.2 schemas shipped with lidar2city",
               help="Folder of the CityJSON 2.0 schemas for the schema check.")
 def command(outdir, seed, density, schemas):
     """Build a synthetic town, reconstruct it end to end and compare with its truth.

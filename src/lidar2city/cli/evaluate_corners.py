@@ -16,7 +16,8 @@ import click
 @click.option("--match", "by", type=click.Choice(["auto", "id", "overlap"]), default="auto",
               show_default=True,
               help="Pair buildings by id, by plan overlap, or by id when any are shared.")
-@click.option("--lod", default=None, help="CityJSON geometry LoD to compare (default: the highest).")
+@click.option("--lod", default=None, show_default="the highest",
+              help="CityJSON geometry LoD to compare.")
 @click.option("--per-building", is_flag=True, help="Also list each building's figures.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 def command(pred, reference, tolerance, by, lod, per_building, as_json):

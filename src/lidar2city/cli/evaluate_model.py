@@ -15,10 +15,11 @@ from ._options import crs_option
               help="Point cloud tile(s) with a building class (repeat for several).")
 @crs_option
 @click.option("--footprints", type=click.Path(dir_okay=False), default=None,
-              help="Measure the points inside these footprints (matched by id or overlap); "
-                   "default: each building's own projection.")
+              show_default="each building's own projection",
+              help="Measure the points inside these footprints (matched by id or overlap).")
 @click.option("--id-field", default=None, help="Footprint field holding the building id.")
-@click.option("--lod", default=None, help="LoD to evaluate (default: the highest per building).")
+@click.option("--lod", default=None, show_default="the highest per building",
+              help="LoD to evaluate.")
 @click.option("--json", "as_json", is_flag=True, help="Print per-building rows and the summary as JSON.")
 def command(model, points, crs, footprints, id_field, lod, as_json):
     """Per-building RMSE (3-D point to model surface), coverage and validity of MODEL.

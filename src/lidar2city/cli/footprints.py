@@ -25,7 +25,8 @@ _DSM_ONLY = {"--dtm": "dtm", "--ortho": "ortho", "--dtm-out": "dtm_out", "--figu
 @click.option("--dsm", type=click.Path(dir_okay=False), default=None,
               help="Segment the buildings from this DSM raster instead of point clouds.")
 @click.option("--dtm", type=click.Path(dir_okay=False), default=None,
-              help="With --dsm: terrain raster on the DSM's grid (default: built from the DSM).")
+              show_default="built from the DSM",
+              help="With --dsm: terrain raster on the DSM's grid.")
 @click.option("--ortho", type=click.Path(dir_okay=False), default=None,
               help="With --dsm: RGB orthoimage on the DSM's grid (vegetation by colour).")
 @click.option("--dtm-out", type=click.Path(dir_okay=False), default=None, callback=check_output,
@@ -33,18 +34,25 @@ _DSM_ONLY = {"--dtm": "dtm", "--ortho": "ortho", "--dtm-out": "dtm_out", "--figu
 @click.option("--figure", type=click.Path(dir_okay=False), default=None, callback=check_output,
               help="With --dsm: PNG of the outlines over the nDSM coloured by shape type.")
 @click.option("--regularize", type=click.Choice(_CHOICES), default=None,
-              help="Outline method. Point clouds: none (default, or the config's), snake or fit; "
-                   "--dsm: fit (default), none or active-contour.")
+              show_default="none for point clouds (or footprints.regularize of --config), "
+                           "fit with --dsm",
+              help="Outline method. Point clouds: none, snake or fit; --dsm: fit, none or "
+                   "active-contour.")
 @click.option("--weights", type=click.Path(dir_okay=False), default=None,
+              show_default="the shipped tuned weights",
               help="With --dsm --regularize active-contour: the five weights (TOML written by "
-                   "lidar2city tune); default the shipped tuned weights.")
+                   "lidar2city tune).")
 @crs_option
 @click.option("--config", "config_path", type=click.Path(dir_okay=False), default=None,
               help="Run config (TOML): [footprints] for point clouds; [dsm_dtm], [dsm_roofs], "
                    "[polygon_fit], [dsm_lod1] with --dsm.")
-@click.option("--cell", type=float, default=None, help="Grid cell (m); default from the spacing.")
-@click.option("--min-area", type=float, default=None, help="Smallest building (m2).")
+@click.option("--cell", type=float, default=None, show_default="1.5 x the building point spacing",
+              help="Grid cell (m).")
+@click.option("--min-area", type=float, default=None,
+              show_default="4 for point clouds, 30 with --dsm, or the --config value",
+              help="Smallest building (m2).")
 @click.option("--edge-offset", type=float, default=None,
+              show_default="0, or footprints.edge_offset of --config",
               help="Outline offset (m); negative shrinks (roof overhang).")
 def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weights, crs,
             config_path, cell, min_area, edge_offset):

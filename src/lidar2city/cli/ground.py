@@ -12,12 +12,14 @@ METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept lite
 @click.command("ground")
 @click.argument("input", type=click.Path(dir_okay=False))
 @output_option()
-@click.option("--method", type=click.Choice(METHODS), default=None,
-              help="Ground filter (default smrf, or ground.method of --config).")
+@click.option("--method", "--ground-method", "method", type=click.Choice(METHODS), default=None,
+              show_default="smrf, or ground.method of --config",
+              help="Ground filter (also spelt --ground-method, as in classify).")
 @click.option("--dtm", "dtm", type=click.Path(dir_okay=False), default=None, callback=check_output,
               help="Also write a DTM GeoTIFF interpolated from the ground points (holes filled).")
 @click.option("--cell", type=float, default=None,
-              help="DTM cell size in metres (default 1, or ground.dtm_cell of --config).")
+              show_default="1, or ground.dtm_cell of --config",
+              help="DTM cell size in metres.")
 @crs_option
 @click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
               help="Run configuration TOML; its [ground] table sets the filter parameters.")

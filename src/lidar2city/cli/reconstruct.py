@@ -13,20 +13,22 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--dsm", type=click.Path(dir_okay=False), default=None,
               help="Build LoD1.2 prisms from this DSM raster instead of point clouds.")
 @click.option("--dtm", type=click.Path(dir_okay=False), default=None,
-              help="With --dsm: terrain raster on the DSM's grid (default: built from the DSM).")
+              show_default="built from the DSM",
+              help="With --dsm: terrain raster on the DSM's grid.")
 @click.option("--ortho", type=click.Path(dir_okay=False), default=None,
               help="With --dsm: RGB orthoimage on the DSM's grid (vegetation by colour).")
 @click.option("--footprints", type=click.Path(dir_okay=False), default=None,
               help="Building footprints (any OGR source: GPKG, SHP, GeoJSON...).")
 @click.option("--lod", "lods", multiple=True, type=click.Choice(["1.2", "1.3", "2.2"]),
-              help="LoD to build (repeat for both); default from the config, else 1.2.")
+              show_default="1.2, or lod1.lods of --config",
+              help="LoD to build (repeat for several).")
 @crs_option
 @click.option("--config", "config", type=click.Path(dir_okay=False), default=None,
               help="Run configuration (TOML), e.g. [lod1] roof_statistic = 70.")
 @click.option("--format", "fmt", type=click.Choice(["cityjson", "cityjsonseq", "obj", "gpkg"]),
-              default=None, help="Output format; default from the output name.")
+              default=None, show_default="from the output name", help="Output format.")
 @click.option("--id-field", default=None, help="Footprint field holding the building id.")
-@click.option("--layer", default=None, help="Footprint layer (default: the first).")
+@click.option("--layer", default=None, show_default="the first", help="Footprint layer.")
 @click.option("--method", type=click.Choice(["roof", "primitives"]), default="roof",
               show_default=True,
               help="LoD2.2 from the roof topology (facets, snake, intersection edges) or from "

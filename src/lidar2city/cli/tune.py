@@ -11,7 +11,8 @@ _path = click.Path(dir_okay=False)
 
 @click.command("tune")
 @click.option("--dsm", required=True, type=_path, help="DSM GeoTIFF (heights in the CRS's vertical unit).")
-@click.option("--dtm", type=_path, default=None, help="DTM on the DSM grid (default: derived from the DSM).")
+@click.option("--dtm", type=_path, default=None, show_default="derived from the DSM",
+              help="DTM on the DSM grid.")
 @click.option("--ortho", type=_path, default=None, help="Orthoimage on the DSM grid (drives the regional term).")
 @click.option("--reference", required=True, type=_path, help="Reference building footprints (GPKG or any OGR source).")
 @output_option()

@@ -10,8 +10,9 @@ import click
 @click.command("validate")
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--schemas", "schema_dir", type=click.Path(file_okay=False), default=None,
-              help="Folder of the CityJSON 2.0 schemas (default: $LIDAR2CITY_CITYJSON_SCHEMAS or "
-                   "the data folder's cityjson/schemas-2.0.2).")
+              show_default="$LIDAR2CITY_CITYJSON_SCHEMAS, else the CityJSON 2.0.2 schemas "
+                           "shipped with lidar2city",
+              help="Folder of the CityJSON 2.0 schemas.")
 @click.option("--no-schema", is_flag=True, help="Only the geometric checks.")
 @click.option("--planarity", default=0.01, show_default=True,
               help="Planarity tolerance (CRS units) of the faces.")

@@ -111,8 +111,11 @@ def read_primitives(path, *, id_field: str | None = None) -> dict[str, dict]:
         import pyogrio
         import shapely
 
+        from .vector import no_pam
+
         try:
-            meta, _, wkb, field_data = pyogrio.raw.read(str(p), force_2d=True)
+            with no_pam():
+                meta, _, wkb, field_data = pyogrio.raw.read(str(p), force_2d=True)
         except Exception as exc:
             raise FileFormatError(f"{str(p)!r} is not a readable vector source: "
                                   f"{str(exc).splitlines()[0]}") from None

@@ -93,7 +93,8 @@ def read_raster(path, *, bands=None, crs=None) -> Raster:
 
     p = check_input_file(path)
     try:
-        with rasterio.open(p) as ds:
+        # PAM off: reading must not leave X.tif.aux.xml beside the user's file
+        with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(p) as ds:
             if bands is None:
                 bands = 1 if ds.count == 1 else list(range(1, ds.count + 1))
             data = ds.read(bands, masked=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass, field
 
@@ -13,7 +14,7 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["read_footprints", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
+__all__ = ["no_pam", "read_footprints", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
            "to_local", "to_world"]
 
 
@@ -102,6 +103,20 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
                   f"size (largest {100 * share:.0f} % of the area): fix the footprint")
 
 
+@contextlib.contextmanager
+def no_pam():
+    """GDAL's PAM off while reading with pyogrio: opening a GeoPackage that holds dataset
+    metadata read-only would otherwise leave ``X.gpkg.aux.xml`` beside the user's file."""
+    import pyogrio
+
+    before = pyogrio.get_gdal_config_option("GDAL_PAM_ENABLED")
+    pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": "NO"})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": before})
+
+
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
                     target_crs=None, bbox=None) -> tuple[Footprints, object]:
     """Read building footprints from any OGR source into local metric coordinates.
@@ -137,8 +152,9 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
 
     p = check_input_file(path)
     try:
-        meta, fids, wkb, field_data = pyogrio.raw.read(
-            str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox)
+        with no_pam():
+            meta, fids, wkb, field_data = pyogrio.raw.read(
+                str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
         raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
     n = len(wkb) if wkb is not None else 0
