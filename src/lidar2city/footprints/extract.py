@@ -124,6 +124,10 @@ def _parts(geom, min_area):
             if g.geom_type == "Polygon" and g.area >= max(min_area, 1e-9)]
 
 
+#: the largest building grid traced at once (cells): a 10 km x 10 km block at 1 m
+MAX_GRID_CELLS = 1e8
+
+
 def extract_footprints(xyz, classification, *, building_class: int = 6, cell: float | None = None,
                        sigma: float | None = None, void_distance: float | None = None,
                        min_area: float = 4.0,
@@ -170,7 +174,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     Raises
     ------
     InputError
-        For arrays of the wrong shape or an unknown regulariser.
+        For arrays of the wrong shape, non-finite coordinates, an unknown
+        regulariser, or points spread over more than :data:`MAX_GRID_CELLS` cells.
     EmptyInputError
         When no point has ``building_class``.
 
@@ -192,6 +197,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                      min_hole_area=min_hole_area, edge_offset=edge_offset, simplify=simplify,
                      regularize=regularize, snake_cell=snake_cell, snake_window=snake_window,
                      snake_threshold=snake_threshold)
+    if not np.isfinite(xyz).all():
+        raise InputError("point coordinates contain NaN or infinite values")
     xy = xyz[:, :2]
     is_b = cls == building_class
     bxy, oxy = xy[is_b], xy[~is_b]
@@ -202,6 +209,12 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                      simplify=simplify, snake_cell=snake_cell)
     logger.info("building point spacing %.3f m; cell %.3f m, sigma %.3f m, void %.2f m",
                 spacing, L["cell"], L["sigma"], L["void_distance"])
+    span = np.ptp(bxy, axis=0) / L["cell"]
+    if not np.prod(span + 1.0) <= MAX_GRID_CELLS:
+        raise InputError(f"the building points span {np.ptp(bxy[:, 0]):.0f} m x "
+                         f"{np.ptp(bxy[:, 1]):.0f} m at a spacing of {spacing:.3g} m: too large a "
+                         f"grid of {L['cell']:.3g} m cells (check the coordinates, or process the "
+                         "area in smaller blocks)")
     pad = int(np.ceil((3 * L["sigma"] + L["void_distance"]) / L["cell"])) + 2
     grid = Grid.around(bxy, L["cell"], pad=pad)
     inside = ((oxy[:, 0] >= grid.x0) & (oxy[:, 1] >= grid.y0)

@@ -75,13 +75,19 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
         return None, f"not a polygon ({geom.geom_type})"
     if not np.isfinite(shapely.get_coordinates(geom)).all():
         return None, "coordinates not finite (NaN or infinite)"
-    geom = shapely.remove_repeated_points(geom, 1e-9)
+    try:
+        geom = shapely.remove_repeated_points(geom, 1e-9)
+    except shapely.errors.GEOSException:  # a ring left with fewer than 3 distinct vertices
+        return None, "degenerate outline (a ring of fewer than 3 distinct vertices)"
     if geom.is_valid:
         if geom.area > 0:
             return geom, ""
         return None, "zero area"
     why = shapely.is_valid_reason(geom).split("[")[0]
-    fixed = shapely.make_valid(geom)
+    try:
+        fixed = shapely.make_valid(geom)
+    except shapely.errors.GEOSException as exc:
+        return None, f"invalid outline ({why}) that could not be repaired: {exc}"
     polys = [g for g in getattr(fixed, "geoms", [fixed]) if isinstance(g, (Polygon, MultiPolygon))]
     parts = []
     for g in polys:

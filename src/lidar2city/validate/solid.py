@@ -377,11 +377,19 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     issues: list[Issue] = []
     if len(solid.surfaces) == 0 or len(verts_in) == 0:
         return [Issue(301, None, "no surface")]
+    if not np.isfinite(verts_in).all():
+        return [Issue(901, None, "vertex coordinates are NaN or infinite")]
+    if not (np.abs(verts_in) / snap_tolerance < 2.0 ** 62).all():
+        return [Issue(901, None, "vertex coordinates too large for the snap tolerance")]
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
     rings_per_face = []
     for i, s in enumerate(solid.surfaces):
         rings = s.rings if hasattr(s, "rings") else s
-        rings = [remap[np.asarray(r, dtype=np.int64)] for r in rings]
+        rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
+        if any(len(r) and (r.min() < 0 or r.max() >= len(verts_in)) for r in rings):
+            issues.append(Issue(901, i, "vertex index out of range"))
+            continue
+        rings = [remap[r] for r in rings]
         rings_per_face.append(_ring_checks(rings, i, issues))
     if issues:
         return issues
