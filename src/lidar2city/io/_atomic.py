@@ -194,7 +194,8 @@ def atomic_path(path):
 
 def _commit(tmp: Path, path: Path) -> None:
     """Rename ``tmp`` to ``path`` and record it, with SIGINT held off in between (main thread)."""
-    main = threading.current_thread() is threading.main_thread()
+    main = (threading.current_thread() is threading.main_thread()
+            and hasattr(signal, "pthread_sigmask"))  # not on Windows
     if main:
         old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
