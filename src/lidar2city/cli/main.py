@@ -38,6 +38,10 @@ class _RootGroup(LazyGroup):
             _fail(ctx, str(exc))
         except MemoryError:
             _fail(ctx, "out of memory; process fewer or smaller tiles")
+        except BrokenPipeError:  # the reader of our output went away (`| head`): not an error
+            with contextlib.suppress(Exception):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            ctx.exit(1)
         except OSError as exc:  # an OS-level failure no tool turned into one of ours
             logging.getLogger(__name__).debug("OS error", exc_info=True)
             where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
