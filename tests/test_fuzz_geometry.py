@@ -164,23 +164,36 @@ def test_lod22_returns_valid_solids_or_a_stated_fallback(geom, n, pitch):
 
 
 @FUZZ
-@given(footprints(), st.floats(-50, 50), st.floats(-50, 50))
-def test_prism_builder_returns_a_valid_solid_or_raises_ours(geom, z0, z1):
+@given(footprints(), st.floats(-50, 50), st.floats(0.5, 50))
+def test_prism_builder_returns_a_valid_solid_or_raises_ours(geom, z0, height):
+    """Raw user polygons (even invalid ones) give a solid or our error; the repaired ones,
+    cleaned as the LoD1 builder cleans them, give a valid solid."""
     from lidar2city.io.vector import repair_polygonal
-    from lidar2city.lod.prism import prism_solid
+    from lidar2city.lod.prism import clean_polygon, prism_solid
+    from lidar2city.validate.solid import check_solid
 
+    try:
+        prism_solid(geom, z0, z0 + height, grid=0.001)
+    except OURS:
+        pass
     fixed, _ = repair_polygonal(geom)
-    for g in ([geom] if fixed is None else [geom, fixed]):
+    if fixed is None:
+        return
+    for poly in clean_polygon(fixed, grid=0.001):
+        rings = [poly.exterior, *poly.interiors]
+        touching = any(a.intersects(b) for i, a in enumerate(rings) for b in rings[i + 1:])
         try:
-            solid = prism_solid(g, z0, z1, grid=0.001)
+            solid = prism_solid(poly, z0, z0 + height, grid=0.001)
         except OURS:
             continue
-        if g is fixed and fixed.geom_type == "Polygon" and z1 - z0 > 0.01 \
-                and fixed.area > 1e-3 and fixed.minimum_rotated_rectangle.length > 0:
-            from lidar2city.validate.solid import check_solid
-
-            assert np.isfinite(solid.vertices).all()
-            check_solid(solid)
+        assert np.isfinite(solid.vertices).all()
+        # known limits, left to the validity attribute of the LoD1 builder: a hole meeting
+        # the outer ring makes a non-manifold prism (303); an arm of the outline narrower
+        # than a few snap tolerances makes walls that touch (306)
+        opened = poly.buffer(-0.0025, join_style="mitre").buffer(0.0025, join_style="mitre")
+        thin = poly.symmetric_difference(opened).area > 1e-4 * poly.area
+        if not touching and not thin:
+            assert check_solid(solid) == [], (poly.wkt, check_solid(solid)[:3])
 
 
 special = st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1e12])

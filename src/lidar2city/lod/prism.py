@@ -56,15 +56,25 @@ def clean_polygon(polygon, *, grid: float = 0.0):
         return []
     g = polygon if polygon.is_valid else shapely.make_valid(polygon)
     if grid > 0:
-        g = shapely.set_precision(g, grid)
+        with np.errstate(all="ignore"):  # denormal coordinates: GEOS copes, numpy warns
+            g = shapely.set_precision(g, grid)
     if not g.is_valid:
         g = shapely.make_valid(g)
     parts = [p for p in shapely.get_parts(g) if p.geom_type == "Polygon" and p.area > 0]
+    # slivers (a part or a hole a few grid steps wide) give walls closer than the snap
+    # tolerance of a validator: they are dropped (mean width = 2 area / perimeter)
+    thin = 5.0 * max(grid, 0.001)
     out = []
     for p in parts:
         for q in shapely.get_parts(shapely.make_valid(p)) if not p.is_valid else [p]:
-            if q.geom_type == "Polygon" and q.area > max(grid, 1e-6) ** 2:
-                out.append(orient(q, 1.0))
+            if q.geom_type != "Polygon" or not q.area > max(grid, 1e-6) ** 2 \
+                    or 2.0 * q.area / q.length < thin:
+                continue
+            holes = [h for h in q.interiors
+                     if 2.0 * abs(shapely.Polygon(h).area) / h.length >= thin]
+            if len(holes) < len(q.interiors):
+                q = shapely.Polygon(q.exterior, holes)
+            out.append(orient(q, 1.0))
     return out
 
 
