@@ -1,23 +1,23 @@
 """``reconstruct``: point cloud tiles (+ footprints) to LoD1 / LoD2.2 buildings in a file.
 
-The job, for any number of tiles and buildings:
+The job, for any number of tiles and buildings, in four parts:
 
-1. index the tiles by their headers (:func:`lidar2city.io.las.scan_tiles`) and
-   decide once whether the input is classified or raw;
-2. read the footprints into one local frame (:func:`load_footprints`) and group
-   them by the cell of a CRS-aligned grid of ``block_size`` metres holding the
-   centre of their bounding box (without footprints, trace them per block);
-3. per block, read the points of its buildings plus a margin from the tiles
-   that meet it (:class:`lidar2city.io.las.TileReader`), classify them if the
-   input is raw (:func:`point_roles`), and give each building exactly the
-   points within its footprint's bounding box plus ``search_radius`` metres,
-   so a result does not depend on tiling, blocks or order; the pure
-   per-building :func:`lidar2city.lod.reconstruct_building` is what a Dask
-   engine would map;
-4. write CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`) in the
-   footprint file's order.
-
-``progress(done, total, result)`` is called after every building.
+1. plan (:func:`plan_reconstruct`, :mod:`lidar2city.tools.blocks`): index the
+   tiles by their headers (:func:`lidar2city.io.las.scan_tiles`), decide once
+   whether the input is classified or raw, read the footprints into one local
+   frame (:func:`load_footprints`) and group them by the cell of a CRS-aligned
+   grid of ``block_size`` metres holding the centre of their bounding box (or,
+   without footprints, one cell per grid cell to trace them in): an ordered
+   list of picklable block specs;
+2. one task per block (:func:`lidar2city.tools.task.run_block`, what runs on a
+   worker): read the points of its buildings plus a margin from the tiles that
+   meet it, classify them if the input is raw (:func:`point_roles`), and give
+   each building exactly the points within its footprint's bounding box plus
+   ``search_radius`` metres, so a result does not depend on tiling, blocks,
+   workers or order;
+3. an executor (:mod:`lidar2city.tools.engine`) runs the tasks;
+4. the results are put back in the footprint file's order (:func:`assemble`)
+   and written as CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`).
 """
 
 from __future__ import annotations
@@ -34,8 +34,9 @@ from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FORMATS", "ReconstructSummary", "PointGrid", "format_from_name", "lod1_config",
-           "point_roles", "load_footprints", "reconstruct_buildings", "write_buildings",
+__all__ = ["FORMATS", "ReconstructSummary", "ReconstructPlan", "PointGrid", "format_from_name",
+           "lod1_config", "point_roles", "load_footprints", "reconstruct_buildings",
+           "write_buildings", "plan_reconstruct", "run_blocks", "assemble", "summarize",
            "reconstruct"]
 
 #: output format name -> file name endings that select it.
@@ -487,8 +488,21 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
         layers.append(VectorLayer(f"lod{lod.replace('.', '')}", geoms,
                                   {"id": [str(r.id) for r in rows]}, "MultiPolygon Z"))
     meta = {"lidar2city_configuration": json.dumps(configuration or {})}
-    write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
-                 z_unit=cloud.z_unit, metadata=meta)
+    import pyogrio
+
+    # GDAL stamps every GeoPackage table with the time of writing: a fixed stamp
+    # makes the same results the same bytes
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
+    try:
+        write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
+                     z_unit=cloud.z_unit, metadata=meta)
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
+
+
+#: the time stamp written in GeoPackage outputs (``gpkg_contents.last_change``)
+GPKG_DATE = "2000-01-01T00:00:00.000Z"
 
 
 #: how LoD2.2 roofs are made: the roof-topology framework or fitted primitives
@@ -511,6 +525,10 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     Without footprints, a block traces the footprints in its cell plus a
     buffer (``margin`` + 100 m) and keeps those centred in its cell.
 
+    The run is a plan (:mod:`lidar2city.tools.blocks`: the ordered block
+    specs), one task per block (:func:`lidar2city.tools.task.run_block`), an
+    executor (:mod:`lidar2city.tools.engine`) and a writer fed in a fixed order.
+
     Parameters
     ----------
     inputs : path or sequence of paths
@@ -527,7 +545,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     config : path, dict or Lod1Config, optional
         Run configuration (TOML).
     progress : callable, optional
-        ``progress(done, total, result)``.
+        ``progress(done, total, result)`` for every building as its block
+        finishes; ``total`` is None when footprints are traced.
     method : {"roof", "primitives"}
         LoD2.2 from the roof topology (facets, snake, intersection edges) or
         from floating primitives fitted by least squares.
@@ -544,10 +563,50 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     -------
     ReconstructSummary
     """
-    from ..datamodel import PointCloud
-    from ..io.las import TileReader, scan_tiles
+    from .engine import make_executor
 
     t0 = time.perf_counter()
+    plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
+                            config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
+                            primitives=primitives, check_images=check_images,
+                            block_size=block_size)
+    outputs = {}
+    with make_executor(1) as executor:
+        for out in run_blocks(executor, plan, progress=progress):
+            outputs[out.index] = out
+    results, fps = assemble(plan, [outputs[k] for k in range(len(plan.specs))])
+    write_buildings(output, results, plan.frame, fmt=plan.fmt, configuration=plan.resolved,
+                    attributes=_fields_for_output(fps), lods=plan.lods)
+    summary = summarize(results, output, plan)
+    summary.seconds = time.perf_counter() - t0
+    return summary
+
+
+@dataclass(eq=False)
+class ReconstructPlan:
+    """A planned run: the ordered block specs, the options every block gets, the output's frame."""
+
+    specs: list
+    options: object
+    frame: object
+    fmt: str
+    lods: tuple
+    resolved: dict
+    traced: bool
+    total: int | None
+
+
+def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None,
+                     fmt=None, id_field=None, layer=None, method="roof", primitives=None,
+                     check_images=None, block_size=1000.0) -> ReconstructPlan:
+    """Check the options, index the tiles and cut the area into block specs (no point read).
+
+    Keywords as :func:`reconstruct`.
+    """
+    from ..io.las import TileReader, scan_tiles
+    from .blocks import Frame, footprint_blocks, traced_blocks
+    from .task import BlockOptions
+
     fmt = format_from_name(output, fmt)
     if method not in LOD22_METHODS:
         raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
@@ -561,7 +620,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         config, lods=lods, stages=(("lod22" if method == "roof" else "primitives"),) if want22 else ())
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
-    reader = TileReader(scan_tiles(inputs, crs=crs))
+    tiles = scan_tiles(inputs, crs=crs)
+    reader = TileReader(tiles)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
     classified = reader.has_classes(cfg.building_classes)
@@ -570,7 +630,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
-    frame = PointCloud(np.zeros((0, 3)), reader.origin, reader.crs, reader.xy_unit, reader.z_unit, {})
+    frame = Frame.of(reader)
     user_prims = None
     if want22 and method == "primitives" and primitives is not None:
         from ..io.primitives import read_primitives
@@ -582,65 +642,89 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             if spec.get("primitive") not in PRIMITIVES:
                 raise InputError(f"{primitives}: footprint {fid}: unknown primitive "
                                  f"{spec.get('primitive')!r}; known: {', '.join(PRIMITIVES)}")
+    options = BlockOptions(cfg, classified, float(block_size), lod22=lod22,
+                           primitives=others.get("primitives") if want22 and method == "primitives"
+                           else None,
+                           user_primitives=user_prims,
+                           check_images=None if check_images is None else str(check_images),
+                           footprints_config=others.get("footprints"))
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang
     margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
     if footprints is None:
         logger.info("no footprints given: tracing them from the building points")
-        blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg,
-                                classified)
+        specs = traced_blocks(tiles, frame, reader.world_bounds(), block_size, margin + 100.0)
     else:
-        blocks = _footprint_blocks(reader, frame, footprints, block_size, margin,
-                                   id_field=id_field, layer=layer)
-    total = None if footprints is None else sum(len(b[1]) for b in blocks)
+        wb = reader.world_bounds()
+        lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
+        hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
+        fps = load_footprints(footprints, frame, id_field=id_field, layer=layer,
+                              extent=(*lo, *hi))
+        specs = footprint_blocks(tiles, frame, fps, block_size, margin)
+    return ReconstructPlan(specs, options, frame, fmt, want, resolved, footprints is None,
+                           None if footprints is None else sum(s.size for s in specs))
+
+
+def run_blocks(executor, plan, specs=None, *, progress=None):
+    """Run ``specs`` (default all of the plan's) on ``executor``; yield each
+    :class:`~lidar2city.tools.task.BlockOutput` as it finishes (any order).
+
+    A block that failed twice gives each of its footprints a stated reason.
+    """
+    from . import task
+
+    specs = plan.specs if specs is None else specs
     done = 0
+    for i, out in executor.map(task.run_block, specs, plan.options):
+        if isinstance(out, BaseException):
+            out = _failed_block(specs[i], out)
+        for r in out.results:
+            done += 1
+            if progress is not None:
+                progress(done, plan.total, r)
+        yield out
 
-    def on_progress(_d, _t, res):
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total, res)
 
-    results, fp_parts, any_points = [], [], False
-    for cloud, fps, classes in (_load_blocks(reader, blocks, cfg, classified) if footprints is not None else blocks):
-        any_points |= cloud is not None
-        if cloud is None:  # no building point in this block
-            res = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
-                               else "no building point in the block around the footprint")
-                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
-            for r in res:
-                on_progress(0, 0, r)
-        else:
-            building = np.isin(classes, cfg.building_classes)
-            ground = np.isin(classes, cfg.ground_classes)
-            res = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
-                                        progress=on_progress, lod22=lod22)
-            if want22 and method == "primitives":
-                with_classes = cloud.with_attributes(classification=classes)
-                fitted = add_primitives(res, with_classes, fps, config=others.get("primitives"),
-                                        user_primitives=user_prims)
-                if check_images is not None:  # block by block: nothing is kept
-                    from .primitives import write_check_images
+def _failed_block(spec, exc):
+    from ..datamodel import Footprints
+    from .task import BlockOutput
 
-                    Path(check_images).mkdir(parents=True, exist_ok=True)
-                    write_check_images(check_images, with_classes, fitted)
-        results.extend(res)
-        fp_parts.append(fps)
-    if not any_points:
+    fps = spec.footprints if spec.footprints is not None else Footprints([], [])
+    msg = str(exc).splitlines()[0] if str(exc) else ""
+    reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
+    return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True)
+
+
+def assemble(plan, outputs):
+    """``(results, Footprints)`` of every block's output (given in block order), in the
+    footprint file's order (traced footprints numbered ``b1``... in block order)."""
+    if not any(o.points for o in outputs):
         raise EmptyInputError("no building point found in the input, even after classification"
-                              if footprints is not None else "no building footprint found in the points")
-    fps = _concat_footprints(fp_parts)
-    if footprints is not None:  # back in the footprint file's order
-        order = np.argsort([i for _, b in blocks for i in b.attributes["_index"]], kind="stable")
+                              if not plan.traced else "no building footprint found in the points")
+    results = [r for o in outputs for r in o.results]
+    fps = _concat_footprints([o.footprints for o in outputs])
+    if plan.traced:
+        from ..datamodel import Footprints
+
+        ids = [f"b{j + 1}" for j in range(len(results))]
+        for r, fid in zip(results, ids, strict=True):
+            r.id = fid
+            if "footprint_id" in r.attributes:
+                r.attributes["footprint_id"] = fid
+        fps = Footprints(fps.geometries, ids, fps.attributes)
+    else:  # back in the footprint file's order
+        order = np.argsort(fps.attributes["_index"], kind="stable")
         results = [results[i] for i in order]
         fps = _subset(fps, order)
-    cloud = frame
     for r in results:  # LoD1 built only as the base of LoD2.2 is not written
-        for lod in [k for k in r.solids if k not in want]:
+        for lod in [k for k in r.solids if k not in plan.lods]:
             del r.solids[lod]
-    write_buildings(output, results, cloud, fmt=fmt, configuration=resolved,
-                    attributes=_fields_for_output(fps), lods=want)
-    summary = ReconstructSummary(str(output), total=len(results), lods=want, format=fmt)
+    return results, fps
+
+
+def summarize(results, output, plan) -> ReconstructSummary:
+    """The run's :class:`ReconstructSummary` (without its time)."""
+    summary = ReconstructSummary(str(output), total=len(results), lods=plan.lods, format=plan.fmt)
     for r in results:
         if r.ok:
             summary.done += 1
@@ -649,7 +733,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         else:
             summary.failed += 1
             summary.reasons[_reason_kind(r.reason)] += 1
-    if want22:
+    if "2.2" in plan.lods:
         ok = [r for r in results if r.ok and "2.2" in r.solids]
         times = [r.attributes.get("lod22_time", 0.0) for r in ok if "lod22_time" in r.attributes]
         summary.lod22 = {
@@ -658,9 +742,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             "type_iv": sum(r.attributes.get("type_iv", 0) > 0 for r in ok),
             "time_per_building": float(np.mean(times)) if times else 0.0,
         }
-    summary.seconds = time.perf_counter() - t0
     return summary
-
 
 
 def _unmodelled(fid, reason):
@@ -685,96 +767,6 @@ def _subset(fps, idx):
     return Footprints([fps.geometries[i] for i in idx], [fps.ids[i] for i in idx],
                       {k: [v[i] for i in idx] for k, v in fps.attributes.items()})
 
-
-def _block_keys(centres_local, reader, block_size):
-    """Grid cell (on the CRS's origin) of local points: ``(row, col)`` per point."""
-    world = reader.origin[:2] + np.asarray(centres_local, dtype=np.float64) / reader.xy_unit
-    return np.floor(world / (block_size / reader.xy_unit)).astype(np.int64)
-
-
-def _footprint_blocks(reader, frame, path, block_size, margin, *, id_field=None, layer=None):
-    """``[(world box, Footprints)]``: the footprints grouped by block, blocks row by row."""
-    wb = reader.world_bounds()
-    lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
-    hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-    fps = load_footprints(path, frame, id_field=id_field, layer=layer, extent=(*lo, *hi))
-    fps.attributes["_index"] = list(range(len(fps)))
-    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
-                       for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
-    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
-    empty = ~np.isfinite(centre).all(axis=1)
-    keys = _block_keys(np.where(empty[:, None], 0.0, centre), reader, block_size)
-    # group by block, row by row (y, then x); footprint order kept inside a block
-    _, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
-    which = np.asarray(which).reshape(-1)
-    order = np.argsort(which, kind="stable")
-    cuts = np.flatnonzero(np.diff(which[order])) + 1
-    blocks = []
-    for idx in np.split(order, cuts):
-        idx = idx.tolist()
-        b = bounds[[i for i in idx if not empty[i]]]
-        if len(b):
-            box = np.array([b[:, 0].min() - margin, b[:, 1].min() - margin,
-                            b[:, 2].max() + margin, b[:, 3].max() + margin])
-            world = np.concatenate([reader.origin[:2] + box[:2] / reader.xy_unit,
-                                    reader.origin[:2] + box[2:] / reader.xy_unit])
-        else:
-            world = None
-        blocks.append((world, _subset(fps, idx)))
-    return blocks
-
-
-def _classified_box(reader, world_box, config, classified):
-    """``(cloud, classes)`` of a world box, or ``(None, None)`` without building points."""
-    cloud = reader.box(*world_box)
-    if len(cloud) == 0:
-        return None, None
-    try:
-        _, _, classes = point_roles(cloud, config, classified=classified)
-    except EmptyInputError:
-        return None, None
-    return cloud, classes
-
-
-def _load_blocks(reader, blocks, config, classified):
-    for world, fps in blocks:
-        cloud, classes = ((None, None) if world is None
-                          else _classified_box(reader, world, config, classified))
-        yield cloud, fps, classes
-
-
-def _traced_blocks(reader, block_size, margin, footprints_config, config, classified):
-    """``(cloud, Footprints, classes)`` per block of the tiles' extent, traced in the block
-    plus a buffer and kept when centred in the block."""
-    buffer = margin + 100.0
-    wb = reader.world_bounds()
-    step = block_size / reader.xy_unit
-    k0 = np.floor(wb[:2] / step).astype(np.int64)
-    k1 = np.floor(wb[2:] / step).astype(np.int64)
-    n = 0
-    for row in range(k0[1], k1[1] + 1):
-        for col in range(k0[0], k1[0] + 1):
-            pad = buffer / reader.xy_unit
-            world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
-                     (row + 1) * step + pad)
-            cloud, classes = _classified_box(reader, world, config, classified)
-            if cloud is None:
-                continue
-            try:
-                fps = footprints_from_points(cloud, classes, config=footprints_config)
-            except EmptyInputError:
-                continue
-            bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
-            centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2,
-                                      (bounds[:, 1] + bounds[:, 3]) / 2])
-            keys = _block_keys(centre, reader, block_size)
-            idx = [i for i in range(len(fps)) if keys[i, 0] == col and keys[i, 1] == row]
-            if not idx:
-                continue
-            fps = _subset(fps, idx)
-            ids = [f"b{n + j + 1}" for j in range(len(idx))]
-            n += len(idx)
-            yield cloud, type(fps)(fps.geometries, ids, fps.attributes), classes
 
 def _reason_kind(reason: str) -> str:
     """A reason without its numbers, to count failures by kind."""
