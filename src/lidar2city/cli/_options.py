@@ -28,7 +28,7 @@ def output_option(**kwargs):
                         help="Output file.", **kwargs)
 
 
-def progress(iterable=None, *, length=None, label="", quiet=False):
+def progress(iterable=None, *, length=None, label="", quiet=False, item_show_func=None):
     """A click progress bar shown on a terminal only (never in pipes or CI logs)."""
     import sys
 
@@ -47,7 +47,8 @@ def progress(iterable=None, *, length=None, label="", quiet=False):
                 return iter(iterable)
 
         return _Null()
-    return click.progressbar(iterable, length=length, label=label, file=sys.stderr)
+    return click.progressbar(iterable, length=length, label=label, file=sys.stderr,
+                             item_show_func=item_show_func)
 
 
 def progress_callback(bar):

@@ -40,9 +40,18 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--block-size", type=click.FloatRange(min=50.0), default=1000.0, show_default=True,
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
                    "bounded by a few tiles and results do not depend on the tiling.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes: 1 runs the blocks in this process, N > 1 on a local "
+                   "Dask cluster of N processes (same output bytes).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the blocks on an existing Dask cluster (tcp://HOST:8786, started with "
+                   "`dask scheduler` and `dask worker`); its workers must see the input paths.")
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted run from its journal (OUT.journal): blocks already "
+                   "done are kept, the output is the same bytes as an uninterrupted run.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
 def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
-            method, primitives_file, check_images, block_size, quiet):
+            method, primitives_file, check_images, block_size, workers, scheduler, resume, quiet):
     """Build 3D buildings from point cloud tiles INPUTS (one area, block by block) or from a DSM.
 
     \b
@@ -76,6 +85,8 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
             raise InputError("--method, --primitives and --check-images apply to point clouds")
         if any(lod != "1.2" for lod in lods):
             raise InputError("--dsm builds LoD1.2 only; drop --lod or use --lod 1.2")
+        if workers != 1 or scheduler is not None or resume:
+            raise InputError("--workers, --scheduler and --resume apply to point clouds")
         if crs is not None:
             raise InputError("--crs does not apply to --dsm (the raster's own CRS is used; "
                              "footprints are reprojected to it)")
@@ -87,20 +98,37 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     from ..tools.reconstruct import reconstruct
 
+    if workers != 1 and scheduler is not None:
+        raise InputError("give either --workers (a local cluster) or --scheduler, not both")
+    # a bar over buildings when their number is known (footprints given), else over blocks
     bar_state = {"bar": None}
 
-    def on_progress(done, total, result):
-        bar = bar_state["bar"]
-        if bar is None:
-            bar = progress(length=total, label="buildings", quiet=quiet).__enter__()
-            bar_state["bar"] = bar
-        bar.update(1)
+    def open_bar(total, label):
+        if bar_state["bar"] is None:
+            bar_state["bar"] = progress(length=total, label=label, quiet=quiet,
+                                        item_show_func=lambda s: s).__enter__()
+        return bar_state["bar"]
 
+    def on_building(done, total, result):
+        if total is not None:
+            open_bar(total, "buildings").update(1)
+
+    def on_block(done, total):
+        if footprints is None:
+            open_bar(total, "blocks").update(1, current_item=f"{on_block.buildings} buildings")
+
+    def count(done, total, result):
+        on_block.buildings = done
+        on_building(done, total, result)
+
+    on_block.buildings = 0
     try:
         summary = reconstruct(list(inputs), output, footprints=footprints, lods=lods or None,
                               crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
-                              progress=on_progress, method=method, primitives=primitives_file,
-                              check_images=check_images, block_size=block_size)
+                              progress=count, block_progress=on_block, method=method,
+                              primitives=primitives_file, check_images=check_images,
+                              block_size=block_size, workers=workers, scheduler=scheduler,
+                              resume=resume)
     finally:
         if bar_state["bar"] is not None:
             bar_state["bar"].__exit__(None, None, None)

@@ -112,7 +112,9 @@ class DaskExecutor:
                                    retries=RETRIES)
         where = {f.key: i for i, f in enumerate(futures)}
         try:
-            for fut in as_completed(futures):
+            with self._client.as_current():
+                completed = as_completed(futures)
+            for fut in completed:
                 i = where[fut.key]
                 try:
                     out = fut.result()

@@ -80,11 +80,15 @@ class ReconstructSummary:
     lods: tuple = ()
     format: str = ""
     lod22: dict = field(default_factory=dict)
+    blocks: int = 0
+    resumed: int = 0
 
     def lines(self) -> list[str]:
         out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
                f"{self.failed} failed, {self.invalid} invalid, in {self.seconds:.2f} s -> "
                f"{self.output} ({self.format})"]
+        if self.resumed:
+            out.append(f"  resumed: {self.resumed} of {self.blocks} blocks taken from the journal")
         for reason, n in self.reasons.most_common():
             out.append(f"  failed: {n} x {reason}")
         if self.lod22:
@@ -511,7 +515,8 @@ LOD22_METHODS = ("roof", "primitives")
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None, check_images=None, block_size=1000.0) -> ReconstructSummary:
+                primitives=None, check_images=None, block_size=1000.0, workers=1,
+                scheduler=None, resume=False, block_progress=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     The area is processed block by block: blocks are the cells of a square
@@ -558,11 +563,29 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         wire frame over its points, for checking by eye.
     block_size : float
         Side (m) of the processing blocks.
+    workers : int
+        1 (default): blocks run in this process; N > 1: on a Dask
+        ``LocalCluster`` of N worker processes. The output is the same bytes.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``) to run the
+        blocks on instead; its workers read the tiles and footprints by path.
+    resume : bool
+        Keep the blocks an interrupted run of the same inputs and options
+        recorded in its journal (``OUT.journal``) and run only the others.
+    block_progress : callable, optional
+        ``block_progress(done, total)`` after every block.
 
     Returns
     -------
     ReconstructSummary
+
+    Raises
+    ------
+    InputError
+        Bad options, a journal of another run beside ``output``, a scheduler
+        that does not answer.
     """
+    from ..io.journal import Journal, file_stamp, run_key
     from .engine import make_executor
 
     t0 = time.perf_counter()
@@ -570,16 +593,57 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
                             config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
                             primitives=primitives, check_images=check_images,
                             block_size=block_size)
+    paths = [inputs] if isinstance(inputs, (str, bytes, Path)) else list(inputs)
+    key = run_key({
+        "version": _version(), "inputs": [file_stamp(p) for p in paths],
+        "footprints": None if footprints is None else file_stamp(footprints),
+        "primitives": None if primitives is None else file_stamp(primitives),
+        "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
+                    float(block_size), None if check_images is None else str(check_images)]})
+    journal = Journal.open(output, key, len(plan.specs), resume=resume)
     outputs = {}
-    with make_executor(1) as executor:
-        for out in run_blocks(executor, plan, progress=progress):
-            outputs[out.index] = out
-    results, fps = assemble(plan, [outputs[k] for k in range(len(plan.specs))])
+    for i in journal.done():
+        out = journal.load(i) if i < len(plan.specs) else None
+        if out is not None:
+            outputs[i] = out
+    if outputs:
+        logger.info("resuming: %d of %d blocks already done", len(outputs), len(plan.specs))
+    n_blocks, state = len(plan.specs), {"blocks": 0, "buildings": 0}
+
+    def advance(out):
+        state["blocks"] += 1
+        for r in out.results:
+            state["buildings"] += 1
+            if progress is not None:
+                progress(state["buildings"], plan.total, r)
+        if block_progress is not None:
+            block_progress(state["blocks"], n_blocks)
+
+    for i in sorted(outputs):
+        advance(outputs[i])
+    pending = [s for s in plan.specs if s.index not in outputs]
+    if pending:
+        with make_executor(workers, scheduler) as executor:
+            logger.info("%d blocks on %s", len(pending), executor.describe())
+            for out in run_blocks(executor, plan, pending):
+                if not out.failed:  # a failed block is tried again by --resume
+                    journal.save(out.index, out)
+                outputs[out.index] = out
+                advance(out)
+    results, fps = assemble(plan, [outputs[k] for k in range(n_blocks)])
     write_buildings(output, results, plan.frame, fmt=plan.fmt, configuration=plan.resolved,
                     attributes=_fields_for_output(fps), lods=plan.lods)
+    journal.remove()
     summary = summarize(results, output, plan)
+    summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
     summary.seconds = time.perf_counter() - t0
     return summary
+
+
+def _version():
+    from .. import __version__
+
+    return __version__
 
 
 @dataclass(eq=False)
@@ -665,7 +729,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            None if footprints is None else sum(s.size for s in specs))
 
 
-def run_blocks(executor, plan, specs=None, *, progress=None):
+def run_blocks(executor, plan, specs=None):
     """Run ``specs`` (default all of the plan's) on ``executor``; yield each
     :class:`~lidar2city.tools.task.BlockOutput` as it finishes (any order).
 
@@ -674,15 +738,8 @@ def run_blocks(executor, plan, specs=None, *, progress=None):
     from . import task
 
     specs = plan.specs if specs is None else specs
-    done = 0
     for i, out in executor.map(task.run_block, specs, plan.options):
-        if isinstance(out, BaseException):
-            out = _failed_block(specs[i], out)
-        for r in out.results:
-            done += 1
-            if progress is not None:
-                progress(done, plan.total, r)
-        yield out
+        yield _failed_block(specs[i], out) if isinstance(out, BaseException) else out
 
 
 def _failed_block(spec, exc):
@@ -692,7 +749,8 @@ def _failed_block(spec, exc):
     fps = spec.footprints if spec.footprints is not None else Footprints([], [])
     msg = str(exc).splitlines()[0] if str(exc) else ""
     reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
-    return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True)
+    return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True,
+                       failed=True)
 
 
 def assemble(plan, outputs):

@@ -16,7 +16,7 @@ import logging
 import os
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -66,14 +66,15 @@ class BlockOutput:
     """The results of one block, in its footprints' order.
 
     ``points`` says whether the block held building points at all (a run where
-    no block does is an error).
+    no block does is an error); ``failed``: the task failed twice and every
+    building carries that reason.
     """
 
     index: int
     results: list
     footprints: object
     points: bool = False
-    notes: dict = field(default_factory=dict)
+    failed: bool = False
 
 
 # decoded tiles kept per process across blocks: blocks visited in grid order
