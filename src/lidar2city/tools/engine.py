@@ -88,7 +88,7 @@ class DaskExecutor:
         with dask.config.set({"distributed.scheduler.allowed-failures": RETRIES,
                               "distributed.worker.daemon": False}):
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
-                                         processes=True, dashboard_address=None,
+                                         processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)
             self._client = Client(self._cluster, set_as_default=False)
         return self
