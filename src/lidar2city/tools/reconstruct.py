@@ -82,6 +82,7 @@ class ReconstructSummary:
     lod22: dict = field(default_factory=dict)
     blocks: int = 0
     resumed: int = 0
+    worker_peak_mb: float = 0.0
 
     def lines(self) -> list[str]:
         out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
@@ -636,6 +637,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     journal.remove()
     summary = summarize(results, output, plan)
     summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
+    summary.worker_peak_mb = max(o.worker_mb for o in outputs.values())
     summary.seconds = time.perf_counter() - t0
     return summary
 

@@ -67,7 +67,8 @@ class BlockOutput:
 
     ``points`` says whether the block held building points at all (a run where
     no block does is an error); ``failed``: the task failed twice and every
-    building carries that reason.
+    building carries that reason; ``worker_mb`` the peak resident memory of
+    the process that ran it (a measure of the run, never written).
     """
 
     index: int
@@ -75,6 +76,7 @@ class BlockOutput:
     footprints: object
     points: bool = False
     failed: bool = False
+    worker_mb: float = 0.0
 
 
 # decoded tiles kept per process across blocks: blocks visited in grid order
@@ -139,7 +141,22 @@ def _traced_footprints(spec, options, cloud, classes):
 
 
 def run_block(spec, options: BlockOptions) -> BlockOutput:
-    """Every building of one block (the task a worker runs).
+    """Every building of one block (the task a worker runs); see :func:`_run_block`."""
+    out = _run_block(spec, options)
+    out.worker_mb = _peak_mb()
+    return out
+
+
+def _peak_mb() -> float:
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on Windows
+        return 0.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _run_block(spec, options: BlockOptions) -> BlockOutput:
+    """Every building of one block.
 
     Parameters
     ----------
