@@ -48,14 +48,24 @@ if __name__ == "__main__":
 """
 
 
+def _town(seed, origin):
+    """A town tile; the next seeds are tried when the generator fails on one (some seeds give
+    a two-part stepped building it cannot handle)."""
+    from lidar2city.synthetic import make_town
+
+    for k in range(10):
+        try:
+            return make_town(size=TILE, density=4.0, seed=seed + 100_000 * k, n_trees=10,
+                             origin=origin)
+        except AttributeError:
+            continue
+    raise RuntimeError(f"make_town failed for seed {seed}")
+
+
 def make_area(folder: Path, n: int):
     """n x n synthetic town tiles (one LAZ each) and one footprint file; returns (tiles, fp)."""
-    import numpy as np  # noqa: F401
-
-    from lidar2city.datamodel import Footprints  # noqa: F401
     from lidar2city.io.las import write_points
     from lidar2city.io.vector import write_polygons
-    from lidar2city.synthetic import make_town
 
     import shapely
 
@@ -64,8 +74,7 @@ def make_area(folder: Path, n: int):
     for j in range(n):
         for i in range(n):
             origin = (x0 + i * TILE[0], y0 + j * TILE[1], 0.0)
-            town = make_town(size=TILE, density=4.0, seed=1000 + j * n + i, n_trees=10,
-                             origin=origin)
+            town = _town(1000 + j * n + i, origin)
             p = folder / f"tile_{i}_{j}.laz"
             write_points(p, town.cloud)
             tiles.append(str(p))

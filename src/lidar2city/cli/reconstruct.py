@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option, progress, progress_callback
+from ._options import crs_option, engine_options, output_option, progress, progress_callback
 
 
 @click.command("reconstruct")
-@click.argument("inputs", nargs=-1, required=False, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=False, type=click.Path())
 @output_option()
 @click.option("--dsm", type=click.Path(dir_okay=False), default=None,
               help="Build LoD1.2 prisms from this DSM raster instead of point clouds.")
@@ -40,12 +40,7 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--block-size", type=click.FloatRange(min=50.0), default=1000.0, show_default=True,
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
                    "bounded by a few tiles and results do not depend on the tiling.")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes: 1 runs the blocks in this process, N > 1 on a local "
-                   "Dask cluster of N processes (same output bytes).")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Run the blocks on an existing Dask cluster (tcp://HOST:8786, started with "
-                   "`dask scheduler` and `dask worker`); its workers must see the input paths.")
+@engine_options
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted run from its journal (OUT.journal): blocks already "
                    "done are kept, the output is the same bytes as an uninterrupted run.")
@@ -53,6 +48,8 @@ from ._options import crs_option, output_option, progress, progress_callback
 def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
             method, primitives_file, check_images, block_size, workers, scheduler, resume, quiet):
     """Build 3D buildings from point cloud tiles INPUTS (one area, block by block) or from a DSM.
+
+    INPUTS are LAS/LAZ files, folders of tiles or quoted glob patterns ("tiles/*.laz").
 
     \b
     lidar2city reconstruct TILE.laz [TILE.laz...] [--footprints FP] [--lod ...] -o OUT

@@ -538,7 +538,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     Parameters
     ----------
     inputs : path or sequence of paths
-        LAS/LAZ tiles of one area (one CRS).
+        LAS/LAZ tiles of one area (one CRS): files, folders of tiles or glob
+        patterns (:func:`lidar2city.io.tiles.tile_paths`).
     output : path
         ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
     footprints : path, optional
@@ -587,14 +588,16 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         that does not answer.
     """
     from ..io.journal import Journal, file_stamp, run_key
+    from ..io.tiles import tile_paths
     from .engine import make_executor
 
     t0 = time.perf_counter()
+    paths = tile_paths(inputs)
+    inputs = paths
     plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
                             config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
                             primitives=primitives, check_images=check_images,
                             block_size=block_size)
-    paths = [inputs] if isinstance(inputs, (str, bytes, Path)) else list(inputs)
     key = run_key({
         "version": _version(), "inputs": [file_stamp(p) for p in paths],
         "footprints": None if footprints is None else file_stamp(footprints),
