@@ -26,7 +26,7 @@ __all__ = ["InProcess", "DaskExecutor", "make_executor", "RETRIES", "CONNECT_TIM
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
 #: seconds to wait for a scheduler address to answer
-CONNECT_TIMEOUT = 20
+CONNECT_TIMEOUT = 15
 
 
 class InProcess:

@@ -36,7 +36,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["FORMATS", "ReconstructSummary", "ReconstructPlan", "PointGrid", "format_from_name",
            "lod1_config", "point_roles", "load_footprints", "reconstruct_buildings",
-           "write_buildings", "plan_reconstruct", "run_blocks", "assemble", "summarize",
+           "write_buildings", "plan_reconstruct", "run_blocks", "InOrder",
            "reconstruct"]
 
 #: output format name -> file name endings that select it.
@@ -407,18 +407,26 @@ def _fields_for_output(footprints):
 RUN_ATTRIBUTES = ("reconstruction_time", "lod22_time")
 
 
+def _title(lods) -> str:
+    return f"lidar2city LoD{'+'.join(lods)} buildings"
+
+
+def _without_run_attributes(result):
+    import dataclasses
+
+    return dataclasses.replace(result, attributes={k: v for k, v in result.attributes.items()
+                                                   if k not in RUN_ATTRIBUTES})
+
+
 def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attributes=None,
                     lods=("1.2",)) -> str:
     """Write results in the format chosen by ``fmt`` or the file name; returns the format.
 
     The same results give the same file: :data:`RUN_ATTRIBUTES` are left out.
     """
-    import dataclasses
-
     fmt = format_from_name(path, fmt)
-    results = [dataclasses.replace(r, attributes={k: v for k, v in r.attributes.items()
-                                                  if k not in RUN_ATTRIBUTES}) for r in results]
-    title = f"lidar2city LoD{'+'.join(lods)} buildings"
+    results = [_without_run_attributes(r) for r in results]
+    title = _title(lods)
     common = dict(origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
                   configuration=configuration, attributes=attributes, title=title)
     if fmt == "cityjson":
@@ -605,44 +613,185 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
                     float(block_size), None if check_images is None else str(check_images)]})
     journal = Journal.open(output, key, len(plan.specs), resume=resume)
-    outputs = {}
-    for i in journal.done():
-        out = journal.load(i) if i < len(plan.specs) else None
-        if out is not None:
-            outputs[i] = out
-    if outputs:
-        logger.info("resuming: %d of %d blocks already done", len(outputs), len(plan.specs))
-    n_blocks, state = len(plan.specs), {"blocks": 0, "buildings": 0}
+    n_blocks, state = len(plan.specs), {"blocks": 0, "buildings": 0, "mb": 0.0}
+    ordered, sink = InOrder(plan), _sink(output, plan)
+    tally = _Tally(output, plan)
 
-    def advance(out):
+    def take(out):
         state["blocks"] += 1
+        state["mb"] = max(state["mb"], out.worker_mb)
         for r in out.results:
             state["buildings"] += 1
             if progress is not None:
                 progress(state["buildings"], plan.total, r)
         if block_progress is not None:
             block_progress(state["blocks"], n_blocks)
+        for r, fields in ordered.add(out):
+            tally.add(r)
+            sink.add(r, fields)
 
-    for i in sorted(outputs):
-        advance(outputs[i])
-    pending = [s for s in plan.specs if s.index not in outputs]
-    if pending:
-        with make_executor(workers, scheduler) as executor:
-            logger.info("%d blocks on %s", len(pending), executor.describe())
-            for out in run_blocks(executor, plan, pending):
-                if not out.failed:  # a failed block is tried again by --resume
-                    journal.save(out.index, out)
-                outputs[out.index] = out
-                advance(out)
-    results, fps = assemble(plan, [outputs[k] for k in range(n_blocks)])
-    write_buildings(output, results, plan.frame, fmt=plan.fmt, configuration=plan.resolved,
-                    attributes=_fields_for_output(fps), lods=plan.lods)
+    try:
+        done = set()
+        for i in journal.done():
+            out = journal.load(i) if i < n_blocks else None
+            if out is not None:
+                done.add(i)
+                take(out)
+        if done:
+            logger.info("resuming: %d of %d blocks already done", len(done), n_blocks)
+        pending = [s for s in plan.specs if s.index not in done]
+        if pending:
+            with make_executor(workers, scheduler) as executor:
+                logger.info("%d blocks on %s", len(pending), executor.describe())
+                for out in run_blocks(executor, plan, pending):
+                    if not out.failed:  # a failed block is tried again by --resume
+                        journal.save(out.index, out)
+                    take(out)
+        ordered.check()
+        sink.close()
+    except BaseException:
+        sink.abort()
+        if not journal.done():  # nothing to resume: leave nothing behind
+            journal.remove()
+        raise
     journal.remove()
-    summary = summarize(results, output, plan)
+    summary = tally.summary
     summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
-    summary.worker_peak_mb = max(o.worker_mb for o in outputs.values())
+    summary.worker_peak_mb = state["mb"]
     summary.seconds = time.perf_counter() - t0
     return summary
+
+
+class InOrder:
+    """Block outputs in (any order), ``(result, footprint fields)`` out in the output's order.
+
+    With footprints the order is the footprint file's (each footprint carries
+    its position in ``_index``); traced footprints come block by block and are
+    numbered ``b1``, ``b2``... Results are released as soon as all those
+    before them are known, so a run whose footprints are in spatial order holds
+    few of them.
+    """
+
+    def __init__(self, plan):
+        self.plan = plan
+        self.pending = {}
+        self.next = 0
+        self.numbered = 0
+        self.points = False
+
+    def add(self, out) -> list:
+        """The results that ``out`` makes ready, in order."""
+        self.points |= out.points
+        fps = out.footprints
+        keys = sorted(k for k in fps.attributes if not k.startswith("_"))
+        items = [(r, {k: fps.attributes[k][j] for k in keys}) for j, r in enumerate(out.results)]
+        if self.plan.traced:
+            self.pending[out.index] = items
+        else:
+            self.pending.update(zip(fps.attributes["_index"], items, strict=True))
+        ready = []
+        while self.next in self.pending:
+            got = self.pending.pop(self.next)
+            ready += got if self.plan.traced else [got]
+            self.next += 1
+        for r, _ in ready:
+            if self.plan.traced:
+                self.numbered += 1
+                r.id = f"b{self.numbered}"
+                if "footprint_id" in r.attributes:
+                    r.attributes["footprint_id"] = r.id
+            for lod in [k for k in r.solids if k not in self.plan.lods]:
+                del r.solids[lod]  # LoD1 built only as the base of LoD2.2 is not written
+        return ready
+
+    def check(self) -> None:
+        """Raise when the run found no building point at all."""
+        if not self.points:
+            raise EmptyInputError("no building point found in the input, even after "
+                                  "classification" if not self.plan.traced
+                                  else "no building footprint found in the points")
+        if self.pending:  # pragma: no cover - every block is given once
+            raise RuntimeError(f"{len(self.pending)} results left out of order")
+
+
+class _Collect:
+    """A sink keeping every result, written at the end by :func:`write_buildings`."""
+
+    def __init__(self, output, plan):
+        self.output, self.plan = output, plan
+        self.results, self.fields = [], []
+
+    def add(self, result, fields):
+        self.results.append(result)
+        self.fields.append(fields)
+
+    def close(self):
+        keys = sorted(set().union(*self.fields)) if self.fields else []
+        attributes = {k: [f.get(k) for f in self.fields] for k in keys}
+        write_buildings(self.output, self.results, self.plan.frame, fmt=self.plan.fmt,
+                        configuration=self.plan.resolved, attributes=attributes,
+                        lods=self.plan.lods)
+
+    def abort(self):
+        self.results, self.fields = [], []
+
+
+class _Stream:
+    """A sink writing CityJSONSeq features as they come (nothing kept)."""
+
+    def __init__(self, output, plan):
+        from ..io.cityjsonseq import CityJSONSeqWriter
+
+        f = plan.frame
+        self.writer = CityJSONSeqWriter(output, origin=f.origin, crs=f.crs, xy_unit=f.xy_unit,
+                                        z_unit=f.z_unit, configuration=plan.resolved,
+                                        title=_title(plan.lods))
+
+    def add(self, result, fields):
+        self.writer.add(_without_run_attributes(result), fields)
+
+    def close(self):
+        self.writer.close()
+
+    def abort(self):
+        self.writer.abort()
+
+
+def _sink(output, plan):
+    return (_Stream if plan.fmt == "cityjsonseq" else _Collect)(output, plan)
+
+
+class _Tally:
+    """The run's :class:`ReconstructSummary`, counted result by result."""
+
+    def __init__(self, output, plan):
+        self.summary = ReconstructSummary(str(output), lods=plan.lods, format=plan.fmt)
+        self.lod22 = "2.2" in plan.lods
+        self.times, self.modelled, self.fallbacks, self.type_iv = [], 0, 0, 0
+        if self.lod22:
+            self.summary.lod22 = {"modelled": 0, "fallbacks": 0, "type_iv": 0,
+                                  "time_per_building": 0.0}
+
+    def add(self, r):
+        s = self.summary
+        s.total += 1
+        if r.ok:
+            s.done += 1
+            if r.attributes.get("valid") is False:
+                s.invalid += 1
+        else:
+            s.failed += 1
+            s.reasons[_reason_kind(r.reason)] += 1
+        if self.lod22 and r.ok and "2.2" in r.solids:
+            fallback = "lod22_fallback" in r.attributes
+            self.modelled += not fallback
+            self.fallbacks += fallback
+            self.type_iv += r.attributes.get("type_iv", 0) > 0
+            if "lod22_time" in r.attributes:
+                self.times.append(r.attributes["lod22_time"])
+            s.lod22 = {"modelled": self.modelled, "fallbacks": self.fallbacks,
+                       "type_iv": self.type_iv,
+                       "time_per_building": float(np.mean(self.times)) if self.times else 0.0}
 
 
 def _version():
@@ -756,56 +905,6 @@ def _failed_block(spec, exc):
     reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
     return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True,
                        failed=True)
-
-
-def assemble(plan, outputs):
-    """``(results, Footprints)`` of every block's output (given in block order), in the
-    footprint file's order (traced footprints numbered ``b1``... in block order)."""
-    if not any(o.points for o in outputs):
-        raise EmptyInputError("no building point found in the input, even after classification"
-                              if not plan.traced else "no building footprint found in the points")
-    results = [r for o in outputs for r in o.results]
-    fps = _concat_footprints([o.footprints for o in outputs])
-    if plan.traced:
-        from ..datamodel import Footprints
-
-        ids = [f"b{j + 1}" for j in range(len(results))]
-        for r, fid in zip(results, ids, strict=True):
-            r.id = fid
-            if "footprint_id" in r.attributes:
-                r.attributes["footprint_id"] = fid
-        fps = Footprints(fps.geometries, ids, fps.attributes)
-    else:  # back in the footprint file's order
-        order = np.argsort(fps.attributes["_index"], kind="stable")
-        results = [results[i] for i in order]
-        fps = _subset(fps, order)
-    for r in results:  # LoD1 built only as the base of LoD2.2 is not written
-        for lod in [k for k in r.solids if k not in plan.lods]:
-            del r.solids[lod]
-    return results, fps
-
-
-def summarize(results, output, plan) -> ReconstructSummary:
-    """The run's :class:`ReconstructSummary` (without its time)."""
-    summary = ReconstructSummary(str(output), total=len(results), lods=plan.lods, format=plan.fmt)
-    for r in results:
-        if r.ok:
-            summary.done += 1
-            if r.attributes.get("valid") is False:
-                summary.invalid += 1
-        else:
-            summary.failed += 1
-            summary.reasons[_reason_kind(r.reason)] += 1
-    if "2.2" in plan.lods:
-        ok = [r for r in results if r.ok and "2.2" in r.solids]
-        times = [r.attributes.get("lod22_time", 0.0) for r in ok if "lod22_time" in r.attributes]
-        summary.lod22 = {
-            "modelled": sum("lod22_fallback" not in r.attributes for r in ok),
-            "fallbacks": sum("lod22_fallback" in r.attributes for r in ok),
-            "type_iv": sum(r.attributes.get("type_iv", 0) > 0 for r in ok),
-            "time_per_building": float(np.mean(times)) if times else 0.0,
-        }
-    return summary
 
 
 def _unmodelled(fid, reason):
