@@ -12,8 +12,10 @@ Printed per run: buildings, wall seconds, buildings per second, the peak
 resident memory of the process that ran the blocks (``ru_maxrss`` read in the
 worker after each block; with 1 worker that process also holds the results),
 seconds per building, and the MD5 of the output (the same for every worker
-count). Then the speed-up of 2 workers over 1, and the load average of the
-machine at the time (the speed-up is depressed when other jobs use the cores).
+count) and the CPU seconds used by the run and all the processes it started
+(Dask workers included). Then the speed-up of 2 workers over 1, and the load
+average of the machine at the time (the speed-up is depressed when other jobs
+use the cores; the CPU seconds are not).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import argparse
 import hashlib
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -94,14 +97,18 @@ def run(tiles, fp, out, workers):
                        "workers": workers})
     with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:
         f.write(CHILD)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         r = subprocess.run([sys.executable, f.name, args], capture_output=True, text=True,
                            env=os.environ.copy())
     finally:
         os.unlink(f.name)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode:
         raise SystemExit(r.stderr)
     res = json.loads(r.stdout.strip().splitlines()[-1])
+    # CPU seconds of the run and of every process it started (Dask workers included)
+    res["cpu"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     res["md5"] = hashlib.md5(Path(out).read_bytes()).hexdigest()
     return res
 
@@ -127,8 +134,8 @@ def main():
                 print(f"{n * n:3d} tiles, {w} worker(s): {r['total']} buildings ({r['failed']} "
                       f"failed), {r['blocks']} blocks, {r['seconds']:.1f} s, "
                       f"{r['total'] / r['seconds']:.1f} buildings/s, "
-                      f"{1000 * r['seconds'] / r['total']:.1f} ms/building, peak worker memory "
-                      f"{r['worker_mb']:.0f} MB, md5 {r['md5']}", flush=True)
+                      f"{1000 * r['seconds'] / r['total']:.1f} ms/building, CPU {r['cpu']:.1f} s, "
+                      f"peak worker memory {r['worker_mb']:.0f} MB, md5 {r['md5']}", flush=True)
     n = max(sizes)
     if (n, 1) in rows:
         base = rows[(n, 1)]

@@ -903,6 +903,9 @@ def _failed_block(spec, exc):
     fps = spec.footprints if spec.footprints is not None else Footprints([], [])
     msg = str(exc).splitlines()[0] if str(exc) else ""
     reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
+    if spec.footprints is None:
+        logger.error("block %d (cell %s): %s; no footprint traced there (run again with "
+                     "--resume to retry it)", spec.index, spec.cell, reason)
     return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True,
                        failed=True)
 
