@@ -6,11 +6,13 @@ The demo town generator (:func:`lidar2city.synthetic.make_town`, 200 x 150 m,
 4 points/m², a different seed per tile) is laid out as n x n tiles (2 x 2 = 4,
 4 x 4 = 16 and 8 x 8 = 64 tiles, ~15 buildings each), every tile its own LAZ
 file, the footprints of all in one GeoPackage. Each area is reconstructed
-(LoD1.2 + LoD1.3, blocks of 200 m) in a fresh process with ``--workers 1`` (in
-process) and, on the largest area, with ``--workers 2`` (a local Dask cluster).
-Printed per run: buildings, wall seconds, buildings per second, the peak
-resident memory of the process that ran the blocks (``ru_maxrss`` read in the
-worker after each block; with 1 worker that process also holds the results),
+(LoD1.2 + LoD1.3, blocks of 200 m, to a streamed CityJSONSeq) in a fresh
+process with ``--workers 1`` (in process) and, on the largest area, with
+``--workers 2`` (a local Dask cluster). Printed per run: buildings, wall
+seconds, buildings per second, the peak resident memory of the process that
+ran the blocks (``ru_maxrss`` read in the worker after each block; with 1
+worker that process is also the client, which holds the results not yet
+written),
 seconds per building, and the MD5 of the output (the same for every worker
 count) and the CPU seconds used by the run and all the processes it started
 (Dask workers included). Then the speed-up of 2 workers over 1, and the load
@@ -129,7 +131,7 @@ def main():
             d.mkdir()
             tiles, fp = make_area(d, n)
             for w in (workers if n == max(sizes) else [1]):
-                r = run(tiles, fp, d / f"out_w{w}.city.json", w)
+                r = run(tiles, fp, d / f"out_w{w}.city.jsonl", w)
                 rows[(n, w)] = r
                 print(f"{n * n:3d} tiles, {w} worker(s): {r['total']} buildings ({r['failed']} "
                       f"failed), {r['blocks']} blocks, {r['seconds']:.1f} s, "

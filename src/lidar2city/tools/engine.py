@@ -84,9 +84,13 @@ class DaskExecutor:
                                  "`dask scheduler` and `dask worker ADDRESS`") from None
             self.workers = len(self._client.scheduler_info().get("workers", {}))
             return self
-        # a task that kills two workers is reported, not retried for ever
+        # a task that kills two workers is reported, not retried for ever; one thread per
+        # worker process, LAZ decoding included (lazrs decodes on a rayon pool of all cores)
+        environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}),
+                   "RAYON_NUM_THREADS": 1, "NUMBA_NUM_THREADS": 1}
         with dask.config.set({"distributed.scheduler.allowed-failures": RETRIES,
-                              "distributed.worker.daemon": False}):
+                              "distributed.worker.daemon": False,
+                              "distributed.nanny.pre-spawn-environ": environ}):
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
                                          processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)

@@ -904,8 +904,8 @@ def _failed_block(spec, exc):
     msg = str(exc).splitlines()[0] if str(exc) else ""
     reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
     if spec.footprints is None:
-        logger.error("block %d (cell %s): %s; no footprint traced there (run again with "
-                     "--resume to retry it)", spec.index, spec.cell, reason)
+        logger.error("block %d (cell %s): %s; no footprint traced there", spec.index,
+                     spec.cell, reason)
     return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True,
                        failed=True)
 
