@@ -136,7 +136,8 @@ def main():
                 print(f"{n * n:3d} tiles, {w} worker(s): {r['total']} buildings ({r['failed']} "
                       f"failed), {r['blocks']} blocks, {r['seconds']:.1f} s, "
                       f"{r['total'] / r['seconds']:.1f} buildings/s, "
-                      f"{1000 * r['seconds'] / r['total']:.1f} ms/building, CPU {r['cpu']:.1f} s, "
+                      f"{1000 * r['seconds'] / r['total']:.1f} ms/building, CPU {r['cpu']:.1f} s "
+                      f"({1000 * r['cpu'] / r['total']:.0f} CPU-ms/building), "
                       f"peak worker memory {r['worker_mb']:.0f} MB, md5 {r['md5']}", flush=True)
     n = max(sizes)
     if (n, 1) in rows:
@@ -145,7 +146,8 @@ def main():
             if w != 1 and (n, w) in rows:
                 r = rows[(n, w)]
                 print(f"speed-up {w} workers / 1 on {n * n} tiles: "
-                      f"{base['seconds'] / r['seconds']:.2f}; same bytes: "
+                      f"{base['seconds'] / r['seconds']:.2f}; CPU {w} workers / 1: "
+                      f"{r['cpu'] / base['cpu']:.2f}; same bytes: "
                       f"{'yes' if r['md5'] == base['md5'] else 'NO'}")
     ones = [rows[(k, 1)] for k in sizes if (k, 1) in rows]
     if len(ones) > 1:
@@ -154,6 +156,9 @@ def main():
         print("time per building from {} to {} tiles: {} ms".format(
             min(sizes) ** 2, n * n,
             " -> ".join(f"{1000 * r['seconds'] / r['total']:.1f}" for r in ones)))
+        print("CPU per building from {} to {} tiles: {} ms".format(
+            min(sizes) ** 2, n * n, " -> ".join(f"{1000 * r['cpu'] / r['total']:.0f}"
+                                                 for r in ones)))
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
