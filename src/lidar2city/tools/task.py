@@ -17,6 +17,7 @@ import os
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -46,7 +47,8 @@ class BlockOptions:
     user_primitives : dict or None
         Footprint id -> primitive and approximate parameters.
     check_images : str or None
-        Folder for one PNG per building (primitives).
+        Folder for one PNG per building (primitives); with traced footprints,
+        one sub-folder per block (``block_COL_ROW``), their ids being per block.
     footprints_config : config or None
         The ``[footprints]`` stage for tracing footprints.
     """
@@ -185,11 +187,20 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
                                else "no building point in the block around the footprint")
                    for fid, g in zip(fps.ids, fps.geometries, strict=True)]
         return BlockOutput(spec.index, results, fps, False)
-    return BlockOutput(spec.index, reconstruct_block(cloud, classes, fps, options), fps, True)
+    images = options.check_images
+    if images is not None and spec.footprints is None:
+        # traced ids are numbered per block: one folder of check images per block
+        images = str(Path(images) / f"block_{spec.cell[0]}_{spec.cell[1]}")
+    return BlockOutput(spec.index, reconstruct_block(cloud, classes, fps, options,
+                                                     check_images=images), fps, True)
 
 
-def reconstruct_block(cloud, classes, footprints, options: BlockOptions) -> list:
-    """The per-building step of a block: LoD1 (+ LoD2.2) of every footprint, in order."""
+def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
+                      check_images=None) -> list:
+    """The per-building step of a block: LoD1 (+ LoD2.2) of every footprint, in order.
+
+    ``check_images``: the folder for the primitives' check images of this block.
+    """
     from .reconstruct import add_primitives, reconstruct_buildings
 
     cfg = options.config
@@ -201,13 +212,11 @@ def reconstruct_block(cloud, classes, footprints, options: BlockOptions) -> list
         with_classes = cloud.with_attributes(classification=classes)
         fitted = add_primitives(results, with_classes, footprints, config=options.primitives,
                                 user_primitives=options.user_primitives)
-        if options.check_images is not None:  # block by block: nothing is kept
-            from pathlib import Path
-
+        if check_images is not None:  # block by block: nothing is kept
             from .primitives import write_check_images
 
-            Path(options.check_images).mkdir(parents=True, exist_ok=True)
-            write_check_images(options.check_images, with_classes, fitted)
+            Path(check_images).mkdir(parents=True, exist_ok=True)
+            write_check_images(check_images, with_classes, fitted)
     return results
 
 
