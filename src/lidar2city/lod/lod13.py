@@ -1,10 +1,14 @@
 """LoD1.3: split a footprint into parts of similar roof height.
 
 The building points' heights are rasterised inside the footprint; cells are
-grown into regions across 4-neighbours whose heights differ by less than a
-step threshold (a pitched roof stays one region, a step between a tower and
-an annex splits); small regions join the neighbour they share the longest
-border with; the regions are polygonised, their shared borders simplified
+grown into continuous surfaces across 4-neighbours whose heights differ by at
+most the rise of a 63 degree roof over one cell (a pitched roof stays one
+surface, a wall between a tower and an annex splits); neighbouring surfaces
+whose heights (70th percentile of their cells, as the parts' prisms) differ by
+less than a step merge, closest pair first, so parts follow the roof's actual
+height jumps rather than its slopes (the LoD1.3 of 3DBAG's roofer merges its
+roof faces the same way); small regions join the neighbour they share the
+longest border with; the regions are polygonised, their shared borders simplified
 as a coverage (so neighbours keep identical edges) and clipped to the
 footprint, so the parts tile it exactly: no gap, no overlap, shared walls.
 """
@@ -88,8 +92,38 @@ def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
     return lab
 
 
-def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
-                   min_area: float = 10.0):
+def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
+    """Merge neighbouring regions whose heights differ by less than ``step``.
+
+    A region's height is the ``percentile`` of its cells' heights (as the
+    parts' prisms); the closest pair of neighbours merges first and the merged
+    region's height is measured again, until every pair of neighbours differs
+    by ``step`` or more.
+    """
+    lab = labels.copy()
+    inside = mask.ravel()
+    while True:
+        la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
+        diff = la != lb
+        if not diff.any():
+            return lab
+        cells = np.flatnonzero(inside)
+        order = np.lexsort((hv[cells], lab[cells]))
+        k, z = lab[cells][order], hv[cells][order]
+        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+        height = {int(k[s0]): float(np.percentile(z[s0:s1], percentile))
+                  for s0, s1 in zip(starts, np.r_[starts[1:], len(k)], strict=True)}
+        edges = np.unique(np.sort(np.column_stack([la[diff], lb[diff]]), axis=1), axis=0)
+        gaps = np.array([abs(height[int(a)] - height[int(b)]) for a, b in edges])
+        best = int(np.argmin(gaps))  # first of the smallest: deterministic
+        if gaps[best] >= step:
+            return lab
+        a, b = edges[best]
+        lab[lab == b] = a
+
+
+def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
+                   min_area: float = 5.0):
     """Label raster of roof-height regions inside a footprint.
 
     Parameters
@@ -101,8 +135,8 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     cell : float
         Raster cell (metres); about twice the point spacing.
     step : float
-        Height difference (metres) between neighbouring cells that separates
-        two regions.
+        Height difference (metres) between the heights of two neighbouring
+        surfaces at or above which they stay separate regions.
     min_area : float
         Regions smaller than this (m2) join a neighbour.
 
@@ -141,10 +175,12 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     h = h[ir, ic]
     pairs = _neighbour_pairs((rows, cols), mask)
     hv = h.ravel()
-    ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) < step
+    # continuous surfaces: neighbours within the rise of a 63 degree roof (2 x cell)
+    ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) <= 2.0 * cell
     n = rows * cols
     graph = coo_matrix((np.ones(int(ok.sum())), (pairs[ok, 0], pairs[ok, 1])), shape=(n, n))
     _, lab = connected_components(graph, directed=False)
+    lab = _merge_by_height(lab, pairs, mask, hv, step)
     lab = _merge_small(lab, pairs, mask, max(1, int(np.ceil(min_area / (cell * cell)))))
     lab = np.where(mask.ravel(), lab, -1).reshape(rows, cols)
     # compact labels 0..k-1
@@ -154,7 +190,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     return out, transform
 
 
-def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 3.0, min_area: float = 10.0,
+def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 2.0, min_area: float = 5.0,
                  grid: float = 0.0):
     """Polygons tiling ``footprint``, one per roof-height region.
 
