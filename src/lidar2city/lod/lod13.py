@@ -15,8 +15,6 @@ footprint, so the parts tile it exactly: no gap, no overlap, shared walls.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 __all__ = ["height_regions", "height_parts"]
@@ -122,6 +120,25 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         lab[lab == b] = a
 
 
+def _cell_boxes(r, c, x0, y_top, cell):
+    """shapely boxes of the cells at rows ``r``, columns ``c`` (rows from the top)."""
+    import shapely
+
+    return shapely.box(x0 + c * cell, y_top - (r + 1) * cell, x0 + (c + 1) * cell, y_top - r * cell)
+
+
+def _touched_cells(footprint, x0, y_top, cell, rows, cols):
+    """Boolean raster (rows, cols) of the cells whose interior meets the footprint."""
+    import shapely
+
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
+    shapely.prepare(footprint)
+    hit = shapely.intersects(footprint, boxes)
+    hit[hit] &= ~shapely.touches(footprint, boxes[hit])
+    return hit.reshape(rows, cols)
+
+
 def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
                    min_area: float = 5.0):
     """Label raster of roof-height regions inside a footprint.
@@ -148,7 +165,6 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
         Raster georeferencing (local metres, north up).
     """
     from affine import Affine
-    from rasterio.features import rasterize
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -159,10 +175,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
     rows = int(np.ceil((y1 - y0) / cell)) + 1
     y_top = y0 + rows * cell
     transform = Affine(cell, 0.0, x0, 0.0, -cell, y_top)  # north up, rows from the top
-    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        mask = rasterize([(footprint, 1)], out_shape=(rows, cols), transform=transform,
-                         all_touched=True, fill=0, dtype="uint8").astype(bool)
+    mask = _touched_cells(footprint, x0, y_top, cell, rows, cols)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     c = np.clip(np.floor((xyz[:, 0] - x0) / cell).astype(np.int64), 0, cols - 1)
     r = np.clip(np.floor((y_top - xyz[:, 1]) / cell).astype(np.int64), 0, rows - 1)
@@ -213,20 +226,16 @@ def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 2.0, min_ar
         A single part is the footprint itself.
     """
     import shapely
-    from rasterio.features import shapes
 
     labels, transform = height_regions(footprint, xyz, cell=cell, step=step, min_area=min_area)
     k = int(labels.max()) + 1
     if k <= 1:
         return [footprint]
-    polys = [[] for _ in range(k)]
-    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        found = list(shapes(labels.astype(np.int32), mask=labels >= 0, transform=transform,
-                            connectivity=4))
-    for geom, value in found:
-        polys[int(value)].append(shapely.geometry.shape(geom))
-    regions = [shapely.union_all(p) if len(p) > 1 else p[0] for p in polys if p]
+    # each region: the union of its cells (they tile it: a coverage union)
+    r, c = np.nonzero(labels >= 0)
+    lab = labels[r, c]
+    boxes = _cell_boxes(r, c, transform.c, transform.f, cell)
+    regions = [shapely.coverage_union_all(boxes[lab == v]) for v in range(k)]
     regions = list(shapely.coverage_simplify(np.array(regions, dtype=object), 0.75 * cell,
                                              simplify_boundary=False))
     gs = grid if grid > 0 else None
