@@ -54,12 +54,10 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
         direction follows the right-hand rule on the ring order.
     """
     p = np.asarray(points, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    return np.array([
-        np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
-        np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
-        np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1])),
-    ])
+    q = np.concatenate([p[1:], p[:1]])  # the next vertex (np.roll without its overhead)
+    d, s = p - q, p + q
+    return np.array([np.sum(d[:, 1] * s[:, 2]), np.sum(d[:, 2] * s[:, 0]),
+                     np.sum(d[:, 0] * s[:, 1])])
 
 
 def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

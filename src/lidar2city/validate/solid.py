@@ -83,6 +83,43 @@ def _merge_vertices(vertices, tol):
     return np.asarray(vertices, dtype=np.float64)[first], inverse.ravel()
 
 
+def _all_rings_clean(rings) -> bool:
+    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones."""
+    idx, nxt, starts, lens = _ring_layout(rings)
+    if len(lens) == 0 or lens.min() < 3 or np.any(idx == idx[nxt]):
+        return False
+    if lens.max() == 3:
+        return True
+    # distinct vertices per ring: sort within rings and count changes
+    ring = np.repeat(np.arange(len(lens)), lens)
+    order = np.lexsort((idx, ring))
+    si, sr = idx[order], ring[order]
+    new = np.r_[True, (si[1:] != si[:-1]) | (sr[1:] != sr[:-1])]
+    return bool(np.bincount(sr[new], minlength=len(lens)).min() >= 3)
+
+
+def _ring_layout(rings):
+    """Concatenated ring indices, the position of each one's next vertex, ring starts and lengths."""
+    lens = np.array([len(r) for r in rings], dtype=np.int64)
+    if len(lens) == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z, z, lens
+    idx = np.concatenate([np.asarray(r, dtype=np.int64) for r in rings])
+    starts = np.cumsum(lens) - lens
+    nxt = np.arange(len(idx)) + 1
+    nxt[(starts + lens - 1)[lens > 0]] = starts[lens > 0]
+    return idx, nxt, starts, lens
+
+
+def _ring_normals(verts, rings):
+    """Newell vector (twice the vector area) of every ring, shape (R, 3); rings of >= 1 vertex."""
+    idx, nxt, starts, _ = _ring_layout(rings)
+    p, q = verts[idx], verts[idx[nxt]]
+    d, s = p - q, p + q
+    terms = np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]])
+    return np.add.reduceat(terms, starts, axis=0)
+
+
 def _ring_checks(rings, i, issues):
     """Remap-independent ring checks; returns cleaned rings (no repeated vertices)."""
     clean = []
@@ -195,23 +232,26 @@ def solid_volume(vertices, surfaces) -> float:
     Divergence theorem with each face's vector area (Newell, holes included):
     ``V = 1/3 sum(p_f . A_f)`` for any point ``p_f`` of face ``f``.
     """
-    vol = 0.0
-    for s in surfaces:
-        rings = s.rings if hasattr(s, "rings") else s
-        area_vec = sum(newell_normal(vertices[np.asarray(r)]) for r in rings) / 2.0
-        vol += float(vertices[np.asarray(rings[0])[0]] @ area_vec) / 3.0
-    return vol
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = [s.rings if hasattr(s, "rings") else s for s in surfaces]
+    faces = [[np.asarray(r, dtype=np.int64) for r in rings if len(r)] for rings in faces]
+    faces = [rings for rings in faces if rings]
+    if not faces:
+        return 0.0
+    nr = np.array([len(rings) for rings in faces])
+    ring_n = _ring_normals(vertices, [r for rings in faces for r in rings])
+    area = np.add.reduceat(ring_n, np.cumsum(nr) - nr, axis=0) / 2.0
+    first = vertices[[rings[0][0] for rings in faces]]
+    return float(np.sum(dot3(first, area))) / 3.0
 
 
 def _edge_checks(rings_per_face, issues):
     """Closedness, manifoldness, orientation consistency, connectivity. True if all pass."""
-    src, dst, face = [], [], []
-    for f, rings in enumerate(rings_per_face):
-        for r in rings:
-            src.append(r)
-            dst.append(np.roll(r, -1))
-            face.append(np.full(len(r), f))
-    a, b, fc = np.concatenate(src), np.concatenate(dst), np.concatenate(face)
+    flat = [r for rings in rings_per_face for r in rings]
+    a, nxt, _, lens = _ring_layout(flat)
+    b = a[nxt]
+    fc = np.repeat(np.repeat(np.arange(len(rings_per_face)),
+                             [len(rings) for rings in rings_per_face]), lens)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     m = max(int(hi.max()) + 1, 1)
     key = lo * m + hi
@@ -319,14 +359,13 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}
     # coplanar faces overlapping (crossing tests miss them)
-    normals, offsets = [], []
-    for rings in rings_per_face:
-        nw = newell_normal(verts[rings[0]])
-        nn = np.linalg.norm(nw)
-        nrm = nw / nn if nn > 0 else nw
-        normals.append(nrm)
-        offsets.append(float(verts[rings[0]].mean(axis=0) @ nrm))
-    normals, offsets = np.array(normals), np.array(offsets)
+    outer = [rings[0] for rings in rings_per_face]
+    nw = _ring_normals(verts, outer)
+    nn = np.sqrt(dot3(nw, nw))
+    normals = nw / np.where(nn > 0, nn, 1.0)[:, None]
+    idx, _, starts, lens = _ring_layout(outer)
+    centre = np.add.reduceat(verts[idx], starts, axis=0) / lens[:, None]
+    offsets = dot3(centre, normals)
     fi, fj = np.triu_indices(len(rings_per_face), 1)
     dot = np.einsum("ij,ij->i", normals[fi], normals[fj])
     cop = (np.abs(dot) > 1 - 1e-9) & (np.abs(offsets[fi] - np.sign(dot) * offsets[fj]) < tol)
@@ -377,11 +416,12 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     if len(solid.surfaces) == 0 or len(verts_in) == 0:
         return [Issue(301, None, "no surface")]
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
-    rings_per_face = []
-    for i, s in enumerate(solid.surfaces):
-        rings = s.rings if hasattr(s, "rings") else s
-        rings = [remap[np.asarray(r, dtype=np.int64)] for r in rings]
-        rings_per_face.append(_ring_checks(rings, i, issues))
+    faces = [[remap[np.asarray(r, dtype=np.int64)] for r in (s.rings if hasattr(s, "rings") else s)]
+             for s in solid.surfaces]
+    if _all_rings_clean([r for rings in faces for r in rings]):
+        rings_per_face = faces
+    else:
+        rings_per_face = [_ring_checks(rings, i, issues) for i, rings in enumerate(faces)]
     if issues:
         return issues
     simple: dict[int, list] = {}
