@@ -297,12 +297,21 @@ def _edge_checks(rings_per_face, issues):
     return ok
 
 
-def _segments_cross_triangles(p, q, a, b, c, eps):
-    """Row-wise: does segment p-q cross triangle abc properly (not just touch)?"""
+def _triangle_normals(a, b, c):
+    """Unit normals (zero for degenerate triangles) and the lengths of ``(b - a) x (c - a)``."""
     n = cross3(b - a, c - a)
     nl = np.sqrt(dot3(n, n))
+    return n / np.where(nl > 0, nl, 1.0)[:, None], nl
+
+
+def _segments_cross_triangles(p, q, a, b, c, eps, normals=None):
+    """Row-wise: does segment p-q cross triangle abc properly (not just touch)?
+
+    ``normals``: the triangles' ``(unit normals, lengths)`` of :func:`_triangle_normals`
+    when already known.
+    """
+    n, nl = normals if normals is not None else _triangle_normals(a, b, c)
     good = nl > 0
-    n = n / np.where(good, nl, 1.0)[:, None]
     dp = dot3(p - a, n)
     dq = dot3(q - a, n)
     cross = good & (((dp > eps) & (dq < -eps)) | ((dp < -eps) & (dq > eps)))
@@ -339,6 +348,7 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     if len(tris) < 2:
         return []
     corners = verts[tris]
+    tri_n, tri_nl = _triangle_normals(corners[:, 0], corners[:, 1], corners[:, 2])
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     i, j = _candidate_pairs(lo, hi, tol)
     keep = face[i] != face[j]
@@ -347,15 +357,17 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     i, j = i[keep], j[keep]
     hits = np.zeros(len(i), dtype=bool)
     eps = 1e-9 * max(1.0, float(np.abs(verts).max()))
-    for s in range(0, len(i), 200_000):
-        ii, jj = i[s:s + 200_000], j[s:s + 200_000]
+    chunk = 32_768  # triangle pairs at a time: a few MB of temporaries
+    for s in range(0, len(i), chunk):
+        ii, jj = i[s:s + chunk], j[s:s + chunk]
         ti, tj = corners[ii], corners[jj]
         h = np.zeros(len(ii), dtype=bool)
-        for (A, B) in ((ti, tj), (tj, ti)):
+        for (A, B, kb) in ((ti, tj, jj), (tj, ti, ii)):
+            nb = (tri_n[kb], tri_nl[kb])
             for e in range(3):
                 h |= _segments_cross_triangles(A[:, e], A[:, (e + 1) % 3], B[:, 0], B[:, 1],
-                                               B[:, 2], eps)
-        hits[s:s + 200_000] = h
+                                               B[:, 2], eps, nb)
+        hits[s:s + chunk] = h
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}
     # coplanar faces overlapping (crossing tests miss them)
@@ -366,7 +378,12 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     idx, _, starts, lens = _ring_layout(outer)
     centre = np.add.reduceat(verts[idx], starts, axis=0) / lens[:, None]
     offsets = dot3(centre, normals)
-    fi, fj = np.triu_indices(len(rings_per_face), 1)
+    # only faces whose boxes meet can overlap (every pair of faces would be quadratic)
+    fi, fj = _candidate_pairs(np.minimum.reduceat(verts[idx], starts, axis=0),
+                              np.maximum.reduceat(verts[idx], starts, axis=0), tol)
+    fi, fj = np.minimum(fi, fj), np.maximum(fi, fj)
+    pair_order = np.lexsort((fj, fi))
+    fi, fj = fi[pair_order], fj[pair_order]
     dot = np.einsum("ij,ij->i", normals[fi], normals[fj])
     cop = (np.abs(dot) > 1 - 1e-9) & (np.abs(offsets[fi] - np.sign(dot) * offsets[fj]) < tol)
     for a, b in zip(fi[cop], fj[cop], strict=True):
