@@ -6,7 +6,7 @@ import click
 
 from ._options import crs_option, neighbours_options, output_option
 
-METHODS = ("pmf", "smrf")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
+METHODS = ("pmf", "smrf", "smrf_refined")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
 
 @click.command("ground")

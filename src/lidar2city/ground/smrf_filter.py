@@ -24,7 +24,7 @@ __all__ = ["smrf", "smrf_surface"]
 
 
 def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
-                 exclude=None, bounds=None):
+                 exclude=None, bounds=None, extend: float = 0.0):
     """The provisional bare-earth surface of SMRF and the cells judged object.
 
     Steps 1-3 of Pingel et al. (2013): the minimum surface ``ZImin`` (lowest
@@ -42,6 +42,13 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
         Points left out of the minimum surface (low outliers).
     bounds : tuple, optional
         ``(xmin, ymin, xmax, ymax)`` of the grid; default the points' extent.
+    extend : float
+        Metres by which the minimum surface is continued beyond the grid
+        edges, by point reflection (a slope continues as a plane), before the
+        opening; beyond that the outside is left out. With 0 (Pingel's
+        scheme) a slope of gradient ``g`` rising to the tile edge loses a
+        ring of about ``g / slope`` cells to the opening; ``extend`` of that
+        many cells keeps it.
 
     Returns
     -------
@@ -54,6 +61,8 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     """
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window)
+    if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
+        raise InputError(f"extend must be a number >= 0, got {extend!r}")
     pts = xyz if exclude is None else xyz[~np.asarray(exclude, dtype=bool)]
     if len(pts) == 0:
         raise InputError("no points to build a surface from")
@@ -64,12 +73,18 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     empty = np.isnan(zmin)
     zfilled = inpaint(zmin)
     max_radius = max(int(np.ceil(window / cell)), 1)
-    objects = np.zeros(spec.shape, dtype=bool)
+    pad = min(int(np.ceil(extend / cell)), *(n - 1 for n in spec.shape))
+    if pad > 0:
+        zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
+    objects = np.zeros(zfilled.shape, dtype=bool)
     last = zfilled
     for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
         step = last - opened
         objects |= step > np.float32(slope * radius * cell)
         last = opened
+    if pad > 0:
+        objects = objects[pad:-pad, pad:-pad]
+        last = last[pad:-pad, pad:-pad]
     provisional = np.where(objects | empty, np.float32(np.nan), zmin)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
