@@ -89,7 +89,7 @@ def test_refined_rounds_zero_is_extended_smrf_and_params_validated():
 def test_refined_config():
     p = GroundConfig(method="smrf_refined").method_params()
     assert {"rounds", "refine_threshold", "extend", "window", "threshold"} <= set(p)
-    assert "extend" not in GroundConfig().method_params()
+    assert "extend" not in GroundConfig(method="smrf").method_params()
     assert "max_window" not in p
     with pytest.raises(ConfigError, match="ground.rounds"):
         GroundConfig(method="smrf_refined", rounds=-1)

@@ -13,7 +13,7 @@ METHODS = ("pmf", "smrf", "smrf_refined")  # keys of lidar2city.ground.GROUND_ME
 @click.argument("input", type=click.Path(dir_okay=False))
 @output_option()
 @click.option("--method", type=click.Choice(METHODS), default=None,
-              help="Ground filter (default smrf, or ground.method of --config).")
+              help="Ground filter (default smrf_refined, or ground.method of --config).")
 @click.option("--dtm", "dtm", type=click.Path(dir_okay=False), default=None,
               help="Also write a DTM GeoTIFF interpolated from the ground points (holes filled).")
 @click.option("--cell", type=float, default=None,

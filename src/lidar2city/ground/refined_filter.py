@@ -2,26 +2,14 @@
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from ..errors import InputError
-from ._grid import gradient_magnitude, sample_bilinear
 from .dtm import dtm_from_ground
-from .outliers import _check_positive, _check_xyz, low_outliers
-from .smrf_filter import smrf_surface
-
-logger = logging.getLogger(__name__)
+from .outliers import _check_xyz
+from .smrf_filter import _near_surface, _smrf
 
 __all__ = ["smrf_refined"]
-
-
-def _within(xyz, surface, grad, spec, threshold, scalar):
-    """Points within ``threshold + scalar * slope`` of ``surface`` (values at cell centres)."""
-    ref = sample_bilinear(surface, spec, xyz[:, :2])
-    tol = threshold + scalar * sample_bilinear(grad, spec, xyz[:, :2])
-    return np.abs(xyz[:, 2] - ref) <= tol
 
 
 def smrf_refined(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
@@ -30,7 +18,7 @@ def smrf_refined(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
                  outlier_depth: float = 1.5) -> np.ndarray:
     """Ground points by SMRF with edge extension, then surface-based cleanup rounds.
 
-    1. Low outliers (:func:`low_outliers`) are set aside as non-ground.
+    1. Low outliers (:func:`~lidar2city.ground.low_outliers`) are set aside as non-ground.
     2. SMRF's provisional surface (:func:`smrf_surface`) is built with the
        minimum surface continued ``extend`` metres across the tile edges by
        point reflection, so a slope rising to the edge is not cut down by
@@ -49,7 +37,7 @@ def smrf_refined(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     ----------
     xyz : ndarray, shape (N, 3)
         Local metric coordinates.
-    cell, slope, window, scalar, threshold : float
+    cell, slope, window, scalar, threshold, outlier_radius, outlier_depth : float
         As in :func:`~lidar2city.ground.smrf`.
     extend : float
         Metres of surface continued beyond the tile edges (>= 0; 10 m keeps
@@ -58,14 +46,11 @@ def smrf_refined(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
         Cleanup rounds (>= 0; 0 is SMRF with edge extension only).
     refine_threshold : float
         Height tolerance (metres) around the re-interpolated terrain.
-    outlier_radius, outlier_depth : float
-        Low-outlier detection (see :func:`low_outliers`); ``outlier_depth=inf``
-        disables it.
 
     Returns
     -------
     ndarray of bool, shape (N,)
-        True for ground points.
+        True for ground points (low outliers never are).
 
     Raises
     ------
@@ -98,32 +83,20 @@ def smrf_refined(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     >>> bool(ground[z - g[:, 0] == 0].all()), bool(ground[z - g[:, 0] == 8].any())
     (True, False)
     """
-    xyz = _check_xyz(xyz)
-    _check_positive(cell=cell, slope=slope, window=window, threshold=threshold,
-                    refine_threshold=refine_threshold, outlier_radius=outlier_radius,
-                    outlier_depth=outlier_depth)
-    if not scalar >= 0:
-        raise InputError(f"scalar must be >= 0, got {scalar!r}")
     if not (isinstance(rounds, (int, np.integer)) and rounds >= 0):
         raise InputError(f"rounds must be an integer >= 0, got {rounds!r}")
-    n = len(xyz)
-    if n == 0:
-        return np.zeros(0, dtype=bool)
-    outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
-                if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
-    if outliers.all():
-        return np.zeros(n, dtype=bool)
-    surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
-                                    exclude=outliers, extend=extend)
-    ground = _within(xyz, surface, gradient_magnitude(surface, cell), spec, threshold, scalar)
-    ground &= ~outliers
+    if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
+        raise InputError(f"extend must be a number >= 0, got {extend!r}")
+    xyz = _check_xyz(xyz)
+    ground, outliers = _smrf(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
+                             threshold=threshold, outlier_radius=outlier_radius,
+                             outlier_depth=outlier_depth, extend=extend,
+                             refine_threshold=refine_threshold)
     for _ in range(rounds):
         if not ground.any():
             break
         dtm = dtm_from_ground(xyz, ground, cell=cell)
-        ground = _within(xyz, dtm.array, gradient_magnitude(dtm.array, cell), dtm.spec,
-                         refine_threshold, scalar)
+        ground = _near_surface(xyz, dtm.array, dtm.spec, threshold=refine_threshold,
+                               scalar=scalar)
         ground &= ~outliers
-    logger.debug("smrf_refined: %d of %d points ground, %d low outliers", int(ground.sum()), n,
-                 int(outliers.sum()))
     return ground

@@ -168,26 +168,47 @@ def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
     >>> bool(ground[z == 0].all()), bool(ground[z == 8].any())
     (True, False)
     """
+    ground, _ = _smrf(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
+                      threshold=threshold, outlier_radius=outlier_radius,
+                      outlier_depth=outlier_depth)
+    return ground
+
+
+def _near_surface(xyz, surface, spec, *, threshold, scalar):
+    """Points within ``threshold + scalar * slope`` of ``surface`` (Pingel et al. 2013, eq. 3).
+
+    ``surface`` (values at cell centres of ``spec``) and its slope are
+    interpolated bilinearly at the points.
+    """
+    grad = gradient_magnitude(surface, spec.cell)
+    weights = bilinear_weights(spec, xyz[:, :2])
+    ref = sample_bilinear(surface, spec, weights=weights)
+    tol = threshold + scalar * sample_bilinear(grad, spec, weights=weights)
+    return np.abs(xyz[:, 2] - ref) <= tol
+
+
+def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
+          extend=0.0, **extra):
+    """SMRF's ground mask and low-outlier mask; ``extend`` as in :func:`smrf_surface`.
+
+    ``extra`` holds further positive parameters of the caller to validate with these.
+    """
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window, threshold=threshold,
-                    outlier_radius=outlier_radius, outlier_depth=outlier_depth)
+                    outlier_radius=outlier_radius, outlier_depth=outlier_depth, **extra)
     if not scalar >= 0:
         raise InputError(f"scalar must be >= 0, got {scalar!r}")
     n = len(xyz)
     if n == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
     outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
                 if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
     if outliers.all():
-        return np.zeros(n, dtype=bool)
+        return np.zeros(n, dtype=bool), outliers
     surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
-                                    exclude=outliers)
-    grad = gradient_magnitude(surface, cell)
-    weights = bilinear_weights(spec, xyz[:, :2])
-    ref = sample_bilinear(surface, spec, weights=weights)
-    tol = threshold + scalar * sample_bilinear(grad, spec, weights=weights)
-    ground = np.abs(xyz[:, 2] - ref) <= tol
+                                    exclude=outliers, extend=extend)
+    ground = _near_surface(xyz, surface, spec, threshold=threshold, scalar=scalar)
     ground &= ~outliers
     logger.debug("smrf: %d of %d points ground, %d low outliers", int(ground.sum()), n,
                  int(outliers.sum()))
-    return ground
+    return ground, outliers
