@@ -45,6 +45,7 @@ from ..config import field
 from ..datamodel import ASPRS
 from ..errors import ConfigError, InputError
 from ..ground.dtm import dtm_from_ground, height_above_ground
+from .cues import survey_cues
 from .features import local_shape, point_spacing
 from .regions import planar_regions
 
@@ -218,7 +219,8 @@ def _disk(radius_cells: float) -> np.ndarray:
 
 
 def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
-                    rgb=None, config: ClassifyConfig | None = None, **params) -> np.ndarray:
+                    rgb=None, intensity=None, config: ClassifyConfig | None = None,
+                    **params) -> np.ndarray:
     """ASPRS classes for every point given a ground mask.
 
     Parameters
@@ -231,9 +233,14 @@ def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_retu
         Height above ground (m); computed from ``ground`` with
         :func:`lidar2city.ground.dtm_from_ground` when omitted.
     return_number, number_of_returns : ndarray, shape (N,), optional
-        Pulse return information; vegetation cue when present.
+        Pulse return information, read by :func:`.cues.survey_cues`: a
+        vegetation cue for multi-echo data; first/last-pulse pairs are
+        recognised (a coincident first pulse is left out and takes its last
+        pulse's class); constant, single or inconsistent fields are ignored.
     rgb : ndarray, shape (N, 3), optional
         Colour; greenness is a vegetation cue when given.
+    intensity : ndarray, shape (N,), optional
+        Inspected and logged only (absent, constant or informative).
     config : ClassifyConfig, optional
         Parameters; keyword arguments override single fields
         (``classify_points(xyz, g, min_height=2.5)``).
@@ -266,16 +273,18 @@ def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_retu
     >>> (cls == 6).mean()                                  # doctest: +SKIP
     """
     return _classify(xyz, ground, hag=hag, return_number=return_number,
-                     number_of_returns=number_of_returns, rgb=rgb, config=config,
-                     **params)["classes"]
+                     number_of_returns=number_of_returns, rgb=rgb, intensity=intensity,
+                     config=config, **params)["classes"]
 
 
 def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
-              rgb=None, config: ClassifyConfig | None = None, **params) -> dict:
-    """:func:`classify_points` returning its intermediate arrays too (diagnostics, tests)."""
-    import dataclasses
+              rgb=None, intensity=None, config: ClassifyConfig | None = None, **params) -> dict:
+    """:func:`classify_points` returning its intermediate arrays too (diagnostics, tests).
 
-    from scipy.spatial import cKDTree
+    With first/last-pulse pairs the intermediate arrays are those of the points
+    kept (``kept``); duplicates take their partner's class.
+    """
+    import dataclasses
 
     if config is None:
         config = ClassifyConfig()
@@ -288,6 +297,36 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     c = config
     xyz, ground, hag, return_number, number_of_returns, rgb = _check(
         xyz, ground, hag, return_number, number_of_returns, rgb)
+    if intensity is not None and np.shape(intensity) != (len(xyz),):
+        raise InputError(f"intensity has shape {np.shape(intensity)}, expected ({len(xyz)},)")
+    spacing = point_spacing(xyz[:, :2]) if len(xyz) else 1.0
+    cues = survey_cues(xyz, return_number=return_number, number_of_returns=number_of_returns,
+                       intensity=intensity, spacing=spacing)
+    logger.info("survey: %d points, spacing %.2f m (%.1f pts/m2); %s; cues used: height above "
+                "ground, planarity, region size and shape%s%s", len(xyz), spacing,
+                1.0 / spacing ** 2, "; ".join(cues.notes),
+                ", returns" if cues.has_returns else "", ", colour" if rgb is not None else "")
+    if not cues.duplicate.any():
+        out = _classify_kept(xyz, ground, hag, cues.multi, cues.not_last, cues.has_returns,
+                             rgb, c)
+        out["cues"] = cues
+        return out
+    kept = np.flatnonzero(~cues.duplicate)
+    sub = lambda a: None if a is None else a[kept]  # noqa: E731
+    out = _classify_kept(xyz[kept], ground[kept], sub(hag), cues.multi[kept],
+                         cues.not_last[kept], cues.has_returns, sub(rgb), c)
+    cls = np.empty(len(xyz), np.uint8)
+    cls[kept] = out["classes"]
+    dup = np.flatnonzero(cues.duplicate)
+    cls[dup] = cls[cues.partner[dup]]
+    out.update(classes=cls, kept=kept, cues=cues)
+    return out
+
+
+def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, c) -> dict:
+    """The classification proper, on points whose return cues are already read."""
+    from scipy.spatial import cKDTree
+
     n = len(xyz)
     cls = np.full(n, ASPRS.UNCLASSIFIED, dtype=np.uint8)
     if n == 0:
@@ -345,11 +384,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     lab = regions.labels[nn]
     residual = shape.residual[nn]
     # single-return data (every number_of_returns == 1) carries no return cue
-    has_returns = (return_number is not None and number_of_returns is not None
-                   and bool(np.any(np.asarray(number_of_returns) > 1)))
     if has_returns:
-        multi = np.asarray(number_of_returns)[obj_idx] > 1
-        not_last = np.asarray(return_number)[obj_idx] < np.asarray(number_of_returns)[obj_idx]
+        multi = multi_all[obj_idx]
+        not_last = not_last_all[obj_idx]
     else:
         multi = np.zeros(len(p), bool)
         not_last = np.zeros(len(p), bool)
