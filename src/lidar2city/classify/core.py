@@ -88,6 +88,7 @@ class ClassifyConfig:
     max_ground_contact: float = field(0.05, "Largest fraction of a seed region's points within 0.5 m of the terrain (planes reaching the ground are ramps and bridge decks).")
     max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
+    max_cluster_multi_return: float = field(0.3, "Largest fraction of multi-echo points among the seed points of a cluster of touching seed cells (canopy patches); 1 disables.")
     cell: float = field(0.5, "Cell size (m) of the building grid (raised to 1.5 spacing on sparse data).")
     closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells (at least 4 spacings).")
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
@@ -123,6 +124,9 @@ class ClassifyConfig:
             raise ConfigError(f"classify.max_ground_contact must be in [0, 1], got {self.max_ground_contact!r}")
         if not 0 <= self.max_linearity <= 1:
             raise ConfigError(f"classify.max_linearity must be in [0, 1], got {self.max_linearity!r}")
+        if not 0 <= self.max_cluster_multi_return <= 1:
+            raise ConfigError("classify.max_cluster_multi_return must be in [0, 1], "
+                              f"got {self.max_cluster_multi_return!r}")
         if not 0 <= self.max_multi_return <= 1:
             raise ConfigError(f"classify.max_multi_return must be in [0, 1], got {self.max_multi_return!r}")
         if not 4 <= self.k <= 100:
@@ -432,6 +436,25 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
             f"one building grid of {cell:g} m cells; split the input into tiles")
     pj = np.floor((p[:, 0] - x0) / cell).astype(np.int64)
     pi = np.floor((p[:, 1] - y0) / cell).astype(np.int64)
+    if has_returns and c.max_cluster_multi_return < 1:
+        # a canopy gives smooth patches too, but most of its echoes come from
+        # pulses that went on through it: clusters of touching seed cells
+        # (before the closing merges a tree with the building next to it)
+        # with more than max_cluster_multi_return of their seed points in
+        # multi-echo pulses are dropped (a roof's seeds are single echoes but
+        # for eaves and overhanging branches)
+        seed_grid = np.zeros((nrow, ncol), bool)
+        seed_grid[pi[seed], pj[seed]] = True
+        sl, ns = ndimage.label(ndimage.binary_dilation(seed_grid), structure=np.ones((3, 3), bool))
+        if ns:
+            s_lab = sl[pi[seed], pj[seed]]
+            s_multi = (np.bincount(s_lab, multi[seed], minlength=ns + 1)
+                       / np.maximum(np.bincount(s_lab, minlength=ns + 1), 1))
+            canopy = s_multi > c.max_cluster_multi_return
+            canopy[0] = False
+            seed[np.flatnonzero(seed)[canopy[s_lab]]] = False
+            logger.debug("%d of %d seed clusters dropped as canopy (multi-echo)",
+                         int(canopy.sum()), ns)
     seed_grid = np.zeros((nrow, ncol), bool)
     seed_grid[pi[seed], pj[seed]] = True
     disk = _disk(closing_radius / cell)
