@@ -101,17 +101,21 @@ def _pair_by_order(xyz, first, last, tol):
 
 
 def _pair_by_neighbour(xyz, first, last, tol):
-    """Each first-pulse point with a last-pulse point within ``tol`` (3-D), mutual nearest."""
+    """Each first-pulse point with a last-pulse point within ``tol`` horizontally, mutual nearest.
+
+    Horizontal only: the two detectors' range noise separates an echo's two
+    points vertically (the caller tests the height difference).
+    """
     from scipy.spatial import cKDTree
 
     fi, li = np.flatnonzero(first), np.flatnonzero(last)
     if len(fi) == 0 or len(li) == 0:
         return fi[:0], li[:0]
-    d, j = cKDTree(xyz[li]).query(xyz[fi], k=1, distance_upper_bound=tol, workers=-1)
+    d, j = cKDTree(xyz[li, :2]).query(xyz[fi, :2], k=1, distance_upper_bound=tol, workers=-1)
     ok = np.isfinite(d)
     fi, cand = fi[ok], li[j[ok]]
     # mutual: the last-pulse point's nearest first-pulse point is this one
-    _, back = cKDTree(xyz[fi]).query(xyz[cand], k=1, workers=-1)
+    _, back = cKDTree(xyz[fi, :2]).query(xyz[cand, :2], k=1, workers=-1)
     keep = back == np.arange(len(fi))
     return fi[keep], cand[keep]
 
