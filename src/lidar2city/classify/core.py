@@ -89,6 +89,7 @@ class ClassifyConfig:
     max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
     max_cluster_multi_return: float = field(0.3, "Largest fraction of multi-echo points among the seed points of a cluster of touching seed cells (canopy patches); 1 disables.")
+    min_seed_cluster_area: float = field(7.5, "Smallest area (m2) of roof seed cells in a cluster of touching seed cells (smooth patches in crowns); 0 disables.")
     cell: float = field(0.5, "Cell size (m) of the building grid (raised to 1.5 spacing on sparse data).")
     closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells (at least 4 spacings).")
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
@@ -112,7 +113,8 @@ class ClassifyConfig:
             if not getattr(self, name) > 0:
                 raise ConfigError(f"classify.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("medium_height", "wall_min_height", "min_facet_area", "max_facet_rms",
-                     "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance",
+                     "closing_radius", "max_hole_area", "min_building_area",
+                     "min_seed_cluster_area", "min_building_width", "roof_tolerance",
                      "edge_buffer", "max_roof_object_area", "max_linear_aspect", "linear_max_width"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"classify.{name} must be >= 0, got {getattr(self, name)!r}")
@@ -220,6 +222,36 @@ def _disk(radius_cells: float) -> np.ndarray:
     r = int(np.ceil(radius_cells))
     yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
     return (xx * xx + yy * yy) <= radius_cells * radius_cells + 1e-9
+
+
+def _drop_seed_clusters(seed, pi, pj, multi, shape, cell, *, min_area, max_multi):
+    """``seed`` without the seed clusters that are too small or canopy.
+
+    Clusters are the connected components (8-neighbourhood) of the seed cells
+    dilated by one cell. A cluster is dropped when its seed cells cover less
+    than ``min_area`` (m2: a smooth patch in a crown, a car roof) or when more
+    than ``max_multi`` of its seed points are multi-echo (a canopy gives smooth
+    patches too, but many of its pulses go on through it; a roof's seeds are
+    single echoes but for eaves and overhanging branches).
+    """
+    from scipy import ndimage
+
+    if not seed.any():
+        return seed
+    grid = np.zeros(shape, bool)
+    grid[pi[seed], pj[seed]] = True
+    lab, n = ndimage.label(ndimage.binary_dilation(grid), structure=np.ones((3, 3), bool))
+    area = np.bincount(lab.ravel(), grid.ravel(), minlength=n + 1) * cell * cell
+    s_lab = lab[pi[seed], pj[seed]]
+    s_multi = (np.bincount(s_lab, multi[seed], minlength=n + 1)
+               / np.maximum(np.bincount(s_lab, minlength=n + 1), 1))
+    drop = (area < min_area) | (s_multi > max_multi)
+    drop[0] = False
+    out = seed.copy()
+    out[np.flatnonzero(seed)[drop[s_lab]]] = False
+    logger.debug("%d of %d seed clusters dropped (%d small, %d multi-echo)", int(drop.sum()), n,
+                 int((area[1:] < min_area).sum()), int((s_multi[1:] > max_multi).sum()))
+    return out
 
 
 def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
@@ -436,25 +468,11 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
             f"one building grid of {cell:g} m cells; split the input into tiles")
     pj = np.floor((p[:, 0] - x0) / cell).astype(np.int64)
     pi = np.floor((p[:, 1] - y0) / cell).astype(np.int64)
-    if has_returns and c.max_cluster_multi_return < 1:
-        # a canopy gives smooth patches too, but most of its echoes come from
-        # pulses that went on through it: clusters of touching seed cells
-        # (before the closing merges a tree with the building next to it)
-        # with more than max_cluster_multi_return of their seed points in
-        # multi-echo pulses are dropped (a roof's seeds are single echoes but
-        # for eaves and overhanging branches)
-        seed_grid = np.zeros((nrow, ncol), bool)
-        seed_grid[pi[seed], pj[seed]] = True
-        sl, ns = ndimage.label(ndimage.binary_dilation(seed_grid), structure=np.ones((3, 3), bool))
-        if ns:
-            s_lab = sl[pi[seed], pj[seed]]
-            s_multi = (np.bincount(s_lab, multi[seed], minlength=ns + 1)
-                       / np.maximum(np.bincount(s_lab, minlength=ns + 1), 1))
-            canopy = s_multi > c.max_cluster_multi_return
-            canopy[0] = False
-            seed[np.flatnonzero(seed)[canopy[s_lab]]] = False
-            logger.debug("%d of %d seed clusters dropped as canopy (multi-echo)",
-                         int(canopy.sum()), ns)
+    # seed clusters: touching seed cells, before the closing joins a tree or a
+    # stray patch to the building beside it
+    seed = _drop_seed_clusters(seed, pi, pj, multi, (nrow, ncol), cell,
+                               min_area=c.min_seed_cluster_area,
+                               max_multi=c.max_cluster_multi_return if has_returns else 1.0)
     seed_grid = np.zeros((nrow, ncol), bool)
     seed_grid[pi[seed], pj[seed]] = True
     disk = _disk(closing_radius / cell)
