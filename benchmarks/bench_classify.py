@@ -233,6 +233,7 @@ def synthetic_surveys():
              ("feet (LAS file)", "feet", 10.0, False),
              ("1.5 pts/m2", "multi", 1.5, False),
              ("1.5 pts/m2 pairs", "pairs", 1.5, False),
+             ("1.5 pts/m2 single returns", "single", 1.5, False),
              ("25 pts/m2", "multi", 25.0, False)]
     for label, kind, density, shuffle in cases:
         cloud = make_survey(kind, density=density, shuffle=shuffle)
