@@ -191,3 +191,19 @@ def test_isprs_first_last_pulse_site_finds_buildings(data):
     two = first & out["cues"].multi
     veg = np.isin(out["classes"], (3, 4, 5))
     assert veg[two].mean() > 3 * veg[first & ~two].mean()
+
+
+def test_constant_or_unpaired_returns_are_no_cue(town):
+    """All "2 of 2" (e.g. last pulses only) or all multi-echo without pairs: no cue."""
+    single = survey_variant(town, "single")
+    twos = np.full(len(single), 2, np.uint8)
+    c = survey_cues(single.xyz, return_number=twos, number_of_returns=twos)
+    assert c.returns == "constant" and not c.multi.any()
+    # every point "1 of 2" or "2 of 2" but first and last never coincide
+    rn = np.where(np.arange(len(single)) % 2 == 0, 1, 2).astype(np.uint8)
+    shifted = single.xyz + np.where(rn[:, None] == 2, [0.0, 0.0, 5.0], 0.0)
+    c = survey_cues(shifted, return_number=rn, number_of_returns=twos)
+    assert c.returns == "constant" and not c.has_returns
+    cls = classify_points(single.xyz, single.attributes["classification"] == 2,
+                          return_number=twos, number_of_returns=twos)
+    assert _building_f1(single, cls) >= 0.95

@@ -20,8 +20,9 @@ classifier may use:
   duplicate, left out of the geometry and given its partner's class; a
   first pulse with a distinct last pulse (below it: canopy, edges) is a
   "first of two echoes", the last pulse a "last of two".
-* **single returns, absent or inconsistent fields** (return number 0 or above
-  the number of returns): no return cue at all.
+* **single returns, constant, absent or inconsistent fields** (every point
+  the same "n of m"; nearly all points multi-echo but no pairs; return number
+  0 or above the number of returns): no return cue at all.
 
 Intensity is inspected (absent, constant, informative) and reported; the
 classifier does not decide on it.
@@ -55,7 +56,9 @@ class SurveyCues:
     ----------
     returns : str
         ``"multi"`` (per-echo returns), ``"pairs"`` (first/last-pulse pairs),
-        ``"single"`` (all 1 of 1), ``"absent"`` or ``"inconsistent"``.
+        ``"single"`` (all 1 of 1), ``"constant"`` (every point the same
+        "n of m", or nearly all multi-echo without pairs), ``"absent"`` or
+        ``"inconsistent"`` (return number 0 or above the number of returns).
     multi : ndarray of bool, shape (N,)
         The point's pulse met several surfaces.
     not_last : ndarray of bool, shape (N,)
@@ -176,6 +179,9 @@ def survey_cues(xyz, *, return_number=None, number_of_returns=None, intensity=No
     if not (nr > 1).any():
         notes.append("single returns only (all 1 of 1): no return cue")
         return SurveyCues("single", none, none.copy(), none.copy(), partner, inten, tuple(notes))
+    if rn.min() == rn.max() and nr.min() == nr.max():
+        notes.append(f"every point says return {rn[0]} of {nr[0]}: no return cue")
+        return SurveyCues("constant", none, none.copy(), none.copy(), partner, inten, tuple(notes))
     multi = (nr > 1) & ~bad
     not_last = (rn < nr) & ~bad
     if multi.mean() < _PAIRED_SHARE:
@@ -198,9 +204,11 @@ def survey_cues(xyz, *, return_number=None, number_of_returns=None, intensity=No
     same &= np.hypot(*(xyz[fi, :2] - xyz[li, :2]).T) <= tol
     share = same.sum() / max(last.sum(), 1)
     if share < _COINCIDENT_SHARE:
-        notes.append(f"multi-echo returns ({multi.mean():.0%} of the points in multi-echo pulses; "
-                     f"only {share:.0%} coincident first/last pairs)")
-        return SurveyCues("multi", multi, not_last, none.copy(), partner, inten, tuple(notes))
+        # nearly every pulse multi-echo, roofs included, is no survey: the
+        # fields were coded otherwise (all "2 of 2", last pulses only...)
+        notes.append(f"{multi.mean():.0%} of the points claim a multi-echo pulse but only "
+                     f"{share:.0%} pair as first/last pulses: returns uninformative, no return cue")
+        return SurveyCues("constant", none, none.copy(), none.copy(), partner, inten, tuple(notes))
     duplicate = none.copy()
     duplicate[fi[same]] = True
     partner[fi[same]] = li[same]
