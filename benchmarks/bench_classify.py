@@ -18,13 +18,15 @@ read), and the synthetic town re-written as other surveys would record it
 (:mod:`lidar2city.synthetic_surveys`: first/last-pulse pairs in file order and
 shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
 25 pts/m2) with building precision / recall / F1 against its truth.
-``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png).
+``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
+``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
+footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
 
 Reference mappings: AHN (Delft) class 6 building, class 1 "unclassified
 (vegetation and other)" counted as vegetation, 9 water and 26 civil
 structures ignored; ASPRS files 3/4/5 vegetation, 6 building, 7 noise ignored.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR] [--png PATH]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR] [--png PATH] [--reconstruct]``.
 """
 
 from __future__ import annotations
@@ -252,9 +254,55 @@ def synthetic_surveys():
               f"{s.recall['building']:6.3f} {s.f1['building']:6.3f} {dt:7.2f}")
 
 
+def reconstruct_csite4(data: Path):
+    """``lidar2city reconstruct CSite4 --lod 2.2`` without footprints, then validation.
+
+    Prints the buildings with a true LoD2.2 roof, those given an LoD1.2 prism
+    instead (with the reason), the failed ones, and the validity of the file.
+    """
+    import collections
+    import json
+    import subprocess
+    import tempfile
+
+    from lidar2city.tools.validate import validate_file
+
+    src = data / "isprs" / "sites" / "CSite4_orig-utm.laz"
+    if not src.exists():
+        return
+    print("\nreconstruct CSite4 (raw, no footprints) --lod 2.2, then validate:")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "c4.city.json"
+        t0 = time.perf_counter()
+        subprocess.run(["lidar2city", "reconstruct", str(src), "--lod", "2.2", "-o", str(out)],
+                       check=True, capture_output=True)
+        dt = time.perf_counter() - t0
+        report = validate_file(out)
+        summary = report.summary()
+        doc = json.loads(out.read_text())
+    counts = collections.Counter()
+    large = []
+    for oid, obj in doc["CityObjects"].items():
+        a = obj.get("attributes", {})
+        kind = ("failed" if a.get("status") != "ok" else
+                "LoD1.2 prism" if a.get("lod22_fallback") else "LoD2.2 roof")
+        counts[kind] += 1
+        if a.get("status") == "ok" and a.get("area", 0) >= 1000:
+            large.append((a["area"], oid, kind, (a.get("lod22_fallback") or "")[:60]))
+    print(f"{len(doc['CityObjects'])} footprints traced: " + ", ".join(
+        f"{counts[k]} {k}" for k in ("LoD2.2 roof", "LoD1.2 prism", "failed"))
+        + f"; file {'VALID' if report.valid else 'INVALID'} ({summary['invalid']} invalid "
+          f"object(s), schema {summary['schema']}); {dt:.0f} s")
+    for area, oid, kind, why in sorted(large, reverse=True):
+        print(f"  {oid:<5} {area:8.0f} m2  {kind:<13} {why}")
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
     png = None
+    rebuild = "--reconstruct" in args
+    if rebuild:
+        args.remove("--reconstruct")
     if "--png" in args:
         i = args.index("--png")
         png = Path(args[i + 1])
@@ -266,3 +314,5 @@ if __name__ == "__main__":
     density_sweep(folder)
     isprs_sites(folder, png)
     synthetic_surveys()
+    if rebuild:
+        reconstruct_csite4(folder)

@@ -558,6 +558,8 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
         small[0] = False
         veg_over &= ~small[o_lab]
     edge_veg = ~in_building & rough & (multi | green | (not has_returns)) & ~seed
+    # walls and eaves join a building at its edge; nothing above its roof does
+    edge_veg |= ~in_building & above_roof & ~seed
     is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | (seed & in_building)
     high = ph >= c.min_height
     is_veg = ~is_building & (veg_cue | ~planar)
