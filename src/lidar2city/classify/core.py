@@ -3,6 +3,10 @@
 The method composes the classic cues (Rottensteiner & Briese 2002;
 Rabbani et al. 2006; Vosselman 2009):
 
+0. **Survey cues** (:mod:`.cues`): the return fields are read the way the
+   survey wrote them (multi-echo, first/last-pulse pairs, single, constant,
+   absent or inconsistent) and logged with the spacing and intensity; a
+   first-pulse point repeating its last pulse is left out and takes its class.
 1. **Height above ground** from a DTM gridded from the ground points
    (:mod:`.hag`); only points at least ``min_height`` above it can be roofs
    or high vegetation.
@@ -19,7 +23,10 @@ Rabbani et al. 2006; Vosselman 2009):
    become large planar regions; vegetation breaks into small incoherent ones.
    Regions that are large, fit a plane, are not steep and are mostly made of
    single / last returns are roof seeds.
-5. **Morphology on a grid**: roof seed cells are closed, small holes filled,
+5. **Morphology on a grid**: clusters of touching roof seed cells smaller
+   than ``min_seed_cluster_area`` or with more than
+   ``max_cluster_multi_return`` multi-echo seeds (smooth patches in crowns)
+   are dropped; the remaining seed cells are closed, small holes filled,
    and connected building areas dropped when smaller than
    ``min_building_area``, narrower than ``min_building_width`` everywhere
    (bridges, walls), long and narrow (``max_linear_aspect``: footbridges and
@@ -28,7 +35,8 @@ Rabbani et al. 2006; Vosselman 2009):
 6. **Point decision**: object points inside a building area and not above
    the roof as vegetation (rough, multi-return, optionally green) are
    building — so walls, roof edges, chimneys and dormers (small clusters
-   above the roof) join their building. Other points are vegetation — high,
+   above the roof) join their building; at its edge nothing above the roof
+   does. Other points are vegetation — high,
    medium or low by their height — when they look like vegetation or lie on
    no sizeable plane, and "other" (1) when they lie on one (vehicles, sheds,
    fences, decks).
