@@ -10,6 +10,8 @@ import numpy as np
 
 from ..config import field
 from ..errors import ConfigError, FitError
+from ..validate.solid import check_solid
+from .arrangement import arrangement_partition
 from .facets import segment_planes
 from .refine import refine_partition
 from .solid import partition_solid
@@ -18,6 +20,9 @@ from .topology import roof_partition
 logger = logging.getLogger(__name__)
 
 __all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes", "roof_type"]
+
+
+TOPOLOGY_METHODS = ("arrangement", "grid")
 
 
 @dataclass(frozen=True)
@@ -42,11 +47,17 @@ class Lod22Config:
     snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
     snake_cell: float = field(0.5, "Snake grid step as a fraction of the label grid cell.")
     snake_window: int = field(3, "Snake half-window w: (2w+1)^2 candidate positions per vertex.")
+    topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
+                          "intersection lines and direction-snapped step lines, noded and labelled) "
+                          "or 'grid' (label-grid chains simplified, then the snake).")
 
     def __post_init__(self):
         for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"lod22.{name}: must be > 0, got {getattr(self, name)}")
+        if self.topology not in TOPOLOGY_METHODS:
+            raise ConfigError(f"lod22.topology: must be one of {sorted(TOPOLOGY_METHODS)}, "
+                              f"got {self.topology!r}")
         if self.cell is not None and self.cell <= 0:
             raise ConfigError(f"lod22.cell: must be > 0, got {self.cell}")
 
@@ -300,25 +311,28 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         d = _direction(poly) if direction is None else direction
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
-        part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
-        faces, face_labels = part.faces, part.face_labels
-        if cfg.snake:
-            faces, info_snake = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
-                                              direction=d, window=cfg.snake_window)
-            type4 += info_snake.get("IV", 0)
-            snake_fallbacks += bool(info_snake.get("snake_fallback"))
-        faces, info = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
-                                       max_shift=cfg.max_shift)
+        methods = ("arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
+        for method in methods:
+            try:
+                solid, faces, face_labels, planes_k, info = _part_solid(
+                    method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg)
+            except (FitError, ValueError, shapely.errors.GEOSException) as exc:
+                if method == methods[-1]:
+                    raise
+                logger.debug("%s roof topology failed (%s); trying the next", method, exc)
+                continue
+            if method == methods[-1] or not check_solid(solid):
+                break
+            logger.debug("%s roof topology gave an invalid solid; trying the next", method)
+        solids.append(solid)
         n_int += info["intersection"]
         n_step += info["step"]
         moved += info["moved"]
-        faces, face_labels = _clean_faces(faces, face_labels)
-        face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
-                                             pts)
-        solids.append(_manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2))
+        type4 += info.get("IV", 0)
+        snake_fallbacks += bool(info.get("snake_fallback"))
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
-        roof_planes += [planes[k] for k in face_labels]
+        roof_planes += [planes_k[k] for k in face_labels]
     main = roof_planes[int(np.argmax(roof_areas))]
     zmax = max(float(s.vertices[:, 2].max()) for s in solids)
     attrs.update(
@@ -334,6 +348,32 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         lod22_time=round(time.perf_counter() - t0, 4),
     )
     return Lod22Result(solids, attrs)
+
+
+def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg):
+    """The solid of one footprint polygon by one roof partition method.
+
+    Returns ``(solid, faces, face_labels, planes, info)``; raises FitError when
+    a roof stays below the floor.
+    """
+    info = {}
+    if method == "arrangement":
+        faces, face_labels, _ = arrangement_partition(
+            poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
+            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle)
+    else:
+        part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
+        faces, face_labels = part.faces, part.face_labels
+        if cfg.snake:
+            faces, info = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
+                                        direction=direction, window=cfg.snake_window)
+    faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
+                                      max_shift=cfg.max_shift)
+    info = {**info, **refined}
+    faces, face_labels = _clean_faces(faces, face_labels)
+    face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+    solid = _manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2)
+    return solid, faces, face_labels, planes, info
 
 
 def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
