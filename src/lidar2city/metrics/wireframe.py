@@ -54,8 +54,29 @@ def _ring_edges(ring, turn_cos):
     return c, np.stack([c, np.roll(c, -1, axis=0)], axis=1), seg
 
 
-def faces_wireframe(faces, *, turn_deg=10.0) -> Wireframe:
-    """The wireframe of roof faces given as lists of 3-D rings (each (m, 3), not closed)."""
+def _cluster(points, tol):
+    """Representative (cluster mean) of each point (N, 3), clusters = points linked within ``tol``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
+    if not len(pairs):
+        return points
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
+    n, comp = connected_components(g, directed=False)
+    mean = np.zeros((n, 3))
+    np.add.at(mean, comp, points)
+    return (mean / np.bincount(comp, minlength=n)[:, None])[comp]
+
+
+def faces_wireframe(faces, *, turn_deg=10.0, merge=0.1) -> Wireframe:
+    """The wireframe of roof faces given as lists of 3-D rings (each (m, 3), not closed).
+
+    Corners closer than ``merge`` (m, 3-D) are one corner, at their mean: fitted
+    planes meeting at a junction agree there within centimetres, not exactly, and
+    a viewer sees one corner.
+    """
     turn_cos = np.cos(np.radians(turn_deg))
     corners, edges, lengths = [], [], []
     for rings in faces:
@@ -68,6 +89,10 @@ def faces_wireframe(faces, *, turn_deg=10.0) -> Wireframe:
         return Wireframe(np.empty((0, 3)), np.empty((0, 2, 3)), np.empty(0))
     c = np.concatenate(corners)
     e = np.concatenate(edges)
+    if merge and len(c):
+        rep = _cluster(np.concatenate([c, e.reshape(-1, 3)]), merge)
+        c, e = rep[:len(c)], rep[len(c):].reshape(-1, 2, 3)
+        e = e[np.linalg.norm(e[:, 1] - e[:, 0], axis=1) > 1e-9]
     # distinct corners and edges (mm keys; an edge is unordered)
     ck = np.round(c * 1000).astype(np.int64)
     _, first = np.unique(ck, axis=0, return_index=True)

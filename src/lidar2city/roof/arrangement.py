@@ -48,11 +48,13 @@ def arrangement_cells(footprint, segments):
 
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
     lines = rings + [np.asarray(s, dtype=np.float64) for s in segments if len(s) >= 2]
-    # nodes on a micrometre grid: a crossing computed twice lands on one vertex
-    noded = shapely.set_precision(shapely.node(MultiLineString(lines)), 1e-6)
+    # snap-rounded noding on a micrometre grid (robust: a crossing computed twice lands on
+    # one vertex, overlapping collinear pieces dissolve)
+    noded = shapely.set_precision(shapely.union_all(MultiLineString(lines), grid_size=1e-6), 0)
     cells = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
-    inside = footprint.buffer(1e-9)
-    return [c for c in cells if c.area > 1e-9 and inside.covers(c.representative_point())]
+    cells = cells[shapely.area(cells) > 1e-9]
+    inside = shapely.dwithin(footprint, shapely.point_on_surface(cells), 1e-9)
+    return list(cells[inside])
 
 
 def _adjacency(cells):
@@ -162,24 +164,52 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None):
     return drop_collinear(faces), np.asarray(face_labels, dtype=np.int64)
 
 
-def drop_collinear(faces, *, tol=1e-6):
+def _merge_close(rings, tol):
+    """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
+    across all rings) and consecutive repeats removed."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    flat = [r for rs in rings for r in rs]
+    if not flat:
+        return rings
+    pts = np.concatenate(flat)
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
+    if len(pairs):
+        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(pts), len(pts)))
+        _, comp = connected_components(g, directed=False)
+        first = np.full(comp.max() + 1, -1)
+        first[comp[::-1]] = np.arange(len(pts))[::-1]
+        pts = pts[first[comp]]
+    out, k = [], 0
+    for rs in rings:
+        new_rs = []
+        for r in rs:
+            c = pts[k:k + len(r)]
+            k += len(r)
+            new_rs.append(c[np.any(c != np.roll(c, 1, axis=0), axis=1)])
+        out.append(new_rs)
+    return out
+
+
+def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
     """Faces without the vertices that are straight (within ``tol`` m) in every ring holding them.
 
     Such vertices are where a dissolved cut ended; a vertex where any face turns
     (a junction) is kept in every face, so shared edges keep identical vertices.
+    Vertices closer than ``merge`` (m; nearly concurrent lines) are first made one.
     """
     import shapely
 
     from .solid import _key
 
-    def ring(r):
-        c = np.round(np.asarray(r.coords)[:-1] * 1e6) / 1e6
-        return c[np.any(c != np.roll(c, 1, axis=0), axis=1)]
-
-    rings = [[ring(r) for r in shapely.get_rings(f)] for f in faces]
+    rings = _merge_close([[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces], merge)
     turning = set()
     for rs in rings:
         for r in rs:
+            if len(r) < 3:
+                continue
             prev, nxt = np.roll(r, 1, axis=0), np.roll(r, -1, axis=0)
             u, v = r - prev, nxt - r
             cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
@@ -194,7 +224,8 @@ def drop_collinear(faces, *, tol=1e-6):
             out.append(f)
             continue
         out.append(shapely.Polygon(kept[0], [h for h in kept[1:] if len(h) >= 3]))
-    if not all(f.is_valid for f in out):
+    if not all(f.is_valid and f.area > 0 for f in out) or \
+            abs(sum(f.area for f in out) - sum(f.area for f in faces)) > 1e-3 * max(1.0, len(faces)):
         return list(faces)
     return out
 
