@@ -34,7 +34,7 @@ import numpy as np
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
 
-__all__ = ["arrangement_cells", "dissolve_cells", "drop_collinear", "extend_to_hits", "chain_segments", "arrangement_partition"]
+__all__ = ["arrangement_cells", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "arrangement_partition"]
 
 
 def arrangement_cells(footprint, segments):
@@ -256,40 +256,85 @@ def _meet(p, d, q, e, fallback):
     return x if np.hypot(*(x - fallback)) < 3.0 else None
 
 
+def _fit_line(sub, direction, snap_angle):
+    """Total-least-squares line (point, unit direction from the first to the last point) of
+    points (m, 2), its direction snapped to the building axes; and the largest distance to it."""
+    m = sub.mean(axis=0)
+    if len(sub) < 3:
+        d = sub[-1] - sub[0]
+    else:
+        w, v = np.linalg.eigh(np.cov((sub - m).T))
+        d = v[:, 1]
+    n = np.hypot(*d)
+    if n < 1e-12:
+        return None
+    d = d / n
+    if (sub[-1] - sub[0]) @ d < 0:
+        d = -d
+    d = _axis_snap(d, direction, snap_angle)
+    normal = np.array([-d[1], d[0]])
+    return m, d, float(np.abs((sub - m) @ normal).max())
+
+
+def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
+    """Pieces (lo, hi) of raw[lo..hi] each fitted by one line within ``tol`` (split at the point
+    farthest from the chord, as Douglas-Peucker)."""
+    sub = raw[lo:hi + 1]
+    fit = _fit_line(sub, direction, snap_angle)
+    if hi - lo < 3 or (fit is not None and fit[2] <= tol):
+        out.append((lo, hi))
+        return
+    a, b = raw[lo], raw[hi]
+    d = b - a
+    n = np.hypot(*d)
+    if n < 1e-9:
+        dist = np.hypot(*(sub - a).T)
+    else:
+        dist = np.abs((sub - a) @ np.array([-d[1], d[0]]) / n)
+    k = lo + int(np.argmax(dist[1:-1])) + 1
+    _split_fit(raw, lo, k, tol, direction, snap_angle, out)
+    _split_fit(raw, k, hi, tol, direction, snap_angle, out)
+
+
 def _step_polyline(chain, *, tol, direction, snap_angle, closed):
-    """Straight, direction-snapped polyline of a step chain (raw grid corners (m, 2))."""
-    simp = _dp(chain, tol)
-    if closed and len(simp) < 4:
-        return None
-    # the raw vertices each simplified piece stands for
+    """Straight, direction-snapped polyline of a step chain (raw grid corners (m, 2)).
+
+    The chain is split into the fewest pieces (Douglas-Peucker order) that each
+    fit one line within ``tol``, neighbouring pieces that fit one line together
+    merge, and consecutive lines meet at their intersection (or, nearly
+    parallel, in a short jog at the vertex they share).
+    """
     raw = np.asarray(chain, dtype=float)
-    idx = [int(np.argmin(np.hypot(*(raw - p).T))) for p in simp]
-    pieces = []
-    for a, b in zip(idx[:-1], idx[1:], strict=True):
-        sub = raw[min(a, b):max(a, b) + 1]
-        d = sub[-1] - sub[0] if a <= b else sub[0] - sub[-1]
-        n = np.hypot(*d)
-        if n < 1e-9:
-            continue
-        d = _axis_snap(d / n, direction, snap_angle)
-        normal = np.array([-d[1], d[0]])
-        off = float(np.mean(sub @ normal))
-        base = off * normal
-        pieces.append((base, d, sub))
-    if not pieces:
+    raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+    if len(raw) < 2 or (closed and len(raw) < 5):
         return None
-    # merge consecutive nearly parallel pieces (the simplification left a shallow kink)
+    spans = []
+    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans)
+    merged = True
+    while merged and len(spans) > 1:
+        merged = False
+        for i in range(len(spans) - 1):
+            fit = _fit_line(raw[spans[i][0]:spans[i + 1][1] + 1], direction, snap_angle)
+            if fit is not None and fit[2] <= tol:
+                spans[i:i + 2] = [(spans[i][0], spans[i + 1][1])]
+                merged = True
+                break
+    pieces = []
+    for lo, hi in spans:
+        fit = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+        if fit is not None:
+            pieces.append((fit[0], fit[1], raw[lo:hi + 1]))
+    if not pieces or (closed and len(pieces) < 3):
+        return None
     pts = []
     m = len(pieces)
     for k in range(m if closed else m - 1):
-        (p, d, sa), (q, e, sb) = pieces[k], pieces[(k + 1) % m]
+        (p, d, sa), (q, e, _) = pieces[k], pieces[(k + 1) % m]
         corner = sa[-1]
         x = _meet(p, d, q, e, corner)
         if x is None:
-            # parallel neighbours: a jog at the shared raw vertex, perpendicular to both
-            a = p + ((corner - p) @ d) * d
-            b = q + ((corner - q) @ e) * e
-            pts += [a, b]
+            # nearly parallel neighbours: a jog at the raw vertex they share
+            pts += [p + ((corner - p) @ d) * d, q + ((corner - q) @ e) * e]
         else:
             pts.append(x)
     if closed:
@@ -313,7 +358,7 @@ def _extend(poly, ext):
 
 
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
-                   snap_angle=15.0, overshoot=None):
+                   snap_angle=15.0, step_tol=1.5, overshoot=None):
     """Straight boundary polylines replacing the label grid's chains.
 
     Parameters
@@ -332,6 +377,8 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         line is an intersection edge.
     snap_angle : float
         Step pieces within this angle (deg) of the building axes are made parallel to them.
+    step_tol : float
+        Largest distance (in cells) of a step chain's raw vertices from its straight piece.
     overshoot : float, optional
         Length (m) by which open polylines are extended; default one cell.
 
@@ -362,7 +409,8 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                 segs.append(np.vstack([foot + lo * u, foot + hi * u]))
                 kinds.append("intersection")
                 continue
-        poly = _step_polyline(c, tol=cell, direction=direction, snap_angle=snap_angle, closed=closed)
+        poly = _step_polyline(c, tol=step_tol * cell, direction=direction, snap_angle=snap_angle,
+                              closed=closed)
         if poly is None:
             continue
         segs.append(poly if closed else _extend(poly, ext))
@@ -470,3 +518,104 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
             labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds
     return faces, face_labels, kinds
+
+
+def collapse_short_edges(faces, footprint, *, min_length):
+    """A partition without edges shorter than ``min_length`` where they can go.
+
+    The ends of short edges are clustered; a cluster moves to the footprint
+    corner in it, else to its one outline vertex, else to its mean (clusters
+    holding two footprint corners or two outline vertices stay). Each cluster is
+    applied only when every face stays valid and the faces still tile the
+    footprint; a face that shrinks to nothing disappears.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+        A partition of ``footprint`` with shared vertices.
+    footprint : shapely Polygon
+    min_length : float
+        Shortest edge (m) kept.
+
+    Returns
+    -------
+    faces : list of shapely Polygon
+    kept : ndarray of int
+        Index into the input faces of each returned face.
+    """
+    import shapely
+
+    from .refine import _remove_spikes
+    from .solid import _key
+
+    rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
+    xy_of = {}
+    edges = set()
+    for rs in rings:
+        for r in rs:
+            keys = [_key(p) for p in r]
+            for p, k in zip(r, keys, strict=True):
+                xy_of[k] = p
+            for a, b in zip(keys, keys[1:] + keys[:1], strict=True):
+                if a != b:
+                    edges.add((min(a, b), max(a, b)))
+    short = [(a, b) for a, b in sorted(edges) if np.hypot(*(xy_of[a] - xy_of[b])) < min_length]
+    if not short:
+        return list(faces), np.arange(len(faces))
+    parent = {}
+
+    def find(k):
+        parent.setdefault(k, k)
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a, b in short:
+        parent[find(a)] = find(b)
+    clusters: dict = {}
+    for k in list(parent):
+        clusters.setdefault(find(k), []).append(k)
+    outline = footprint.boundary
+    corners = {_key(p) for r in shapely.get_rings(footprint) for p in np.asarray(r.coords)[:-1]}
+    total = footprint.area
+    mapping: dict = {}
+
+    def rebuild(mp):
+        out, idx = [], []
+        for fi, rs in enumerate(rings):
+            new_rs = []
+            for r in rs:
+                pts = [mp.get(_key(p), p) for p in r]
+                pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+                if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
+                    pts.pop()
+                new_rs.append(_remove_spikes(pts))
+            if len(new_rs[0]) < 3:
+                continue
+            poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
+            if poly.area <= 1e-9:
+                continue
+            out.append(poly)
+            idx.append(fi)
+        return out, idx
+
+    def ok(out):
+        return (all(f.is_valid for f in out) and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
+                and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
+
+    for members in sorted(clusters.values()):
+        pts = np.array([xy_of[k] for k in members])
+        on = np.array([outline.distance(shapely.Point(p)) < 1e-6 for p in pts])
+        fixed = [k for k in members if k in corners]
+        if len(fixed) > 1 or (not fixed and on.sum() > 1):
+            continue
+        target = xy_of[fixed[0]] if fixed else (pts[on][0] if on.any() else pts.mean(axis=0))
+        trial = {**mapping, **{k: target for k in members}}
+        out, _ = rebuild(trial)
+        if ok(out):
+            mapping = trial
+    if not mapping:
+        return list(faces), np.arange(len(faces))
+    out, idx = rebuild(mapping)
+    return [shapely.normalize(f) for f in out], np.asarray(idx, dtype=np.int64)

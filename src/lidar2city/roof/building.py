@@ -11,7 +11,7 @@ import numpy as np
 from ..config import field
 from ..errors import ConfigError, FitError
 from ..validate.solid import check_solid
-from .arrangement import arrangement_partition
+from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
 from .solid import partition_solid
@@ -47,6 +47,8 @@ class Lod22Config:
     snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
     snake_cell: float = field(0.5, "Snake grid step as a fraction of the label grid cell.")
     snake_window: int = field(3, "Snake half-window w: (2w+1)^2 candidate positions per vertex.")
+    min_edge: float = field(1.5, "Roof edges shorter than this many label cells are collapsed "
+                            "(their ends merge) where the partition stays valid; 0 keeps them.")
     topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
                           "intersection lines and direction-snapped step lines, noded and labelled) "
                           "or 'grid' (label-grid chains simplified, then the snake).")
@@ -370,6 +372,9 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
+    if method == "arrangement" and cfg.min_edge > 0:
+        faces, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
+        face_labels = face_labels[kept]
     faces, face_labels = _clean_faces(faces, face_labels)
     face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
     solid = _manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2)
