@@ -297,13 +297,24 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     solids, attrs = [], {}
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes = [], []
-    for poly in _parts(footprint):
+    parts = _parts(footprint)
+    skipped = 0
+    for poly in parts:
         near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
         pts = xyz[near]
         if len(pts) < 3:
             raise FitError(f"too few points on the roof ({len(pts)})")
+        centred = pts[:, :2] - pts[:, :2].mean(axis=0)
+        if np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(len(pts)) < 0.01:
+            raise FitError(f"the {len(pts)} roof points lie on one line: no roof surface between them")
         spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
         cell = cfg.cell or float(np.clip(spacing, 0.25, 1.0))
+        if poly.area < cell * cell:
+            if len(parts) > 1:
+                skipped += 1  # a sliver beside the building's other parts
+                continue
+            raise FitError(f"footprint smaller than one label cell ({poly.area:.3f} m2 < "
+                           f"{cell:.2f} m x {cell:.2f} m)")
         labels, planes = segment_planes(pts, dist_tol=cfg.dist_tol, angle_tol=cfg.angle_tol,
                                         min_area=cfg.min_facet_area, merge_angle=cfg.merge_angle)
         if len(planes) == 0:
@@ -335,6 +346,10 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
         roof_planes += [planes_k[k] for k in face_labels]
+    if not solids:
+        raise FitError(f"every footprint part is smaller than one label cell ({skipped} parts)")
+    if skipped:
+        attrs["skipped_parts"] = skipped
     main = roof_planes[int(np.argmax(roof_areas))]
     zmax = max(float(s.vertices[:, 2].max()) for s in solids)
     attrs.update(
