@@ -411,8 +411,11 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                 continue
         poly = _step_polyline(c, tol=step_tol * cell, direction=direction, snap_angle=snap_angle,
                               closed=closed)
-        if poly is None:
-            continue
+        if poly is None or (closed and len(poly) < 4):
+            # too few vertices for straight pieces (a small island): its simplified outline
+            poly = _dp(c, cell)
+            if closed and len(poly) < 4:
+                poly = c
         segs.append(poly if closed else _extend(poly, ext))
         kinds.append("step")
     return segs, kinds
