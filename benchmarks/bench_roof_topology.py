@@ -1,7 +1,11 @@
 """LoD2.2 roof topology (issue 12): cleanliness on Delft, wireframe F1 on synthetic roofs, speed.
 
-Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [--only delft|synthetic|city3d]
-(default data $LIDAR2CITY_DATA or ../shared/data)
+Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
+       [--figure docs/roof_topology_delft.png] [--topology grid]
+(default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
+section; --figure also draws a Delft block from above, the points beside our
+roofs; --topology grid measures the label-grid + snake partition, the one
+before the line arrangement)
 
 1. Delft shared tile, 132 BGT footprints, AHN3 class 6 building points (as
    bench_lod22.py): median roof corners per building (distinct vertices where a
@@ -29,8 +33,22 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def option(name):
+    """The value after ``--name`` on the command line, or None."""
+    argv = sys.argv[1:]
+    return argv[argv.index(name) + 1] if name in argv and argv.index(name) + 1 < len(argv) else None
+
+
+def config():
+    from lidar2city.roof.building import Lod22Config
+
+    return Lod22Config(topology=option("--topology") or "arrangement")
+
+
 def data_dir() -> Path:
-    args = [a for a in sys.argv[1:] if not a.startswith("--") and a not in ("delft", "synthetic", "city3d")]
+    values = {option("--figure"), option("--topology")}
+    args = [a for a in sys.argv[1:] if not a.startswith("--") and a not in ("delft", "synthetic", "city3d")
+            and a not in values]
     if args:
         return Path(args[0])
     if os.environ.get("LIDAR2CITY_DATA"):
@@ -46,7 +64,6 @@ def delft(d):
     from lidar2city.lod.lod1 import Lod1Config
     from lidar2city.metrics.model import model_rmse
     from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
-    from lidar2city.roof.building import Lod22Config
     from lidar2city.tools.reconstruct import reconstruct_buildings
     from lidar2city.validate.solid import check_solid
 
@@ -54,7 +71,7 @@ def delft(d):
     cloud = read_points(laz, crs="EPSG:7415")
     fps, _ = read_footprints(fpath, origin=cloud.origin[:2], target_crs=cloud.crs)
     cls = cloud.get("classification")
-    results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=Lod22Config())
+    results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=config())
     bxyz = cloud.xyz[cls == 6]
     rms, corners, short, total, valid, faces, times, fallback = [], [], 0.0, 0.0, 0, 0, [], 0
     for g, r in zip(fps.geometries, results, strict=True):
@@ -62,8 +79,9 @@ def delft(d):
         s22 = r.solids["2.2"]
         s22 = s22 if isinstance(s22, list) else [s22]
         rms.append(model_rmse(pts, s22))
-        valid += all(not check_solid(s) for s in s22)
-        fallback += "lod22_fallback" in r.attributes
+        fell = "lod22_fallback" in r.attributes
+        valid += all(not check_solid(s) for s in s22) and not fell
+        fallback += fell
         wf = roof_wireframe(s22)
         c, sh, tot = roof_cleanliness(wf)
         corners.append(c)
@@ -77,8 +95,63 @@ def delft(d):
     print(f"  short-edge share (roof-face edge length in edges < 0.5 m): {100 * short / max(total, 1e-9):.2f} %"
           f"  (target <= 1.8 %)")
     print(f"  LoD2.2 RMSE point to mesh: median {np.median(rms):.3f} m  (target <= 0.15 m)")
-    print(f"  valid LoD2.2 solids {valid}/{n}, LoD1.2 fallbacks {fallback}, roof faces {faces}")
+    print(f"  valid LoD2.2 solids {valid}/{n} (LoD1.2 fallbacks with a stated reason: {fallback}), "
+          f"roof faces {faces}")
     print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean {1000 * np.mean(times):.1f} ms")
+    if option("--figure"):
+        figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
+
+
+def figure(path, bxyz, geoms, results, size=70.0):
+    """The densest ``size`` m square of the tile from above: building points by height beside
+    our LoD2.2 roof faces (shaded by their facing) with their edges."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import shapely
+    from matplotlib.collections import PolyCollection
+
+    cent = np.array([g.centroid.coords[0] for g in geoms])
+    counts = [np.sum(np.all(np.abs(cent - c) < size / 2, axis=1)) for c in cent]
+    c0 = cent[int(np.argmax(counts))]
+    lo, hi = c0 - size / 2, c0 + size / 2
+    box = shapely.box(*lo, *hi)
+    pts = bxyz[np.all((bxyz[:, :2] >= lo) & (bxyz[:, :2] <= hi), axis=1)]
+    inside = shapely.contains_xy(shapely.union_all([g for g in geoms if g.intersects(box)]), pts[:, 0], pts[:, 1])
+    pts = pts[inside]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 5.2))
+    ax[0].scatter(pts[:, 0], pts[:, 1], c=pts[:, 2], s=1.2, cmap="viridis", linewidths=0)
+    ax[0].set_title("AHN3 building points (height)", fontsize=10)
+    polys, colours = [], []
+    light = np.array([-1.0, 1.0, 1.5]) / np.linalg.norm([-1.0, 1.0, 1.5])
+    for g, r in zip(geoms, results, strict=True):
+        if not g.intersects(box):
+            continue
+        s22 = r.solids["2.2"]
+        for s in (s22 if isinstance(s22, list) else [s22]):
+            for surf in s.surfaces:
+                if surf.semantic != "RoofSurface":
+                    continue
+                v = s.vertices[surf.rings[0]]
+                n = np.cross(v[1] - v[0], v[2] - v[0])
+                n = n / (np.linalg.norm(n) or 1.0)
+                shade = 0.35 + 0.6 * max(float(n @ light), 0.0)
+                polys.append(v[:, :2])
+                colours.append((shade, shade * 0.8, shade * 0.7))
+    ax[1].add_collection(PolyCollection(polys, facecolors=colours, edgecolors="k", linewidths=0.5))
+    ax[1].set_title("lidar2city LoD2.2 roof faces", fontsize=10)
+    for a in ax:
+        a.set_xlim(lo[0], hi[0])
+        a.set_ylim(lo[1], hi[1])
+        a.set_aspect("equal")
+        a.set_xticks([])
+        a.set_yticks([])
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=72)
+    plt.close(fig)
+    print(f"  figure: {path} ({path.stat().st_size // 1024} kB)")
 
 
 def synthetic():
@@ -96,7 +169,7 @@ def synthetic():
             for seed in range(4):
                 s = roof_sample(kind, density=density, seed=seed)
                 try:
-                    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z)
+                    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=config())
                 except Exception:  # noqa: BLE001 - a failed roof scores zero matches
                     n_fail += 1
                     sc = {k: 0 for k in keys}
@@ -133,7 +206,7 @@ def city3d(folder):
         fps = extract_footprints(xyz, np.full(len(xyz), 6), regularize="snake")
         fp = shapely.union_all([x.polygon for x in fps])
         t1 = time.perf_counter()
-        res = reconstruct_lod22(fp, xyz, float(xyz[:, 2].min()))
+        res = reconstruct_lod22(fp, xyz, float(xyz[:, 2].min()), config=config())
         t2 = time.perf_counter()
         t_roof.append(t2 - t1)
         t_all.append(t2 - t0)
