@@ -433,27 +433,30 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
 
     segments = [np.array(s, dtype=float) for s in segments]
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
-    out = []
+    everything = MultiLineString(rings + [s for s in segments if len(s) >= 2])
+    shapely.prepare(everything)
+    rays, where = [], []
     for k, s in enumerate(segments):
         if len(s) < 2 or np.allclose(s[0], s[-1]):
-            out.append(s)
             continue
-        others = MultiLineString(rings + [o for j, o in enumerate(segments) if j != k and len(o) >= 2])
-        s = s.copy()
         for i, j in ((0, 1), (-1, -2)):
             d = s[i] - s[j]
             n = np.hypot(*d)
             if n < 1e-9:
                 continue
-            d /= n
-            ray = LineString([s[i] + d * 1e-6, s[i] + d * max_ext])
-            hit = shapely.intersection(ray, others)
-            if hit.is_empty:
-                continue
-            c = shapely.get_coordinates(hit)
-            t = (c - s[i]) @ d
-            s[i] = s[i] + d * (t.min() + eps)
-        out.append(s)
+            d = d / n
+            rays.append(LineString([s[i] + d * 1e-6, s[i] + d * max_ext]))
+            where.append((k, i, d))
+    out = [s.copy() for s in segments]
+    if not rays:
+        return out
+    hits = shapely.intersection(np.asarray(rays, dtype=object), everything)
+    for hit, (k, i, d) in zip(hits, where, strict=True):
+        if hit.is_empty:
+            continue
+        c = shapely.get_coordinates(hit)
+        t = (c - segments[k][i]) @ d
+        out[k][i] = segments[k][i] + d * (t.min() + eps)
     return out
 
 

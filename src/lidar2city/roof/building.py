@@ -10,7 +10,6 @@ import numpy as np
 
 from ..config import field
 from ..errors import ConfigError, FitError
-from ..validate.solid import check_solid
 from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
@@ -334,7 +333,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                     raise
                 logger.debug("%s roof topology failed (%s); trying the next", method, exc)
                 continue
-            if method == methods[-1] or not check_solid(solid):
+            if method == methods[-1] or _closed_shell(solid):
                 break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
         solids.append(solid)
@@ -365,6 +364,19 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         lod22_time=round(time.perf_counter() - t0, 4),
     )
     return Lod22Result(solids, attrs)
+
+
+def _closed_shell(solid) -> bool:
+    """Every edge of the solid used exactly twice, in opposite directions (a closed,
+    2-manifold, consistently oriented shell: the cheap part of a val3dity check)."""
+    rings = [np.asarray(r) for s in solid.surfaces for r in s.rings]
+    a = np.concatenate(rings)
+    b = np.concatenate([np.roll(r, -1) for r in rings])
+    keep = a != b
+    a, b = a[keep], b[keep]
+    directed = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)[1]
+    und = np.unique(np.sort(np.column_stack([a, b]), axis=1), axis=0, return_counts=True)[1]
+    return bool(np.all(directed == 1) and np.all(und == 2))
 
 
 def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg):
