@@ -357,8 +357,30 @@ def _extend(poly, ext):
     return poly
 
 
+def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
+    """Whether the planes' intersection line explains the points of facets ``a`` and ``b``
+    near a chain about as well as the chain (a step) does: points beyond the line take
+    the other plane; their mean capped residual may grow by at most ``tol`` (m)."""
+    xyz, lab, tree = points
+    near = np.unique(np.concatenate(tree.query_ball_point(chain, radius)).astype(np.int64)) \
+        if len(chain) else np.zeros(0, np.int64)
+    near = near[(lab[near] == a) | (lab[near] == b)]
+    if len(near) < 6:
+        return True
+    p = xyz[near]
+    side = p[:, :2] @ g + c0 > 0
+    is_a = lab[near] == a
+    a_side = np.mean(side[is_a]) >= 0.5 if is_a.any() else not np.mean(side[~is_a]) >= 0.5
+    za = p[:, :2] @ pa[:2] + pa[2]
+    zb = p[:, :2] @ pb[:2] + pb[2]
+    r_step = np.minimum(np.abs(p[:, 2] - np.where(is_a, za, zb)), cap)
+    r_line = np.minimum(np.abs(p[:, 2] - np.where(side == a_side, za, zb)), cap)
+    return float(np.mean(r_line) - np.mean(r_step)) <= tol
+
+
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
-                   snap_angle=15.0, step_tol=1.5, overshoot=None):
+                   snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
+                   tol_gain=0.05):
     """Straight boundary polylines replacing the label grid's chains.
 
     Parameters
@@ -381,6 +403,11 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         Largest distance (in cells) of a step chain's raw vertices from its straight piece.
     overshoot : float, optional
         Length (m) by which open polylines are extended; default one cell.
+    points : (xyz (N, 3), labels (N,), cKDTree of xyz[:, :2]), optional
+        With points, a chain near its planes' intersection line is an intersection
+        edge only when that line explains the nearby points of both facets about as
+        well as the chain does (mean capped residual, at most ``cap`` m per point,
+        grows by at most ``tol_gain`` m); else it is a step.
 
     Returns
     -------
@@ -401,7 +428,11 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         if line is not None:
             g, c0 = line
             dist = np.abs(c @ g + c0)
-            if np.mean(np.abs(dz)) < t_step or np.percentile(dist, 90) <= max_shift:
+            near_line = np.percentile(dist, 90) <= max_shift
+            if near_line and points is not None and np.mean(np.abs(dz)) >= t_step:
+                near_line = _line_explains(points, c, a, b, pa, pb, g, c0, radius=max_shift + cell,
+                                           cap=cap, tol=tol_gain)
+            if np.mean(np.abs(dz)) < t_step or near_line:
                 u = np.array([-g[1], g[0]])
                 t = c @ u
                 foot = -c0 * g
@@ -511,8 +542,11 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     cap = 1.5 * t_step if cap is None else cap
     grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
     chains, pairs = boundary_chains(grid)
+    from scipy.spatial import cKDTree
+
     segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
-                                 t_step=t_step, max_shift=max_shift, snap_angle=snap_angle)
+                                 t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
+                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap)
     x0, y0, x1, y1 = footprint.bounds
     segs = extend_to_hits(segs, footprint, max_ext=float(np.hypot(x1 - x0, y1 - y0)))
     cells = arrangement_cells(footprint, segs)

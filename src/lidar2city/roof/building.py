@@ -226,15 +226,17 @@ def _nonmanifold_points(solid):
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
-    longest-shared neighbour's plane, until the shell is 2-manifold."""
+    longest-shared neighbour's plane, until the shell is 2-manifold.
+
+    Returns ``(solid, relabelled)``, the number of faces that took another plane."""
     import shapely
 
     face_labels = np.array(face_labels, copy=True)
-    for _ in range(max_rounds):
+    for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
         bad = _nonmanifold_points(solid)
         if not len(bad):
-            return solid
+            return solid, r
         p = bad[0]
         at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
@@ -244,9 +246,9 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
                  for j in range(len(faces)) if j != victim and face_labels[j] != face_labels[victim]]
         neigh = [t for t in neigh if t[0] > 0]
         if not neigh:
-            return solid
+            return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height), max_rounds
 
 
 def _parts(footprint):
@@ -399,13 +401,20 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
+    variants = [(faces, face_labels)]
     if method == "arrangement" and cfg.min_edge > 0:
-        faces, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
-        face_labels = face_labels[kept]
-    faces, face_labels = _clean_faces(faces, face_labels)
-    face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-    solid = _manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2)
-    return solid, faces, face_labels, planes, info
+        collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
+        if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
+            variants.insert(0, (collapsed, face_labels[kept]))
+    for faces, face_labels in variants:
+        # collapsing short edges can pinch faces at different heights into a saddle; the
+        # uncollapsed partition is used then rather than a face taking a neighbour's plane
+        faces, face_labels = _clean_faces(faces, face_labels)
+        face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2)
+        if not relabelled:
+            break
+    return solid, faces, face_labels, planes_f, info
 
 
 def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
