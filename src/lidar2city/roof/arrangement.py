@@ -89,7 +89,7 @@ def _components(n, adj, labels):
     return np.unique(roots, return_inverse=True)[1]
 
 
-def dissolve_cells(cells, labels, *, min_area=0.0, weights=None):
+def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
     """Merge cells into faces: same-label neighbours join; small faces take a neighbour's label.
 
     Parameters
@@ -103,6 +103,8 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None):
         longest boundary with (smallest first).
     weights : ndarray, optional
         Per-cell evidence (e.g. point counts); a face with none joins a neighbour too.
+    min_width : float
+        Faces narrower than this on average (2 area / perimeter, m) join a neighbour too.
 
     Returns
     -------
@@ -118,6 +120,7 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None):
     area = shapely.area(np.asarray(cells, dtype=object))
     w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
     adj = _adjacency(cells)
+    length = shapely.length(np.asarray(cells, dtype=object))
     nbr: dict = {}
     for (i, j), L in adj.items():
         nbr.setdefault(i, []).append((j, L))
@@ -130,6 +133,15 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None):
         c_lab = np.zeros(n_comp, dtype=np.int64)
         c_lab[comp] = labels
         bad = (c_area < min_area) | (c_w <= 0) | (c_lab < 0)
+        if min_width > 0:
+            # mean width of each face: 2 area / perimeter, the perimeter from the cells' edges
+            # minus twice the edges shared inside the face
+            inner = np.zeros(n_comp)
+            for (i, j), L in adj.items():
+                if comp[i] == comp[j]:
+                    inner[comp[i]] += 2 * L
+            perim = np.bincount(comp, weights=length, minlength=n_comp) - inner
+            bad |= 2 * c_area < min_width * perim
         if n_comp == 1 or not bad.any():
             break
         # the smallest bad face: its shared length with each neighbouring face
@@ -553,7 +565,8 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     if len(planes) == 0 or not cells:
         return [footprint], np.zeros(1, dtype=np.int64), kinds
     cell_lab, counts = _cell_labels(cells, xyz, planes, cap)
-    faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts)
+    faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
+                                        min_width=cell)
     if not faces or (face_labels < 0).any():
         return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
             labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds
