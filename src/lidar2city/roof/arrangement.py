@@ -74,19 +74,12 @@ def _adjacency(cells):
 
 def _components(n, adj, labels):
     """Connected components of same-label cells (array of component ids)."""
-    parent = np.arange(n)
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
-    def find(x):
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for i, j in adj:
-        if labels[i] == labels[j]:
-            parent[find(i)] = find(j)
-    roots = np.array([find(x) for x in range(n)])
-    return np.unique(roots, return_inverse=True)[1]
+    pairs = np.array([(i, j) for i, j in adj if labels[i] == labels[j]], dtype=np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(g, directed=False)[1]
 
 
 def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..config import field
 from ..errors import ConfigError, FitError
+from ..validate.solid import check_solid
 from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
@@ -335,7 +336,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                     raise
                 logger.debug("%s roof topology failed (%s); trying the next", method, exc)
                 continue
-            if method == methods[-1] or _closed_shell(solid):
+            if method == methods[-1] or (_closed_shell(solid) and not check_solid(solid)):
                 break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
         solids.append(solid)
