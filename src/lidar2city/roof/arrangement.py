@@ -7,18 +7,24 @@ replaced by straight segments:
 - an **intersection edge** (the chain lies near the line where the two facets'
   planes meet, or the planes are at the same height along it) becomes that
   exact line, projected, over the chain's extent;
-- a **step edge** is simplified (Douglas-Peucker at one cell), each piece made
-  parallel / perpendicular to the building direction when within
-  ``snap_angle`` of it and fitted (least squares, direction fixed) to its raw
-  chain; consecutive pieces meet at their lines' intersection.
+- a **step edge** is split into the fewest straight pieces that each fit its
+  raw chain within 1.5 cells (split where Douglas-Peucker would, then merged
+  where neighbours fit one line), each piece made parallel / perpendicular to
+  the building direction when within ``snap_angle`` of it; consecutive pieces
+  meet at their lines' intersection.
+
+A chain near its planes' intersection line is an intersection edge only when
+that line explains the nearby points about as well as the chain does.
 
 Segments overshoot their ends a little; together with the footprint outline
 they are noded and polygonised, so the cells always partition the footprint
 and dangling overshoots vanish. Each cell takes the facet plane that fits its
 points best (robust, capped residuals); small or empty cells and faces join the
-neighbour they share the longest boundary with; same-plane cells dissolve into
-faces. Junction vertices are then moved to the least-squares meeting point of
-the planes by :func:`.refine.refine_partition`.
+neighbour they share the longest boundary with, and so do slivers narrower than
+a cell; same-plane cells dissolve into faces. Junction vertices are then moved
+to the least-squares meeting point of the planes by
+:func:`.refine.refine_partition`, and edges shorter than 1.5 cells collapse
+(:func:`collapse_short_edges`).
 
 References
 ----------
