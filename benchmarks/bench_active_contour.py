@@ -68,7 +68,13 @@ from lidar2city.tools.active_contour import load_scene_inputs, reference_mask, s
 from lidar2city.tune.ga import tune_weights
 
 DATA = Path(os.environ.get("LIDAR2CITY_DATA",
-                           Path(__file__).resolve().parents[2] / "shared" / "data")) / "alexandria"
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+#: area -> (DSM, DTM, reference footprints) under DATA
+AREAS = {
+    "delft": ("delft/dsm_50cm.tif", "delft/dtm_50cm.tif", "delft/footprints_bgt.gpkg"),
+    "alexandria": ("alexandria/dsm_west.tif", "alexandria/dtm_west.tif",
+                   "alexandria/footprints_west.gpkg"),
+}
 
 
 def metrics_line(name, pred, ref, dom):
@@ -98,9 +104,9 @@ def skimage_peer(scene, frame, shape, cfg):
     return rasterize_polygons(contours_to_polygons(out, frame, simplify=cfg.simplify), shape, frame)
 
 
-def row_domains(ref, objects, split, kind):
+def row_domains(ref, objects, split, kind, cell):
     """Scoring domains (all, north = rows < split, south) of one protocol."""
-    dom = scoring_domain(ref, objects, kind)
+    dom = scoring_domain(ref, objects, kind, cell=cell)
     rows = np.arange(ref.shape[0])[:, None]
     return dom, dom & (rows < split), dom & (rows >= split)
 
@@ -114,14 +120,18 @@ def main():
     ap.add_argument("--out", default="/tmp/ac_bench")
     ap.add_argument("--skip-full", action="store_true")
     ap.add_argument("--skip-reverse", action="store_true")
-    ap.add_argument("--objective", choices=["cost", "kappa"], default="kappa")
+    ap.add_argument("--objective", choices=["cost", "kappa"], default="cost")
+    ap.add_argument("--scale", choices=["log", "linear"], default="log")
+    ap.add_argument("--area", choices=sorted(AREAS), default="delft")
+    ap.add_argument("--skip-peer", action="store_true")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    inp = load_scene_inputs(DATA / "dsm_west.tif", dtm=DATA / "dtm_west.tif")
+    p_dsm, p_dtm, p_ref = (DATA / p for p in AREAS[args.area])
+    inp = load_scene_inputs(p_dsm, dtm=p_dtm)
     r = inp["raster"]
-    ref = reference_mask(DATA / "footprints_west.gpkg", r)
+    ref = reference_mask(p_ref, r)
     cell = inp["cell"]
     rows = np.nonzero(ref.any(axis=1))[0]
     split = int((rows.min() + rows.max() + 1) // 2)
@@ -135,11 +145,11 @@ def main():
     print(f"untuned weights {UNTUNED_WEIGHTS}")
     print(f"shipped default weights {DEFAULT_WEIGHTS}")
     print(f"GA: population {args.population}, generations {args.generations}, jobs {args.jobs}, "
-          f"seed {args.seed}, objective {args.objective}")
+          f"seed {args.seed}, objective {args.objective}, {args.scale} scale")
 
     dsm, ndsm = inp["dsm"], inp["ndsm"]
     objects = np.nan_to_num(ndsm, nan=0.0) > cfg.min_height
-    domains = {k: row_domains(ref, objects, split, k) for k in ("reference", "bbox")}
+    domains = {k: row_domains(ref, objects, split, k, cell) for k in ("reference", "bbox")}
     for k, (da, dn, ds) in domains.items():
         print(f"domain {k:9s}: {int(da.sum())} px; north {int(dn.sum())} px with {int((ref & dn).sum())} "
               f"reference px, south {int(ds.sum())} px with {int((ref & ds).sum())} reference px")
@@ -149,7 +159,8 @@ def main():
         t0 = time.perf_counter()
         w, hist = tune_weights(dsm, ndsm, ref, cell=cell, domain=dom, config=cfg,
                                population=args.population, generations=args.generations,
-                               seed=args.seed, n_jobs=args.jobs, objective=args.objective)
+                               seed=args.seed, n_jobs=args.jobs, objective=args.objective,
+                               scale=args.scale)
         print(f"\nGA on the {label} part (reference protocol): {time.perf_counter() - t0:.1f} s, "
               f"{hist[-1]['evaluations']} evaluations, {len(hist) - 1} generations")
         for rec in hist:
@@ -180,7 +191,8 @@ def main():
     if weights_s is not None:
         preds["snake, weights tuned on south"] = predict(scene, weights_s, cfg, frame, shape)
     t0 = time.perf_counter()
-    preds["skimage active_contour (same init)"] = skimage_peer(scene, frame, shape, cfg)
+    if not args.skip_peer:
+        preds["skimage active_contour (same init)"] = skimage_peer(scene, frame, shape, cfg)
     t_sk = time.perf_counter() - t0
     for kind, (_, dn, ds) in domains.items():
         for name, dom in (("south", ds), ("north", dn)):

@@ -18,7 +18,7 @@ from .snake import evolve_contours
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
+__all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "LOG_WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
            "ContourScene", "prepare_scene", "run_scene", "contours_to_polygons",
            "active_contour_outlines"]
 
@@ -26,6 +26,8 @@ __all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS"
 WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
 #: Range searched by the genetic algorithm for every weight.
 WEIGHT_BOUNDS = (0.0, 3.0)
+#: Range of log10 of every weight searched by the GA on its (default) log scale: 0.01 to 10.
+LOG_WEIGHT_BOUNDS = (-2.0, 1.0)
 #: Weights used when none are given: tuned by the GA (objective 1 - kappa, population
 #: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage,
 #: scored around the reference footprints (``reference_neighbourhood_domain``), with the
@@ -49,7 +51,7 @@ class ActiveContourConfig:
     min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
-    split_distance: int = field(3, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (pixels; 0: no split).")
+    split_distance: float = field(6.0, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (m, rounded to whole pixels; 0: no split).")
     min_aspect_coherence: float = field(0.1, "Regions whose four-fold slope-direction coherence is below this are dropped (tree crowns slope every way, buildings a few ways 90 degrees apart; 0: off).")
     relative_height: float = field(0.5, "Each piece keeps its pixels higher than this share of its 90th height percentile (a blurred wall's mid-height; drops low crowns and sheds leaning on buildings; 0: off).")
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
@@ -66,8 +68,8 @@ class ActiveContourConfig:
     tol: float = field(0.02, "Convergence: RMS vertex move per iteration below this (pixels).")
     spacing: float = field(1.0, "Vertex spacing after resampling (pixels).")
     resample_every: int = field(5, "Resample contours and update region statistics every N iterations.")
-    band: float = field(3.0, "Width of the outside band for region statistics (pixels; used when local_sigma is 0).")
-    local_sigma: float = field(3.0, "Gaussian window (pixels) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
+    band: float = field(6.0, "Width of the outside band for region statistics (m; used when local_sigma is 0).")
+    local_sigma: float = field(6.0, "Gaussian window (m) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
     smooth: float = field(0.7, "Gaussian sigma applied to the region-term images (pixels; 0: none).")
     simplify: float = field(0.5, "Douglas-Peucker tolerance of the output outlines (pixels; 0: none).")
 
@@ -139,6 +141,8 @@ class ContourScene:
         Intensity of the regional term (grey orthoimage, or the DSM).
     ndsm : ndarray (H, W)
         Height above terrain, NaN filled.
+    cell : float
+        Pixel size (m): the configuration's lengths in metres become pixels.
     """
 
     contours: list
@@ -146,6 +150,7 @@ class ContourScene:
     gvf: np.ndarray
     image: np.ndarray
     ndsm: np.ndarray
+    cell: float = 1.0
 
 
 def _grey(ortho, shape):
@@ -182,7 +187,8 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
     labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
                               max_roughness=cfg.max_roughness, min_area=cfg.min_area,
-                              split_distance=cfg.split_distance, relative_height=cfg.relative_height,
+                              split_distance=int(round(cfg.split_distance / cell)),
+                              relative_height=cfg.relative_height,
                               min_aspect_coherence=cfg.min_aspect_coherence,
                               edges=edges)
     contours = initial_contours(labels)
@@ -204,7 +210,7 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         image = ndi.gaussian_filter(image, cfg.smooth)
         nd = ndi.gaussian_filter(nd, cfg.smooth)
     logger.info("%d initial contours", len(contours))
-    return ContourScene(contours, labels, g, image, nd)
+    return ContourScene(contours, labels, g, image, nd, float(cell))
 
 
 def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig | None = None,
@@ -217,8 +223,8 @@ def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig 
         scene.contours, scene.gvf, scene.image, scene.ndsm,
         alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
         tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
-        spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band,
-        local_sigma=cfg.local_sigma, callback=callback)
+        spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band / scene.cell,
+        local_sigma=cfg.local_sigma / scene.cell, callback=callback)
 
 
 def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:
