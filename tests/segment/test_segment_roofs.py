@@ -118,3 +118,20 @@ def test_split_at_saddles_keeps_flat_shapes_whole():
     for depth in (0.5, 1.0, 6.0, 20.0):
         out, n = split_at_saddles(lab, nd, depth=depth)
         assert n == 2 and np.array_equal(out > 0, lab > 0)
+
+
+def test_inset_regions_moves_outer_edges_only_and_in_metres():
+    from lidar2city.segment.dsm import inset_regions
+
+    lab = np.zeros((12, 16), np.int32)
+    lab[2:10, 2:8] = 1
+    lab[2:10, 8:14] = 2  # a touching neighbour: the shared edge stays
+    half = inset_regions(lab, cell=0.5, inset=0.25)
+    assert (half[3:9, 3:8] == 1).all() and (half[3:9, 8:13] == 2).all()
+    assert not half[2].any() and not half[:, 2].any() and not half[:, 13].any()
+    assert (half > 0).sum() == 6 * 10
+    # at 1 m a pixel centre is 0.5 m inside the edge: a 0.25 m inset changes nothing
+    assert (inset_regions(lab, cell=1.0, inset=0.25) == lab).all()
+    assert (inset_regions(lab, cell=0.5, inset=0.0) == lab).all()
+    with pytest.raises(InputError):
+        roof_regions(np.zeros((5, 5)), np.zeros((5, 5)), cell=1.0, edge_inset=-1)

@@ -15,15 +15,6 @@ __all__ = ["load_scene_inputs", "reference_mask", "footprints_active_contour", "
            "resolve_weights", "scoring_domain"]
 
 
-def _same_grid(a, b, what):
-    if a.shape != b.shape or not np.allclose(tuple(a.transform)[:6], tuple(b.transform)[:6]):
-        raise InputError(f"{what} is not on the DSM's grid (shape {b.shape} vs {a.shape}, "
-                         f"transform {tuple(b.transform)[:6]} vs {tuple(a.transform)[:6]}); "
-                         "resample it onto the DSM grid first")
-    if a.crs is not None and b.crs is not None and not a.crs.equals(b.crs, ignore_axis_order=True):
-        raise InputError(f"{what} is in {b.crs.name}, the DSM in {a.crs.name}")
-
-
 def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     """Read a DSM, its DTM (or derive one) and an optional orthoimage on the same grid.
 
@@ -38,11 +29,12 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     InputError
         Grids differ, or no DTM is given and none can be derived.
     """
-    from ..io.raster import read_raster
+    from ..io.raster import check_same_grid, check_surface, read_raster
 
     d = read_raster(dsm)
     if d.array.ndim != 2:
         raise InputError(f"{str(dsm)!r}: the DSM must have one band")
+    check_surface(d, dsm)
     from ..crs import unit_factors
 
     z_unit = unit_factors(d.crs)[1]
@@ -57,13 +49,14 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
         logger.info("no DTM given: derived one from the DSM")
     else:
         t = read_raster(dtm)
-        _same_grid(d, t, f"DTM {str(dtm)!r}")
+        check_same_grid(d, t, f"DTM {str(dtm)!r}")
+        check_surface(t, dtm)
         ground = t.array * z_unit
     ndsm = zs - ground
     o = None
     if ortho is not None:
         orr = read_raster(ortho)
-        _same_grid(d, orr, f"orthoimage {str(ortho)!r}")
+        check_same_grid(d, orr, f"orthoimage {str(ortho)!r}")
         o = np.asarray(orr.array, dtype=np.float64)
     return {"raster": d, "dsm": zs, "ndsm": ndsm, "ortho": o, "cell": cell}
 

@@ -310,6 +310,27 @@ def weights_cost(weights) -> float:
     return float(np.count_nonzero(pred[dom] != ref[dom])) / max(int(dom.sum()), 1)
 
 
+#: Farther than this (m) from the scored pixels, a contour cannot change the cost.
+_SNAKE_REACH = 10.0
+
+
+def _near_domain(scene, domain, *, margin):
+    """The scene with only the contours whose bounding box, grown by ``margin``
+    pixels, holds a pixel of ``domain``: the others cannot change the cost,
+    and the fitness runs once per chromosome."""
+    import dataclasses
+
+    integral = np.pad(np.cumsum(np.cumsum(domain, axis=0), axis=1), ((1, 0), (1, 0)))
+    h, w = domain.shape
+    keep = []
+    for c in scene.contours:
+        r0, c0 = np.clip(np.floor(c.min(axis=0)).astype(int) - margin, 0, [h, w])
+        r1, c1 = np.clip(np.ceil(c.max(axis=0)).astype(int) + margin + 1, 0, [h, w])
+        if integral[r1, c1] - integral[r0, c1] - integral[r1, c0] + integral[r0, c0] > 0:
+            keep.append(c)
+    return dataclasses.replace(scene, contours=keep)
+
+
 def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None, config=None,
                  population=30, generations=15, seed=None, n_jobs=1, cxpb=0.8, mutpb=0.04,
                  objective="cost", scale="log", callback=None):
@@ -374,7 +395,8 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
         raise InputError("domain and reference differ in shape")
     if not (ref & dom).any():
         raise InputError("no reference building pixel inside the scoring domain")
-    scene = prepare_scene(dsm, ndsm, ortho=ortho, cell=cell, config=cfg)
+    scene = _near_domain(prepare_scene(dsm, ndsm, ortho=ortho, cell=cell, config=cfg), dom,
+                         margin=int(np.ceil(_SNAKE_REACH / cell)))
     frame = PixelFrame(cell=cell)
     bounds = LOG_WEIGHT_BOUNDS if scale == "log" else WEIGHT_BOUNDS
     start = np.array([getattr(cfg, k) for k in WEIGHT_NAMES], dtype=float)
