@@ -22,6 +22,8 @@ __all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "LOG_WEIGHT_BOUNDS", "DEFAULT_WEIGHT
            "ContourScene", "prepare_scene", "run_scene", "contours_to_polygons",
            "active_contour_outlines"]
 
+#: Initial contour choices (``ActiveContourConfig.init``).
+INITIALISATIONS = ("roofs", "edges")
 #: The five energy weights, in chromosome order.
 WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
 #: Range searched by the genetic algorithm for every weight.
@@ -57,6 +59,7 @@ class ActiveContourConfig:
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
     min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
+    init: str = field("roofs", "Initial contours: 'roofs' (the smooth roof regions of lidar2city.segment.dsm.roof_regions with its default [dsm_roofs] options: the DSM blobs that footprints --dsm fits) or 'edges' (the seed's: the nDSM mask above min_height cut by linked Canny edges, split at necks, vegetation dropped by roughness and aspect).")
     edge_map: str = field("gradient", "Edge map of the GVF: 'canny' (blurred linked Canny edges of the DSM: walls) or 'gradient' (gradient magnitude, also strong on pitched roofs).")
     edge_sigma: float = field(0.5, "Gaussian sigma of the edge map for the GVF (pixels); small keeps the two walls of narrow buildings apart.")
     gvf_mu: float = field(0.2, "GVF diffusion weight.")
@@ -84,6 +87,8 @@ class ActiveContourConfig:
         for name in ("max_iter", "gvf_iterations", "resample_every", "min_edge_length"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"active_contour.{name}: must be >= 1, got {getattr(self, name)}")
+        if self.init not in INITIALISATIONS:
+            raise ConfigError(f"active_contour.init: must be one of {', '.join(INITIALISATIONS)}, got {self.init!r}")
         if self.edge_map not in ("canny", "gradient"):
             raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
@@ -163,7 +168,7 @@ def _grey(ortho, shape):
 
 
 def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfig | None = None,
-                  gvf_callback=None) -> ContourScene:
+                  gvf_callback=None, roof_config=None) -> ContourScene:
     """Initial contours, GVF field and region images of a DSM (weight-independent).
 
     Parameters
@@ -175,6 +180,8 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         (the DSM does otherwise).
     cell : float
         Pixel size (m).
+    roof_config : RoofRegionsConfig, optional
+        Options of the roof regions (``config.init == "roofs"``).
     """
     cfg = config or ActiveContourConfig()
     z = _filled(dsm)
@@ -185,12 +192,18 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         raise InputError(f"cell must be > 0, got {cell}")
     nd = np.where(np.isfinite(nd), nd, 0.0)
     edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
-    labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
-                              max_roughness=cfg.max_roughness, min_area=cfg.min_area,
-                              split_distance=int(round(cfg.split_distance / cell)),
-                              relative_height=cfg.relative_height,
-                              min_aspect_coherence=cfg.min_aspect_coherence,
-                              edges=edges)
+    if cfg.init == "roofs":
+        from ..segment.dsm import RoofRegionsConfig, roof_regions
+
+        labels, _ = roof_regions(dsm, ndsm, cell=cell,
+                                 **dataclasses.asdict(roof_config or RoofRegionsConfig()))
+    else:
+        labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
+                                  max_roughness=cfg.max_roughness, min_area=cfg.min_area,
+                                  split_distance=int(round(cfg.split_distance / cell)),
+                                  relative_height=cfg.relative_height,
+                                  min_aspect_coherence=cfg.min_aspect_coherence,
+                                  edges=edges)
     contours = initial_contours(labels)
     if cfg.edge_map == "canny":
         f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0

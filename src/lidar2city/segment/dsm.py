@@ -440,10 +440,10 @@ def _remove_small(mask, min_px):
 class RoofRegionsConfig:
     """Options of :func:`roof_regions` (stage ``dsm_roofs``)."""
 
-    min_height: float = field(2.5, "nDSM threshold (m): lower objects are not buildings")
+    min_height: float = field(2.0, "nDSM threshold (m): lower objects are not buildings")
     max_step: float = field(0.5, "largest height difference (m) between 4-neighbours inside "
                                  "one roof region")
-    min_area: float = field(30.0, "smallest roof region (m2)")
+    min_area: float = field(10.0, "smallest roof region (m2)")
     expand: float = field(2.0, "regions grow by this distance (m) into the remaining elevated "
                                "pixels (blurred eaves and walls)")
     max_hole_area: float = field(12.0, "holes up to this area (m2) are filled; larger ones are "
@@ -455,10 +455,10 @@ class RoofRegionsConfig:
                                      "least min_area each, separated by a saddle at least this "
                                      "deep (m), is split at the saddle (a tree crown or a "
                                      "neighbour reached by the growing); 0 disables")
-    edge_inset: float = field(0.0, "region pixels whose centre lies within this distance (m) of "
+    edge_inset: float = field(0.25, "region pixels whose centre lies within this distance (m) of "
                                    "the regions' outer edge are dropped (the highest point per "
                                    "cell overstates a roof by half a cell on average; 0: off)")
-    edge_fraction: float = field(0.5, "after growing, a region keeps the pixels whose nDSM "
+    edge_fraction: float = field(0.2, "after growing, a region keeps the pixels whose nDSM "
                                       "reaches this fraction of its roof height (the upper "
                                       "quartile of its nDSM): the edge of a blurred step lies "
                                       "at half its height; 0 disables the trimming")
@@ -615,9 +615,9 @@ def inset_regions(labels, *, cell, inset):
     return np.where((dist - 0.5) * float(cell) > float(inset) + 1e-9, lab, 0)
 
 
-def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0.5,
-                 min_area=30.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
-                 saddle_depth=1.0, edge_fraction=0.5, edge_inset=0.0):
+def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
+                 min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
+                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.25):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -629,8 +629,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM), are split where they hold several summits separated by
     saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
-    half their roof height (:func:`trim_to_edges` with ``edge_fraction``),
-    small holes are filled and large ones kept as courtyards.
+    a share of their roof height (:func:`trim_to_edges` with
+    ``edge_fraction``), small holes are filled and large ones kept as
+    courtyards, and their outer edges are moved in by ``edge_inset`` metres
+    (:func:`inset_regions`: the highest point per cell overstates roofs).
 
     Parameters
     ----------
