@@ -136,3 +136,27 @@ def test_inset_regions_moves_outer_edges_only_and_in_metres():
     assert (inset_regions(lab, cell=0.5, inset=0.0) == lab).all()
     with pytest.raises(InputError):
         roof_regions(np.zeros((5, 5)), np.zeros((5, 5)), cell=1.0, edge_inset=-1)
+
+
+def test_row_houses_one_region_per_block_split_at_a_step():
+    """0.5 m DSM of two row-house blocks: 4 gabled houses of one height (no step between
+    them) and 3 houses whose middle one is 1.5 m higher (a height step)."""
+    cell = 0.5
+    nd = np.zeros((80, 120))
+    rows = np.arange(80)[:, None] * cell
+
+    def gable(r0, r1, eaves, ridge):
+        mid, half = (r0 + r1) / 2 * cell, (r1 - r0) / 2 * cell
+        return eaves + (ridge - eaves) * (1 - np.abs(rows - mid) / half)
+
+    block = gable(8, 32, 6.0, 10.0)
+    nd[8:32, 8:88] = np.broadcast_to(block[8:32], (24, 80))      # 4 houses of 10 m, one roof
+    low = gable(48, 72, 6.0, 10.0)
+    nd[48:72, 8:98] = np.broadcast_to(low[48:72], (24, 90))
+    nd[48:72, 38:68] += 1.5                                       # the middle house is higher
+    labels, n = roof_regions(nd + 1.0, nd, cell=cell)
+    top = np.unique(labels[10:30, 10:86])
+    assert len(top[top > 0]) == 1                                  # one outline per block
+    bottom = {int(np.bincount(labels[50:70, c0:c1].ravel()).argmax())
+              for c0, c1 in ((12, 34), (42, 64), (72, 94))}
+    assert len(bottom) == 3 and 0 not in bottom                    # split at the steps
