@@ -29,7 +29,8 @@ def blurred_scene(sigma=1.0):
 def test_roof_regions_separates_heights_and_finds_edges():
     nd, truth = blurred_scene()
     # a blurred DSM (like the 2 m Alexandria one): regions cut back at half height
-    labels, n = roof_regions(nd + 20.0, nd, cell=1.0, min_area=20.0, expand=3.0, edge_fraction=0.5)
+    labels, n = roof_regions(nd + 20.0, nd, cell=1.0, min_area=20.0, expand=3.0, edge_fraction=0.5,
+                             edge_inset=0.0)
     found = set()
     for t in truth:
         ids, counts = np.unique(labels[t], return_counts=True)
@@ -160,3 +161,12 @@ def test_row_houses_one_region_per_block_split_at_a_step():
     bottom = {int(np.bincount(labels[50:70, c0:c1].ravel()).argmax())
               for c0, c1 in ((12, 34), (42, 64), (72, 94))}
     assert len(bottom) == 3 and 0 not in bottom                    # split at the steps
+
+
+def test_inset_default_drops_one_ring_at_half_and_one_metre_none_at_two():
+    from lidar2city.segment.dsm import inset_regions
+
+    lab = np.zeros((12, 12), np.int32)
+    lab[2:10, 2:10] = 1
+    for cell, kept in ((0.5, 36), (1.0, 36), (2.0, 64)):
+        assert (inset_regions(lab, cell=cell, inset=0.5) > 0).sum() == kept

@@ -455,9 +455,10 @@ class RoofRegionsConfig:
                                      "least min_area each, separated by a saddle at least this "
                                      "deep (m), is split at the saddle (a tree crown or a "
                                      "neighbour reached by the growing); 0 disables")
-    edge_inset: float = field(0.25, "region pixels whose centre lies within this distance (m) of "
-                                   "the regions' outer edge are dropped (the highest point per "
-                                   "cell overstates a roof by half a cell on average; 0: off)")
+    edge_inset: float = field(0.5, "region pixels whose centre lies within this distance (m) of "
+                                  "the regions' outer edge are dropped (the highest point per "
+                                  "cell overstates a roof by half a cell on average, and eaves "
+                                  "overhang the walls; 0: off)")
     edge_fraction: float = field(0.2, "after growing, a region keeps the pixels whose nDSM "
                                       "reaches this fraction of its roof height (the upper "
                                       "quartile of its nDSM): the edge of a blurred step lies "
@@ -591,10 +592,11 @@ def inset_regions(labels, *, cell, inset):
     soon as one roof point falls in it, so its building regions reach on
     average half a cell beyond the walls (and eaves overhang the walls the
     footprints are drawn on). The pixel edge between a region and the
-    background is the region's edge; a pixel whose centre is ``k`` pixels
-    (Euclidean, centre to centre) from the nearest background pixel lies
-    ``(k - 1/2) cell`` inside it. Edges shared by two touching regions are
-    not moved. With ``inset`` below half a cell nothing changes.
+    background is the region's edge; a pixel ``k`` steps along rows and
+    columns from the nearest background pixel lies ``(k - 1/2) cell`` inside
+    it. Edges shared by two touching regions are not moved. With ``inset``
+    below half a cell nothing changes: the default 0.5 m drops one ring of
+    pixels from 0.5 m and 1 m grids, and nothing from coarser (blurred) ones.
 
     Parameters
     ----------
@@ -611,13 +613,13 @@ def inset_regions(labels, *, cell, inset):
         The labels with the inset pixels set to 0.
     """
     lab = np.asarray(labels)
-    dist = ndimage.distance_transform_edt(lab > 0)
+    dist = ndimage.distance_transform_cdt(lab > 0, metric="taxicab")
     return np.where((dist - 0.5) * float(cell) > float(inset) + 1e-9, lab, 0)
 
 
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
-                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.25):
+                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
