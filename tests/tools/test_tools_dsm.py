@@ -11,6 +11,7 @@ from lidar2city.errors import InputError
 from lidar2city.io.raster import Raster, read_raster, write_raster
 from lidar2city.tools.dsm import (
     footprints_from_dsm,
+    load_dsm_config,
     lod1_from_dsm,
     rasters_from_las,
 )
@@ -42,7 +43,9 @@ def test_footprints_gpkg_and_figure(scene, tmp_path):
     p_dsm, p_dtm = scene
     out, fig, dtm_out = tmp_path / "fp.gpkg", tmp_path / "fig.png", tmp_path / "dtm_out.tif"
     calls = []
-    s = footprints_from_dsm(p_dsm, output=out, figure=fig, dtm_out=dtm_out,
+    # walls on pixel edges: none of the half-cell excess of a highest-point-per-cell DSM
+    exact = load_dsm_config(None, **{"dsm_roofs.edge_inset": 0.0})
+    s = footprints_from_dsm(p_dsm, output=out, figure=fig, dtm_out=dtm_out, config=exact,
                             progress=lambda i, n: calls.append((i, n)))
     assert s["buildings"] == 2 and s["failed"] == 0 and s["dtm"] == "built from the DSM"
     assert calls and calls[-1][0] == calls[-1][1]
