@@ -444,6 +444,8 @@ class RoofRegionsConfig:
     max_step: float = field(0.5, "largest height difference (m) between 4-neighbours inside "
                                  "one roof region")
     min_area: float = field(10.0, "smallest roof region (m2)")
+    min_pixels: int = field(8, "smallest roof region (pixels): on coarse rasters a few pixels "
+                               "cannot hold a shape (8 pixels = 32 m2 at 2 m)")
     expand: float = field(2.0, "regions grow by this distance (m) into the remaining elevated "
                                "pixels (blurred eaves and walls)")
     max_hole_area: float = field(12.0, "holes up to this area (m2) are filled; larger ones are "
@@ -619,7 +621,7 @@ def inset_regions(labels, *, cell, inset):
 
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
-                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5):
+                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -627,7 +629,7 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     heights differ by at most ``max_step`` join. Roofs are piecewise smooth,
     so each becomes one region, separated from neighbouring buildings of
     another height and from tree crowns, whose rough surfaces break into
-    fragments smaller than ``min_area`` and are dropped. Regions then grow by
+    fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped. Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM), are split where they hold several summits separated by
     saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
@@ -658,8 +660,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     cell = _check_cell(cell)
     if dsm.shape != ndsm.shape:
         raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
-    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0:
-        raise InputError("max_step must be > 0; min_area, expand, max_hole_area >= 0")
+    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0:
+        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels >= 0")
     if not 0 <= edge_fraction < 1:
         raise InputError(f"edge_fraction must be in [0, 1), got {edge_fraction}")
     if saddle_depth < 0:
@@ -675,7 +677,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     lab = _smooth_components(np.where(elevated, dsm, np.nan), elevated, max_step) + 1
     lab[~elevated] = 0
     sizes = np.bincount(lab.ravel())
-    keep = sizes >= max(1, int(np.ceil(min_area / cell**2)))
+    min_px = max(1, int(min_pixels), int(np.ceil(min_area / cell**2)))
+    keep = sizes >= min_px
     keep[0] = False
     if roughness_threshold > 0 and keep.any():
         rough = roughness(ndsm)
@@ -691,7 +694,7 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         lab = np.where(elevated, grown, 0)
     if saddle_depth > 0:
         lab, _ = split_at_saddles(lab, ndsm, depth=saddle_depth,
-                                  min_pixels=max(1, int(np.ceil(min_area / cell**2))))
+                                  min_pixels=min_px)
     if edge_fraction > 0:
         lab = trim_to_edges(lab, ndsm, fraction=edge_fraction)
     # fill small holes region by region (courtyards stay)
