@@ -497,7 +497,8 @@ LOD22_METHODS = ("roof", "primitives")
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None, check_images=None, block_size=1000.0) -> ReconstructSummary:
+                primitives=None, check_images=None, block_size=1000.0,
+                edits=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     The area is processed block by block: blocks are the cells of a square
@@ -539,6 +540,9 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         wire frame over its points, for checking by eye.
     block_size : float
         Side (m) of the processing blocks.
+    edits : path, optional
+        An ``EDITS.json`` written by ``lidar2city edit`` or the viewer: every
+        edit is re-applied to its building (:mod:`lidar2city.tools.edit`).
 
     Returns
     -------
@@ -592,6 +596,14 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     else:
         blocks = _footprint_blocks(reader, frame, footprints, block_size, margin,
                                    id_field=id_field, layer=layer)
+    # --- edits hook (issue 15): the edits of EDITS.json, re-applied per block below
+    edit_log = edit_ctx = None
+    if edits is not None:
+        from .edit import EditContext, load_edits
+
+        edit_log = load_edits(edits)
+        edit_ctx = EditContext(cfg, lod22, others.get("primitives"), want, method)
+    # --- end of edits hook
     total = None if footprints is None else sum(len(b[1]) for b in blocks)
     done = 0
 
@@ -624,12 +636,20 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
 
                     Path(check_images).mkdir(parents=True, exist_ok=True)
                     write_check_images(check_images, with_classes, fitted)
+            if edit_log:  # --- edits hook (issue 15)
+                from .edit import apply_block_edits
+
+                res = apply_block_edits(res, fps, cloud, classes, edit_log, edit_ctx)
         results.extend(res)
         fp_parts.append(fps)
     if not any_points:
         raise EmptyInputError("no building point found in the input, even after classification"
                               if footprints is not None else "no building footprint found in the points")
     fps = _concat_footprints(fp_parts)
+    if edit_log:  # --- edits hook (issue 15): an edit naming no building is an error
+        from .edit import check_edit_ids
+
+        check_edit_ids(edit_log, fps.ids, source=str(edits))
     if footprints is not None:  # back in the footprint file's order
         order = np.argsort([i for _, b in blocks for i in b.attributes["_index"]], kind="stable")
         results = [results[i] for i in order]
