@@ -22,7 +22,7 @@ from ._options import crs_option
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Address to listen on; 0.0.0.0 exposes the viewer (and editing) to the "
                    "network.")
-@click.option("--max-points", default=300_000, show_default=True, type=click.IntRange(min=0),
+@click.option("--max-points", default=200_000, show_default=True, type=click.IntRange(min=0),
               help="Points shown at most (evenly subsampled).")
 @click.option("--no-browser", is_flag=True, help="Do not open a browser.")
 @crs_option

@@ -480,6 +480,7 @@ class EditSession:
                                   extent=(*lo, *hi))
             self._footprints = dict(zip(map(str, fps.ids), fps.geometries, strict=True))
         self.edits_cache: dict[str, dict] = {}
+        self._area = None
 
     # -- reading
     def buildings(self) -> list[str]:
@@ -539,11 +540,38 @@ class EditSession:
         over = self.context.lod22.overhang if self.context.lod22 is not None else 0.0
         margin = (max(cfg.search_radius, 50.0) + over) / self.reader.xy_unit
         x0, y0, x1, y1 = shape(footprint_world).bounds
-        cloud = self.reader.box(x0 - margin, y0 - margin, x1 + margin, y1 + margin)
+        box = (x0 - margin, y0 - margin, x1 + margin, y1 + margin)
+        if self._area is not None:
+            # a subset of the canonically ordered area is the box's canonical cloud
+            world, area, area_classes = self._area
+            keep = ((world[:, 0] >= box[0]) & (world[:, 0] <= box[2])
+                    & (world[:, 1] >= box[1]) & (world[:, 1] <= box[3]))
+            cloud, classes = area.subset(keep), area_classes[keep]
+        else:
+            cloud = self.reader.box(*box)
+            classes = None
         if len(cloud) == 0:
             raise InputError("no point of the tiles around this building (wrong --points?)")
-        _, _, classes = point_roles(cloud, cfg, classified=self.classified)
+        if classes is None:
+            _, _, classes = point_roles(cloud, cfg, classified=self.classified)
         return cloud, classes
+
+    def load_area(self):
+        """Read every point of the tiles once and keep them: later :meth:`points` calls
+        only select (the viewer's fast edits). Returns ``(world xyz, cloud, classes)``.
+        For classified tiles the selection equals a fresh read; raw tiles are classified
+        over the whole area here."""
+        from .reconstruct import point_roles
+
+        if self._area is None:
+            r = self.reader
+            box = r.world_bounds()
+            cloud = r.box(*box)
+            _, _, classes = point_roles(cloud, self.context.lod1, classified=self.classified)
+            world = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
+                                     cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
+            self._area = (world, cloud, classes)
+        return self._area
 
     def current_result(self, building_id):
         """A minimal result standing for the building as it is in the model."""

@@ -72,7 +72,7 @@ class Viewer:
     """
 
     def __init__(self, model, *, points=(), footprints=None, edits=None, output=None,
-                 host="127.0.0.1", port=8080, max_points=300_000, crs=None, id_field=None):
+                 host="127.0.0.1", port=8080, max_points=200_000, crs=None, id_field=None):
         self.viser = require_viser()
         from ..io.cityjson import read_cityjson
 
@@ -115,6 +115,7 @@ class Viewer:
         self._placed = None
         self.cloud = self.classes = None
         self._rmse_thread = None
+        self._quiet_worst = False
 
     # ------------------------------------------------------------------ data
     def _world_solids(self, bid, lod):
@@ -216,21 +217,16 @@ class Viewer:
         if old is not None:
             old.remove()
         h = self.server.scene.add_mesh_simple(name, v, t, color=colour, flat_shading=True,
+                                              cast_shadow=False, receive_shadow=False,
                                               visible=visible)
         h.on_click(lambda _event, bid=bid: self.select(bid))
         self.handles[bid][lod] = h
 
     def _draw_points(self):
-        r = self.session.reader
-        wb = r.world_bounds()
-        cloud = r.box(*wb)
-        from ..tools.reconstruct import point_roles
-
-        cfg = self.session.context.lod1
-        building, _, classes = point_roles(cloud, cfg, classified=self.session.classified)
+        world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
-        self._world_xyz = cloud.to_world(cloud.xyz)
-        self._building_mask = building
+        self._world_xyz = world
+        self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
         idx = scene.subsample(len(cloud), self.max_points)
         pts = (self._world_xyz[idx] - self.origin).astype(np.float32)
         self.points_handle = self.server.scene.add_point_cloud(
@@ -298,6 +294,8 @@ class Viewer:
             self.points_handle.visible = self.show_points.value
 
     def _select_worst(self):
+        if self._quiet_worst:
+            return
         bid = self.worst.value.split(" ")[0]
         if bid in self.attrs and bid != self.selected:
             self.select(bid, focus=True)
@@ -318,7 +316,13 @@ class Viewer:
                     for h in lods.values():
                         h.color = _SELECTED if bid == self.selected else colours.get(bid, (170,) * 3)
             worst = scene.worst_buildings(self.attrs)
-            self.worst.options = [self._worst_label(b, r) for b, r in worst] or ["-"]
+            labels = [self._worst_label(b, r) for b, r in worst] or ["-"]
+            if list(self.worst.options) != labels:
+                self._quiet_worst = True
+                try:
+                    self.worst.options = labels
+                finally:
+                    self._quiet_worst = False
 
     def _message(self, text, *, error=False):
         self.status = text

@@ -125,6 +125,8 @@ def legend_markdown(title: str, legend: list) -> str:
 
 def subsample(n: int, max_points: int) -> np.ndarray:
     """Indices of at most ``max_points`` of ``n`` points, evenly strided (deterministic)."""
+    if max_points <= 0:
+        return np.zeros(0, dtype=np.int64)
     if n <= max_points:
         return np.arange(n)
     return np.arange(0, n, int(math.ceil(n / max_points)))
