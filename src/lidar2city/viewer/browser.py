@@ -83,6 +83,14 @@ def _tree_cpu_seconds(root: int) -> float | None:
     return total
 
 
+def _read(path) -> str:
+    try:
+        with open(path, encoding="utf-8") as f:
+            return f.read()
+    except OSError:
+        return ""
+
+
 class _Devtools:
     def __init__(self, ws_url):
         from websockets.sync.client import connect
@@ -131,12 +139,12 @@ def capture_when_drawn(url: str, *, timeout: float = 30.0, poll: float = 0.25,
     dev = None
     try:
         port_file = os.path.join(profile, "DevToolsActivePort")
-        end = time.monotonic() + 20.0
-        while not os.path.exists(port_file) or not open(port_file).read().strip():
+        end = time.monotonic() + 30.0
+        while not _read(port_file).strip():
             if proc.poll() is not None or time.monotonic() > end:
                 raise Lidar2CityError("chromium did not start its DevTools endpoint")
             time.sleep(0.05)
-        port = int(open(port_file).read().split()[0])
+        port = int(_read(port_file).split()[0])
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
             pages = [t for t in json.load(r) if t.get("type") == "page"]
         dev = _Devtools(pages[0]["webSocketDebuggerUrl"])

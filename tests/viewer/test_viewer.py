@@ -1,0 +1,110 @@
+"""The viewer's actions without a browser: select, refit, outline edits, accept, undo."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lidar2city.io.cityjson import read_cityjson
+
+
+def test_loopback_scene_and_colours(viewer):
+    assert viewer.server.get_host() == "127.0.0.1"
+    assert set(viewer.lods) == {"1.2", "2.2"}
+    assert set(viewer.handles) == set(viewer.attrs) == {"b00", "b01", "b02", "b03"}
+    # the RMSE of the LoD shown, from the points, for every building
+    assert all(isinstance(a.get("viewer_rmse"), float) for a in viewer.attrs.values())
+    for by in ("RMSE", "roof type", "status", "validity", "height", "edited"):
+        viewer.colour_by.value = by
+        viewer.recolour()
+        assert viewer.legend.content.startswith(f"**{by}**")
+    assert viewer.points_handle.points.shape[0] <= 20_000
+
+
+def test_refit_undo_accept(viewer):
+    viewer.select("b00")
+    assert "Building b00" in viewer.info.content
+    seconds = viewer.refit_primitive("gable")
+    assert seconds is not None and "refit as gable" in viewer.status
+    assert viewer.attrs["b00"]["primitive"] == "gable"
+    viewer.undo()
+    assert "primitive" not in viewer.attrs["b00"]
+    assert not (viewer.edits_path).exists()
+    viewer.refit_primitive("box")
+    out = viewer.accept()
+    assert out == viewer.path and "Saved" in viewer.status
+    model = read_cityjson(viewer.path)
+    assert model.objects["b00"]["attributes"]["primitive"] == "box"
+    edits = json.loads(viewer.edits_path.read_text())["edits"]
+    assert [(e["building"], e["primitive"]) for e in edits] == [("b00", "box")]
+    from lidar2city.tools.validate import validate_file
+
+    assert validate_file(viewer.path).valid
+
+
+def test_outline_edit_and_rebuild(viewer):
+    viewer.select("b02")
+    viewer.start_outline()
+    n = len(viewer.outline)
+    viewer.add_vertex()
+    assert len(viewer.outline) == n + 1
+    viewer.delete_vertex()
+    assert len(viewer.outline) == n
+    centre = viewer.outline.mean(axis=0)
+    viewer.move_vertex(0, viewer.outline[0] + 0.5 * (viewer.outline[0] - centre)
+                       / np.linalg.norm(viewer.outline[0] - centre))
+    assert viewer.rebuild_from_outline() is not None, viewer.status
+    assert viewer.attrs["b02"]["edit"].startswith("footprint edited")
+    viewer.accept()
+    edits = json.loads(viewer.edits_path.read_text())["edits"]
+    assert edits[0]["action"] == "footprint"
+
+
+@pytest.mark.parametrize("case", ["unknown", "unfittable", "self-intersecting"])
+def test_bad_edits_give_a_message_and_change_nothing(viewer, case):
+    before = viewer.path.read_bytes()
+    if case == "unknown":
+        viewer.select("nope")
+        assert "unknown building id" in viewer.status
+    elif case == "unfittable":
+        viewer.select("b02")
+        assert viewer.refit_primitive("gable") is None
+        assert "cannot be fitted" in viewer.status
+    else:
+        viewer.select("b00")
+        viewer.start_outline()
+        viewer.outline[[1, 2]] = viewer.outline[[2, 1]]  # crossed edges
+        assert viewer.rebuild_from_outline() is None
+        assert "self-intersecting" in viewer.status
+    assert "Error" in viewer.status_md.content
+    assert viewer.pending is None and viewer.path.read_bytes() == before
+
+
+def test_view_only_without_points(edit_town, port):
+    from lidar2city.viewer.app import Viewer
+
+    v = Viewer(edit_town.model, port=port)
+    v.start()
+    try:
+        v.select("b01")
+        assert v.refit_primitive("box") is None and "--points" in v.status
+    finally:
+        v.stop()
+
+
+def test_missing_viser_is_a_one_line_error(monkeypatch):
+    import sys
+
+    from lidar2city.errors import DependencyError
+    from lidar2city.viewer.app import require_viser
+
+    monkeypatch.setitem(sys.modules, "viser", None)
+    with pytest.raises(DependencyError, match=r"lidar2city\[view\]"):
+        require_viser()
+
+
+def test_cli_view_errors(runner, tmp_path):
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, ["view", str(tmp_path / "absent.city.json"), "--no-browser"])
+    assert res.exit_code == 1 and "no such file" in res.output
