@@ -43,9 +43,6 @@ def command(model, points, footprints, id_field, edits, output, port, host, max_
 
     from ..viewer.app import Viewer
 
-    if host not in ("127.0.0.1", "localhost", "::1"):
-        click.echo(f"Warning: listening on {host}: anyone who can reach this machine can see "
-                   "and edit the model", err=True)
     viewer = Viewer(model, points=points, footprints=footprints, edits=edits, output=output,
                     host=host, port=port, max_points=max_points, crs=crs, id_field=id_field)
     url = viewer.start()

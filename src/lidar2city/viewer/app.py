@@ -184,7 +184,7 @@ class Viewer:
         d = float(max(self.extent[0], self.extent[1], 10.0))
         centre = self.extent / 2
         cam = srv.initial_camera
-        cam.position = (centre[0] - 0.55 * d, centre[1] - 0.75 * d, centre[2] + 0.6 * d)
+        cam.position = (centre[0] - 0.45 * d, centre[1] - 0.95 * d, centre[2] + 0.75 * d)
         cam.look_at = (centre[0], centre[1], 0.0)
         self._build_gui()
         self._draw_buildings()
@@ -279,6 +279,11 @@ class Viewer:
         self.rebuild_btn.on_click(lambda _: self.rebuild_from_outline())
         self.accept_btn.on_click(lambda _: self.accept())
         self.undo_btn.on_click(lambda _: self.undo())
+
+    def worst_order(self):
+        """Every building, worst first: ``[(id, RMSE or None)]``."""
+        with self.lock:
+            return scene.worst_buildings(self.attrs, n=len(self.attrs))
 
     @staticmethod
     def _worst_label(bid, rmse):
@@ -506,11 +511,8 @@ class Viewer:
             return
         z = self._outline_z()
         local = self.outline - self.origin[:2]
-        ring = np.vstack([local, local[:1]])
-        seg = np.stack([np.column_stack([ring[:-1], np.full(len(ring) - 1, z)]),
-                        np.column_stack([ring[1:], np.full(len(ring) - 1, z)])], axis=1)
         self._line = self.server.scene.add_line_segments(
-            "/outline", seg.astype(np.float32), (255, 40, 40), thickness=3.0,
+            "/outline", self._outline_segments(), (255, 40, 40), thickness=3.0,
             thickness_units="screen")
         self._gizmos.append(self._line)
         for i, (x, y) in enumerate(local):
@@ -526,12 +528,16 @@ class Viewer:
                 return
             self.outline[i] = np.asarray(g.position[:2], dtype=np.float64) + self.origin[:2]
             self.vertex = i
-            local = self.outline - self.origin[:2]
-            ring = np.vstack([local, local[:1]])
-            z = self._outline_z()
-            seg = np.stack([np.column_stack([ring[:-1], np.full(len(ring) - 1, z)]),
-                            np.column_stack([ring[1:], np.full(len(ring) - 1, z)])], axis=1)
-            self._line.points = seg.astype(np.float32)
+            self._line.points = self._outline_segments()
+
+    def _outline_segments(self):
+        """The outline's edges, (N, 2, 3) float32 in the display frame, above the roof."""
+        z = self._outline_z()
+        local = self.outline - self.origin[:2]
+        ring = np.vstack([local, local[:1]])
+        return np.stack([np.column_stack([ring[:-1], np.full(len(ring) - 1, z)]),
+                         np.column_stack([ring[1:], np.full(len(ring) - 1, z)])],
+                        axis=1).astype(np.float32)
 
     def move_vertex(self, i, xy):
         """Move outline vertex ``i`` to world ``xy`` (what dragging its handle does)."""
