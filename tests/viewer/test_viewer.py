@@ -108,3 +108,17 @@ def test_cli_view_errors(runner, tmp_path):
 
     res = runner.invoke(cli, ["view", str(tmp_path / "absent.city.json"), "--no-browser"])
     assert res.exit_code == 1 and "no such file" in res.output
+
+
+def test_other_hosts_are_warned_about(edit_town, caplog):
+    import logging
+
+    from lidar2city.viewer.app import Viewer
+
+    with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
+        Viewer(edit_town.model, host="0.0.0.0")  # not started: nothing is bound
+    assert "anyone who can reach this machine" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
+        Viewer(edit_town.model)
+    assert caplog.text == ""

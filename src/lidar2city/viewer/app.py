@@ -94,6 +94,9 @@ class Viewer:
         self.edits_path = Path(edits) if edits else self.path.with_name(f"{name}.edits.json")
         self.output = output
         self.host, self.port = host, int(port)
+        if self.host not in ("127.0.0.1", "localhost", "::1"):
+            logger.warning("the viewer will listen on %s: anyone who can reach this machine "
+                           "can see and edit the model", self.host)
         self.max_points = int(max_points)
         self.server = None
         self.handles: dict[str, dict] = {}
@@ -175,16 +178,13 @@ class Viewer:
     def start(self, *, compute_rmse: bool = True) -> str:
         """Start the server, build the scene and GUI; returns the URL."""
         viser = self.viser
-        if self.host not in ("127.0.0.1", "localhost", "::1"):
-            logger.warning("the viewer listens on %s: anyone who can reach this machine can "
-                           "see and edit the model", self.host)
         self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
         srv = self.server
         srv.scene.set_up_direction("+z")
         d = float(max(self.extent[0], self.extent[1], 10.0))
         centre = self.extent / 2
         cam = srv.initial_camera
-        cam.position = (centre[0] - 0.45 * d, centre[1] - 0.95 * d, centre[2] + 0.75 * d)
+        cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
         cam.look_at = (centre[0], centre[1], 0.0)
         self._build_gui()
         self._draw_buildings()
