@@ -122,3 +122,17 @@ def test_other_hosts_are_warned_about(edit_town, caplog):
     with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
         Viewer(edit_town.model)
     assert caplog.text == ""
+
+
+def test_refit_from_a_placed_primitive(viewer):
+    viewer.select("b00")
+    viewer.place.value = True
+    viewer._toggle_place()
+    assert viewer._placed is not None and viewer.p_len.value > viewer.p_wid.value > 0
+    approx = viewer._approx()
+    assert set(approx) == {"x", "y", "azimuth", "length", "width"}
+    assert viewer.refit_primitive("gable") is not None, viewer.status
+    assert viewer.attrs["b00"]["edit"] == "refit as gable (user-placed)"
+    viewer.place.value = False
+    viewer._toggle_place()
+    assert viewer._placed is None

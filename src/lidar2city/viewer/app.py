@@ -272,6 +272,8 @@ class Viewer:
         self.worst.on_update(lambda _: self._select_worst())
         self.next_worst.on_click(lambda _: self._next_worst())
         self.place.on_update(lambda _: self._toggle_place())
+        self.p_len.on_update(lambda _: self._draw_placed_box())
+        self.p_wid.on_update(lambda _: self._draw_placed_box())
         self.refit_btn.on_click(lambda _: self.refit_primitive(self.kind.value))
         self.outline_btn.on_click(lambda _: self.start_outline())
         self.add_v.on_click(lambda _: self.add_vertex())
@@ -618,3 +620,12 @@ class Viewer:
             "/placed", scale=3.0, active_axes=(True, True, False),
             position=(float(c[0]), float(c[1]), self._outline_z()),
             wxyz=(math.cos(az / 2), 0.0, 0.0, math.sin(az / 2)))
+        self._draw_placed_box()
+
+    def _draw_placed_box(self):
+        """A translucent box of the placed primitive's length and width under its handle."""
+        if self._placed is None:
+            return
+        self.server.scene.add_box("/placed/box", color=(255, 225, 0),
+                                  dimensions=(float(self.p_len.value), float(self.p_wid.value), 1.0),
+                                  opacity=0.45, position=(0.0, 0.0, -0.5))
