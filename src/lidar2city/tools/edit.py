@@ -162,8 +162,10 @@ class EditContext:
 
 
 def load_edits(path) -> list[Edit]:
-    """The edits of an ``EDITS.json`` file, in order (an absent file gives none when
-    ``path`` is only to be appended to: use :func:`append_edit`).
+    """The edits of an ``EDITS.json`` file, in the order they were made.
+
+    ``{"type": "lidar2city-edits", "version": 1, "edits": [Edit.to_dict(), ...]}``;
+    :func:`append_edit` creates and extends it.
 
     Raises
     ------
@@ -596,8 +598,7 @@ class EditSession:
     def refit(self, edit: Edit):
         """The building's new result (nothing saved); see :func:`apply_edit`."""
         self.check_building(edit.building)
-        fp = footprint_local(edit, self.reader)  # checked before any point is read
-        del fp
+        footprint_local(edit, self.reader)  # the outline is checked before any point is read
         cloud, classes = self.points(edit.footprint)
         return apply_edit(self.current_result(edit.building), edit, cloud, classes,
                           context=self.context)
