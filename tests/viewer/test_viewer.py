@@ -136,3 +136,18 @@ def test_refit_from_a_placed_primitive(viewer):
     viewer.place.value = False
     viewer._toggle_place()
     assert viewer._placed is None
+
+
+def test_gui_controls_are_wired(viewer):
+    import time
+
+    viewer.colour_by.value = "validity"  # as if chosen in the page: the callback recolours
+    end = time.monotonic() + 10
+    while not viewer.legend.content.startswith("**validity**") and time.monotonic() < end:
+        time.sleep(0.05)
+    assert viewer.legend.content.startswith("**validity**")
+    viewer.show_points.value = False
+    end = time.monotonic() + 10
+    while viewer.points_handle.visible and time.monotonic() < end:
+        time.sleep(0.05)
+    assert not viewer.points_handle.visible

@@ -266,21 +266,19 @@ class Viewer:
         with gui.add_folder("Building"):
             self.info = gui.add_markdown("")
 
-        self.lod_choice.on_update(lambda _: self._show_lod())
-        self.colour_by.on_update(lambda _: self.recolour())
-        self.show_points.on_update(lambda _: self._toggle_points())
-        self.worst.on_update(lambda _: self._select_worst())
-        self.next_worst.on_click(lambda _: self._next_worst())
-        self.place.on_update(lambda _: self._toggle_place())
-        self.p_len.on_update(lambda _: self._draw_placed_box())
-        self.p_wid.on_update(lambda _: self._draw_placed_box())
-        self.refit_btn.on_click(lambda _: self.refit_primitive(self.kind.value))
-        self.outline_btn.on_click(lambda _: self.start_outline())
-        self.add_v.on_click(lambda _: self.add_vertex())
-        self.del_v.on_click(lambda _: self.delete_vertex())
-        self.rebuild_btn.on_click(lambda _: self.rebuild_from_outline())
-        self.accept_btn.on_click(lambda _: self.accept())
-        self.undo_btn.on_click(lambda _: self.undo())
+        for control, action in ((self.lod_choice, self._show_lod), (self.colour_by, self.recolour),
+                                (self.show_points, self._toggle_points),
+                                (self.worst, self._select_worst), (self.place, self._toggle_place),
+                                (self.p_len, self._draw_placed_box),
+                                (self.p_wid, self._draw_placed_box)):
+            control.on_update(lambda _, action=action: action())
+        for button, action in ((self.next_worst, self._next_worst),
+                               (self.refit_btn, lambda: self.refit_primitive(self.kind.value)),
+                               (self.outline_btn, self.start_outline),
+                               (self.add_v, self.add_vertex), (self.del_v, self.delete_vertex),
+                               (self.rebuild_btn, self.rebuild_from_outline),
+                               (self.accept_btn, self.accept), (self.undo_btn, self.undo)):
+            button.on_click(lambda _, action=action: action())
 
     def worst_order(self):
         """Every building, worst first: ``[(id, RMSE or None)]``."""
