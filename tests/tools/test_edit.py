@@ -202,3 +202,24 @@ def test_invalid_model_is_not_written(work, tmp_path, monkeypatch):
         session.save(res, edit, edits=tmp_path / "E.json")
     assert model_path.read_bytes() == before
     assert not (tmp_path / "E.json").exists()
+
+
+def test_replacing_a_building_by_itself_gives_the_same_document(edit_town):
+    import copy
+
+    from lidar2city.tools.edit import replace_building
+
+    doc = json.loads(edit_town.model.read_text())
+    for bid in ("b00", "b03"):
+        objs = {bid: copy.deepcopy(doc["CityObjects"][bid])}
+        used = sorted({i for g in objs[bid]["geometry"] for shell in g["boundaries"]
+                       for face in shell for r in face for i in r})
+        # the building's own vertices, re-indexed from 0
+        index = {old: new for new, old in enumerate(used)}
+        for g in objs[bid]["geometry"]:
+            g["boundaries"] = [[[[index[int(i)] for i in r] for r in face] for face in shell]
+                               for shell in g["boundaries"]]
+        verts = [doc["vertices"][i] for i in used]
+        assert replace_building(doc, bid, objs, verts) == doc
+    with pytest.raises(InputError, match="unknown building"):
+        replace_building(doc, "nope", {}, [])
