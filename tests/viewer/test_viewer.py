@@ -19,6 +19,12 @@ def test_loopback_scene_and_colours(viewer):
         viewer.recolour()
         assert viewer.legend.content.startswith(f"**{by}**")
     assert viewer.points_handle.points.shape[0] <= 20_000
+    # LoD2.2 is shown first; LoD1.2's meshes are made when it is chosen
+    assert all(set(h) == {"2.2"} for h in viewer.handles.values())
+    viewer.lod_choice.value = "1.2"
+    viewer._show_lod()
+    assert all(set(h) == {"1.2", "2.2"} and h["1.2"].visible and not h["2.2"].visible
+               for h in viewer.handles.values())
 
 
 def test_refit_undo_accept(viewer):

@@ -119,6 +119,7 @@ class Viewer:
         self.cloud = self.classes = None
         self._rmse_thread = None
         self._quiet_worst = False
+        self._drawn = set()
 
     # ------------------------------------------------------------------ data
     def _world_solids(self, bid, lod):
@@ -200,16 +201,21 @@ class Viewer:
             self.server.stop()
             self.server = None
 
-    def _draw_buildings(self):
-        srv = self.server
+    def _draw_buildings(self, lod=None):
+        """Meshes of every building at ``lod`` (default: the LoD shown), made when first shown."""
+        lod = lod or self.lod_choice.value
+        if lod not in self.lods or lod in self._drawn:
+            return
+        self._drawn.add(lod)
         colours, legend = scene.colours_for(scene.attribute_values(self.attrs, self.colour_by.value))
         self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
-        show = self.lod_choice.value
-        with srv.atomic():
-            for lod in self.lods:
-                solids = {bid: self._world_solids(bid, lod) for bid in self.attrs}
-                for bid, (v, t) in scene.building_meshes(solids, self.origin).items():
-                    self._add_mesh(bid, lod, v, t, colours[bid], visible=(lod == show))
+        # a building with a refit pending already has its candidate's meshes at every LoD
+        solids = {bid: self._world_solids(bid, lod) for bid in self.attrs
+                  if lod not in self.handles.get(bid, {})}
+        with self.server.atomic():
+            for bid, (v, t) in scene.building_meshes(solids, self.origin).items():
+                self._add_mesh(bid, lod, v, t,
+                               _SELECTED if bid == self.selected else colours[bid])
 
     def _add_mesh(self, bid, lod, v, t, colour, *, visible=True):
         name = f"/{_LOD_NAMES[lod]}/b{self._index[bid]}"
@@ -290,9 +296,11 @@ class Viewer:
         return f"{bid} (RMSE {rmse:.2f} m)" if rmse is not None else f"{bid}"
 
     def _show_lod(self):
-        for lods in self.handles.values():
-            for lod, h in lods.items():
-                h.visible = lod == self.lod_choice.value
+        with self.lock:
+            self._draw_buildings(self.lod_choice.value)
+            for lods in self.handles.values():
+                for lod, h in lods.items():
+                    h.visible = lod == self.lod_choice.value
 
     def _toggle_points(self):
         if getattr(self, "points_handle", None) is not None:
