@@ -149,6 +149,22 @@ def test_lod13_sloped_roof_stays_one_part_and_small_parts_merge():
     assert len(height_parts(fp, chimney, step=3.0, min_area=10.0)) == 1
 
 
+def test_lod13_steep_gable_stays_one_part_and_annex_below_its_eave_splits():
+    # a 60 degree gable (eave 6 m, ridge 14.7 m over 10 m depth) and a flat annex at
+    # 5 m behind it: the step at the eave is only 1 m, the surfaces' heights differ by ~6 m
+    house, annex = box(0, 0, 12, 10), box(0, 10, 12, 16)
+    steep = _grid_points(house, lambda xy: 14.7 - np.sqrt(3) * np.abs(xy[:, 1] - 5))
+    assert len(height_parts(house, steep, step=2.0)) == 1
+    fp = box(0, 0, 12, 16)
+    pts = np.concatenate([steep, _grid_points(annex, 5.0)])
+    parts = height_parts(fp, pts, step=2.0, min_area=5.0)
+    assert len(parts) == 2
+    assert sorted(round(p.area, 6) for p in parts) == [72.0, 120.0]
+    # the same roof with a 1 m high annex difference stays one part
+    level = np.concatenate([_grid_points(house, 6.0), _grid_points(annex, 5.0)])
+    assert len(height_parts(fp, level, step=2.0)) == 1
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4), st.floats(-50, 50))
 def test_translation_does_not_change_the_model(dx, dy, dz):

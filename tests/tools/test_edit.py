@@ -223,3 +223,91 @@ def test_replacing_a_building_by_itself_gives_the_same_document(edit_town):
         assert replace_building(doc, bid, objs, verts) == doc
     with pytest.raises(InputError, match="unknown building"):
         replace_building(doc, "nope", {}, [])
+
+
+# --------------------------------------------------------------- on the block engine (issue 14)
+
+
+@pytest.fixture(scope="module")
+def town_edits(edit_town, tmp_path_factory):
+    """An EDITS.json with two edits (b00 refit as a gable, b02's outline moved 0.5 m)."""
+    import shapely
+    from shapely import affinity
+    from shapely.geometry import mapping, shape
+
+    session = EditSession(edit_town.model, [edit_town.laz], footprints=edit_town.footprints)
+    path = tmp_path_factory.mktemp("town_edits") / "E.json"
+    append_edit(path, session.make_edit("b00", primitive="gable"))
+    moved = affinity.translate(shapely.get_parts(shape(session.footprint("b02")))[0], xoff=0.5)
+    append_edit(path, session.make_edit("b02", footprint=mapping(moved)))
+    return path
+
+
+@pytest.mark.slow
+def test_reconstruct_edits_on_two_workers_gives_the_same_bytes(edit_town, town_edits, tmp_path,
+                                                                runner):
+    from lidar2city.cli.main import cli
+
+    outs = []
+    for workers in ("1", "2"):  # blocks of 60 m: the edited buildings lie in different blocks
+        out = tmp_path / f"w{workers}.city.json"
+        r = runner.invoke(cli, ["reconstruct", str(edit_town.laz), "--footprints",
+                                str(edit_town.footprints), "--lod", "1.2", "--lod", "2.2",
+                                "--block-size", "60", "--edits", str(town_edits),
+                                "--workers", workers, "-q", "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    objects = json.loads(outs[0])["CityObjects"]
+    assert objects["b00"]["attributes"]["primitive"] == "gable"
+    assert objects["b02"]["attributes"]["edit"].startswith("footprint edited")
+    assert "edit" not in objects["b01"]["attributes"]
+
+
+def test_an_unknown_edit_id_is_refused_before_any_block_runs(edit_town, tmp_path, monkeypatch):
+    from lidar2city.tools import task
+
+    def no_block(spec, options):  # pragma: no cover - must not be called
+        raise AssertionError("a block ran")
+
+    monkeypatch.setattr(task, "run_block", no_block)
+    edits = tmp_path / "E.json"
+    append_edit(edits, Edit("nope", "footprint", SQUARE))
+    with pytest.raises(InputError, match="unknown building id"):
+        reconstruct([edit_town.laz], tmp_path / "x.city.json", footprints=edit_town.footprints,
+                    lods=("1.2",), edits=edits)
+    with pytest.raises(InputError, match="--edits needs --footprints"):
+        reconstruct([edit_town.laz], tmp_path / "x.city.json", lods=("1.2",), edits=edits)
+
+
+def test_a_run_resumed_with_other_edits_is_refused(edit_town, town_edits, tmp_path, monkeypatch):
+    from lidar2city.io.journal import journal_path
+    from lidar2city.tools import task
+
+    class Crash(BaseException):  # a crash of the run, not a task failure to retry
+        pass
+
+    real = task.run_block
+
+    def crash_after_first(spec, options):
+        if spec.index > 0:
+            raise Crash
+        return real(spec, options)
+
+    out = tmp_path / "r.city.json"
+    run = dict(footprints=edit_town.footprints, lods=("1.2", "2.2"), block_size=60.0)
+    monkeypatch.setattr(task, "run_block", crash_after_first)
+    with pytest.raises(Crash):
+        reconstruct([edit_town.laz], out, edits=town_edits, **run)
+    assert journal_path(out).exists()
+    monkeypatch.undo()
+    other = tmp_path / "other.json"  # the same file name's content changed: one edit less
+    doc = json.loads(town_edits.read_text())
+    doc["edits"] = doc["edits"][:1]
+    other.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="another run"):
+        reconstruct([edit_town.laz], out, edits=other, resume=True, **run)
+    with pytest.raises(InputError, match="another run"):
+        reconstruct([edit_town.laz], out, resume=True, **run)
+    reconstruct([edit_town.laz], out, edits=town_edits, resume=True, **run)  # the same edits
+    assert out.exists() and not journal_path(out).exists()

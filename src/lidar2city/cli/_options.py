@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["crs_option", "neighbours_options", "output_option", "progress", "progress_callback"]
+__all__ = ["crs_option", "engine_options", "neighbours_options", "output_option", "progress",
+           "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -23,12 +24,56 @@ def neighbours_options(f):
                              "INPUT's points are written.")(f)
 
 
+def engine_options(f):
+    """``--workers`` and ``--scheduler``: where the tasks (blocks or tiles) run."""
+    f = click.option("--scheduler", default=None, metavar="ADDRESS",
+                     help="Run the tasks on an existing Dask cluster (tcp://HOST:8786, started "
+                          "with `dask scheduler` and `dask worker`); its workers must see the "
+                          "input paths.")(f)
+    return click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+                        help="Worker processes: 1 runs the tasks in this process, N > 1 on a "
+                             "local Dask cluster of N processes (same output bytes).")(f)
+
+
+def run_on_tiles(job, input, output, *, neighbours, workers, scheduler, extra=None, suffix=None,
+                 buffer=50.0, crs=None, **options):
+    """The folder-of-tiles mode of a per-tile command (``ground``, ``classify``).
+
+    Returns False when ``input`` is one file (the command's own mode), else runs
+    ``job`` on every tile, prints its summary and exits non-zero when a tile failed.
+    """
+    from ..errors import InputError
+    from ..io.tiles import is_tile_set
+
+    if not is_tile_set(input):
+        if workers != 1 or scheduler is not None:
+            raise InputError("--workers and --scheduler apply to a folder or glob of tiles")
+        return False
+    if neighbours:
+        raise InputError("with a folder of tiles the neighbours are found from the tiles; "
+                         "drop --neighbour")
+    if workers != 1 and scheduler is not None:
+        raise InputError("give either --workers (a local cluster) or --scheduler, not both")
+    from ..tools.tiles import plan_tiles, run_tiles
+
+    tasks = plan_tiles(input, output, crs=crs, buffer=buffer, suffix=suffix, extra=extra)
+    with progress(length=len(tasks), label="tiles") as bar:
+        summary = run_tiles(job, tasks, output, workers=workers, scheduler=scheduler,
+                            progress=lambda d, t: bar.update(1), buffer=buffer, crs=crs,
+                            **options)
+    for line in summary.lines():
+        click.echo(line, err=True)
+    if summary.failed:
+        raise click.exceptions.Exit(1)
+    return True
+
+
 def output_option(**kwargs):
     return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                         help="Output file.", **kwargs)
 
 
-def progress(iterable=None, *, length=None, label="", quiet=False):
+def progress(iterable=None, *, length=None, label="", quiet=False, item_show_func=None):
     """A click progress bar shown on a terminal only (never in pipes or CI logs)."""
     import sys
 
@@ -47,7 +92,8 @@ def progress(iterable=None, *, length=None, label="", quiet=False):
                 return iter(iterable)
 
         return _Null()
-    return click.progressbar(iterable, length=length, label=label, file=sys.stderr)
+    return click.progressbar(iterable, length=length, label=label, file=sys.stderr,
+                             item_show_func=item_show_func)
 
 
 def progress_callback(bar):
