@@ -40,13 +40,17 @@ from ._options import crs_option, engine_options, output_option, progress, progr
 @click.option("--block-size", type=click.FloatRange(min=50.0), default=1000.0, show_default=True,
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
                    "bounded by a few tiles and results do not depend on the tiling.")
+@click.option("--edits", type=click.Path(dir_okay=False), default=None,
+              help="EDITS.json written by `lidar2city edit` or the viewer: re-apply every edit "
+                   "(needs --footprints).")
 @engine_options
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted run from its journal (OUT.journal): blocks already "
                    "done are kept, the output is the same bytes as an uninterrupted run.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
 def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
-            method, primitives_file, check_images, block_size, workers, scheduler, resume, quiet):
+            method, primitives_file, check_images, block_size, edits, workers, scheduler, resume,
+            quiet):
     """Build 3D buildings from point cloud tiles INPUTS (one area, block by block) or from a DSM.
 
     INPUTS are LAS/LAZ files, folders of tiles or quoted glob patterns ("tiles/*.laz").
@@ -78,8 +82,9 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
     else:
         if inputs:
             raise InputError("give either point-cloud INPUTS or --dsm, not both")
-        if method != "roof" or primitives_file or check_images:
-            raise InputError("--method, --primitives and --check-images apply to point clouds")
+        if method != "roof" or primitives_file or check_images or edits:
+            raise InputError("--method, --primitives, --check-images and --edits apply to point "
+                             "clouds")
         if any(lod != "1.2" for lod in lods):
             raise InputError("--dsm builds LoD1.2 only; drop --lod or use --lod 1.2")
         if workers != 1 or scheduler is not None or resume:
@@ -125,7 +130,7 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
                               progress=count, block_progress=on_block, method=method,
                               primitives=primitives_file, check_images=check_images,
                               block_size=block_size, workers=workers, scheduler=scheduler,
-                              resume=resume)
+                              resume=resume, edits=edits)
     finally:
         if bar_state["bar"] is not None:
             bar_state["bar"].__exit__(None, None, None)

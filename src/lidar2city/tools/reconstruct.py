@@ -525,7 +525,8 @@ LOD22_METHODS = ("roof", "primitives")
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
                 primitives=None, check_images=None, block_size=1000.0, workers=1,
-                scheduler=None, resume=False, block_progress=None) -> ReconstructSummary:
+                scheduler=None, resume=False, block_progress=None,
+                edits=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     The area is processed block by block: blocks are the cells of a square
@@ -584,6 +585,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         recorded in its journal (``OUT.journal``) and run only the others.
     block_progress : callable, optional
         ``block_progress(done, total)`` after every block.
+    edits : path, optional
+        An ``EDITS.json`` written by ``lidar2city edit`` or the viewer: every
+        edit is re-applied to its building inside its block
+        (:func:`lidar2city.tools.edit.apply_block_edits`); an edit naming no
+        footprint is an error before any block runs. Needs ``footprints``.
 
     Returns
     -------
@@ -605,11 +611,13 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
                             config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
                             primitives=primitives, check_images=check_images,
-                            block_size=block_size)
+                            block_size=block_size, edits=edits)
     key = run_key({
         "version": _version(), "inputs": [file_stamp(p) for p in paths],
         "footprints": None if footprints is None else file_stamp(footprints),
         "primitives": None if primitives is None else file_stamp(primitives),
+        # the edits' content: a run resumed with other edits is refused
+        "edits": [e.to_dict() for e in plan.options.edits],
         "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
                     float(block_size), None if check_images is None else str(check_images)]})
     journal = Journal.open(output, key, len(plan.specs), resume=resume)
@@ -816,7 +824,7 @@ class ReconstructPlan:
 
 def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None,
                      fmt=None, id_field=None, layer=None, method="roof", primitives=None,
-                     check_images=None, block_size=1000.0) -> ReconstructPlan:
+                     check_images=None, block_size=1000.0, edits=None) -> ReconstructPlan:
     """Check the options, index the tiles and cut the area into block specs (no point read).
 
     Keywords as :func:`reconstruct`.
@@ -833,6 +841,11 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
             raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
     if not block_size > 0:
         raise InputError(f"block_size must be positive, got {block_size}")
+    if edits is not None and footprints is None:
+        # traced footprints are numbered when the run is assembled, after the
+        # blocks ran: an edit's building id cannot be found inside a block
+        raise InputError("--edits needs --footprints (the footprints the edited model was "
+                         "made from)")
     want22 = "2.2" in (lods or ())
     cfg, resolved, others = lod1_config(
         config, lods=lods, stages=(("lod22" if method == "roof" else "primitives"),) if want22 else ())
@@ -865,7 +878,8 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            else None,
                            user_primitives=user_prims,
                            check_images=None if check_images is None else str(check_images),
-                           footprints_config=others.get("footprints"))
+                           footprints_config=others.get("footprints"),
+                           **_edit_options(edits, cfg, lod22, others, want, method))
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang
     margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
@@ -879,8 +893,23 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         fps = load_footprints(footprints, frame, id_field=id_field, layer=layer,
                               extent=(*lo, *hi))
         specs = footprint_blocks(tiles, frame, fps, block_size, margin)
+        if options.edits:  # an unknown building id: an error before any block runs
+            from .edit import check_edit_ids
+
+            check_edit_ids(options.edits, fps.ids, source=str(edits))
     return ReconstructPlan(specs, options, frame, fmt, want, resolved, footprints is None,
                            None if footprints is None else sum(s.size for s in specs))
+
+
+def _edit_options(edits, cfg, lod22, others, lods, method) -> dict:
+    """The :class:`~lidar2city.tools.task.BlockOptions` fields of an ``EDITS.json``
+    (its parsed edits travel to the blocks, not its path)."""
+    if edits is None:
+        return {}
+    from .edit import EditContext, load_edits
+
+    return {"edits": tuple(load_edits(edits)),
+            "edit_context": EditContext(cfg, lod22, others.get("primitives"), lods, method)}
 
 
 def run_blocks(executor, plan, specs=None):

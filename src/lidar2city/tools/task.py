@@ -51,6 +51,11 @@ class BlockOptions:
         one sub-folder per block (``block_COL_ROW``), their ids being per block.
     footprints_config : config or None
         The ``[footprints]`` stage for tracing footprints.
+    edits : tuple of Edit
+        The corrections of an ``EDITS.json`` (:mod:`lidar2city.tools.edit`),
+        re-applied to their buildings inside the block; empty: none.
+    edit_context : EditContext or None
+        How the run builds a building, for re-applying ``edits``.
     """
 
     config: object
@@ -61,6 +66,8 @@ class BlockOptions:
     user_primitives: dict | None = None
     check_images: str | None = None
     footprints_config: object = None
+    edits: tuple = ()
+    edit_context: object = None
 
 
 @dataclass(eq=False)
@@ -197,7 +204,8 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
 
 def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
                       check_images=None) -> list:
-    """The per-building step of a block: LoD1 (+ LoD2.2) of every footprint, in order.
+    """The per-building step of a block: LoD1 (+ LoD2.2) of every footprint, in order,
+    with the run's edits (``options.edits``) re-applied to the buildings they name.
 
     ``check_images``: the folder for the primitives' check images of this block.
     """
@@ -217,6 +225,11 @@ def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
 
             Path(check_images).mkdir(parents=True, exist_ok=True)
             write_check_images(check_images, with_classes, fitted)
+    if options.edits:  # corrections of EDITS.json, where the block's points are
+        from .edit import apply_block_edits
+
+        results = apply_block_edits(results, footprints, cloud, classes, options.edits,
+                                    options.edit_context)
     return results
 
 
