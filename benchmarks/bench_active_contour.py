@@ -1,17 +1,21 @@
-"""Active contours + GA-tuned weights on the Alexandria west half: an honest split.
+"""Active contours + GA-tuned weights: an honest split, on Delft (0.5 m) or Alexandria (2 m).
 
-The reference footprints (56 buildings) cover the middle of the west raster.
-The rows of the reference's extent are split in two: the GA tunes the five
-weights on the NORTH part only; pixel metrics are reported on the SOUTH part,
-never seen by the tuning, for
+``--area delft`` (default): the shared 0.5 m DSM / DTM of the Delft AHN3 tile
+and its 132 BGT footprints (issue 16); ``--area alexandria``: the 2 m west
+half and its 56 footprints (the coarse case, issue 7). The rows of the
+reference's extent are split in two: the GA tunes the five weights on the
+NORTH part only (fitness (FP + FN) / N over the reference neighbourhood,
+weights searched as log10 in [-2, 1]); pixel metrics are reported on the
+SOUTH part, never seen by the tuning, for
 
 * the initial contours (no snake),
-* the default weights,
+* the untuned (hand-set) and the shipped default weights,
 * the weights tuned on the north part,
-* scikit-image's ``active_contour`` initialised with the same contours,
+* scikit-image's ``active_contour`` initialised with the same contours
+  (``--skip-peer`` leaves it out),
 
-and, for reference, on the north part too. Then the GA runs on the whole
-west half (the weights to ship as defaults).
+and, for reference, on the north part too. Then (unless ``--skip-full``)
+the GA runs on the whole reference extent.
 
 Two scoring protocols, both reported:
 
@@ -24,7 +28,7 @@ Two scoring protocols, both reported:
   dense south), so correctly found unreferenced buildings count as false
   positives.
 * ``reference`` (``reference_neighbourhood_domain``, the new one, used for
-  tuning): pixels within 5 px (10 m) of a reference footprint, minus the
+  tuning): pixels within 10 m of a reference footprint, minus the
   above-ground pieces (nDSM > 3 m cut into building-scale pieces by a
   distance-transform watershed, independent of the method) that hold no
   reference pixel. Outlines spilling onto the ground around a reference, or
@@ -33,14 +37,16 @@ Two scoring protocols, both reported:
   crowns standing apart are not scored either: a limit of this protocol).
 
 The rows "previous pipeline" use the initialisation and region statistics of
-the first version (no split, no height cut, no aspect test; one region mean
+the first version (edge-based initial contours without split, height cut or
+aspect test; one region mean
 per contour and a band outside it); the altitudinal force's two-sided
 normalisation is the current one.
 
 Usage::
 
-    PYTHONPATH=src python benchmarks/bench_active_contour.py [--population 12]
-        [--generations 8] [--jobs 2] [--seed 0] [--out /tmp/ac_bench] [--skip-full]
+    PYTHONPATH=src python benchmarks/bench_active_contour.py [--area delft|alexandria]
+        [--population 8] [--generations 4] [--jobs 2] [--seed 0] [--objective cost]
+        [--scale log] [--out /tmp/ac_bench] [--skip-full] [--skip-reverse] [--skip-peer]
 """
 
 from __future__ import annotations
@@ -68,7 +74,13 @@ from lidar2city.tools.active_contour import load_scene_inputs, reference_mask, s
 from lidar2city.tune.ga import tune_weights
 
 DATA = Path(os.environ.get("LIDAR2CITY_DATA",
-                           Path(__file__).resolve().parents[2] / "shared" / "data")) / "alexandria"
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+#: area -> (DSM, DTM, reference footprints) under DATA
+AREAS = {
+    "delft": ("delft/dsm_50cm.tif", "delft/dtm_50cm.tif", "delft/footprints_bgt.gpkg"),
+    "alexandria": ("alexandria/dsm_west.tif", "alexandria/dtm_west.tif",
+                   "alexandria/footprints_west.gpkg"),
+}
 
 
 def metrics_line(name, pred, ref, dom):
@@ -98,9 +110,9 @@ def skimage_peer(scene, frame, shape, cfg):
     return rasterize_polygons(contours_to_polygons(out, frame, simplify=cfg.simplify), shape, frame)
 
 
-def row_domains(ref, objects, split, kind):
+def row_domains(ref, objects, split, kind, cell):
     """Scoring domains (all, north = rows < split, south) of one protocol."""
-    dom = scoring_domain(ref, objects, kind)
+    dom = scoring_domain(ref, objects, kind, cell=cell)
     rows = np.arange(ref.shape[0])[:, None]
     return dom, dom & (rows < split), dom & (rows >= split)
 
@@ -114,14 +126,18 @@ def main():
     ap.add_argument("--out", default="/tmp/ac_bench")
     ap.add_argument("--skip-full", action="store_true")
     ap.add_argument("--skip-reverse", action="store_true")
-    ap.add_argument("--objective", choices=["cost", "kappa"], default="kappa")
+    ap.add_argument("--objective", choices=["cost", "kappa"], default="cost")
+    ap.add_argument("--scale", choices=["log", "linear"], default="log")
+    ap.add_argument("--area", choices=sorted(AREAS), default="delft")
+    ap.add_argument("--skip-peer", action="store_true")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    inp = load_scene_inputs(DATA / "dsm_west.tif", dtm=DATA / "dtm_west.tif")
+    p_dsm, p_dtm, p_ref = (DATA / p for p in AREAS[args.area])
+    inp = load_scene_inputs(p_dsm, dtm=p_dtm)
     r = inp["raster"]
-    ref = reference_mask(DATA / "footprints_west.gpkg", r)
+    ref = reference_mask(p_ref, r)
     cell = inp["cell"]
     rows = np.nonzero(ref.any(axis=1))[0]
     split = int((rows.min() + rows.max() + 1) // 2)
@@ -129,17 +145,18 @@ def main():
     # the GA's first generation holds the configured weights: for an honest split
     # these are the hand-set, untuned ones (the shipped defaults were tuned on all of it)
     cfg = ActiveContourConfig().with_weights(UNTUNED_WEIGHTS)
-    prev = dataclasses.replace(cfg, split_distance=0, relative_height=0.0, min_aspect_coherence=0.0,
+    prev = dataclasses.replace(cfg, init="edges", split_distance=0, relative_height=0.0,
+                               min_aspect_coherence=0.0,
                                local_sigma=0.0)
     frame = PixelFrame(cell=cell)
     print(f"untuned weights {UNTUNED_WEIGHTS}")
     print(f"shipped default weights {DEFAULT_WEIGHTS}")
     print(f"GA: population {args.population}, generations {args.generations}, jobs {args.jobs}, "
-          f"seed {args.seed}, objective {args.objective}")
+          f"seed {args.seed}, objective {args.objective}, {args.scale} scale")
 
     dsm, ndsm = inp["dsm"], inp["ndsm"]
     objects = np.nan_to_num(ndsm, nan=0.0) > cfg.min_height
-    domains = {k: row_domains(ref, objects, split, k) for k in ("reference", "bbox")}
+    domains = {k: row_domains(ref, objects, split, k, cell) for k in ("reference", "bbox")}
     for k, (da, dn, ds) in domains.items():
         print(f"domain {k:9s}: {int(da.sum())} px; north {int(dn.sum())} px with {int((ref & dn).sum())} "
               f"reference px, south {int(ds.sum())} px with {int((ref & ds).sum())} reference px")
@@ -149,7 +166,8 @@ def main():
         t0 = time.perf_counter()
         w, hist = tune_weights(dsm, ndsm, ref, cell=cell, domain=dom, config=cfg,
                                population=args.population, generations=args.generations,
-                               seed=args.seed, n_jobs=args.jobs, objective=args.objective)
+                               seed=args.seed, n_jobs=args.jobs, objective=args.objective,
+                               scale=args.scale)
         print(f"\nGA on the {label} part (reference protocol): {time.perf_counter() - t0:.1f} s, "
               f"{hist[-1]['evaluations']} evaluations, {len(hist) - 1} generations")
         for rec in hist:
@@ -180,7 +198,8 @@ def main():
     if weights_s is not None:
         preds["snake, weights tuned on south"] = predict(scene, weights_s, cfg, frame, shape)
     t0 = time.perf_counter()
-    preds["skimage active_contour (same init)"] = skimage_peer(scene, frame, shape, cfg)
+    if not args.skip_peer:
+        preds["skimage active_contour (same init)"] = skimage_peer(scene, frame, shape, cfg)
     t_sk = time.perf_counter() - t0
     for kind, (_, dn, ds) in domains.items():
         for name, dom in (("south", ds), ("north", dn)):

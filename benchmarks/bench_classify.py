@@ -10,11 +10,23 @@ the 18 m x 12 m Nebraska sample it is not meaningful). Then the Delft tile
 thinned at random to 1/2, 1/4 and 1/8 of its density, with and without
 return numbers, for the dependence on density and on the return cue.
 
+Then surveys of other kinds, from raw tiles (ground from
+:func:`lidar2city.ground.ground_mask`, the default filter): the ISPRS Stuttgart
+sites (first and last pulse as separate points, no reference classes: the
+share of first-pulse points called building, and how the return fields were
+read), and the synthetic town re-written as other surveys would record it
+(:mod:`lidar2city.synthetic_surveys`: first/last-pulse pairs in file order and
+shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
+25 pts/m2) with building precision / recall / F1 against its truth.
+``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
+``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
+footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
+
 Reference mappings: AHN (Delft) class 6 building, class 1 "unclassified
 (vegetation and other)" counted as vegetation, 9 water and 26 civil
 structures ignored; ASPRS files 3/4/5 vegetation, 6 building, 7 noise ignored.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR] [--png PATH] [--reconstruct]``.
 """
 
 from __future__ import annotations
@@ -26,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar2city.classify import classify_points
+from lidar2city.classify import classify_points, point_spacing
 from lidar2city.io.las import read_points
 from lidar2city.metrics.classification import ASPRS_MAPPING, classification_scores
 
@@ -121,9 +133,186 @@ def density_sweep(data: Path):
                   f"{s.recall['vegetation']:6.3f} {s.f1['vegetation']:6.3f} {dt:7.2f}")
 
 
+ISPRS_SITES = ("CSite1_red2-utm.laz", "CSite2_orig-utm.laz", "CSite3_orig-utm.laz",
+               "CSite4_orig-utm.laz", "FSite5_orig-utm.laz")
+
+#: colours of the class image (ASPRS code -> RGB)
+COLOURS = {1: (150, 150, 230), 2: (220, 205, 165), 3: (160, 225, 130), 4: (80, 185, 80),
+           5: (25, 120, 25), 6: (210, 40, 25), 7: (0, 0, 0)}
+
+
+def _raw_classes(cloud):
+    """Ground filter, then classification with the cloud's own fields (a raw tile)."""
+    from lidar2city.classify.core import _classify
+    from lidar2city.ground import ground_mask
+
+    a = cloud.attributes
+    ground = ground_mask(cloud.xyz)
+    return _classify(cloud.xyz, ground, return_number=a.get("return_number"),
+                     number_of_returns=a.get("number_of_returns"), intensity=a.get("intensity"))
+
+
+def class_image(xyz, classes, path, *, cell=1.0, title=""):
+    """PNG of the class of the highest point per ``cell`` (m) grid cell, with a legend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
+    ncol, nrow = ij.max(axis=0) + 1
+    order = np.lexsort((xyz[:, 2],))  # lowest first: the highest point of a cell wins
+    img = np.full((nrow, ncol, 3), 255, np.uint8)
+    lut = np.full((256, 3), 255, np.uint8)
+    for k, rgb in COLOURS.items():
+        lut[k] = rgb
+    code = np.zeros((nrow, ncol), np.uint8)
+    code[ij[order, 1], ij[order, 0]] = classes[order]
+    # scan-line gaps: empty cells take the nearest cell's class up to 2 cells away
+    from scipy import ndimage
+
+    dist, (a, b) = ndimage.distance_transform_edt(code == 0, return_indices=True)
+    code = np.where(dist <= 2, code[a, b], 0)
+    img[code > 0] = lut[code[code > 0]]
+    names = {1: "other", 2: "ground", 3: "low veg.", 4: "medium veg.", 5: "high veg.",
+             6: "building", 7: "noise"}
+    fig, ax = plt.subplots(figsize=(7, 7 * nrow / ncol + 0.6))
+    ax.imshow(img, origin="lower", extent=(0, ncol * cell, 0, nrow * cell), interpolation="nearest")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title, fontsize=9)
+    present = sorted(set(np.unique(classes).tolist()) & set(COLOURS))
+    ax.legend(handles=[Patch(color=np.array(COLOURS[k]) / 255, label=names[k]) for k in present],
+              loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def isprs_sites(data: Path, png=None):
+    """First/last-pulse sites: share of first-pulse points called building."""
+    folder = data / "isprs" / "sites"
+    print("\nISPRS Stuttgart sites, raw (ground = ground_mask default; no reference classes):")
+    print(f"{'site':<22} {'points':>7} {'pulses/m2':>9} {'returns read as':<15} "
+          f"{'one-echo pulses':>15} {'first-pulse building':>20} {'time s':>7}")
+    for name in ISPRS_SITES:
+        path = folder / name
+        if not path.exists():
+            print(f"{name}: missing, skipped")
+            continue
+        cloud = read_points(path)
+        t0 = time.perf_counter()
+        out = _raw_classes(cloud)
+        dt = time.perf_counter() - t0
+        cls, cues = out["classes"], out["cues"]
+        first = cloud.attributes["return_number"] == 1
+        one_echo = cues.duplicate.sum() / max(first.sum(), 1) if cues.returns == "pairs" else np.nan
+        density = 1 / point_spacing(cloud.xyz[first, :2]) ** 2
+        print(f"{name:<22} {len(cloud):>7} {density:9.1f} {cues.returns:<15} "
+              f"{one_echo:15.3f} {(cls[first] == 6).mean():20.3f} {dt:7.2f}")
+        if png is not None and name.startswith("CSite4"):
+            class_image(cloud.xyz[first], cls[first], png,
+                        title=f"ISPRS CSite4, first pulse, classes from the raw tile "
+                              f"(building {(cls[first] == 6).mean():.1%} of first-pulse points)")
+            print(f"{'':<22} class image written to {png}")
+
+
+def synthetic_surveys():
+    """The synthetic town as other surveys record it: building P / R / F1 from raw points."""
+    import tempfile
+
+    from lidar2city.synthetic_surveys import make_survey
+
+    print("\nSynthetic town (200 m x 150 m, seed 0) as other surveys, raw "
+          "(ground = ground_mask default):")
+    print(f"{'survey':<26} {'points':>7} {'bld P':>6} {'bld R':>6} {'bld F1':>6} {'time s':>7}")
+    cases = [("multi-echo, 10 pts/m2", "multi", 10.0, False),
+             ("first/last pairs", "pairs", 10.0, False),
+             ("first/last pairs shuffled", "pairs", 10.0, True),
+             ("single returns", "single", 10.0, False),
+             ("no return fields", "no_returns", 10.0, False),
+             ("feet (LAS file)", "feet", 10.0, False),
+             ("1.5 pts/m2", "multi", 1.5, False),
+             ("1.5 pts/m2 pairs", "pairs", 1.5, False),
+             ("1.5 pts/m2 single returns", "single", 1.5, False),
+             ("25 pts/m2", "multi", 25.0, False)]
+    for label, kind, density, shuffle in cases:
+        cloud = make_survey(kind, density=density, shuffle=shuffle)
+        if kind == "feet":
+            from lidar2city.io.las import write_points
+
+            with tempfile.TemporaryDirectory() as tmp:
+                write_points(Path(tmp) / "feet.laz", cloud)
+                cloud = read_points(Path(tmp) / "feet.laz")
+        t0 = time.perf_counter()
+        cls = _raw_classes(cloud)["classes"]
+        dt = time.perf_counter() - t0
+        s = classification_scores(cloud.attributes["classification"], cls, mapping=ASPRS_MAPPING,
+                                  predicted_mapping=ASPRS_MAPPING, ignore=(7,))
+        print(f"{label:<26} {len(cloud):>7} {s.precision['building']:6.3f} "
+              f"{s.recall['building']:6.3f} {s.f1['building']:6.3f} {dt:7.2f}")
+
+
+def reconstruct_csite4(data: Path):
+    """``lidar2city reconstruct CSite4 --lod 2.2`` without footprints, then validation.
+
+    Prints the buildings with a true LoD2.2 roof, those given an LoD1.2 prism
+    instead (with the reason), the failed ones, and the validity of the file.
+    """
+    import collections
+    import json
+    import subprocess
+    import tempfile
+
+    from lidar2city.tools.validate import validate_file
+
+    src = data / "isprs" / "sites" / "CSite4_orig-utm.laz"
+    if not src.exists():
+        return
+    print("\nreconstruct CSite4 (raw, no footprints) --lod 2.2, then validate:")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "c4.city.json"
+        t0 = time.perf_counter()
+        subprocess.run(["lidar2city", "reconstruct", str(src), "--lod", "2.2", "-o", str(out)],
+                       check=True, capture_output=True)
+        dt = time.perf_counter() - t0
+        report = validate_file(out)
+        summary = report.summary()
+        doc = json.loads(out.read_text())
+    counts = collections.Counter()
+    large = []
+    for oid, obj in doc["CityObjects"].items():
+        a = obj.get("attributes", {})
+        kind = ("failed" if a.get("status") != "ok" else
+                "LoD1.2 prism" if a.get("lod22_fallback") else "LoD2.2 roof")
+        counts[kind] += 1
+        if a.get("status") == "ok" and a.get("area", 0) >= 1000:
+            large.append((a["area"], oid, kind, (a.get("lod22_fallback") or "")[:60]))
+    print(f"{len(doc['CityObjects'])} footprints traced: " + ", ".join(
+        f"{counts[k]} {k}" for k in ("LoD2.2 roof", "LoD1.2 prism", "failed"))
+        + f"; file {'VALID' if report.valid else 'INVALID'} ({summary['invalid']} invalid "
+          f"object(s), schema {summary['schema']}); {dt:.0f} s")
+    for area, oid, kind, why in sorted(large, reverse=True):
+        print(f"  {oid:<5} {area:8.0f} m2  {kind:<13} {why}")
+
+
 if __name__ == "__main__":
+    args = sys.argv[1:]
+    png = None
+    rebuild = "--reconstruct" in args
+    if rebuild:
+        args.remove("--reconstruct")
+    if "--png" in args:
+        i = args.index("--png")
+        png = Path(args[i + 1])
+        del args[i:i + 2]
     default = os.environ.get("LIDAR2CITY_DATA", Path(__file__).resolve().parents[1].parent
                              / "shared" / "data")
-    folder = Path(sys.argv[1] if len(sys.argv) > 1 else default)
+    folder = Path(args[0] if args else default)
     main(folder)
     density_sweep(folder)
+    isprs_sites(folder, png)
+    synthetic_surveys()
+    if rebuild:
+        reconstruct_csite4(folder)

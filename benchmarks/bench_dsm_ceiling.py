@@ -80,7 +80,7 @@ def main(data=None):
                                   transform=tr, fill=0, dtype="uint8").astype(bool)
 
     ref_mask = raster(ref)
-    domain = scoring_domain(ref_mask, nd0 > 3.0, "reference")
+    domain = scoring_domain(ref_mask, nd0 > 3.0, "reference", cell=d.cell_size)
     ref_tree = shapely.STRtree(ref)
 
     def kappa(mask):

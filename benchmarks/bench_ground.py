@@ -6,12 +6,19 @@ Usage::
 
 Prints, for every ISPRS reference sample in ``DIR/isprs/reference`` and each
 method with its default parameters, type I / type II / total error and
-Cohen's kappa (Sithole & Vosselman 2004), and their means. Then times
+Cohen's kappa (Sithole & Vosselman 2004), and their means, then the total
+error of each method on the synthetic terrains of
+:mod:`lidar2city.synthetic_terrain` (1 m and 2.5 m spacing). Then times
 ``lidar2city ground`` on ``DIR/isprs/sites/CSite4_orig-utm.laz`` as a fresh
 process against plainly reading and writing the same file with laspy (best
-of ``--repeat`` runs each) and prints the ratio. ``--loo`` adds a
-leave-one-out check of SMRF's slope: the slope chosen on six samples, scored
-on the seventh.
+of ``--repeat`` runs each) and prints the ratio.
+
+``--loo`` adds the leave-one-sample-out check of SMRF and smrf_refined: for
+each ISPRS sample, the parameter set of a coarse grid (:data:`LOO_GRID`) that
+minimises the mean total error over the six other samples plus the
+synthetic terrains (their mean counted as one more sample) is scored on the
+held-out sample; it prints the held-out errors, their mean and maximum, and
+the set chosen on all seven (compare with the defaults). A few minutes.
 """
 
 from __future__ import annotations
@@ -29,8 +36,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+import itertools  # noqa: E402
+
 from lidar2city.ground import GROUND_METHODS, GroundConfig  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
+from lidar2city.synthetic_terrain import TERRAIN_KINDS, make_terrain  # noqa: E402
+
+#: parameter grid of the leave-one-out check, per method.
+LOO_GRID = {
+    "smrf": {"slope": (0.1, 0.15, 0.2), "window": (16.0, 24.0, 32.0),
+             "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
+    "smrf_refined": {"slope": (0.1, 0.15, 0.2), "window": (16.0, 24.0, 32.0),
+                     "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
+}
 
 
 def load(path):
@@ -64,17 +82,55 @@ def accuracy(samples):
     return means
 
 
-def leave_one_out(samples, slopes=(0.1, 0.125, 0.15, 0.175, 0.2, 0.25)):
-    smrf = GROUND_METHODS["smrf"]
-    table = {s: {n: ground_errors(smrf(xyz, slope=s), ref)["total"]
-                 for n, (xyz, ref) in samples.items()} for s in slopes}
-    print("\nleave-one-out (SMRF slope chosen on the other samples)")
-    held = []
-    for name in samples:
-        best = min(slopes, key=lambda s: np.mean([v for n, v in table[s].items() if n != name]))
-        held.append(table[best][name])
-        print(f"{name:<8} chosen slope {best:<6} held-out total {100 * table[best][name]:.2f} %")
-    print(f"mean held-out total {100 * np.mean(held):.2f} %")
+def synthetic_scenes():
+    return {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
+            for kind in TERRAIN_KINDS for spacing in (1.0, 2.5)}
+
+
+def synthetic(scenes):
+    print("\nsynthetic terrains (total error %, defaults)")
+    methods = sorted(GROUND_METHODS)
+    print(f"{'scene':<20} " + " ".join(f"{m:>13}" for m in methods))
+    totals = {m: [] for m in methods}
+    for name, scene in scenes.items():
+        for m in methods:
+            pred = GROUND_METHODS[m](scene.xyz, **GroundConfig(method=m).method_params())
+            totals[m].append(ground_errors(pred, scene.ground)["total"])
+        print(f"{name:<20} " + " ".join(f"{100 * totals[m][-1]:>13.2f}" for m in methods))
+    print(f"{'mean':<20} " + " ".join(f"{100 * np.mean(totals[m]):>13.2f}" for m in methods))
+
+
+def leave_one_out(samples, scenes):
+    for method, grid in LOO_GRID.items():
+        fn = GROUND_METHODS[method]
+        base = GroundConfig(method=method).method_params()
+        keys = list(grid)
+        table = []
+        for values in itertools.product(*(grid[k] for k in keys)):
+            params = dict(base, **dict(zip(keys, values)))
+            real = {n: ground_errors(fn(xyz, **params), ref)["total"]
+                    for n, (xyz, ref) in samples.items()}
+            syn = np.mean([ground_errors(fn(s.xyz, **params), s.ground)["total"]
+                           for s in scenes.values()])
+            table.append((dict(zip(keys, values)), real, syn))
+
+        def objective(row, held_out):
+            return np.mean([v for n, v in row[1].items() if n != held_out] + [row[2]])
+
+        print(f"\nleave-one-out, {method} ({len(table)} parameter sets; chosen on the other six "
+              f"samples + synthetic terrains)")
+        held = []
+        for name in samples:
+            best = min(table, key=lambda row: objective(row, name))
+            held.append(best[1][name])
+            print(f"{name:<8} held-out total {100 * best[1][name]:5.2f} %  chosen "
+                  f"{', '.join(f'{k}={v}' for k, v in best[0].items())}")
+        print(f"{method} leave-one-out mean total {100 * np.mean(held):.2f} %, "
+              f"max {100 * np.max(held):.2f} %")
+        best = min(table, key=lambda row: objective(row, None))
+        print(f"{method} chosen on all seven: {', '.join(f'{k}={v}' for k, v in best[0].items())} "
+              f"(mean {100 * np.mean(list(best[1].values())):.2f} %, synthetic "
+              f"{100 * best[2]:.2f} %)")
 
 
 def best_time(cmd, env, repeat):
@@ -86,20 +142,24 @@ def best_time(cmd, env, repeat):
     return min(times)
 
 
-def speed(site, repeat):
+def speed(site, repeat, methods=("smrf", "smrf_refined")):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / ("out" + site.suffix))
         base_cmd = [sys.executable, "-c",
                     f"import laspy; laspy.read({str(site)!r}).write({out!r})"]
-        cli_cmd = [sys.executable, "-m", "lidar2city.cli.main", "ground", str(site), "-o", out]
+        cli_cmds = {m: [sys.executable, "-m", "lidar2city.cli.main", "ground", str(site), "-o", out,
+                        "--method", m] for m in methods}
         # interleave to share the machine load fairly
-        base = cli = float("inf")
+        base = float("inf")
+        cli = dict.fromkeys(methods, float("inf"))
         for _ in range(repeat):
             base = min(base, best_time(base_cmd, env, 1))
-            cli = min(cli, best_time(cli_cmd, env, 1))
-    print(f"\nspeed on {site.name}: laspy read+write {base:.2f} s, lidar2city ground {cli:.2f} s, "
-          f"ratio {cli / base:.2f} (best of {repeat})")
+            for m, cmd in cli_cmds.items():
+                cli[m] = min(cli[m], best_time(cmd, env, 1))
+    for m in methods:
+        print(f"\nspeed on {site.name}: laspy read+write {base:.2f} s, lidar2city ground --method {m} "
+              f"{cli[m]:.2f} s, ratio {cli[m] / base:.2f} (best of {repeat})")
 
 
 def main():
@@ -115,8 +175,10 @@ def main():
         sys.exit(f"no ISPRS reference samples under {args.data}")
     samples = {p.name.split("-")[0]: load(p) for p in refs}
     accuracy(samples)
+    scenes = synthetic_scenes()
+    synthetic(scenes)
     if args.loo:
-        leave_one_out(samples)
+        leave_one_out(samples, scenes)
     if not args.no_speed:
         speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat)
 

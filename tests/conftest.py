@@ -63,3 +63,26 @@ def raw_town():
         return town, raw
 
     return make
+
+
+@pytest.fixture(scope="session")
+def edit_town(tmp_path_factory):
+    """A classified synthetic town (gable b00, hip b01, flat b02, L-shaped b03) written as
+    ``town.laz`` + ``fp.gpkg`` and reconstructed at LoD1.2 + 2.2 into ``model.city.json``
+    (the editing and viewer tests copy the model before changing it)."""
+    from types import SimpleNamespace
+
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.synthetic import make_town
+    from lidar2city.tools.reconstruct import reconstruct
+
+    d = tmp_path_factory.mktemp("edit_town")
+    town = make_town(size=(120.0, 90.0), density=6.0, seed=5)
+    write_points(d / "town.laz", town.cloud)
+    write_polygons(d / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    reconstruct([d / "town.laz"], d / "model.city.json", footprints=d / "fp.gpkg",
+                lods=("1.2", "2.2"))
+    return SimpleNamespace(town=town, dir=d, laz=d / "town.laz", footprints=d / "fp.gpkg",
+                           model=d / "model.city.json")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -164,7 +165,8 @@ def test_writer_library_errors_become_one_line(runner, block, tmp_path, monkeypa
     monkeypatch.setattr(rasterio, "open", rasterio_fails)
     res = runner.invoke(cli, _commands(block, tmp_path)["ground --dtm"])
     assert "cannot write" in _error_line(res)
-    assert _left(tmp_path) == []
+    # the blocks done are kept in the journal for --resume; no output is left
+    assert _left(tmp_path, keep=("r.gpkg.journal",)) == []
 
 
 # --- beyond: a write failing half-way (disk full) ---------------------------------------------
@@ -614,3 +616,64 @@ def test_reading_a_geopackage_leaves_no_aux_xml(block, tmp_path):
                  metadata={"lidar2city_version": "x"})
     evaluate_footprints(pred, ref)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pred.gpkg", "ref.gpkg"]
+
+
+@pytest.mark.slow
+def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
+    """SIGINT to ``reconstruct --workers 2`` (CityJSONSeq, streamed through a spool): exit 130
+    in one line; the output, its temporary name and the spool are gone, the journal (meant
+    for --resume) is kept, and no worker process outlives the run."""
+    import psutil
+
+    from lidar2city.io.las import read_points, write_points
+    from lidar2city.io.vector import write_polygons
+
+    # the block repeated on a 4 x 4 grid: 32 buildings in blocks of 50 m
+    cloud = read_points(block / "t.laz")
+    shifts = [(40.0 * i, 40.0 * j) for i in range(4) for j in range(4)]
+    xyz = np.concatenate([cloud.xyz + [dx, dy, 0.0] for dx, dy in shifts])
+    big = type(cloud)(xyz, cloud.origin, cloud.crs, cloud.xy_unit, cloud.z_unit,
+                      {k: np.tile(v, len(shifts)) for k, v in cloud.attributes.items()})
+    src = tmp_path / "big.laz"
+    write_points(src, big)
+    # the fixture's footprints, local to its origin (85000, 447000), repeated likewise
+    geoms = [box(x0 + dx, y0 + dy, x1 + dx, y1 + dy) for dx, dy in shifts
+             for x0, y0, x1, y1 in ((6, 6, 18, 16), (24, 8, 34, 20))]
+    write_polygons(tmp_path / "fp.gpkg", geoms, {"id": [f"f{i}" for i in range(len(geoms))]},
+                   origin=np.array([85000.0, 447000.0]), crs=cloud.crs)
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [sys.executable, "-m", "lidar2city.cli.main", "reconstruct", str(src), "--footprints",
+            str(tmp_path / "fp.gpkg"), "--workers", "2", "--block-size", "50",
+            "-o", str(out / "x.city.jsonl")]
+    t0 = time.perf_counter()
+    subprocess.run(args, check=True, capture_output=True, timeout=600)
+    full = time.perf_counter() - t0
+    assert _left(out) == ["x.city.jsonl"]
+    (out / "x.city.jsonl").unlink()
+    interrupted = 0
+    for frac in (0.5, 0.8):
+        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(frac * full)
+        children = psutil.Process(proc.pid).children(recursive=True)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+        _, alive = psutil.wait_procs(children, timeout=30)
+        assert not alive, [p.cmdline() for p in alive]
+        if proc.returncode == 0:  # finished before the signal
+            assert _left(out) == ["x.city.jsonl"], err
+        else:
+            assert proc.returncode == 130, (frac, proc.returncode, err)
+            interrupted += 1
+            # multiprocessing's resource tracker may still note the cluster's semaphores it
+            # cleans up after the process ended: the error line is the run's last line
+            lines = [ln for ln in err.strip().splitlines() if "resource_tracker" not in ln
+                     and not ln.startswith("  warnings.warn(")]
+            assert "Traceback" not in err and lines[-1].startswith("Error: interrupted"), err
+            assert set(_left(out)) <= {"x.city.jsonl.journal"}, (frac, err)
+            journal = out / "x.city.jsonl.journal"
+            if journal.exists():
+                assert not [p.name for p in journal.iterdir() if ".tmp" in p.name]
+        for p in out.iterdir():
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+    assert interrupted, "every run ended before its signal"

@@ -178,3 +178,36 @@ def test_dsm_commands_on_alexandria(runner, data, tmp_path):
     rep = validate_file(city, schema_dir=data / "cityjson" / "schemas-2.0.2")
     assert rep.schema_errors == [] and len(rep.objects) == 56
     assert all(o.valid for o in rep.objects)
+
+
+@pytest.mark.parametrize("case", ["no_crs", "all_nodata", "dtm_grid", "dtm_no_crs"])
+@pytest.mark.parametrize("command", ["footprints", "tune"])
+def test_bad_rasters_one_line_error(runner, rasters, tmp_path, case, command):
+    from lidar2city.cli.main import cli
+    from lidar2city.io.raster import Raster, read_raster, write_raster
+    from lidar2city.io.vector import write_polygons
+
+    p_dsm, p_dtm = rasters
+    d = read_raster(p_dsm)
+    bad = tmp_path / "bad.tif"
+    if case in ("no_crs", "dtm_no_crs"):
+        write_raster(bad, Raster(d.array, d.transform, None, d.mask))
+    elif case == "all_nodata":
+        write_raster(bad, Raster(np.full(d.shape, np.nan), d.transform, d.crs))
+    else:
+        write_raster(bad, Raster(d.array[1:, 1:], d.transform, d.crs))
+    dsm, dtm = (p_dsm, bad) if case.startswith("dtm") else (bad, p_dtm)
+    out = tmp_path / ("out.gpkg" if command == "footprints" else "w.toml")
+    args = [command, "--dsm", str(dsm), "--dtm", str(dtm), "-o", str(out)]
+    if command == "tune":
+        import shapely
+
+        ref = tmp_path / "ref.gpkg"
+        write_polygons(ref, [shapely.box(500010, 4299974, 500040, 4299990)], {"id": ["a"]},
+                       origin=(0.0, 0.0), crs=CRS_UTM)
+        args += ["--reference", str(ref), "--population", "4", "--generations", "0"]
+    res = runner.invoke(cli, args)
+    assert res.exit_code != 0
+    assert res.output.strip().startswith("Error:") and len(res.output.strip().splitlines()) == 1, \
+        res.output
+    assert not out.exists()

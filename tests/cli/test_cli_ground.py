@@ -123,7 +123,8 @@ def test_ground_no_ground_found_writes_nothing(runner, tmp_path, monkeypatch):
 
     src = tmp_path / "town.las"
     _write_town(src)
-    monkeypatch.setitem(ground.GROUND_METHODS, "smrf", lambda xyz, **kw: np.zeros(len(xyz), bool))
+    monkeypatch.setitem(ground.GROUND_METHODS, ground.GroundConfig().method,
+                        lambda xyz, **kw: np.zeros(len(xyz), bool))
     out, dtm = tmp_path / "o.las", tmp_path / "d.tif"
     msg = _one_line_error(runner.invoke(_cli(), ["ground", str(src), "-o", str(out), "--dtm", str(dtm)]))
     assert "no ground" in msg

@@ -32,7 +32,7 @@ def test_initialisation_and_snake_on_alexandria(data):
     bbox = evaluation_domain(ref, objects)
     # the reference is incomplete: its neighbourhood is a fraction of its bounding box
     assert ref[near].sum() == ref.sum() and near.sum() < 0.8 * bbox.sum()
-    cfg = ActiveContourConfig()
+    cfg = ActiveContourConfig(init="edges")  # the seed's edge-based initialisation
     prev = dataclasses.replace(cfg, split_distance=0, relative_height=0.0, min_aspect_coherence=0.0,
                                local_sigma=0.0)
     frame = PixelFrame(cell=inp["cell"])

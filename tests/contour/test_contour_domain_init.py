@@ -104,3 +104,17 @@ def test_building_regions_drop_the_incoherent_crown():
     assert (lab > 0)[house].mean() > 0.9 and not (lab > 0)[crown].any()
     kept = building_regions(z, z, cell=2.0, max_roughness=99.0, min_aspect_coherence=0.0)
     assert (kept > 0)[crown].mean() > 0.8
+
+
+def test_initial_contours_from_roof_regions_or_edges():
+    from lidar2city.contour import ActiveContourConfig, prepare_scene
+    from lidar2city.errors import ConfigError
+
+    dsm = np.zeros((60, 60))
+    dsm[10:30, 10:40] = 8.0
+    dsm[40:52, 20:50] = 5.0
+    for init in ("roofs", "edges"):
+        scene = prepare_scene(dsm, dsm, cell=1.0, config=ActiveContourConfig(init=init))
+        assert len(scene.contours) == 2 and scene.cell == 1.0
+    with pytest.raises(ConfigError, match="init"):
+        ActiveContourConfig(init="blobs")

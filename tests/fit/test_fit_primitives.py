@@ -8,7 +8,7 @@ from collections import Counter
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from lidar2city.errors import FitError
@@ -504,6 +504,9 @@ def test_lidar_outline_improves_corners():
 def test_envelope_solids_over_random_footprints_are_closed(boxes, az, off, slope, kind):
     geom = shapely.union_all([shapely.box(x, y, x + w, y + h) for x, y, w, h in boxes])
     poly = max(getattr(geom, "geoms", [geom]), key=lambda g: g.area)
+    # a union whose parts meet only along a sliver under the 1e-6 m snapping grid is not one
+    # polygon once snapped: envelope_solid refuses it with FitError (tested below), not a solid
+    assume(shapely.set_precision(poly, 1e-6).geom_type == "Polygon")
     c = np.array(poly.centroid.coords[0])
     t = math.radians(az)
     n = np.array([-math.sin(t), math.cos(t)])
@@ -515,6 +518,17 @@ def test_envelope_solids_over_random_footprints_are_closed(boxes, az, off, slope
     solid = envelope_solid(poly, planes, 0.0)
     assert solid_problems(solid, tol=1e-5) == []
     assert solid_volume(solid) > 0
+
+
+def test_envelope_refuses_a_footprint_that_splits_when_snapped():
+    from lidar2city.errors import FitError
+
+    # two 5 m squares joined by a 1e-9 m wide neck: two polygons on the 1e-6 m grid
+    poly = shapely.Polygon([(0, 0), (5, 0), (5, 2.5), (6, 2.5), (6, 0), (11, 0), (11, 5), (6, 5),
+                            (6, 2.5 + 1e-9), (5, 2.5 + 1e-9), (5, 5), (0, 5)])
+    assert poly.is_valid
+    with pytest.raises(FitError, match="degenerates when snapped"):
+        envelope_solid(poly, [[10.0, 0.0, 0.0]], 0.0)
 
 
 def test_bad_arguments_raise_project_errors():

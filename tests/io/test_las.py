@@ -51,3 +51,31 @@ def test_unknown_crs():
 
     with pytest.raises(CRSError, match="unknown CRS"):
         parse_crs("EPSG:999999999")
+
+
+@pytest.mark.parametrize("name", ["misc/simple.laz", "misc/autzen_trim.laz"])
+def test_tiles_decoded_in_chunks_equal_the_whole_file(data, name):
+    import laspy
+
+    from lidar2city.io.las import POINT_ATTRIBUTES, _read_world
+
+    las = laspy.read(data / name)
+    scales = np.asarray(las.header.scales)
+    expected = np.round(np.column_stack([las.x, las.y, las.z]) / scales) * scales
+    for chunk in (97, 1_000_000):  # many chunks, a last short one / one chunk
+        world, attrs = _read_world(data / name, chunk=chunk)
+        assert np.array_equal(world, expected)
+        names = [n for n in POINT_ATTRIBUTES if n in las.point_format.dimension_names]
+        assert list(attrs) == names
+        for n in names:
+            assert attrs[n].dtype == np.asarray(las[n]).dtype
+            assert np.array_equal(attrs[n], np.asarray(las[n]))
+
+
+def test_chunked_tile_read_reports_a_bad_file(tmp_path):
+    from lidar2city.io.las import _read_world
+
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(b"LASF" + b"\0" * 100)
+    with pytest.raises(FileFormatError):
+        _read_world(bad)

@@ -28,7 +28,9 @@ def blurred_scene(sigma=1.0):
 
 def test_roof_regions_separates_heights_and_finds_edges():
     nd, truth = blurred_scene()
-    labels, n = roof_regions(nd + 20.0, nd, cell=1.0, min_area=20.0, expand=3.0)
+    # a blurred DSM (like the 2 m Alexandria one): regions cut back at half height
+    labels, n = roof_regions(nd + 20.0, nd, cell=1.0, min_area=20.0, expand=3.0, edge_fraction=0.5,
+                             edge_inset=0.0)
     found = set()
     for t in truth:
         ids, counts = np.unique(labels[t], return_counts=True)
@@ -118,3 +120,53 @@ def test_split_at_saddles_keeps_flat_shapes_whole():
     for depth in (0.5, 1.0, 6.0, 20.0):
         out, n = split_at_saddles(lab, nd, depth=depth)
         assert n == 2 and np.array_equal(out > 0, lab > 0)
+
+
+def test_inset_regions_moves_outer_edges_only_and_in_metres():
+    from lidar2city.segment.dsm import inset_regions
+
+    lab = np.zeros((12, 16), np.int32)
+    lab[2:10, 2:8] = 1
+    lab[2:10, 8:14] = 2  # a touching neighbour: the shared edge stays
+    half = inset_regions(lab, cell=0.5, inset=0.25)
+    assert (half[3:9, 3:8] == 1).all() and (half[3:9, 8:13] == 2).all()
+    assert not half[2].any() and not half[:, 2].any() and not half[:, 13].any()
+    assert (half > 0).sum() == 6 * 10
+    # at 1 m a pixel centre is 0.5 m inside the edge: a 0.25 m inset changes nothing
+    assert (inset_regions(lab, cell=1.0, inset=0.25) == lab).all()
+    assert (inset_regions(lab, cell=0.5, inset=0.0) == lab).all()
+    with pytest.raises(InputError):
+        roof_regions(np.zeros((5, 5)), np.zeros((5, 5)), cell=1.0, edge_inset=-1)
+
+
+def test_row_houses_one_region_per_block_split_at_a_step():
+    """0.5 m DSM of two row-house blocks: 4 gabled houses of one height (no step between
+    them) and 3 houses whose middle one is 1.5 m higher (a height step)."""
+    cell = 0.5
+    nd = np.zeros((80, 120))
+    rows = np.arange(80)[:, None] * cell
+
+    def gable(r0, r1, eaves, ridge):
+        mid, half = (r0 + r1) / 2 * cell, (r1 - r0) / 2 * cell
+        return eaves + (ridge - eaves) * (1 - np.abs(rows - mid) / half)
+
+    block = gable(8, 32, 6.0, 10.0)
+    nd[8:32, 8:88] = np.broadcast_to(block[8:32], (24, 80))      # 4 houses of 10 m, one roof
+    low = gable(48, 72, 6.0, 10.0)
+    nd[48:72, 8:98] = np.broadcast_to(low[48:72], (24, 90))
+    nd[48:72, 38:68] += 1.5                                       # the middle house is higher
+    labels, n = roof_regions(nd + 1.0, nd, cell=cell)
+    top = np.unique(labels[10:30, 10:86])
+    assert len(top[top > 0]) == 1                                  # one outline per block
+    bottom = {int(np.bincount(labels[50:70, c0:c1].ravel()).argmax())
+              for c0, c1 in ((12, 34), (42, 64), (72, 94))}
+    assert len(bottom) == 3 and 0 not in bottom                    # split at the steps
+
+
+def test_inset_default_drops_one_ring_at_half_and_one_metre_none_at_two():
+    from lidar2city.segment.dsm import inset_regions
+
+    lab = np.zeros((12, 12), np.int32)
+    lab[2:10, 2:10] = 1
+    for cell, kept in ((0.5, 36), (1.0, 36), (2.0, 64)):
+        assert (inset_regions(lab, cell=cell, inset=0.5) > 0).sum() == kept

@@ -95,3 +95,22 @@ def test_tune_weights_on_a_synthetic_dsm_is_reproducible_across_jobs():
         tune_weights(dsm, dsm, ref[:10], cell=1.0)
     with pytest.raises(InputError):
         tune_weights(dsm, dsm, ref, cell=1.0, objective="iou")
+
+
+def test_log_scale_genes_and_validation():
+    from lidar2city.contour.outlines import LOG_WEIGHT_BOUNDS
+    from lidar2city.tune.ga import genes_to_weights, tune_weights
+
+    assert genes_to_weights([-2, 0, 1], "log") == [0.01, 1.0, 10.0]
+    assert genes_to_weights([0.5, 2.0], "linear") == [0.5, 2.0]
+    assert LOG_WEIGHT_BOUNDS == (-2.0, 1.0)
+    dsm = np.zeros((30, 30))
+    dsm[8:22, 8:22] = 6.0
+    ref = dsm > 3
+    with pytest.raises(InputError, match="scale"):
+        tune_weights(dsm, dsm, ref, cell=1.0, scale="cubic")
+    w, hist = tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=1,
+                           scale="log")
+    assert all(0.01 - 1e-12 <= v <= 10 + 1e-9 for v in w.values())
+    assert w == tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=1,
+                             scale="log")[0]

@@ -3,6 +3,10 @@
 The method composes the classic cues (Rottensteiner & Briese 2002;
 Rabbani et al. 2006; Vosselman 2009):
 
+0. **Survey cues** (:mod:`.cues`): the return fields are read the way the
+   survey wrote them (multi-echo, first/last-pulse pairs, single, constant,
+   absent or inconsistent) and logged with the spacing and intensity; a
+   first-pulse point repeating its last pulse is left out and takes its class.
 1. **Height above ground** from a DTM gridded from the ground points
    (:mod:`.hag`); only points at least ``min_height`` above it can be roofs
    or high vegetation.
@@ -19,7 +23,10 @@ Rabbani et al. 2006; Vosselman 2009):
    become large planar regions; vegetation breaks into small incoherent ones.
    Regions that are large, fit a plane, are not steep and are mostly made of
    single / last returns are roof seeds.
-5. **Morphology on a grid**: roof seed cells are closed, small holes filled,
+5. **Morphology on a grid**: clusters of touching roof seed cells smaller
+   than ``min_seed_cluster_area`` or with more than
+   ``max_cluster_multi_return`` multi-echo seeds (smooth patches in crowns)
+   are dropped; the remaining seed cells are closed, small holes filled,
    and connected building areas dropped when smaller than
    ``min_building_area``, narrower than ``min_building_width`` everywhere
    (bridges, walls), long and narrow (``max_linear_aspect``: footbridges and
@@ -28,7 +35,8 @@ Rabbani et al. 2006; Vosselman 2009):
 6. **Point decision**: object points inside a building area and not above
    the roof as vegetation (rough, multi-return, optionally green) are
    building — so walls, roof edges, chimneys and dormers (small clusters
-   above the roof) join their building. Other points are vegetation — high,
+   above the roof) join their building; at its edge nothing above the roof
+   does. Other points are vegetation — high,
    medium or low by their height — when they look like vegetation or lie on
    no sizeable plane, and "other" (1) when they lie on one (vehicles, sheds,
    fences, decks).
@@ -45,6 +53,7 @@ from ..config import field
 from ..datamodel import ASPRS
 from ..errors import ConfigError, InputError
 from ..ground.dtm import dtm_from_ground, height_above_ground
+from .cues import survey_cues
 from .features import local_shape, point_spacing
 from .regions import planar_regions
 
@@ -87,6 +96,8 @@ class ClassifyConfig:
     max_ground_contact: float = field(0.05, "Largest fraction of a seed region's points within 0.5 m of the terrain (planes reaching the ground are ramps and bridge decks).")
     max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
+    max_cluster_multi_return: float = field(0.3, "Largest fraction of multi-echo points among the seed points of a cluster of touching seed cells (canopy patches); 1 disables.")
+    min_seed_cluster_area: float = field(7.5, "Smallest area (m2) of roof seed cells in a cluster of touching seed cells (smooth patches in crowns); 0 disables.")
     cell: float = field(0.5, "Cell size (m) of the building grid (raised to 1.5 spacing on sparse data).")
     closing_radius: float = field(1.0, "Radius (m) of the morphological closing of roof seed cells (at least 4 spacings).")
     max_hole_area: float = field(10.0, "Holes (m2) in building areas up to this size are filled.")
@@ -110,7 +121,8 @@ class ClassifyConfig:
             if not getattr(self, name) > 0:
                 raise ConfigError(f"classify.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("medium_height", "wall_min_height", "min_facet_area", "max_facet_rms",
-                     "closing_radius", "max_hole_area", "min_building_area", "min_building_width", "roof_tolerance",
+                     "closing_radius", "max_hole_area", "min_building_area",
+                     "min_seed_cluster_area", "min_building_width", "roof_tolerance",
                      "edge_buffer", "max_roof_object_area", "max_linear_aspect", "linear_max_width"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"classify.{name} must be >= 0, got {getattr(self, name)!r}")
@@ -122,6 +134,9 @@ class ClassifyConfig:
             raise ConfigError(f"classify.max_ground_contact must be in [0, 1], got {self.max_ground_contact!r}")
         if not 0 <= self.max_linearity <= 1:
             raise ConfigError(f"classify.max_linearity must be in [0, 1], got {self.max_linearity!r}")
+        if not 0 <= self.max_cluster_multi_return <= 1:
+            raise ConfigError("classify.max_cluster_multi_return must be in [0, 1], "
+                              f"got {self.max_cluster_multi_return!r}")
         if not 0 <= self.max_multi_return <= 1:
             raise ConfigError(f"classify.max_multi_return must be in [0, 1], got {self.max_multi_return!r}")
         if not 4 <= self.k <= 100:
@@ -217,8 +232,39 @@ def _disk(radius_cells: float) -> np.ndarray:
     return (xx * xx + yy * yy) <= radius_cells * radius_cells + 1e-9
 
 
+def _drop_seed_clusters(seed, pi, pj, multi, shape, cell, *, min_area, max_multi):
+    """``seed`` without the seed clusters that are too small or canopy.
+
+    Clusters are the connected components (8-neighbourhood) of the seed cells
+    dilated by one cell. A cluster is dropped when its seed cells cover less
+    than ``min_area`` (m2: a smooth patch in a crown, a car roof) or when more
+    than ``max_multi`` of its seed points are multi-echo (a canopy gives smooth
+    patches too, but many of its pulses go on through it; a roof's seeds are
+    single echoes but for eaves and overhanging branches).
+    """
+    from scipy import ndimage
+
+    if not seed.any():
+        return seed
+    grid = np.zeros(shape, bool)
+    grid[pi[seed], pj[seed]] = True
+    lab, n = ndimage.label(ndimage.binary_dilation(grid), structure=np.ones((3, 3), bool))
+    area = np.bincount(lab.ravel(), grid.ravel(), minlength=n + 1) * cell * cell
+    s_lab = lab[pi[seed], pj[seed]]
+    s_multi = (np.bincount(s_lab, multi[seed], minlength=n + 1)
+               / np.maximum(np.bincount(s_lab, minlength=n + 1), 1))
+    drop = (area < min_area) | (s_multi > max_multi)
+    drop[0] = False
+    out = seed.copy()
+    out[np.flatnonzero(seed)[drop[s_lab]]] = False
+    logger.debug("%d of %d seed clusters dropped (%d small, %d multi-echo)", int(drop.sum()), n,
+                 int((area[1:] < min_area).sum()), int((s_multi[1:] > max_multi).sum()))
+    return out
+
+
 def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
-                    rgb=None, config: ClassifyConfig | None = None, **params) -> np.ndarray:
+                    rgb=None, intensity=None, config: ClassifyConfig | None = None,
+                    **params) -> np.ndarray:
     """ASPRS classes for every point given a ground mask.
 
     Parameters
@@ -231,9 +277,14 @@ def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_retu
         Height above ground (m); computed from ``ground`` with
         :func:`lidar2city.ground.dtm_from_ground` when omitted.
     return_number, number_of_returns : ndarray, shape (N,), optional
-        Pulse return information; vegetation cue when present.
+        Pulse return information, read by :func:`.cues.survey_cues`: a
+        vegetation cue for multi-echo data; first/last-pulse pairs are
+        recognised (a coincident first pulse is left out and takes its last
+        pulse's class); constant, single or inconsistent fields are ignored.
     rgb : ndarray, shape (N, 3), optional
         Colour; greenness is a vegetation cue when given.
+    intensity : ndarray, shape (N,), optional
+        Inspected and logged only (absent, constant or informative).
     config : ClassifyConfig, optional
         Parameters; keyword arguments override single fields
         (``classify_points(xyz, g, min_height=2.5)``).
@@ -266,16 +317,18 @@ def classify_points(xyz, ground, *, hag=None, return_number=None, number_of_retu
     >>> (cls == 6).mean()                                  # doctest: +SKIP
     """
     return _classify(xyz, ground, hag=hag, return_number=return_number,
-                     number_of_returns=number_of_returns, rgb=rgb, config=config,
-                     **params)["classes"]
+                     number_of_returns=number_of_returns, rgb=rgb, intensity=intensity,
+                     config=config, **params)["classes"]
 
 
 def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=None,
-              rgb=None, config: ClassifyConfig | None = None, **params) -> dict:
-    """:func:`classify_points` returning its intermediate arrays too (diagnostics, tests)."""
-    import dataclasses
+              rgb=None, intensity=None, config: ClassifyConfig | None = None, **params) -> dict:
+    """:func:`classify_points` returning its intermediate arrays too (diagnostics, tests).
 
-    from scipy.spatial import cKDTree
+    With first/last-pulse pairs the intermediate arrays are those of the points
+    kept (``kept``); duplicates take their partner's class.
+    """
+    import dataclasses
 
     if config is None:
         config = ClassifyConfig()
@@ -288,6 +341,36 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     c = config
     xyz, ground, hag, return_number, number_of_returns, rgb = _check(
         xyz, ground, hag, return_number, number_of_returns, rgb)
+    if intensity is not None and np.shape(intensity) != (len(xyz),):
+        raise InputError(f"intensity has shape {np.shape(intensity)}, expected ({len(xyz)},)")
+    spacing = point_spacing(xyz[:, :2]) if len(xyz) else 1.0
+    cues = survey_cues(xyz, return_number=return_number, number_of_returns=number_of_returns,
+                       intensity=intensity, spacing=spacing)
+    logger.info("survey: %d points, spacing %.2f m (%.1f pts/m2); %s; cues used: height above "
+                "ground, planarity, region size and shape%s%s", len(xyz), spacing,
+                1.0 / spacing ** 2, "; ".join(cues.notes),
+                ", returns" if cues.has_returns else "", ", colour" if rgb is not None else "")
+    if not cues.duplicate.any():
+        out = _classify_kept(xyz, ground, hag, cues.multi, cues.not_last, cues.has_returns,
+                             rgb, c)
+        out["cues"] = cues
+        return out
+    kept = np.flatnonzero(~cues.duplicate)
+    sub = lambda a: None if a is None else a[kept]  # noqa: E731
+    out = _classify_kept(xyz[kept], ground[kept], sub(hag), cues.multi[kept],
+                         cues.not_last[kept], cues.has_returns, sub(rgb), c)
+    cls = np.empty(len(xyz), np.uint8)
+    cls[kept] = out["classes"]
+    dup = np.flatnonzero(cues.duplicate)
+    cls[dup] = cls[cues.partner[dup]]
+    out.update(classes=cls, kept=kept, cues=cues)
+    return out
+
+
+def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, c) -> dict:
+    """The classification proper, on points whose return cues are already read."""
+    from scipy.spatial import cKDTree
+
     n = len(xyz)
     cls = np.full(n, ASPRS.UNCLASSIFIED, dtype=np.uint8)
     if n == 0:
@@ -345,11 +428,9 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
     lab = regions.labels[nn]
     residual = shape.residual[nn]
     # single-return data (every number_of_returns == 1) carries no return cue
-    has_returns = (return_number is not None and number_of_returns is not None
-                   and bool(np.any(np.asarray(number_of_returns) > 1)))
     if has_returns:
-        multi = np.asarray(number_of_returns)[obj_idx] > 1
-        not_last = np.asarray(return_number)[obj_idx] < np.asarray(number_of_returns)[obj_idx]
+        multi = multi_all[obj_idx]
+        not_last = not_last_all[obj_idx]
     else:
         multi = np.zeros(len(p), bool)
         not_last = np.zeros(len(p), bool)
@@ -395,6 +476,11 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
             f"one building grid of {cell:g} m cells; split the input into tiles")
     pj = np.floor((p[:, 0] - x0) / cell).astype(np.int64)
     pi = np.floor((p[:, 1] - y0) / cell).astype(np.int64)
+    # seed clusters: touching seed cells, before the closing joins a tree or a
+    # stray patch to the building beside it
+    seed = _drop_seed_clusters(seed, pi, pj, multi, (nrow, ncol), cell,
+                               min_area=c.min_seed_cluster_area,
+                               max_multi=c.max_cluster_multi_return if has_returns else 1.0)
     seed_grid = np.zeros((nrow, ncol), bool)
     seed_grid[pi[seed], pj[seed]] = True
     disk = _disk(closing_radius / cell)
@@ -480,6 +566,8 @@ def _classify(xyz, ground, *, hag=None, return_number=None, number_of_returns=No
         small[0] = False
         veg_over &= ~small[o_lab]
     edge_veg = ~in_building & rough & (multi | green | (not has_returns)) & ~seed
+    # walls and eaves join a building at its edge; nothing above its roof does
+    edge_veg |= ~in_building & above_roof & ~seed
     is_building = (in_zone & (ph >= c.wall_min_height) & ~veg_over & ~edge_veg) | (seed & in_building)
     high = ph >= c.min_height
     is_veg = ~is_building & (veg_cue | ~planar)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["check_output", "crs_option", "neighbours_options", "output_option", "progress",
-           "progress_callback"]
+__all__ = ["check_output", "crs_option", "engine_options", "neighbours_options", "output_option",
+           "progress", "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -34,13 +34,66 @@ def check_output(ctx, param, value):
     return value
 
 
+def engine_options(f):
+    """``--workers`` and ``--scheduler``: where the tasks (blocks or tiles) run."""
+    f = click.option("--scheduler", default=None, metavar="ADDRESS",
+                     help="Run the tasks on an existing Dask cluster (tcp://HOST:8786, started "
+                          "with `dask scheduler` and `dask worker`); its workers must see the "
+                          "input paths.")(f)
+    return click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+                        help="Worker processes: 1 runs the tasks in this process, N > 1 on a "
+                             "local Dask cluster of N processes (same output bytes).")(f)
+
+
+def run_on_tiles(job, input, output, *, neighbours, workers, scheduler, extra=None, suffix=None,
+                 buffer=50.0, crs=None, **options):
+    """The folder-of-tiles mode of a per-tile command (``ground``, ``classify``).
+
+    The outputs (``output`` and the folders of ``extra``) are checked first: as
+    files that can be written when ``input`` is one file, else created as folders.
+
+    Returns False when ``input`` is one file (the command's own mode), else runs
+    ``job`` on every tile, prints its summary and exits non-zero when a tile failed.
+    """
+    from ..errors import InputError
+    from ..io._atomic import check_output_path, make_output_dir
+    from ..io.tiles import is_tile_set
+
+    outputs = [output, *(v[0] for v in (extra or {}).values() if v[0] is not None)]
+    if not is_tile_set(input):
+        if workers != 1 or scheduler is not None:
+            raise InputError("--workers and --scheduler apply to a folder or glob of tiles")
+        for path in outputs:  # one file each: fails at once, in one line, before any work
+            check_output_path(path)
+        return False
+    if neighbours:
+        raise InputError("with a folder of tiles the neighbours are found from the tiles; "
+                         "drop --neighbour")
+    if workers != 1 and scheduler is not None:
+        raise InputError("give either --workers (a local cluster) or --scheduler, not both")
+    for path in outputs:  # folders of tiles
+        make_output_dir(path)
+    from ..tools.tiles import plan_tiles, run_tiles
+
+    tasks = plan_tiles(input, output, crs=crs, buffer=buffer, suffix=suffix, extra=extra)
+    with progress(length=len(tasks), label="tiles") as bar:
+        summary = run_tiles(job, tasks, output, workers=workers, scheduler=scheduler,
+                            progress=lambda d, t: bar.update(1), buffer=buffer, crs=crs,
+                            **options)
+    for line in summary.lines():
+        click.echo(line, err=True)
+    if summary.failed:
+        raise click.exceptions.Exit(1)
+    return True
+
+
 def output_option(**kwargs):
     kwargs.setdefault("callback", check_output)
     return click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                         help="Output file.", **kwargs)
 
 
-def progress(iterable=None, *, length=None, label="", quiet=False):
+def progress(iterable=None, *, length=None, label="", quiet=False, item_show_func=None):
     """A click progress bar shown on a terminal only (never in pipes or CI logs)."""
     import sys
 
@@ -59,7 +112,8 @@ def progress(iterable=None, *, length=None, label="", quiet=False):
                 return iter(iterable)
 
         return _Null()
-    return click.progressbar(iterable, length=length, label=label, file=sys.stderr)
+    return click.progressbar(iterable, length=length, label=label, file=sys.stderr,
+                             item_show_func=item_show_func)
 
 
 def progress_callback(bar):

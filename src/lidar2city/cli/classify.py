@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, neighbours_options, output_option
+from ._options import crs_option, engine_options, neighbours_options, run_on_tiles
 from .ground import METHODS as GROUND_METHODS
 
 NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
@@ -12,8 +12,9 @@ NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
 
 
 @click.command("classify")
-@click.argument("input", type=click.Path(dir_okay=False))
-@output_option()
+@click.argument("input", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(),
+              help="Output file; an output folder when INPUT is a folder or glob of tiles.")
 @crs_option
 @click.option("--ground-from-file", is_flag=True,
               help="Reuse the input's class 2 points as ground (when that class is trustworthy) "
@@ -25,12 +26,23 @@ NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
 @click.option("--config", "config", default=None, type=click.Path(dir_okay=False),
               help="Run configuration (TOML); its [classify] table sets the parameters.")
 @neighbours_options
-def command(input, output, crs, ground_from_file, ground_method, config, neighbours, buffer):
+@engine_options
+def command(input, output, crs, ground_from_file, ground_method, config, neighbours, buffer,
+            workers, scheduler):
     """Classify INPUT into ground (2), building (6), vegetation (3/4/5), noise (7), other (1).
 
-    Every point is written to OUTPUT with all its attributes and its new class.
+    Every point is written to OUTPUT with all its attributes and its new class. INPUT may be
+    a folder or a quoted glob of tiles ("tiles/*.laz"): OUTPUT is then a folder, each tile is
+    classified with the strips of its neighbours (found from the tiles' bounds), one task per
+    tile (--workers, --scheduler).
     """
     from ..tools.classify import classify_file
+
+    if run_on_tiles(classify_file, input, output, neighbours=neighbours, workers=workers,
+                    scheduler=scheduler, buffer=buffer, crs=crs,
+                    ground_from_file=ground_from_file, ground_method=ground_method,
+                    config=config):
+        return
 
     summary = classify_file(input, output, crs=crs, ground_from_file=ground_from_file,
                             ground_method=ground_method, config=config,

@@ -63,10 +63,23 @@ def _on_interrupt(signum, frame):  # pragma: no cover - exercised in a subproces
     from ..io._atomic import remove_run_outputs
 
     removed = remove_run_outputs()
+    _stop_workers()
     note = f"; {len(removed)} partial output(s) removed" if removed else ""
     with contextlib.suppress(Exception):
         os.write(2, f"\nError: interrupted{note}\n".encode())
     os._exit(130 if signum == signal.SIGINT else 143)
+
+
+def _stop_workers():  # pragma: no cover - exercised in a subprocess
+    """Kill the worker processes this process started (a local Dask cluster's): ended by
+    os._exit they would outlive it for a while and log their lost connection."""
+    mp = sys.modules.get("multiprocessing")
+    if mp is None:
+        return
+    with contextlib.suppress(Exception):
+        for child in mp.active_children():
+            with contextlib.suppress(Exception):
+                child.kill()
 
 
 def _install_interrupt_handlers():

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option, progress, progress_callback
+from ._options import crs_option, engine_options, output_option, progress, progress_callback
 
 
 @click.command("reconstruct")
-@click.argument("inputs", nargs=-1, required=False, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=False, type=click.Path())
 @output_option()
 @click.option("--dsm", type=click.Path(dir_okay=False), default=None,
               help="Build LoD1.2 prisms from this DSM raster instead of point clouds.")
@@ -42,10 +42,20 @@ from ._options import crs_option, output_option, progress, progress_callback
 @click.option("--block-size", type=click.FloatRange(min=50.0), default=1000.0, show_default=True,
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
                    "bounded by a few tiles and results do not depend on the tiling.")
+@click.option("--edits", type=click.Path(dir_okay=False), default=None,
+              help="EDITS.json written by `lidar2city edit` or the viewer: re-apply every edit "
+                   "(needs --footprints).")
+@engine_options
+@click.option("--resume", is_flag=True,
+              help="Continue an interrupted run from its journal (OUT.journal): blocks already "
+                   "done are kept, the output is the same bytes as an uninterrupted run.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar or summary.")
 def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt, id_field, layer,
-            method, primitives_file, check_images, block_size, quiet):
+            method, primitives_file, check_images, block_size, edits, workers, scheduler, resume,
+            quiet):
     """Build 3D buildings from point cloud tiles INPUTS (one area, block by block) or from a DSM.
+
+    INPUTS are LAS/LAZ files, folders of tiles or quoted glob patterns ("tiles/*.laz").
 
     \b
     lidar2city reconstruct TILE.laz [TILE.laz...] [--footprints FP] [--lod ...] -o OUT
@@ -74,10 +84,13 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
     else:
         if inputs:
             raise InputError("give either point-cloud INPUTS or --dsm, not both")
-        if method != "roof" or primitives_file or check_images:
-            raise InputError("--method, --primitives and --check-images apply to point clouds")
+        if method != "roof" or primitives_file or check_images or edits:
+            raise InputError("--method, --primitives, --check-images and --edits apply to point "
+                             "clouds")
         if any(lod != "1.2" for lod in lods):
             raise InputError("--dsm builds LoD1.2 only; drop --lod or use --lod 1.2")
+        if workers != 1 or scheduler is not None or resume:
+            raise InputError("--workers, --scheduler and --resume apply to point clouds")
         if crs is not None:
             raise InputError("--crs does not apply to --dsm (the raster's own CRS is used; "
                              "footprints are reprojected to it)")
@@ -89,20 +102,37 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     from ..tools.reconstruct import reconstruct
 
+    if workers != 1 and scheduler is not None:
+        raise InputError("give either --workers (a local cluster) or --scheduler, not both")
+    # a bar over buildings when their number is known (footprints given), else over blocks
     bar_state = {"bar": None}
 
-    def on_progress(done, total, result):
-        bar = bar_state["bar"]
-        if bar is None:
-            bar = progress(length=total, label="buildings", quiet=quiet).__enter__()
-            bar_state["bar"] = bar
-        bar.update(1)
+    def open_bar(total, label):
+        if bar_state["bar"] is None:
+            bar_state["bar"] = progress(length=total, label=label, quiet=quiet,
+                                        item_show_func=lambda s: s).__enter__()
+        return bar_state["bar"]
 
+    def on_building(done, total, result):
+        if total is not None:
+            open_bar(total, "buildings").update(1)
+
+    def on_block(done, total):
+        if footprints is None:
+            open_bar(total, "blocks").update(1, current_item=f"{on_block.buildings} buildings")
+
+    def count(done, total, result):
+        on_block.buildings = done
+        on_building(done, total, result)
+
+    on_block.buildings = 0
     try:
         summary = reconstruct(list(inputs), output, footprints=footprints, lods=lods or None,
                               crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
-                              progress=on_progress, method=method, primitives=primitives_file,
-                              check_images=check_images, block_size=block_size)
+                              progress=count, block_progress=on_block, method=method,
+                              primitives=primitives_file, check_images=check_images,
+                              block_size=block_size, workers=workers, scheduler=scheduler,
+                              resume=resume, edits=edits)
     finally:
         if bar_state["bar"] is not None:
             bar_state["bar"].__exit__(None, None, None)

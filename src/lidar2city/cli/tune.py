@@ -27,8 +27,10 @@ _path = click.Path(dir_okay=False)
 @click.option("--domain", type=click.Choice(["reference", "bbox"]), default="reference", show_default=True,
               help="Pixels scored: around the reference buildings, skipping above-ground objects the "
                    "reference does not hold (incomplete reference), or its whole bounding box (complete).")
+@click.option("--scale", type=click.Choice(["log", "linear"]), default="log", show_default=True,
+              help="Genes: log10 of the weights (0.01 to 10) or the weights themselves (0 to 3).")
 def command(dsm, dtm, ortho, reference, output, seed, population, generations, jobs, objective,
-            config_path, figure, domain):
+            config_path, figure, domain, scale):
     """Tune the five active-contour weights (alpha, beta, gamma, mu, epsilon) with a genetic algorithm.
 
     The cost is the share of wrongly classified pixels, (FP + FN) / N, of the
@@ -52,7 +54,7 @@ def command(dsm, dtm, ortho, reference, output, seed, population, generations, j
 
         res = tune(dsm, dtm=dtm, ortho=ortho, reference=reference, output=output, seed=seed,
                    population=population, generations=generations, n_jobs=jobs, objective=objective,
-                   config=cfg, figure=figure, callback=step, domain=domain)
+                   config=cfg, figure=figure, callback=step, domain=domain, scale=scale)
     for r in res["history"]:
         click.echo(f"generation {r['generation']:3d}  best cost {r['best_cost']:.5f}  "
                    f"mean {r['mean']:.5f}  same {100 * r['same']:.0f} %", err=True)

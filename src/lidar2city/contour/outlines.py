@@ -18,14 +18,18 @@ from .snake import evolve_contours
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
+__all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "LOG_WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
            "ContourScene", "prepare_scene", "run_scene", "contours_to_polygons",
            "active_contour_outlines"]
 
+#: Initial contour choices (``ActiveContourConfig.init``).
+INITIALISATIONS = ("roofs", "edges")
 #: The five energy weights, in chromosome order.
 WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
 #: Range searched by the genetic algorithm for every weight.
 WEIGHT_BOUNDS = (0.0, 3.0)
+#: Range of log10 of every weight searched by the GA on its (default) log scale: 0.01 to 10.
+LOG_WEIGHT_BOUNDS = (-2.0, 1.0)
 #: Weights used when none are given: tuned by the GA (objective 1 - kappa, population
 #: 12, 8 generations, seed 0) on the Alexandria west half, 2 m DSM without orthoimage,
 #: scored around the reference footprints (``reference_neighbourhood_domain``), with the
@@ -49,12 +53,13 @@ class ActiveContourConfig:
     min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
-    split_distance: int = field(3, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (pixels; 0: no split).")
+    split_distance: float = field(6.0, "Joined candidate regions are cut by a distance-transform watershed into pieces whose centres are at least this far apart (m, rounded to whole pixels; 0: no split).")
     min_aspect_coherence: float = field(0.1, "Regions whose four-fold slope-direction coherence is below this are dropped (tree crowns slope every way, buildings a few ways 90 degrees apart; 0: off).")
     relative_height: float = field(0.5, "Each piece keeps its pixels higher than this share of its 90th height percentile (a blurred wall's mid-height; drops low crowns and sheds leaning on buildings; 0: off).")
     canny_sigma: float = field(1.0, "Gaussian sigma of the Canny edge detector (pixels).")
     max_gap: int = field(1, "Edge gaps up to this many pixels are closed.")
     min_edge_length: int = field(4, "Edge chains shorter than this (pixels) are dropped.")
+    init: str = field("roofs", "Initial contours: 'roofs' (the smooth roof regions of lidar2city.segment.dsm.roof_regions with its default [dsm_roofs] options: the DSM blobs that footprints --dsm fits) or 'edges' (the seed's: the nDSM mask above min_height cut by linked Canny edges, split at necks, vegetation dropped by roughness and aspect).")
     edge_map: str = field("gradient", "Edge map of the GVF: 'canny' (blurred linked Canny edges of the DSM: walls) or 'gradient' (gradient magnitude, also strong on pitched roofs).")
     edge_sigma: float = field(0.5, "Gaussian sigma of the edge map for the GVF (pixels); small keeps the two walls of narrow buildings apart.")
     gvf_mu: float = field(0.2, "GVF diffusion weight.")
@@ -66,8 +71,8 @@ class ActiveContourConfig:
     tol: float = field(0.02, "Convergence: RMS vertex move per iteration below this (pixels).")
     spacing: float = field(1.0, "Vertex spacing after resampling (pixels).")
     resample_every: int = field(5, "Resample contours and update region statistics every N iterations.")
-    band: float = field(3.0, "Width of the outside band for region statistics (pixels; used when local_sigma is 0).")
-    local_sigma: float = field(3.0, "Gaussian window (pixels) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
+    band: float = field(6.0, "Width of the outside band for region statistics (m; used when local_sigma is 0).")
+    local_sigma: float = field(6.0, "Gaussian window (m) of the localised region statistics (Lankton & Tannenbaum 2008): each vertex compares the inside and outside next to it; 0: one inside mean per contour and a band outside it.")
     smooth: float = field(0.7, "Gaussian sigma applied to the region-term images (pixels; 0: none).")
     simplify: float = field(0.5, "Douglas-Peucker tolerance of the output outlines (pixels; 0: none).")
 
@@ -82,6 +87,8 @@ class ActiveContourConfig:
         for name in ("max_iter", "gvf_iterations", "resample_every", "min_edge_length"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"active_contour.{name}: must be >= 1, got {getattr(self, name)}")
+        if self.init not in INITIALISATIONS:
+            raise ConfigError(f"active_contour.init: must be one of {', '.join(INITIALISATIONS)}, got {self.init!r}")
         if self.edge_map not in ("canny", "gradient"):
             raise ConfigError(f"active_contour.edge_map: must be 'canny' or 'gradient', got {self.edge_map!r}")
         if not 0 < self.step_decay <= 1:
@@ -139,6 +146,8 @@ class ContourScene:
         Intensity of the regional term (grey orthoimage, or the DSM).
     ndsm : ndarray (H, W)
         Height above terrain, NaN filled.
+    cell : float
+        Pixel size (m): the configuration's lengths in metres become pixels.
     """
 
     contours: list
@@ -146,6 +155,7 @@ class ContourScene:
     gvf: np.ndarray
     image: np.ndarray
     ndsm: np.ndarray
+    cell: float = 1.0
 
 
 def _grey(ortho, shape):
@@ -158,7 +168,7 @@ def _grey(ortho, shape):
 
 
 def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfig | None = None,
-                  gvf_callback=None) -> ContourScene:
+                  gvf_callback=None, roof_config=None) -> ContourScene:
     """Initial contours, GVF field and region images of a DSM (weight-independent).
 
     Parameters
@@ -170,6 +180,8 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         (the DSM does otherwise).
     cell : float
         Pixel size (m).
+    roof_config : RoofRegionsConfig, optional
+        Options of the roof regions (``config.init == "roofs"``).
     """
     cfg = config or ActiveContourConfig()
     z = _filled(dsm)
@@ -180,11 +192,18 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         raise InputError(f"cell must be > 0, got {cell}")
     nd = np.where(np.isfinite(nd), nd, 0.0)
     edges = linked_edges(z, sigma=cfg.canny_sigma, max_gap=cfg.max_gap, min_length=cfg.min_edge_length)
-    labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
-                              max_roughness=cfg.max_roughness, min_area=cfg.min_area,
-                              split_distance=cfg.split_distance, relative_height=cfg.relative_height,
-                              min_aspect_coherence=cfg.min_aspect_coherence,
-                              edges=edges)
+    if cfg.init == "roofs":
+        from ..segment.dsm import RoofRegionsConfig, roof_regions
+
+        labels, _ = roof_regions(dsm, ndsm, cell=cell,
+                                 **dataclasses.asdict(roof_config or RoofRegionsConfig()))
+    else:
+        labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
+                                  max_roughness=cfg.max_roughness, min_area=cfg.min_area,
+                                  split_distance=int(round(cfg.split_distance / cell)),
+                                  relative_height=cfg.relative_height,
+                                  min_aspect_coherence=cfg.min_aspect_coherence,
+                                  edges=edges)
     contours = initial_contours(labels)
     if cfg.edge_map == "canny":
         f = ndi.gaussian_filter(edges.astype(np.float64), cfg.edge_sigma) if cfg.edge_sigma > 0 else edges * 1.0
@@ -204,7 +223,7 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         image = ndi.gaussian_filter(image, cfg.smooth)
         nd = ndi.gaussian_filter(nd, cfg.smooth)
     logger.info("%d initial contours", len(contours))
-    return ContourScene(contours, labels, g, image, nd)
+    return ContourScene(contours, labels, g, image, nd, float(cell))
 
 
 def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig | None = None,
@@ -217,8 +236,8 @@ def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig 
         scene.contours, scene.gvf, scene.image, scene.ndsm,
         alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
         tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
-        spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band,
-        local_sigma=cfg.local_sigma, callback=callback)
+        spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band / scene.cell,
+        local_sigma=cfg.local_sigma / scene.cell, callback=callback)
 
 
 def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:

@@ -176,7 +176,8 @@ def object_segments(objects, *, min_distance=3, sigma=1.0) -> np.ndarray:
     return watershed(-smooth, markers, mask=obj, connectivity=2).astype(np.int32)
 
 
-def reference_neighbourhood_domain(reference, objects, *, buffer=5, edge_margin=3) -> np.ndarray:
+def reference_neighbourhood_domain(reference, objects, *, buffer=5, edge_margin=3,
+                                   min_distance=3) -> np.ndarray:
     """Pixels near the reference footprints, where an incomplete reference can be trusted.
 
     Reference footprint sets often hold only some of the buildings of the
@@ -207,6 +208,10 @@ def reference_neighbourhood_domain(reference, objects, *, buffer=5, edge_margin=
         Width of the ring of surroundings kept around each reference building
         (pixels); its ground pixels score false positives of outlines that
         spill over.
+    edge_margin : int
+        Pixels left out along the raster border.
+    min_distance : int
+        ``min_distance`` of :func:`object_segments` (pixels).
 
     Returns
     -------
@@ -226,7 +231,7 @@ def reference_neighbourhood_domain(reference, objects, *, buffer=5, edge_margin=
     if buffer < 0:
         raise InputError(f"buffer must be >= 0, got {buffer}")
     dom = ndi.distance_transform_edt(~ref) <= float(buffer)
-    lab = object_segments(obj)
+    lab = object_segments(obj, min_distance=min_distance)
     n = int(lab.max())
     if n:
         touched = np.zeros(n + 1, bool)

@@ -1,8 +1,11 @@
 """Ground filtering: which points are bare earth, and terrain models from them.
 
-Methods (:data:`GROUND_METHODS`): ``"smrf"`` (Pingel et al. 2013, the
-default) and ``"pmf"`` (Zhang et al. 2003). Both set low outliers aside
-first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
+Methods (:data:`GROUND_METHODS`): ``"smrf_refined"`` (the default: SMRF
+with the surface continued across the tile edges, optional surface-based
+cleanup; lower leave-one-sample-out error than plain SMRF on the ISPRS
+samples and the synthetic terrains), ``"smrf"`` (Pingel et al. 2013) and
+``"pmf"`` (Zhang et al. 2003). All set low
+outliers aside first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
 into a gap-free terrain model and :func:`height_above_ground` reads it back
 at points.
 """
@@ -20,6 +23,7 @@ from ..errors import ConfigError, InputError
 from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
+from .refined_filter import smrf_refined
 from .smrf_filter import smrf, smrf_surface
 
 __all__ = [
@@ -28,6 +32,7 @@ __all__ = [
     "ground_mask",
     "smrf",
     "smrf_surface",
+    "smrf_refined",
     "pmf",
     "pmf_windows",
     "low_outliers",
@@ -37,13 +42,13 @@ __all__ = [
 ]
 
 #: method name -> ground filter ``f(xyz, **params) -> bool mask``.
-GROUND_METHODS = {"smrf": smrf, "pmf": pmf}
+GROUND_METHODS = {"smrf": smrf, "smrf_refined": smrf_refined, "pmf": pmf}
 
 #: per-method default of the shared ``slope`` option.
-_SLOPE_DEFAULTS = {"smrf": 0.15, "pmf": 0.3}
+_SLOPE_DEFAULTS = {"smrf": 0.15, "smrf_refined": 0.15, "pmf": 0.3}
 
 
-def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
+def ground_mask(xyz, *, method: str = "smrf_refined", **params) -> np.ndarray:
     """Ground points of ``xyz`` (N, 3) by ``method`` (see :data:`GROUND_METHODS`).
 
     ``params`` are the method's keyword arguments; unknown ones raise.
@@ -75,12 +80,19 @@ def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
 class GroundConfig:
     """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
 
-    method: Literal["smrf", "pmf"] = field("smrf", "ground filter: smrf (Pingel 2013) or pmf (Zhang 2003)")
+    method: Literal["smrf", "smrf_refined", "pmf"] = field(
+        "smrf_refined", "ground filter: smrf_refined (SMRF + edge extension and optional "
+        "surface cleanup), smrf (Pingel 2013) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
-    slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf, 0.3 for pmf")
+    slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf and smrf_refined, 0.3 for pmf")
     window: float = field(24.0, "smrf: largest opening radius (m); wider objects survive")
     scalar: float = field(1.25, "smrf: extra tolerance (m) per unit of terrain slope")
     threshold: float = field(0.5, "smrf: height tolerance (m) around the provisional terrain")
+    extend: float = field(10.0, "smrf_refined: metres of surface continued beyond the tile edges "
+                                "(point reflection) so slopes rising to an edge are kept")
+    rounds: int = field(0, "smrf_refined: surface-based cleanup rounds")
+    refine_threshold: float = field(0.3, "smrf_refined: height tolerance (m) around the terrain "
+                                          "re-interpolated from the ground points")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -94,11 +106,16 @@ class GroundConfig:
             raise ConfigError(f"ground.method: {self.method!r} is not one of "
                               f"{', '.join(sorted(GROUND_METHODS))}")
         for name in ("cell", "window", "threshold", "max_window", "initial_distance",
-                     "max_distance", "outlier_radius", "outlier_depth", "dtm_cell"):
+                     "max_distance", "refine_threshold", "outlier_radius", "outlier_depth",
+                     "dtm_cell"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"ground.{name}: must be > 0, got {getattr(self, name)!r}")
         if self.slope is not None and not self.slope > 0:
             raise ConfigError(f"ground.slope: must be > 0, got {self.slope!r}")
+        if not self.extend >= 0:
+            raise ConfigError(f"ground.extend: must be >= 0, got {self.extend!r}")
+        if not (isinstance(self.rounds, int) and self.rounds >= 0):
+            raise ConfigError(f"ground.rounds: must be an integer >= 0, got {self.rounds!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 

@@ -24,7 +24,7 @@ __all__ = ["smrf", "smrf_surface"]
 
 
 def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
-                 exclude=None, bounds=None):
+                 exclude=None, bounds=None, extend: float = 0.0):
     """The provisional bare-earth surface of SMRF and the cells judged object.
 
     Steps 1-3 of Pingel et al. (2013): the minimum surface ``ZImin`` (lowest
@@ -42,6 +42,13 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
         Points left out of the minimum surface (low outliers).
     bounds : tuple, optional
         ``(xmin, ymin, xmax, ymax)`` of the grid; default the points' extent.
+    extend : float
+        Metres by which the minimum surface is continued beyond the grid
+        edges, by point reflection (a slope continues as a plane), before the
+        opening; beyond that the outside is left out. With 0 (Pingel's
+        scheme) a slope of gradient ``g`` rising to the tile edge loses a
+        ring of about ``g / slope`` cells to the opening; ``extend`` of that
+        many cells keeps it.
 
     Returns
     -------
@@ -54,6 +61,8 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     """
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window)
+    if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
+        raise InputError(f"extend must be a number >= 0, got {extend!r}")
     pts = xyz if exclude is None else xyz[~np.asarray(exclude, dtype=bool)]
     if len(pts) == 0:
         raise InputError("no points to build a surface from")
@@ -64,12 +73,18 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     empty = np.isnan(zmin)
     zfilled = inpaint(zmin)
     max_radius = max(int(np.ceil(window / cell)), 1)
-    objects = np.zeros(spec.shape, dtype=bool)
+    pad = min(int(np.ceil(extend / cell)), *(n - 1 for n in spec.shape))
+    if pad > 0:
+        zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
+    objects = np.zeros(zfilled.shape, dtype=bool)
     last = zfilled
     for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
         step = last - opened
         objects |= step > np.float32(slope * radius * cell)
         last = opened
+    if pad > 0:
+        objects = objects[pad:-pad, pad:-pad]
+        last = last[pad:-pad, pad:-pad]
     provisional = np.where(objects | empty, np.float32(np.nan), zmin)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
@@ -153,26 +168,47 @@ def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
     >>> bool(ground[z == 0].all()), bool(ground[z == 8].any())
     (True, False)
     """
+    ground, _ = _smrf(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
+                      threshold=threshold, outlier_radius=outlier_radius,
+                      outlier_depth=outlier_depth)
+    return ground
+
+
+def _near_surface(xyz, surface, spec, *, threshold, scalar):
+    """Points within ``threshold + scalar * slope`` of ``surface`` (Pingel et al. 2013, eq. 3).
+
+    ``surface`` (values at cell centres of ``spec``) and its slope are
+    interpolated bilinearly at the points.
+    """
+    grad = gradient_magnitude(surface, spec.cell)
+    weights = bilinear_weights(spec, xyz[:, :2])
+    ref = sample_bilinear(surface, spec, weights=weights)
+    tol = threshold + scalar * sample_bilinear(grad, spec, weights=weights)
+    return np.abs(xyz[:, 2] - ref) <= tol
+
+
+def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
+          extend=0.0, **extra):
+    """SMRF's ground mask and low-outlier mask; ``extend`` as in :func:`smrf_surface`.
+
+    ``extra`` holds further positive parameters of the caller to validate with these.
+    """
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window, threshold=threshold,
-                    outlier_radius=outlier_radius, outlier_depth=outlier_depth)
+                    outlier_radius=outlier_radius, outlier_depth=outlier_depth, **extra)
     if not scalar >= 0:
         raise InputError(f"scalar must be >= 0, got {scalar!r}")
     n = len(xyz)
     if n == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
     outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
                 if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
     if outliers.all():
-        return np.zeros(n, dtype=bool)
+        return np.zeros(n, dtype=bool), outliers
     surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
-                                    exclude=outliers)
-    grad = gradient_magnitude(surface, cell)
-    weights = bilinear_weights(spec, xyz[:, :2])
-    ref = sample_bilinear(surface, spec, weights=weights)
-    tol = threshold + scalar * sample_bilinear(grad, spec, weights=weights)
-    ground = np.abs(xyz[:, 2] - ref) <= tol
+                                    exclude=outliers, extend=extend)
+    ground = _near_surface(xyz, surface, spec, threshold=threshold, scalar=scalar)
     ground &= ~outliers
     logger.debug("smrf: %d of %d points ground, %d low outliers", int(ground.sum()), n,
                  int(outliers.sum()))
-    return ground
+    return ground, outliers

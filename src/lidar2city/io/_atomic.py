@@ -18,7 +18,7 @@ from pathlib import Path
 from ..errors import FileFormatError, Lidar2CityError
 
 __all__ = ["atomic_path", "check_input_file", "check_output_path", "make_output_dir",
-           "begin_run", "end_run", "remove_run_outputs"]
+           "begin_run", "end_run", "remove_run_outputs", "scratch_path"]
 
 #: temporary files being written by this process
 _PENDING: set = set()
@@ -66,6 +66,23 @@ def remove_run_outputs() -> list[str]:
         _RUN["files"].clear()
         _RUN["dirs"].clear()
     return removed
+
+
+@contextlib.contextmanager
+def scratch_path(path):
+    """Yield ``path``, a scratch file (never an output) removed at the end of the block.
+
+    While the block runs the file is registered as being written, so that a
+    failed or interrupted run removes it too (:func:`remove_run_outputs`).
+    """
+    path = Path(path)
+    _PENDING.add(path)
+    try:
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        _PENDING.discard(path)
 
 
 def _reason(exc) -> str:

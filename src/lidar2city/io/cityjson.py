@@ -266,8 +266,11 @@ def cityjson_features(results, *, scale=0.001, xy_unit=1.0, z_unit=1.0, attribut
 def write_cityjson(path, results, **kwargs) -> None:
     """Write a ``.city.json`` file atomically; keywords as :func:`cityjson_document`."""
     doc = cityjson_document(results, **kwargs)
+    # json.dumps runs the C encoder; json.dump streams through the pure-Python one
+    text = json.dumps(doc, separators=(",", ":"))
+    del doc
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
-        json.dump(doc, f, separators=(",", ":"))
+        f.write(text)
 
 
 def write_cityjsonseq(path, results, *, origin, crs=None, xy_unit=1.0, z_unit=1.0, scale=0.001,

@@ -254,7 +254,7 @@ class TileReader:
             with _reading(t.path), laspy.open(t.path) as f:
                 if "classification" not in f.header.point_format.dimension_names:
                     continue
-                for chunk in f.chunk_iterator(1_000_000):
+                for chunk in f.chunk_iterator(READ_CHUNK):
                     if np.isin(np.asarray(chunk.classification), classes).any():
                         return True
         return False
@@ -263,20 +263,9 @@ class TileReader:
         if k in self._tiles:
             self._tiles.move_to_end(k)
             return self._tiles[k]
-        t = read_las(self.tiles[k].path, crs=self.crs)
+        path = self.tiles[k].path
         self.reads += 1
-        las = t.data
-        world = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
-        # snapped to the file's resolution: offset + integer x scale is rounded
-        # differently for different offsets, and tiles cut from one survey may
-        # carry different offsets
-        scales = np.asarray(las.header.scales, dtype=np.float64)
-        world = np.round(world / scales) * scales
-        if not np.isfinite(world).all():
-            raise InputError(f"{self.tiles[k].path}: point coordinates contain NaN or infinite values")
-        names = set(las.point_format.dimension_names)
-        attrs = {n: np.asarray(las[n]) for n in POINT_ATTRIBUTES if n in names}
-        self._tiles[k] = (world, attrs)
+        self._tiles[k] = _read_world(path)
         while len(self._tiles) > self.cache:
             self._tiles.popitem(last=False)
         return self._tiles[k]
@@ -291,16 +280,74 @@ class TileReader:
             world, a = self._tile(k)
             inside = ((world[:, 0] >= xmin) & (world[:, 0] <= xmax)
                       & (world[:, 1] >= ymin) & (world[:, 1] <= ymax))
-            parts.append(world[inside])
-            attrs.append({n: v[inside] for n, v in a.items()})
+            idx = np.flatnonzero(inside)
+            del inside
+            parts.append((world, idx))
+            attrs.append({n: v[idx] for n, v in a.items()})
         keys = sorted(set.intersection(*(set(a) for a in attrs))) if attrs else []
-        world = np.concatenate(parts) if parts else np.zeros((0, 3))
         values = {n: np.concatenate([a[n] for a in attrs]) for n in keys}
+        del attrs
         # canonical order: the same points give the same cloud whatever the tiling
-        order = np.lexsort([values[n] for n in reversed(keys)] + [world[:, 2], world[:, 1], world[:, 0]])
-        return PointCloud.from_world(world[order], crs=self.crs, xy_unit=self.xy_unit,
-                                     z_unit=self.z_unit, origin=self.origin,
-                                     attributes={n: v[order] for n, v in values.items()})
+        cols = [np.concatenate([w[i, d] for w, i in parts]) if parts else np.zeros(0)
+                for d in range(3)]
+        order = np.lexsort([values[n] for n in reversed(keys)] + cols[::-1])
+        values = {n: v[order] for n, v in values.items()}
+        # local coordinates, column by column: (world - origin) * scale, as from_world
+        scale = (self.xy_unit, self.xy_unit, self.z_unit)
+        local = np.empty((len(order), 3), dtype=np.float64)
+        for d in range(3):
+            c = cols[d][order]
+            cols[d] = None
+            np.subtract(c, self.origin[d], out=c)
+            np.multiply(c, scale[d], out=c)
+            local[:, d] = c
+        return PointCloud(local, self.origin.copy(), self.crs, self.xy_unit, self.z_unit, values)
+
+
+#: points decoded at a time when a tile is read for :class:`TileReader`
+READ_CHUNK = 262_144
+
+
+def _read_world(path, *, chunk: int = READ_CHUNK):
+    """``(world xyz (N, 3), {name: values})`` of a tile, decoded ``chunk`` points at a time.
+
+    Only the coordinates and :data:`POINT_ATTRIBUTES` are kept (never the
+    whole point record), written into arrays allocated once. Coordinates are
+    snapped to the file's resolution: offset + integer x scale is rounded
+    differently for different offsets, and tiles cut from one survey may
+    carry different offsets.
+    """
+    import laspy
+
+    p = check_input_file(path)
+    with _reading(p):  # laspy log silenced, any read error one line
+        with laspy.open(p) as f:
+            n = int(f.header.point_count)
+            scales = np.asarray(f.header.scales, dtype=np.float64)
+            names = [d for d in POINT_ATTRIBUTES if d in set(f.header.point_format.dimension_names)]
+            world = np.empty((n, 3), dtype=np.float64)
+            attrs: dict = {}
+            i = 0
+            for pts in f.chunk_iterator(chunk):
+                m = min(len(pts), n - i)
+                for d, axis in enumerate("xyz"):
+                    world[i:i + m, d] = np.asarray(pts[axis])[:m]
+                for d in names:
+                    v = np.asarray(pts[d])[:m]
+                    if d not in attrs:
+                        attrs[d] = np.empty(n, dtype=v.dtype)
+                    attrs[d][i:i + m] = v
+                i += m
+    if i < n:
+        world = world[:i].copy()
+    attrs = {d: (attrs[d][:i].copy() if i < n else attrs[d]) if d in attrs
+             else np.zeros(i, dtype=np.uint8) for d in names}
+    np.divide(world, scales, out=world)
+    np.round(world, out=world)
+    np.multiply(world, scales, out=world)
+    if not np.isfinite(world).all():
+        raise InputError(f"{path}: point coordinates contain NaN or infinite values")
+    return world, attrs
 
 
 def with_neighbours(cloud, neighbours, *, buffer=50.0, crs=None):

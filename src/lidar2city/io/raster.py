@@ -8,12 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..crs import unit_factors
-from ..errors import FileFormatError, InputError
+from ..errors import CRSError, EmptyInputError, FileFormatError, InputError
 from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Raster", "read_raster", "write_raster"]
+__all__ = ["Raster", "read_raster", "write_raster", "check_surface", "check_same_grid"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +114,42 @@ def read_raster(path, *, bands=None, crs=None) -> Raster:
         mask &= np.isfinite(arr)
         arr = np.where(mask, arr, np.nan)
     return Raster(arr, transform, resolved, mask)
+
+
+def check_surface(raster: Raster, name) -> Raster:
+    """A DSM / DTM input must carry a CRS and hold at least one valid pixel.
+
+    Raises
+    ------
+    CRSError
+        No CRS (outputs must carry one; pass a raster with its CRS).
+    EmptyInputError
+        Every pixel is nodata.
+    """
+    if raster.crs is None:
+        raise CRSError(f"{str(name)!r} has no CRS; write the raster with its CRS (e.g. "
+                       "gdal_edit.py -a_srs EPSG:xxxx)")
+    valid = raster.mask if raster.mask is not None else np.isfinite(raster.array)
+    if not np.any(valid):
+        raise EmptyInputError(f"{str(name)!r} holds no valid pixel (all nodata)")
+    return raster
+
+
+def check_same_grid(ref: Raster, other: Raster, what) -> None:
+    """``other`` must lie on ``ref``'s grid (shape and transform) and in its CRS.
+
+    Raises
+    ------
+    InputError
+    """
+    if ref.shape != other.shape or not np.allclose(tuple(ref.transform)[:6],
+                                                   tuple(other.transform)[:6]):
+        raise InputError(f"{what} is not on the DSM's grid (shape {other.shape} vs {ref.shape}, "
+                         f"transform {tuple(other.transform)[:6]} vs {tuple(ref.transform)[:6]}); "
+                         "resample it onto the DSM grid first")
+    if ref.crs is not None and other.crs is not None and \
+            not ref.crs.equals(other.crs, ignore_axis_order=True):
+        raise InputError(f"{what} is in {other.crs.name}, the DSM in {ref.crs.name}")
 
 
 def write_raster(path, raster: Raster, *, nodata=-9999.0, dtype="float32") -> None:

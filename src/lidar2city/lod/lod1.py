@@ -49,9 +49,9 @@ class Lod1Config:
     min_points: int = field(10, "Building points needed inside a footprint.")
     min_height: float = field(0.5, "Smallest roof height above ground (m) for a model.")
     lod13_cell: float = field(0.5, "Raster cell (m) of the LoD1.3 height regions.")
-    lod13_step: float = field(3.0, "Height jump (m) between neighbouring cells that splits "
-                              "LoD1.3 parts.")
-    lod13_min_area: float = field(10.0, "LoD1.3 parts smaller than this (m2) join a neighbour.")
+    lod13_step: float = field(2.0, "Height difference (m) between the heights of neighbouring "
+                              "roof surfaces at or above which they are separate LoD1.3 parts.")
+    lod13_min_area: float = field(5.0, "LoD1.3 parts smaller than this (m2) join a neighbour.")
     coverage_cell: float = field(1.0, "Cell (m) for the share of the footprint without points.")
     precision: float = field(0.001, "Vertex grid (m): footprints are snapped to it so the "
                              "written (quantised) model is the validated one.")

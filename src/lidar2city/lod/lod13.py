@@ -1,17 +1,19 @@
 """LoD1.3: split a footprint into parts of similar roof height.
 
 The building points' heights are rasterised inside the footprint; cells are
-grown into regions across 4-neighbours whose heights differ by less than a
-step threshold (a pitched roof stays one region, a step between a tower and
-an annex splits); small regions join the neighbour they share the longest
-border with; the regions are polygonised, their shared borders simplified
+grown into continuous surfaces across 4-neighbours whose heights differ by at
+most the rise of a 63 degree roof over one cell (a pitched roof stays one
+surface, a wall between a tower and an annex splits); neighbouring surfaces
+whose heights (70th percentile of their cells, as the parts' prisms) differ by
+less than a step merge, closest pair first, so parts follow the roof's actual
+height jumps rather than its slopes (the LoD1.3 of 3DBAG's roofer merges its
+roof faces the same way); small regions join the neighbour they share the
+longest border with; the regions are polygonised, their shared borders simplified
 as a coverage (so neighbours keep identical edges) and clipped to the
 footprint, so the parts tile it exactly: no gap, no overlap, shared walls.
 """
 
 from __future__ import annotations
-
-import warnings
 
 import numpy as np
 
@@ -88,8 +90,61 @@ def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
     return lab
 
 
-def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
-                   min_area: float = 10.0):
+def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
+    """Merge neighbouring regions whose heights differ by less than ``step``.
+
+    A region's height is the ``percentile`` of its cells' heights (as the
+    parts' prisms); the closest pair of neighbours merges first and the merged
+    region's height is measured again, until every pair of neighbours differs
+    by ``step`` or more.
+    """
+    lab = labels.copy()
+    cells = np.flatnonzero(mask.ravel())
+    height = np.zeros(lab.max() + 1)
+    while True:
+        la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
+        diff = la != lb
+        if not diff.any():
+            return lab
+        k, z = lab[cells], hv[cells]
+        order = np.lexsort((z, k))
+        k, z = k[order], z[order]
+        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+        # linear-interpolated percentile of each region's sorted heights (as np.percentile)
+        pos = starts + (np.diff(np.r_[starts, len(k)]) - 1) * (percentile / 100.0)
+        lo = np.floor(pos).astype(np.int64)
+        hi = np.minimum(lo + 1, len(z) - 1)
+        height[k[starts]] = z[lo] + (z[hi] - z[lo]) * (pos - lo)
+        edges = np.unique(np.sort(np.column_stack([la[diff], lb[diff]]), axis=1), axis=0)
+        gaps = np.abs(height[edges[:, 0]] - height[edges[:, 1]])
+        best = int(np.argmin(gaps))  # first of the smallest: deterministic
+        if gaps[best] >= step:
+            return lab
+        a, b = edges[best]
+        lab[lab == b] = a
+
+
+def _cell_boxes(r, c, x0, y_top, cell):
+    """shapely boxes of the cells at rows ``r``, columns ``c`` (rows from the top)."""
+    import shapely
+
+    return shapely.box(x0 + c * cell, y_top - (r + 1) * cell, x0 + (c + 1) * cell, y_top - r * cell)
+
+
+def _touched_cells(footprint, x0, y_top, cell, rows, cols):
+    """Boolean raster (rows, cols) of the cells whose interior meets the footprint."""
+    import shapely
+
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
+    shapely.prepare(footprint)
+    hit = shapely.intersects(footprint, boxes)
+    hit[hit] &= ~shapely.touches(footprint, boxes[hit])
+    return hit.reshape(rows, cols)
+
+
+def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
+                   min_area: float = 5.0):
     """Label raster of roof-height regions inside a footprint.
 
     Parameters
@@ -101,8 +156,8 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     cell : float
         Raster cell (metres); about twice the point spacing.
     step : float
-        Height difference (metres) between neighbouring cells that separates
-        two regions.
+        Height difference (metres) between the heights of two neighbouring
+        surfaces at or above which they stay separate regions.
     min_area : float
         Regions smaller than this (m2) join a neighbour.
 
@@ -114,7 +169,6 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
         Raster georeferencing (local metres, north up).
     """
     from affine import Affine
-    from rasterio.features import rasterize
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -125,10 +179,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     rows = int(np.ceil((y1 - y0) / cell)) + 1
     y_top = y0 + rows * cell
     transform = Affine(cell, 0.0, x0, 0.0, -cell, y_top)  # north up, rows from the top
-    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        mask = rasterize([(footprint, 1)], out_shape=(rows, cols), transform=transform,
-                         all_touched=True, fill=0, dtype="uint8").astype(bool)
+    mask = _touched_cells(footprint, x0, y_top, cell, rows, cols)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     c = np.clip(np.floor((xyz[:, 0] - x0) / cell).astype(np.int64), 0, cols - 1)
     r = np.clip(np.floor((y_top - xyz[:, 1]) / cell).astype(np.int64), 0, rows - 1)
@@ -141,10 +192,12 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     h = h[ir, ic]
     pairs = _neighbour_pairs((rows, cols), mask)
     hv = h.ravel()
-    ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) < step
+    # continuous surfaces: neighbours within the rise of a 63 degree roof (2 x cell)
+    ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) <= 2.0 * cell
     n = rows * cols
     graph = coo_matrix((np.ones(int(ok.sum())), (pairs[ok, 0], pairs[ok, 1])), shape=(n, n))
     _, lab = connected_components(graph, directed=False)
+    lab = _merge_by_height(lab, pairs, mask, hv, step)
     lab = _merge_small(lab, pairs, mask, max(1, int(np.ceil(min_area / (cell * cell)))))
     lab = np.where(mask.ravel(), lab, -1).reshape(rows, cols)
     # compact labels 0..k-1
@@ -154,7 +207,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 3.0,
     return out, transform
 
 
-def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 3.0, min_area: float = 10.0,
+def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 2.0, min_area: float = 5.0,
                  grid: float = 0.0):
     """Polygons tiling ``footprint``, one per roof-height region.
 
@@ -177,20 +230,16 @@ def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 3.0, min_ar
         A single part is the footprint itself.
     """
     import shapely
-    from rasterio.features import shapes
 
     labels, transform = height_regions(footprint, xyz, cell=cell, step=step, min_area=min_area)
     k = int(labels.max()) + 1
     if k <= 1:
         return [footprint]
-    polys = [[] for _ in range(k)]
-    with warnings.catch_warnings():  # rasterio's own use of affine's deprecated `*`
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        found = list(shapes(labels.astype(np.int32), mask=labels >= 0, transform=transform,
-                            connectivity=4))
-    for geom, value in found:
-        polys[int(value)].append(shapely.geometry.shape(geom))
-    regions = [shapely.union_all(p) if len(p) > 1 else p[0] for p in polys if p]
+    # each region: the union of its cells (they tile it: a coverage union)
+    r, c = np.nonzero(labels >= 0)
+    lab = labels[r, c]
+    boxes = _cell_boxes(r, c, transform.c, transform.f, cell)
+    regions = [shapely.coverage_union_all(boxes[lab == v]) for v in range(k)]
     regions = list(shapely.coverage_simplify(np.array(regions, dtype=object), 0.75 * cell,
                                              simplify_boundary=False))
     gs = grid if grid > 0 else None

@@ -54,12 +54,10 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
         direction follows the right-hand rule on the ring order.
     """
     p = np.asarray(points, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    return np.array([
-        np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
-        np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
-        np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1])),
-    ])
+    q = np.concatenate([p[1:], p[:1]])  # the next vertex (np.roll without its overhead)
+    d, s = p - q, p + q
+    return np.array([np.sum(d[:, 1] * s[:, 2]), np.sum(d[:, 2] * s[:, 0]),
+                     np.sum(d[:, 0] * s[:, 1])])
 
 
 def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -77,8 +75,8 @@ def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _fan_ok(p2: np.ndarray) -> bool:
     """True when a single 2-D ring (CCW) is strictly convex, so a fan triangulates it."""
-    d1 = np.roll(p2, -1, axis=0) - p2
-    d2 = np.roll(d1, -1, axis=0)
+    d1 = np.concatenate([p2[1:], p2[:1]]) - p2  # np.roll(p2, -1) without its overhead
+    d2 = np.concatenate([d1[1:], d1[:1]])
     cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
     return bool(np.all(cross > 0))
 

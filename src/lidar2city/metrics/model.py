@@ -77,7 +77,7 @@ def _unique_edges(tris):
     return np.unique(e.reshape(len(e), 6), axis=0).reshape(-1, 2, 3)
 
 
-def _brute(points, tris, chunk_pairs=2_000_000):
+def _brute(points, tris, chunk_pairs=262_144):
     """Exact nearest distance over all triangles (dense, via matrix products).
 
     The nearest point of a mesh is either the orthogonal projection on a

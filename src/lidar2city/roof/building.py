@@ -10,6 +10,8 @@ import numpy as np
 
 from ..config import field
 from ..errors import ConfigError, FitError
+from ..validate.solid import check_solid
+from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
 from .solid import partition_solid
@@ -18,6 +20,9 @@ from .topology import roof_partition
 logger = logging.getLogger(__name__)
 
 __all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes", "roof_type"]
+
+
+TOPOLOGY_METHODS = ("arrangement", "grid")
 
 
 @dataclass(frozen=True)
@@ -42,11 +47,19 @@ class Lod22Config:
     snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
     snake_cell: float = field(0.5, "Snake grid step as a fraction of the label grid cell.")
     snake_window: int = field(3, "Snake half-window w: (2w+1)^2 candidate positions per vertex.")
+    min_edge: float = field(1.5, "Roof edges shorter than this many label cells are collapsed "
+                            "(their ends merge) where the partition stays valid; 0 keeps them.")
+    topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
+                          "intersection lines and direction-snapped step lines, noded and labelled) "
+                          "or 'grid' (label-grid chains simplified, then the snake).")
 
     def __post_init__(self):
         for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"lod22.{name}: must be > 0, got {getattr(self, name)}")
+        if self.topology not in TOPOLOGY_METHODS:
+            raise ConfigError(f"lod22.topology: must be one of {sorted(TOPOLOGY_METHODS)}, "
+                              f"got {self.topology!r}")
         if self.cell is not None and self.cell <= 0:
             raise ConfigError(f"lod22.cell: must be > 0, got {self.cell}")
 
@@ -214,15 +227,17 @@ def _nonmanifold_points(solid):
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
-    longest-shared neighbour's plane, until the shell is 2-manifold."""
+    longest-shared neighbour's plane, until the shell is 2-manifold.
+
+    Returns ``(solid, relabelled)``, the number of faces that took another plane."""
     import shapely
 
     face_labels = np.array(face_labels, copy=True)
-    for _ in range(max_rounds):
+    for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
         bad = _nonmanifold_points(solid)
         if not len(bad):
-            return solid
+            return solid, r
         p = bad[0]
         at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
@@ -232,9 +247,9 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
                  for j in range(len(faces)) if j != victim and face_labels[j] != face_labels[victim]]
         neigh = [t for t in neigh if t[0] > 0]
         if not neigh:
-            return solid
+            return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height), max_rounds
 
 
 def _parts(footprint):
@@ -284,13 +299,24 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     solids, attrs = [], {}
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes = [], []
-    for poly in _parts(footprint):
+    parts = _parts(footprint)
+    skipped = 0
+    for poly in parts:
         near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
         pts = xyz[near]
         if len(pts) < 3:
             raise FitError(f"too few points on the roof ({len(pts)})")
+        centred = pts[:, :2] - pts[:, :2].mean(axis=0)
+        if np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(len(pts)) < 0.01:
+            raise FitError(f"the {len(pts)} roof points lie on one line: no roof surface between them")
         spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
         cell = cfg.cell or float(np.clip(spacing, 0.25, 1.0))
+        if poly.area < cell * cell:
+            if len(parts) > 1:
+                skipped += 1  # a sliver beside the building's other parts
+                continue
+            raise FitError(f"footprint smaller than one label cell ({poly.area:.3f} m2 < "
+                           f"{cell:.2f} m x {cell:.2f} m)")
         labels, planes = segment_planes(pts, dist_tol=cfg.dist_tol, angle_tol=cfg.angle_tol,
                                         min_area=cfg.min_facet_area, merge_angle=cfg.merge_angle)
         if len(planes) == 0:
@@ -300,25 +326,32 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         d = _direction(poly) if direction is None else direction
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
-        part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
-        faces, face_labels = part.faces, part.face_labels
-        if cfg.snake:
-            faces, info_snake = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
-                                              direction=d, window=cfg.snake_window)
-            type4 += info_snake.get("IV", 0)
-            snake_fallbacks += bool(info_snake.get("snake_fallback"))
-        faces, info = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
-                                       max_shift=cfg.max_shift)
+        methods = ("arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
+        for method in methods:
+            try:
+                solid, faces, face_labels, planes_k, info = _part_solid(
+                    method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg)
+            except (FitError, ValueError, shapely.errors.GEOSException) as exc:
+                if method == methods[-1]:
+                    raise
+                logger.debug("%s roof topology failed (%s); trying the next", method, exc)
+                continue
+            if method == methods[-1] or (_closed_shell(solid) and not check_solid(solid)):
+                break
+            logger.debug("%s roof topology gave an invalid solid; trying the next", method)
+        solids.append(solid)
         n_int += info["intersection"]
         n_step += info["step"]
         moved += info["moved"]
-        faces, face_labels = _clean_faces(faces, face_labels)
-        face_labels, planes = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height,
-                                             pts)
-        solids.append(_manifold_solid(faces, face_labels, planes, ground_z, cfg.min_height / 2))
+        type4 += info.get("IV", 0)
+        snake_fallbacks += bool(info.get("snake_fallback"))
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
-        roof_planes += [planes[k] for k in face_labels]
+        roof_planes += [planes_k[k] for k in face_labels]
+    if not solids:
+        raise FitError(f"every footprint part is smaller than one label cell ({skipped} parts)")
+    if skipped:
+        attrs["skipped_parts"] = skipped
     main = roof_planes[int(np.argmax(roof_areas))]
     zmax = max(float(s.vertices[:, 2].max()) for s in solids)
     attrs.update(
@@ -334,6 +367,55 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         lod22_time=round(time.perf_counter() - t0, 4),
     )
     return Lod22Result(solids, attrs)
+
+
+def _closed_shell(solid) -> bool:
+    """Every edge of the solid used exactly twice, in opposite directions (a closed,
+    2-manifold, consistently oriented shell: the cheap part of a val3dity check)."""
+    rings = [np.asarray(r) for s in solid.surfaces for r in s.rings]
+    a = np.concatenate(rings)
+    b = np.concatenate([np.roll(r, -1) for r in rings])
+    keep = a != b
+    a, b = a[keep], b[keep]
+    directed = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)[1]
+    und = np.unique(np.sort(np.column_stack([a, b]), axis=1), axis=0, return_counts=True)[1]
+    return bool(np.all(directed == 1) and np.all(und == 2))
+
+
+def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg):
+    """The solid of one footprint polygon by one roof partition method.
+
+    Returns ``(solid, faces, face_labels, planes, info)``; raises FitError when
+    a roof stays below the floor.
+    """
+    info = {}
+    if method == "arrangement":
+        faces, face_labels, _ = arrangement_partition(
+            poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
+            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle)
+    else:
+        part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
+        faces, face_labels = part.faces, part.face_labels
+        if cfg.snake:
+            faces, info = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
+                                        direction=direction, window=cfg.snake_window)
+    faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
+                                      max_shift=cfg.max_shift)
+    info = {**info, **refined}
+    variants = [(faces, face_labels)]
+    if method == "arrangement" and cfg.min_edge > 0:
+        collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
+        if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
+            variants.insert(0, (collapsed, face_labels[kept]))
+    for faces, face_labels in variants:
+        # collapsing short edges can pinch faces at different heights into a saddle; the
+        # uncollapsed partition is used then rather than a face taking a neighbour's plane
+        faces, face_labels = _clean_faces(faces, face_labels)
+        face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2)
+        if not relabelled:
+            break
+    return solid, faces, face_labels, planes_f, info
 
 
 def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):

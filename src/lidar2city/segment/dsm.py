@@ -440,10 +440,12 @@ def _remove_small(mask, min_px):
 class RoofRegionsConfig:
     """Options of :func:`roof_regions` (stage ``dsm_roofs``)."""
 
-    min_height: float = field(2.5, "nDSM threshold (m): lower objects are not buildings")
+    min_height: float = field(2.0, "nDSM threshold (m): lower objects are not buildings")
     max_step: float = field(0.5, "largest height difference (m) between 4-neighbours inside "
                                  "one roof region")
-    min_area: float = field(30.0, "smallest roof region (m2)")
+    min_area: float = field(10.0, "smallest roof region (m2)")
+    min_pixels: int = field(8, "smallest roof region (pixels): on coarse rasters a few pixels "
+                               "cannot hold a shape (8 pixels = 32 m2 at 2 m)")
     expand: float = field(2.0, "regions grow by this distance (m) into the remaining elevated "
                                "pixels (blurred eaves and walls)")
     max_hole_area: float = field(12.0, "holes up to this area (m2) are filled; larger ones are "
@@ -455,7 +457,11 @@ class RoofRegionsConfig:
                                      "least min_area each, separated by a saddle at least this "
                                      "deep (m), is split at the saddle (a tree crown or a "
                                      "neighbour reached by the growing); 0 disables")
-    edge_fraction: float = field(0.5, "after growing, a region keeps the pixels whose nDSM "
+    edge_inset: float = field(0.5, "region pixels whose centre lies within this distance (m) of "
+                                  "the regions' outer edge are dropped (the highest point per "
+                                  "cell overstates a roof by half a cell on average, and eaves "
+                                  "overhang the walls; 0: off)")
+    edge_fraction: float = field(0.2, "after growing, a region keeps the pixels whose nDSM "
                                       "reaches this fraction of its roof height (the upper "
                                       "quartile of its nDSM): the edge of a blurred step lies "
                                       "at half its height; 0 disables the trimming")
@@ -581,9 +587,41 @@ def trim_to_edges(labels, ndsm, *, fraction=0.5, roof_quantile=75.0):
     return out
 
 
-def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0.5,
-                 min_area=30.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
-                 saddle_depth=1.0, edge_fraction=0.5):
+def inset_regions(labels, *, cell, inset):
+    """Drop the region pixels whose centre lies within ``inset`` metres of the regions' outer edge.
+
+    A DSM that keeps the highest point of each cell marks a cell as roof as
+    soon as one roof point falls in it, so its building regions reach on
+    average half a cell beyond the walls (and eaves overhang the walls the
+    footprints are drawn on). The pixel edge between a region and the
+    background is the region's edge; a pixel ``k`` steps along rows and
+    columns from the nearest background pixel lies ``(k - 1/2) cell`` inside
+    it. Edges shared by two touching regions are not moved. With ``inset``
+    below half a cell nothing changes: the default 0.5 m drops one ring of
+    pixels from 0.5 m and 1 m grids, and nothing from coarser (blurred) ones.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, > 0 regions.
+    cell : float
+        Pixel size (m).
+    inset : float
+        Distance (m), >= 0.
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        The labels with the inset pixels set to 0.
+    """
+    lab = np.asarray(labels)
+    dist = ndimage.distance_transform_cdt(lab > 0, metric="taxicab")
+    return np.where((dist - 0.5) * float(cell) > float(inset) + 1e-9, lab, 0)
+
+
+def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
+                 min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
+                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -591,12 +629,14 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     heights differ by at most ``max_step`` join. Roofs are piecewise smooth,
     so each becomes one region, separated from neighbouring buildings of
     another height and from tree crowns, whose rough surfaces break into
-    fragments smaller than ``min_area`` and are dropped. Regions then grow by
+    fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped. Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM), are split where they hold several summits separated by
     saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
-    half their roof height (:func:`trim_to_edges` with ``edge_fraction``),
-    small holes are filled and large ones kept as courtyards.
+    a share of their roof height (:func:`trim_to_edges` with
+    ``edge_fraction``), small holes are filled and large ones kept as
+    courtyards, and their outer edges are moved in by ``edge_inset`` metres
+    (:func:`inset_regions`: the highest point per cell overstates roofs).
 
     Parameters
     ----------
@@ -620,12 +660,14 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     cell = _check_cell(cell)
     if dsm.shape != ndsm.shape:
         raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
-    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0:
-        raise InputError("max_step must be > 0; min_area, expand, max_hole_area >= 0")
+    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0:
+        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels >= 0")
     if not 0 <= edge_fraction < 1:
         raise InputError(f"edge_fraction must be in [0, 1), got {edge_fraction}")
     if saddle_depth < 0:
         raise InputError(f"saddle_depth must be >= 0, got {saddle_depth}")
+    if edge_inset < 0:
+        raise InputError(f"edge_inset must be >= 0, got {edge_inset}")
     elevated = np.isfinite(ndsm) & np.isfinite(dsm) & (ndsm > min_height)
     if vegetation is not None:
         vegetation = np.asarray(vegetation, dtype=bool)
@@ -635,7 +677,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
     lab = _smooth_components(np.where(elevated, dsm, np.nan), elevated, max_step) + 1
     lab[~elevated] = 0
     sizes = np.bincount(lab.ravel())
-    keep = sizes >= max(1, int(np.ceil(min_area / cell**2)))
+    min_px = max(1, int(min_pixels), int(np.ceil(min_area / cell**2)))
+    keep = sizes >= min_px
     keep[0] = False
     if roughness_threshold > 0 and keep.any():
         rough = roughness(ndsm)
@@ -651,7 +694,7 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
         lab = np.where(elevated, grown, 0)
     if saddle_depth > 0:
         lab, _ = split_at_saddles(lab, ndsm, depth=saddle_depth,
-                                  min_pixels=max(1, int(np.ceil(min_area / cell**2))))
+                                  min_pixels=min_px)
     if edge_fraction > 0:
         lab = trim_to_edges(lab, ndsm, fraction=edge_fraction)
     # fill small holes region by region (courtyards stay)
@@ -667,6 +710,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.5, max_step=0
             # a hole takes the label of its neighbouring region
             near = expand_labels(lab, distance=2.0)
             lab = np.where(fill, near, lab)
+    if edge_inset > 0:
+        lab = inset_regions(lab, cell=cell, inset=edge_inset)
     # touching regions stay apart (no re-labelling of connected components)
     ids = np.unique(lab[lab > 0])
     remap = np.zeros(lab.max() + 1, dtype=np.int32)

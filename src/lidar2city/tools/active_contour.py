@@ -15,15 +15,6 @@ __all__ = ["load_scene_inputs", "reference_mask", "footprints_active_contour", "
            "resolve_weights", "scoring_domain"]
 
 
-def _same_grid(a, b, what):
-    if a.shape != b.shape or not np.allclose(tuple(a.transform)[:6], tuple(b.transform)[:6]):
-        raise InputError(f"{what} is not on the DSM's grid (shape {b.shape} vs {a.shape}, "
-                         f"transform {tuple(b.transform)[:6]} vs {tuple(a.transform)[:6]}); "
-                         "resample it onto the DSM grid first")
-    if a.crs is not None and b.crs is not None and not a.crs.equals(b.crs, ignore_axis_order=True):
-        raise InputError(f"{what} is in {b.crs.name}, the DSM in {a.crs.name}")
-
-
 def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     """Read a DSM, its DTM (or derive one) and an optional orthoimage on the same grid.
 
@@ -38,11 +29,12 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     InputError
         Grids differ, or no DTM is given and none can be derived.
     """
-    from ..io.raster import read_raster
+    from ..io.raster import check_same_grid, check_surface, read_raster
 
     d = read_raster(dsm)
     if d.array.ndim != 2:
         raise InputError(f"{str(dsm)!r}: the DSM must have one band")
+    check_surface(d, dsm)
     from ..crs import unit_factors
 
     z_unit = unit_factors(d.crs)[1]
@@ -57,13 +49,14 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
         logger.info("no DTM given: derived one from the DSM")
     else:
         t = read_raster(dtm)
-        _same_grid(d, t, f"DTM {str(dtm)!r}")
+        check_same_grid(d, t, f"DTM {str(dtm)!r}")
+        check_surface(t, dtm)
         ground = t.array * z_unit
     ndsm = zs - ground
     o = None
     if ortho is not None:
         orr = read_raster(ortho)
-        _same_grid(d, orr, f"orthoimage {str(ortho)!r}")
+        check_same_grid(d, orr, f"orthoimage {str(ortho)!r}")
         o = np.asarray(orr.array, dtype=np.float64)
     return {"raster": d, "dsm": zs, "ndsm": ndsm, "ortho": o, "cell": cell}
 
@@ -133,21 +126,30 @@ def footprints_active_contour(dsm, *, output, dtm=None, ortho=None, weights=None
     return {"buildings": len(polys), "weights": used, "output": str(output)}
 
 
-def scoring_domain(reference_mask, objects, kind="reference", *, buffer=5) -> np.ndarray:
+def scoring_domain(reference_mask, objects, kind="reference", *, cell, buffer=10.0,
+                   edge_margin=6.0, piece_distance=6.0) -> np.ndarray:
     """The pixels a reference footprint set is scored on.
 
     ``"reference"`` (:func:`~lidar2city.contour.raster.reference_neighbourhood_domain`):
-    ``buffer`` pixels around the reference buildings, minus the above-ground
-    pieces holding no reference pixel -- for reference sets that leave out
-    buildings inside their extent. ``"bbox"``
-    (:func:`~lidar2city.contour.raster.evaluation_domain`): the reference's
-    bounding box, minus a border margin and the objects cut by the raster edge
-    -- for complete reference sets.
+    ``buffer`` metres around the reference buildings, minus the above-ground
+    pieces (cut at necks, centres ``piece_distance`` metres apart) holding no
+    reference pixel -- for reference sets that leave out buildings inside
+    their extent. ``"bbox"`` (:func:`~lidar2city.contour.raster.evaluation_domain`):
+    the reference's bounding box, minus a border margin and the objects cut by
+    the raster edge -- for complete reference sets. Lengths are in metres
+    (``cell`` is the pixel size), so rasters of any resolution are scored on
+    the same ground: on a 2 m raster these are the 5, 3 and 3 pixels of the
+    first protocol.
     """
     from ..contour.raster import evaluation_domain, reference_neighbourhood_domain
 
+    if not cell > 0:
+        raise InputError(f"cell must be > 0, got {cell!r}")
     if kind == "reference":
-        return reference_neighbourhood_domain(reference_mask, objects, buffer=buffer)
+        return reference_neighbourhood_domain(
+            reference_mask, objects, buffer=buffer / cell,
+            edge_margin=int(round(edge_margin / cell)),
+            min_distance=max(1, int(round(piece_distance / cell))))
     if kind == "bbox":
         return evaluation_domain(reference_mask, objects)
     raise InputError(f"unknown scoring domain {kind!r}; expected 'reference' or 'bbox'")
@@ -155,7 +157,7 @@ def scoring_domain(reference_mask, objects, kind="reference", *, buffer=5) -> np
 
 def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30, generations=15,
          n_jobs=1, objective="cost", config=None, figure=None, callback=None,
-         domain="reference") -> dict:
+         domain="reference", scale="log") -> dict:
     """Learn the five weights on a DSM with reference footprints; write them as TOML.
 
     The cost is scored on :func:`scoring_domain` ``domain``: by default the
@@ -179,11 +181,11 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
     ref = reference_mask(reference, inp["raster"])
     objects = np.nan_to_num(inp["ndsm"], nan=0.0) > cfg.min_height
     kind = domain
-    domain = scoring_domain(ref, objects, kind)
+    domain = scoring_domain(ref, objects, kind, cell=inp["cell"])
     weights, history = tune_weights(inp["dsm"], inp["ndsm"], ref, ortho=inp["ortho"], cell=inp["cell"],
                                     domain=domain, config=cfg, population=population,
                                     generations=generations, seed=seed, n_jobs=n_jobs,
-                                    objective=objective, callback=callback)
+                                    objective=objective, scale=scale, callback=callback)
     cost = history[-1]["best_cost"] if history else float("nan")
     # the defaults' cost on the same pixels: tuning must not be worse
     from ..contour.outlines import prepare_scene
@@ -199,7 +201,7 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
         weights, cost = default, default_cost
     write_weights(output, weights, metadata={
         "objective": objective, "cost": round(cost, 6), "default_cost": round(default_cost, 6),
-        "seed": seed, "domain": kind,
+        "seed": seed, "domain": kind, "scale": scale,
         "population": population, "generations": len(history) - 1,
         "stopped": "converged" if history and history[-1]["same"] >= 0.95 else "generations",
         "dsm": str(dsm), "reference": str(reference)})

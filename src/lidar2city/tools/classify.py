@@ -62,6 +62,7 @@ def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str 
         cloud.xyz, ground,
         return_number=cloud.get("return_number"),
         number_of_returns=cloud.get("number_of_returns"),
+        intensity=cloud.get("intensity"),
         rgb=rgb, config=cfg,
     )
 

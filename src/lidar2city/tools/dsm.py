@@ -21,7 +21,7 @@ from ..config import field
 from ..datamodel import BuildingResult
 from ..errors import EmptyInputError, FitError, InputError
 from ..fit.polygon import PolygonFitConfig, fit_building_outline, region_polygon
-from ..io.raster import Raster, read_raster, write_raster
+from ..io.raster import Raster, check_same_grid, check_surface, read_raster, write_raster
 from ..lod.prism import lod12_solids
 from ..segment.dsm import (
     BuildingMaskConfig,
@@ -175,14 +175,12 @@ def _read_inputs(dsm, dtm, ortho):
         raise InputError(f"{dsm}: only north-up rasters are supported (transform {tuple(t)[:6]})")
     if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
         raise InputError(f"{dsm}: pixels must be square, got {t.a} x {-t.e}")
-    if not d.mask.any():
-        raise EmptyInputError(f"{dsm} holds no valid pixel")
+    check_surface(d, dsm)
     dt = o = None
     if dtm is not None:
         dt = read_raster(dtm)
-        if dt.shape != d.shape or not np.allclose(tuple(dt.transform)[:6], tuple(t)[:6]):
-            raise InputError(f"the DTM {dtm} must share the DSM's grid (shape {d.shape}, "
-                             f"transform {tuple(t)[:6]})")
+        check_same_grid(d, dt, f"the DTM {str(dtm)!r}")
+        check_surface(dt, dtm)
     if ortho is not None:
         o = read_raster(ortho)
         arr = np.asarray(o.array)

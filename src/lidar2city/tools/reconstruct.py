@@ -1,23 +1,23 @@
 """``reconstruct``: point cloud tiles (+ footprints) to LoD1 / LoD2.2 buildings in a file.
 
-The job, for any number of tiles and buildings:
+The job, for any number of tiles and buildings, in four parts:
 
-1. index the tiles by their headers (:func:`lidar2city.io.las.scan_tiles`) and
-   decide once whether the input is classified or raw;
-2. read the footprints into one local frame (:func:`load_footprints`) and group
-   them by the cell of a CRS-aligned grid of ``block_size`` metres holding the
-   centre of their bounding box (without footprints, trace them per block);
-3. per block, read the points of its buildings plus a margin from the tiles
-   that meet it (:class:`lidar2city.io.las.TileReader`), classify them if the
-   input is raw (:func:`point_roles`), and give each building exactly the
-   points within its footprint's bounding box plus ``search_radius`` metres,
-   so a result does not depend on tiling, blocks or order; the pure
-   per-building :func:`lidar2city.lod.reconstruct_building` is what a Dask
-   engine would map;
-4. write CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`) in the
-   footprint file's order.
-
-``progress(done, total, result)`` is called after every building.
+1. plan (:func:`plan_reconstruct`, :mod:`lidar2city.tools.blocks`): index the
+   tiles by their headers (:func:`lidar2city.io.las.scan_tiles`), decide once
+   whether the input is classified or raw, read the footprints into one local
+   frame (:func:`load_footprints`) and group them by the cell of a CRS-aligned
+   grid of ``block_size`` metres holding the centre of their bounding box (or,
+   without footprints, one cell per grid cell to trace them in): an ordered
+   list of picklable block specs;
+2. one task per block (:func:`lidar2city.tools.task.run_block`, what runs on a
+   worker): read the points of its buildings plus a margin from the tiles that
+   meet it, classify them if the input is raw (:func:`point_roles`), and give
+   each building exactly the points within its footprint's bounding box plus
+   ``search_radius`` metres, so a result does not depend on tiling, blocks,
+   workers or order;
+3. an executor (:mod:`lidar2city.tools.engine`) runs the tasks;
+4. the results are put back in the footprint file's order (:func:`assemble`)
+   and written as CityJSON, CityJSONSeq, OBJ or GeoPackage (:data:`FORMATS`).
 """
 
 from __future__ import annotations
@@ -34,8 +34,9 @@ from ..errors import EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FORMATS", "ReconstructSummary", "PointGrid", "format_from_name", "lod1_config",
-           "point_roles", "load_footprints", "reconstruct_buildings", "write_buildings",
+__all__ = ["FORMATS", "ReconstructSummary", "ReconstructPlan", "PointGrid", "format_from_name",
+           "lod1_config", "point_roles", "load_footprints", "reconstruct_buildings",
+           "write_buildings", "plan_reconstruct", "run_blocks", "InOrder",
            "reconstruct"]
 
 #: output format name -> file name endings that select it.
@@ -79,11 +80,16 @@ class ReconstructSummary:
     lods: tuple = ()
     format: str = ""
     lod22: dict = field(default_factory=dict)
+    blocks: int = 0
+    resumed: int = 0
+    worker_peak_mb: float = 0.0
 
     def lines(self) -> list[str]:
         out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
                f"{self.failed} failed, {self.invalid} invalid, in {self.seconds:.2f} s -> "
                f"{self.output} ({self.format})"]
+        if self.resumed:
+            out.append(f"  resumed: {self.resumed} of {self.blocks} blocks taken from the journal")
         for reason, n in self.reasons.most_common():
             out.append(f"  failed: {n} x {reason}")
         if self.lod22:
@@ -401,18 +407,26 @@ def _fields_for_output(footprints):
 RUN_ATTRIBUTES = ("reconstruction_time", "lod22_time")
 
 
+def _title(lods) -> str:
+    return f"lidar2city LoD{'+'.join(lods)} buildings"
+
+
+def _without_run_attributes(result):
+    import dataclasses
+
+    return dataclasses.replace(result, attributes={k: v for k, v in result.attributes.items()
+                                                   if k not in RUN_ATTRIBUTES})
+
+
 def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attributes=None,
                     lods=("1.2",)) -> str:
     """Write results in the format chosen by ``fmt`` or the file name; returns the format.
 
     The same results give the same file: :data:`RUN_ATTRIBUTES` are left out.
     """
-    import dataclasses
-
     fmt = format_from_name(path, fmt)
-    results = [dataclasses.replace(r, attributes={k: v for k, v in r.attributes.items()
-                                                  if k not in RUN_ATTRIBUTES}) for r in results]
-    title = f"lidar2city LoD{'+'.join(lods)} buildings"
+    results = [_without_run_attributes(r) for r in results]
+    title = _title(lods)
     common = dict(origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
                   configuration=configuration, attributes=attributes, title=title)
     if fmt == "cityjson":
@@ -487,8 +501,21 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
         layers.append(VectorLayer(f"lod{lod.replace('.', '')}", geoms,
                                   {"id": [str(r.id) for r in rows]}, "MultiPolygon Z"))
     meta = {"lidar2city_configuration": json.dumps(configuration or {})}
-    write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
-                 z_unit=cloud.z_unit, metadata=meta)
+    import pyogrio
+
+    # GDAL stamps every GeoPackage table with the time of writing: a fixed stamp
+    # makes the same results the same bytes
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
+    try:
+        write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
+                     z_unit=cloud.z_unit, metadata=meta)
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
+
+
+#: the time stamp written in GeoPackage outputs (``gpkg_contents.last_change``)
+GPKG_DATE = "2000-01-01T00:00:00.000Z"
 
 
 #: how LoD2.2 roofs are made: the roof-topology framework or fitted primitives
@@ -497,7 +524,9 @@ LOD22_METHODS = ("roof", "primitives")
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None, check_images=None, block_size=1000.0) -> ReconstructSummary:
+                primitives=None, check_images=None, block_size=1000.0, workers=1,
+                scheduler=None, resume=False, block_progress=None,
+                edits=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
 
     The area is processed block by block: blocks are the cells of a square
@@ -511,10 +540,15 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     Without footprints, a block traces the footprints in its cell plus a
     buffer (``margin`` + 100 m) and keeps those centred in its cell.
 
+    The run is a plan (:mod:`lidar2city.tools.blocks`: the ordered block
+    specs), one task per block (:func:`lidar2city.tools.task.run_block`), an
+    executor (:mod:`lidar2city.tools.engine`) and a writer fed in a fixed order.
+
     Parameters
     ----------
     inputs : path or sequence of paths
-        LAS/LAZ tiles of one area (one CRS).
+        LAS/LAZ tiles of one area (one CRS): files, folders of tiles or glob
+        patterns (:func:`lidar2city.io.tiles.tile_paths`).
     output : path
         ``.city.json``, ``.city.jsonl``, ``.obj`` or ``.gpkg`` (or ``fmt``).
     footprints : path, optional
@@ -527,7 +561,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     config : path, dict or Lod1Config, optional
         Run configuration (TOML).
     progress : callable, optional
-        ``progress(done, total, result)``.
+        ``progress(done, total, result)`` for every building as its block
+        finishes; ``total`` is None when footprints are traced.
     method : {"roof", "primitives"}
         LoD2.2 from the roof topology (facets, snake, intersection edges) or
         from floating primitives fitted by least squares.
@@ -539,15 +574,265 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         wire frame over its points, for checking by eye.
     block_size : float
         Side (m) of the processing blocks.
+    workers : int
+        1 (default): blocks run in this process; N > 1: on a Dask
+        ``LocalCluster`` of N worker processes. The output is the same bytes.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``) to run the
+        blocks on instead; its workers read the tiles and footprints by path.
+    resume : bool
+        Keep the blocks an interrupted run of the same inputs and options
+        recorded in its journal (``OUT.journal``) and run only the others.
+    block_progress : callable, optional
+        ``block_progress(done, total)`` after every block.
+    edits : path, optional
+        An ``EDITS.json`` written by ``lidar2city edit`` or the viewer: every
+        edit is re-applied to its building inside its block
+        (:func:`lidar2city.tools.edit.apply_block_edits`); an edit naming no
+        footprint is an error before any block runs. Needs ``footprints``.
 
     Returns
     -------
     ReconstructSummary
+
+    Raises
+    ------
+    InputError
+        Bad options, a journal of another run beside ``output``, a scheduler
+        that does not answer.
     """
-    from ..datamodel import PointCloud
-    from ..io.las import TileReader, scan_tiles
+    from ..io.journal import Journal, file_stamp, run_key
+    from ..io.tiles import tile_paths
+    from .engine import make_executor
 
     t0 = time.perf_counter()
+    paths = tile_paths(inputs)
+    inputs = paths
+    plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
+                            config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
+                            primitives=primitives, check_images=check_images,
+                            block_size=block_size, edits=edits)
+    key = run_key({
+        "version": _version(), "inputs": [file_stamp(p) for p in paths],
+        "footprints": None if footprints is None else file_stamp(footprints),
+        "primitives": None if primitives is None else file_stamp(primitives),
+        # the edits' content: a run resumed with other edits is refused
+        "edits": [e.to_dict() for e in plan.options.edits],
+        "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
+                    float(block_size), None if check_images is None else str(check_images)]})
+    journal = Journal.open(output, key, len(plan.specs), resume=resume)
+    n_blocks, state = len(plan.specs), {"blocks": 0, "buildings": 0, "mb": 0.0}
+    ordered, sink = InOrder(plan), _sink(output, plan)
+    tally = _Tally(output, plan)
+
+    def take(out):
+        state["blocks"] += 1
+        state["mb"] = max(state["mb"], out.worker_mb)
+        for r in out.results:
+            state["buildings"] += 1
+            if progress is not None:
+                progress(state["buildings"], plan.total, r)
+        if block_progress is not None:
+            block_progress(state["blocks"], n_blocks)
+        for r, fields in ordered.add(out):
+            tally.add(r)
+            sink.add(r, fields)
+
+    try:
+        done = set()
+        for i in journal.done():
+            out = journal.load(i) if i < n_blocks else None
+            if out is not None:
+                done.add(i)
+                take(out)
+        if done:
+            logger.info("resuming: %d of %d blocks already done", len(done), n_blocks)
+        pending = [s for s in plan.specs if s.index not in done]
+        if pending:
+            with make_executor(workers, scheduler) as executor:
+                logger.info("%d blocks on %s", len(pending), executor.describe())
+                for out in run_blocks(executor, plan, pending):
+                    if not out.failed:  # a failed block is tried again by --resume
+                        journal.save(out.index, out)
+                    take(out)
+        ordered.check()
+        sink.close()
+    except BaseException:
+        sink.abort()
+        if not journal.done():  # nothing to resume: leave nothing behind
+            journal.remove()
+        raise
+    journal.remove()
+    summary = tally.summary
+    summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
+    summary.worker_peak_mb = state["mb"]
+    summary.seconds = time.perf_counter() - t0
+    return summary
+
+
+class InOrder:
+    """Block outputs in (any order), ``(result, footprint fields)`` out in the output's order.
+
+    With footprints the order is the footprint file's (each footprint carries
+    its position in ``_index``); traced footprints come block by block and are
+    numbered ``b1``, ``b2``... Results are released as soon as all those
+    before them are known, so a run whose footprints are in spatial order holds
+    few of them.
+    """
+
+    def __init__(self, plan):
+        self.plan = plan
+        self.pending = {}
+        self.next = 0
+        self.numbered = 0
+        self.points = False
+
+    def add(self, out) -> list:
+        """The results that ``out`` makes ready, in order."""
+        self.points |= out.points
+        fps = out.footprints
+        keys = sorted(k for k in fps.attributes if not k.startswith("_"))
+        items = [(r, {k: fps.attributes[k][j] for k in keys}) for j, r in enumerate(out.results)]
+        if self.plan.traced:
+            self.pending[out.index] = items
+        else:
+            self.pending.update(zip(fps.attributes["_index"], items, strict=True))
+        ready = []
+        while self.next in self.pending:
+            got = self.pending.pop(self.next)
+            ready += got if self.plan.traced else [got]
+            self.next += 1
+        for r, _ in ready:
+            if self.plan.traced:
+                self.numbered += 1
+                r.id = f"b{self.numbered}"
+                if "footprint_id" in r.attributes:
+                    r.attributes["footprint_id"] = r.id
+            for lod in [k for k in r.solids if k not in self.plan.lods]:
+                del r.solids[lod]  # LoD1 built only as the base of LoD2.2 is not written
+        return ready
+
+    def check(self) -> None:
+        """Raise when the run found no building point at all."""
+        if not self.points:
+            raise EmptyInputError("no building point found in the input, even after "
+                                  "classification" if not self.plan.traced
+                                  else "no building footprint found in the points")
+        if self.pending:  # pragma: no cover - every block is given once
+            raise RuntimeError(f"{len(self.pending)} results left out of order")
+
+
+class _Collect:
+    """A sink keeping every result, written at the end by :func:`write_buildings`."""
+
+    def __init__(self, output, plan):
+        self.output, self.plan = output, plan
+        self.results, self.fields = [], []
+
+    def add(self, result, fields):
+        self.results.append(result)
+        self.fields.append(fields)
+
+    def close(self):
+        keys = sorted(set().union(*self.fields)) if self.fields else []
+        attributes = {k: [f.get(k) for f in self.fields] for k in keys}
+        write_buildings(self.output, self.results, self.plan.frame, fmt=self.plan.fmt,
+                        configuration=self.plan.resolved, attributes=attributes,
+                        lods=self.plan.lods)
+
+    def abort(self):
+        self.results, self.fields = [], []
+
+
+class _Stream:
+    """A sink writing CityJSONSeq features as they come (nothing kept)."""
+
+    def __init__(self, output, plan):
+        from ..io.cityjsonseq import CityJSONSeqWriter
+
+        f = plan.frame
+        self.writer = CityJSONSeqWriter(output, origin=f.origin, crs=f.crs, xy_unit=f.xy_unit,
+                                        z_unit=f.z_unit, configuration=plan.resolved,
+                                        title=_title(plan.lods))
+
+    def add(self, result, fields):
+        self.writer.add(_without_run_attributes(result), fields)
+
+    def close(self):
+        self.writer.close()
+
+    def abort(self):
+        self.writer.abort()
+
+
+def _sink(output, plan):
+    return (_Stream if plan.fmt == "cityjsonseq" else _Collect)(output, plan)
+
+
+class _Tally:
+    """The run's :class:`ReconstructSummary`, counted result by result."""
+
+    def __init__(self, output, plan):
+        self.summary = ReconstructSummary(str(output), lods=plan.lods, format=plan.fmt)
+        self.lod22 = "2.2" in plan.lods
+        self.times, self.modelled, self.fallbacks, self.type_iv = [], 0, 0, 0
+        if self.lod22:
+            self.summary.lod22 = {"modelled": 0, "fallbacks": 0, "type_iv": 0,
+                                  "time_per_building": 0.0}
+
+    def add(self, r):
+        s = self.summary
+        s.total += 1
+        if r.ok:
+            s.done += 1
+            if r.attributes.get("valid") is False:
+                s.invalid += 1
+        else:
+            s.failed += 1
+            s.reasons[_reason_kind(r.reason)] += 1
+        if self.lod22 and r.ok and "2.2" in r.solids:
+            fallback = "lod22_fallback" in r.attributes
+            self.modelled += not fallback
+            self.fallbacks += fallback
+            self.type_iv += r.attributes.get("type_iv", 0) > 0
+            if "lod22_time" in r.attributes:
+                self.times.append(r.attributes["lod22_time"])
+            s.lod22 = {"modelled": self.modelled, "fallbacks": self.fallbacks,
+                       "type_iv": self.type_iv,
+                       "time_per_building": float(np.mean(self.times)) if self.times else 0.0}
+
+
+def _version():
+    from .. import __version__
+
+    return __version__
+
+
+@dataclass(eq=False)
+class ReconstructPlan:
+    """A planned run: the ordered block specs, the options every block gets, the output's frame."""
+
+    specs: list
+    options: object
+    frame: object
+    fmt: str
+    lods: tuple
+    resolved: dict
+    traced: bool
+    total: int | None
+
+
+def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None,
+                     fmt=None, id_field=None, layer=None, method="roof", primitives=None,
+                     check_images=None, block_size=1000.0, edits=None) -> ReconstructPlan:
+    """Check the options, index the tiles and cut the area into block specs (no point read).
+
+    Keywords as :func:`reconstruct`.
+    """
+    from ..io.las import TileReader, scan_tiles
+    from .blocks import Frame, footprint_blocks, traced_blocks
+    from .task import BlockOptions
+
     fmt = format_from_name(output, fmt)
     if method not in LOD22_METHODS:
         raise InputError(f"method must be one of {', '.join(LOD22_METHODS)}, got {method!r}")
@@ -556,12 +841,18 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
     if not block_size > 0:
         raise InputError(f"block_size must be positive, got {block_size}")
+    if edits is not None and footprints is None:
+        # traced footprints are numbered when the run is assembled, after the
+        # blocks ran: an edit's building id cannot be found inside a block
+        raise InputError("--edits needs --footprints (the footprints the edited model was "
+                         "made from)")
     want22 = "2.2" in (lods or ())
     cfg, resolved, others = lod1_config(
         config, lods=lods, stages=(("lod22" if method == "roof" else "primitives"),) if want22 else ())
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
-    reader = TileReader(scan_tiles(inputs, crs=crs))
+    tiles = scan_tiles(inputs, crs=crs)
+    reader = TileReader(tiles)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
     classified = reader.has_classes(cfg.building_classes)
@@ -570,7 +861,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
-    frame = PointCloud(np.zeros((0, 3)), reader.origin, reader.crs, reader.xy_unit, reader.z_unit, {})
+    frame = Frame.of(reader)
     user_prims = None
     if want22 and method == "primitives" and primitives is not None:
         from ..io.primitives import read_primitives
@@ -582,85 +873,70 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             if spec.get("primitive") not in PRIMITIVES:
                 raise InputError(f"{primitives}: footprint {fid}: unknown primitive "
                                  f"{spec.get('primitive')!r}; known: {', '.join(PRIMITIVES)}")
+    options = BlockOptions(cfg, classified, float(block_size), lod22=lod22,
+                           primitives=others.get("primitives") if want22 and method == "primitives"
+                           else None,
+                           user_primitives=user_prims,
+                           check_images=None if check_images is None else str(check_images),
+                           footprints_config=others.get("footprints"),
+                           **_edit_options(edits, cfg, lod22, others, want, method))
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang
     margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
     if footprints is None:
         logger.info("no footprints given: tracing them from the building points")
-        blocks = _traced_blocks(reader, block_size, margin, others.get("footprints"), cfg,
-                                classified)
+        specs = traced_blocks(tiles, frame, reader.world_bounds(), block_size, margin + 100.0)
     else:
-        blocks = _footprint_blocks(reader, frame, footprints, block_size, margin,
-                                   id_field=id_field, layer=layer)
-    total = None if footprints is None else sum(len(b[1]) for b in blocks)
-    done = 0
+        wb = reader.world_bounds()
+        lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
+        hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
+        fps = load_footprints(footprints, frame, id_field=id_field, layer=layer,
+                              extent=(*lo, *hi))
+        specs = footprint_blocks(tiles, frame, fps, block_size, margin)
+        if options.edits:  # an unknown building id: an error before any block runs
+            from .edit import check_edit_ids
 
-    def on_progress(_d, _t, res):
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total, res)
+            check_edit_ids(options.edits, fps.ids, source=str(edits))
+    return ReconstructPlan(specs, options, frame, fmt, want, resolved, footprints is None,
+                           None if footprints is None else sum(s.size for s in specs))
 
-    results, fp_parts, any_points = [], [], False
-    for cloud, fps, classes in (_load_blocks(reader, blocks, cfg, classified) if footprints is not None else blocks):
-        any_points |= cloud is not None
-        if cloud is None:  # no building point in this block
-            res = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
-                               else "no building point in the block around the footprint")
-                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
-            for r in res:
-                on_progress(0, 0, r)
-        else:
-            building = np.isin(classes, cfg.building_classes)
-            ground = np.isin(classes, cfg.ground_classes)
-            res = reconstruct_buildings(cloud, fps, config=cfg, building=building, ground=ground,
-                                        progress=on_progress, lod22=lod22)
-            if want22 and method == "primitives":
-                with_classes = cloud.with_attributes(classification=classes)
-                fitted = add_primitives(res, with_classes, fps, config=others.get("primitives"),
-                                        user_primitives=user_prims)
-                if check_images is not None:  # block by block: nothing is kept
-                    from .primitives import write_check_images
 
-                    Path(check_images).mkdir(parents=True, exist_ok=True)
-                    write_check_images(check_images, with_classes, fitted)
-        results.extend(res)
-        fp_parts.append(fps)
-    if not any_points:
-        raise EmptyInputError("no building point found in the input, even after classification"
-                              if footprints is not None else "no building footprint found in the points")
-    fps = _concat_footprints(fp_parts)
-    if footprints is not None:  # back in the footprint file's order
-        order = np.argsort([i for _, b in blocks for i in b.attributes["_index"]], kind="stable")
-        results = [results[i] for i in order]
-        fps = _subset(fps, order)
-    cloud = frame
-    for r in results:  # LoD1 built only as the base of LoD2.2 is not written
-        for lod in [k for k in r.solids if k not in want]:
-            del r.solids[lod]
-    write_buildings(output, results, cloud, fmt=fmt, configuration=resolved,
-                    attributes=_fields_for_output(fps), lods=want)
-    summary = ReconstructSummary(str(output), total=len(results), lods=want, format=fmt)
-    for r in results:
-        if r.ok:
-            summary.done += 1
-            if r.attributes.get("valid") is False:
-                summary.invalid += 1
-        else:
-            summary.failed += 1
-            summary.reasons[_reason_kind(r.reason)] += 1
-    if want22:
-        ok = [r for r in results if r.ok and "2.2" in r.solids]
-        times = [r.attributes.get("lod22_time", 0.0) for r in ok if "lod22_time" in r.attributes]
-        summary.lod22 = {
-            "modelled": sum("lod22_fallback" not in r.attributes for r in ok),
-            "fallbacks": sum("lod22_fallback" in r.attributes for r in ok),
-            "type_iv": sum(r.attributes.get("type_iv", 0) > 0 for r in ok),
-            "time_per_building": float(np.mean(times)) if times else 0.0,
-        }
-    summary.seconds = time.perf_counter() - t0
-    return summary
+def _edit_options(edits, cfg, lod22, others, lods, method) -> dict:
+    """The :class:`~lidar2city.tools.task.BlockOptions` fields of an ``EDITS.json``
+    (its parsed edits travel to the blocks, not its path)."""
+    if edits is None:
+        return {}
+    from .edit import EditContext, load_edits
 
+    return {"edits": tuple(load_edits(edits)),
+            "edit_context": EditContext(cfg, lod22, others.get("primitives"), lods, method)}
+
+
+def run_blocks(executor, plan, specs=None):
+    """Run ``specs`` (default all of the plan's) on ``executor``; yield each
+    :class:`~lidar2city.tools.task.BlockOutput` as it finishes (any order).
+
+    A block that failed twice gives each of its footprints a stated reason.
+    """
+    from . import task
+
+    specs = plan.specs if specs is None else specs
+    for i, out in executor.map(task.run_block, specs, plan.options):
+        yield _failed_block(specs[i], out) if isinstance(out, BaseException) else out
+
+
+def _failed_block(spec, exc):
+    from ..datamodel import Footprints
+    from .task import BlockOutput
+
+    fps = spec.footprints if spec.footprints is not None else Footprints([], [])
+    msg = str(exc).splitlines()[0] if str(exc) else ""
+    reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
+    if spec.footprints is None:
+        logger.error("block %d (cell %s): %s; no footprint traced there", spec.index,
+                     spec.cell, reason)
+    return BlockOutput(spec.index, [_unmodelled(fid, reason) for fid in fps.ids], fps, True,
+                       failed=True)
 
 
 def _unmodelled(fid, reason):
@@ -685,103 +961,6 @@ def _subset(fps, idx):
     return Footprints([fps.geometries[i] for i in idx], [fps.ids[i] for i in idx],
                       {k: [v[i] for i in idx] for k, v in fps.attributes.items()})
 
-
-def _block_keys(centres_local, reader, block_size):
-    """Grid cell (on the CRS's origin) of local points: ``(row, col)`` per point."""
-    world = reader.origin[:2] + np.asarray(centres_local, dtype=np.float64) / reader.xy_unit
-    return np.floor(world / (block_size / reader.xy_unit)).astype(np.int64)
-
-
-def _footprint_blocks(reader, frame, path, block_size, margin, *, id_field=None, layer=None):
-    """``[(world box, Footprints)]``: the footprints grouped by block, blocks row by row."""
-    wb = reader.world_bounds()
-    lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
-    hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-    fps = load_footprints(path, frame, id_field=id_field, layer=layer, extent=(*lo, *hi))
-    fps.attributes["_index"] = list(range(len(fps)))
-    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
-                       for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
-    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
-    empty = ~np.isfinite(centre).all(axis=1)
-    keys = _block_keys(np.where(empty[:, None], 0.0, centre), reader, block_size)
-    # group by block, row by row (y, then x); footprint order kept inside a block
-    _, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
-    which = np.asarray(which).reshape(-1)
-    order = np.argsort(which, kind="stable")
-    cuts = np.flatnonzero(np.diff(which[order])) + 1
-    blocks = []
-    for idx in np.split(order, cuts):
-        idx = idx.tolist()
-        b = bounds[[i for i in idx if not empty[i]]]
-        if len(b):
-            box = np.array([b[:, 0].min() - margin, b[:, 1].min() - margin,
-                            b[:, 2].max() + margin, b[:, 3].max() + margin])
-            world = np.concatenate([reader.origin[:2] + box[:2] / reader.xy_unit,
-                                    reader.origin[:2] + box[2:] / reader.xy_unit])
-        else:
-            world = None
-        blocks.append((world, _subset(fps, idx)))
-    return blocks
-
-
-def _classified_box(reader, world_box, config, classified):
-    """``(cloud, classes)`` of a world box, or ``(None, None)`` without building points."""
-    cloud = reader.box(*world_box)
-    if len(cloud) == 0:
-        return None, None
-    try:
-        _, _, classes = point_roles(cloud, config, classified=classified)
-    except EmptyInputError:
-        return None, None
-    return cloud, classes
-
-
-def _load_blocks(reader, blocks, config, classified):
-    from ..footprints.points import claim_footprint_points
-
-    for world, fps in blocks:
-        cloud, classes = ((None, None) if world is None
-                          else _classified_box(reader, world, config, classified))
-        if cloud is not None and not classified:  # the footprints say where buildings are
-            classes = claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
-                                             building_classes=config.building_classes,
-                                             excluded=(*config.ground_classes, 7),
-                                             min_points=config.min_points)
-        yield cloud, fps, classes
-
-
-def _traced_blocks(reader, block_size, margin, footprints_config, config, classified):
-    """``(cloud, Footprints, classes)`` per block of the tiles' extent, traced in the block
-    plus a buffer and kept when centred in the block."""
-    buffer = margin + 100.0
-    wb = reader.world_bounds()
-    step = block_size / reader.xy_unit
-    k0 = np.floor(wb[:2] / step).astype(np.int64)
-    k1 = np.floor(wb[2:] / step).astype(np.int64)
-    n = 0
-    for row in range(k0[1], k1[1] + 1):
-        for col in range(k0[0], k1[0] + 1):
-            pad = buffer / reader.xy_unit
-            world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
-                     (row + 1) * step + pad)
-            cloud, classes = _classified_box(reader, world, config, classified)
-            if cloud is None:
-                continue
-            try:
-                fps = footprints_from_points(cloud, classes, config=footprints_config)
-            except EmptyInputError:
-                continue
-            bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
-            centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2,
-                                      (bounds[:, 1] + bounds[:, 3]) / 2])
-            keys = _block_keys(centre, reader, block_size)
-            idx = [i for i in range(len(fps)) if keys[i, 0] == col and keys[i, 1] == row]
-            if not idx:
-                continue
-            fps = _subset(fps, idx)
-            ids = [f"b{n + j + 1}" for j in range(len(idx))]
-            n += len(idx)
-            yield cloud, type(fps)(fps.geometries, ids, fps.attributes), classes
 
 def _reason_kind(reason: str) -> str:
     """A reason without its numbers, to count failures by kind."""

@@ -22,8 +22,8 @@ from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GAResult", "OBJECTIVES", "genetic_minimize", "converged_share", "tune_weights",
-           "weights_cost"]
+__all__ = ["GAResult", "OBJECTIVES", "SCALES", "genetic_minimize", "converged_share",
+           "genes_to_weights", "tune_weights", "weights_cost"]
 
 
 def _deap():
@@ -270,24 +270,35 @@ _SCENE = {}
 
 #: Fitness choices: eq. 4's share of wrong pixels, or one minus Cohen's kappa.
 OBJECTIVES = ("cost", "kappa")
+#: Gene scales: ``"log"`` searches log10 of the weights (:data:`LOG_WEIGHT_BOUNDS`),
+#: ``"linear"`` the weights themselves (:data:`~lidar2city.contour.outlines.WEIGHT_BOUNDS`).
+SCALES = ("log", "linear")
 
 
-def _init_worker(scene, frame, reference, domain, config, objective="cost"):
+def genes_to_weights(genes, scale="log") -> list:
+    """The five weights of a chromosome: ``10 ** g`` on the log scale, ``g`` otherwise."""
+    g = [float(v) for v in genes]
+    return [10.0 ** v for v in g] if scale == "log" else g
+
+
+def _init_worker(scene, frame, reference, domain, config, objective="cost", scale="linear"):
     _SCENE.update(scene=scene, frame=frame, reference=reference, domain=domain, config=config,
-                  objective=objective)
+                  objective=objective, scale=scale)
 
 
 def weights_cost(weights) -> float:
-    """Fitness of one weight vector on the scene loaded by ``_init_worker``.
+    """Fitness of one chromosome on the scene loaded by ``_init_worker``.
 
-    ``(FP + FN) / N`` over the domain (objective ``"cost"``), or ``1 - kappa``.
+    The genes are the weights, or their log10 when the worker was loaded with
+    ``scale="log"``. ``(FP + FN) / N`` over the domain (objective ``"cost"``),
+    or ``1 - kappa``.
     """
     from ..contour.outlines import contours_to_polygons, run_scene
     from ..contour.raster import rasterize_polygons
 
     s = _SCENE
     cfg = s["config"]
-    contours = run_scene(s["scene"], list(weights), config=cfg)
+    contours = run_scene(s["scene"], genes_to_weights(weights, s.get("scale", "linear")), config=cfg)
     polys = contours_to_polygons(contours, s["frame"], simplify=cfg.simplify)
     pred = rasterize_polygons(polys, s["reference"].shape, s["frame"])
     dom = s["domain"]
@@ -299,9 +310,30 @@ def weights_cost(weights) -> float:
     return float(np.count_nonzero(pred[dom] != ref[dom])) / max(int(dom.sum()), 1)
 
 
+#: Farther than this (m) from the scored pixels, a contour cannot change the cost.
+_SNAKE_REACH = 10.0
+
+
+def _near_domain(scene, domain, *, margin):
+    """The scene with only the contours whose bounding box, grown by ``margin``
+    pixels, holds a pixel of ``domain``: the others cannot change the cost,
+    and the fitness runs once per chromosome."""
+    import dataclasses
+
+    integral = np.pad(np.cumsum(np.cumsum(domain, axis=0), axis=1), ((1, 0), (1, 0)))
+    h, w = domain.shape
+    keep = []
+    for c in scene.contours:
+        r0, c0 = np.clip(np.floor(c.min(axis=0)).astype(int) - margin, 0, [h, w])
+        r1, c1 = np.clip(np.ceil(c.max(axis=0)).astype(int) + margin + 1, 0, [h, w])
+        if integral[r1, c1] - integral[r0, c1] - integral[r1, c0] + integral[r0, c0] > 0:
+            keep.append(c)
+    return dataclasses.replace(scene, contours=keep)
+
+
 def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None, config=None,
                  population=30, generations=15, seed=None, n_jobs=1, cxpb=0.8, mutpb=0.04,
-                 objective="cost", callback=None):
+                 objective="cost", scale="log", callback=None):
     """Learn the five active-contour weights from reference buildings.
 
     The cost of a weight vector is the share of wrongly classified pixels,
@@ -325,6 +357,12 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     objective : {"cost", "kappa"}
         ``"cost"``: (FP + FN) / N (eq. 4). ``"kappa"``: 1 - Cohen's kappa, which
         does not reward erasing buildings where false positives abound.
+    scale : {"log", "linear"}
+        Genes are log10 of the weights in :data:`LOG_WEIGHT_BOUNDS` (0.01 to
+        10: a weight matters by its order of magnitude relative to the
+        others, and the blend crossover and mutation then move it by factors,
+        not by steps that swamp small weights), or the weights themselves in
+        :data:`WEIGHT_BOUNDS`.
     population, generations, seed, n_jobs, cxpb, mutpb, callback
         See :func:`genetic_minimize`.
 
@@ -335,11 +373,19 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     history : list of dict
         Per generation records (see :class:`GAResult`), ``best_cost`` included.
     """
-    from ..contour.outlines import WEIGHT_BOUNDS, WEIGHT_NAMES, ActiveContourConfig, prepare_scene
+    from ..contour.outlines import (
+        LOG_WEIGHT_BOUNDS,
+        WEIGHT_BOUNDS,
+        WEIGHT_NAMES,
+        ActiveContourConfig,
+        prepare_scene,
+    )
     from ..contour.raster import PixelFrame
 
     if objective not in OBJECTIVES:
         raise InputError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    if scale not in SCALES:
+        raise InputError(f"scale must be one of {', '.join(SCALES)}, got {scale!r}")
     cfg = config or ActiveContourConfig()
     ref = np.asarray(reference_mask, dtype=bool)
     if ref.shape != np.shape(dsm):
@@ -349,13 +395,21 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
         raise InputError("domain and reference differ in shape")
     if not (ref & dom).any():
         raise InputError("no reference building pixel inside the scoring domain")
-    scene = prepare_scene(dsm, ndsm, ortho=ortho, cell=cell, config=cfg)
+    scene = _near_domain(prepare_scene(dsm, ndsm, ortho=ortho, cell=cell, config=cfg), dom,
+                         margin=int(np.ceil(_SNAKE_REACH / cell)))
     frame = PixelFrame(cell=cell)
+    bounds = LOG_WEIGHT_BOUNDS if scale == "log" else WEIGHT_BOUNDS
+    start = np.array([getattr(cfg, k) for k in WEIGHT_NAMES], dtype=float)
+    if scale == "log":
+        start = np.log10(np.maximum(start, 10.0 ** bounds[0]))
+    start = np.clip(start, *bounds).tolist()
     result = genetic_minimize(
-        weights_cost, len(WEIGHT_NAMES), bounds=WEIGHT_BOUNDS, population=population,
+        weights_cost, len(WEIGHT_NAMES), bounds=bounds, population=population,
         generations=generations, cxpb=cxpb, mutpb=mutpb, seed=seed, n_jobs=n_jobs,
-        initial=[[getattr(cfg, k) for k in WEIGHT_NAMES]], initializer=_init_worker, initargs=(scene, frame, ref, dom, cfg, objective), callback=callback)
-    weights = {k: float(v) for k, v in zip(WEIGHT_NAMES, result.best, strict=True)}
+        initial=[start], initializer=_init_worker,
+        initargs=(scene, frame, ref, dom, cfg, objective, scale), callback=callback)
+    weights = {k: float(v) for k, v in
+               zip(WEIGHT_NAMES, genes_to_weights(result.best, scale), strict=True)}
     # (the configured weights are in the first generation: tuned is never worse on these pixels)
     logger.info("tuned weights %s: cost %.5f (%s)", weights, result.best_cost, result.stopped)
     return weights, result.history

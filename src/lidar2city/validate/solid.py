@@ -84,6 +84,43 @@ def _merge_vertices(vertices, tol):
     return np.asarray(vertices, dtype=np.float64)[first], inverse.ravel()
 
 
+def _all_rings_clean(rings) -> bool:
+    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones."""
+    idx, nxt, starts, lens = _ring_layout(rings)
+    if len(lens) == 0 or lens.min() < 3 or np.any(idx == idx[nxt]):
+        return False
+    if lens.max() == 3:
+        return True
+    # distinct vertices per ring: sort within rings and count changes
+    ring = np.repeat(np.arange(len(lens)), lens)
+    order = np.lexsort((idx, ring))
+    si, sr = idx[order], ring[order]
+    new = np.r_[True, (si[1:] != si[:-1]) | (sr[1:] != sr[:-1])]
+    return bool(np.bincount(sr[new], minlength=len(lens)).min() >= 3)
+
+
+def _ring_layout(rings):
+    """Concatenated ring indices, the position of each one's next vertex, ring starts and lengths."""
+    lens = np.array([len(r) for r in rings], dtype=np.int64)
+    if len(lens) == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z, z, lens
+    idx = np.concatenate([np.asarray(r, dtype=np.int64) for r in rings])
+    starts = np.cumsum(lens) - lens
+    nxt = np.arange(len(idx)) + 1
+    nxt[(starts + lens - 1)[lens > 0]] = starts[lens > 0]
+    return idx, nxt, starts, lens
+
+
+def _ring_normals(verts, rings):
+    """Newell vector (twice the vector area) of every ring, shape (R, 3); rings of >= 1 vertex."""
+    idx, nxt, starts, _ = _ring_layout(rings)
+    p, q = verts[idx], verts[idx[nxt]]
+    d, s = p - q, p + q
+    terms = np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]])
+    return np.add.reduceat(terms, starts, axis=0)
+
+
 def _ring_checks(rings, i, issues):
     """Remap-independent ring checks; returns cleaned rings (no repeated vertices)."""
     clean = []
@@ -196,23 +233,26 @@ def solid_volume(vertices, surfaces) -> float:
     Divergence theorem with each face's vector area (Newell, holes included):
     ``V = 1/3 sum(p_f . A_f)`` for any point ``p_f`` of face ``f``.
     """
-    vol = 0.0
-    for s in surfaces:
-        rings = s.rings if hasattr(s, "rings") else s
-        area_vec = sum(newell_normal(vertices[np.asarray(r)]) for r in rings) / 2.0
-        vol += float(vertices[np.asarray(rings[0])[0]] @ area_vec) / 3.0
-    return vol
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = [s.rings if hasattr(s, "rings") else s for s in surfaces]
+    faces = [[np.asarray(r, dtype=np.int64) for r in rings if len(r)] for rings in faces]
+    faces = [rings for rings in faces if rings]
+    if not faces:
+        return 0.0
+    nr = np.array([len(rings) for rings in faces])
+    ring_n = _ring_normals(vertices, [r for rings in faces for r in rings])
+    area = np.add.reduceat(ring_n, np.cumsum(nr) - nr, axis=0) / 2.0
+    first = vertices[[rings[0][0] for rings in faces]]
+    return float(np.sum(dot3(first, area))) / 3.0
 
 
 def _edge_checks(rings_per_face, issues):
     """Closedness, manifoldness, orientation consistency, connectivity. True if all pass."""
-    src, dst, face = [], [], []
-    for f, rings in enumerate(rings_per_face):
-        for r in rings:
-            src.append(r)
-            dst.append(np.roll(r, -1))
-            face.append(np.full(len(r), f))
-    a, b, fc = np.concatenate(src), np.concatenate(dst), np.concatenate(face)
+    flat = [r for rings in rings_per_face for r in rings]
+    a, nxt, _, lens = _ring_layout(flat)
+    b = a[nxt]
+    fc = np.repeat(np.repeat(np.arange(len(rings_per_face)),
+                             [len(rings) for rings in rings_per_face]), lens)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     m = max(int(hi.max()) + 1, 1)
     key = lo * m + hi
@@ -258,12 +298,21 @@ def _edge_checks(rings_per_face, issues):
     return ok
 
 
-def _segments_cross_triangles(p, q, a, b, c, eps):
-    """Row-wise: does segment p-q cross triangle abc properly (not just touch)?"""
+def _triangle_normals(a, b, c):
+    """Unit normals (zero for degenerate triangles) and the lengths of ``(b - a) x (c - a)``."""
     n = cross3(b - a, c - a)
     nl = np.sqrt(dot3(n, n))
+    return n / np.where(nl > 0, nl, 1.0)[:, None], nl
+
+
+def _segments_cross_triangles(p, q, a, b, c, eps, normals=None):
+    """Row-wise: does segment p-q cross triangle abc properly (not just touch)?
+
+    ``normals``: the triangles' ``(unit normals, lengths)`` of :func:`_triangle_normals`
+    when already known.
+    """
+    n, nl = normals if normals is not None else _triangle_normals(a, b, c)
     good = nl > 0
-    n = n / np.where(good, nl, 1.0)[:, None]
     dp = dot3(p - a, n)
     dq = dot3(q - a, n)
     cross = good & (((dp > eps) & (dq < -eps)) | ((dp < -eps) & (dq > eps)))
@@ -300,6 +349,7 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     if len(tris) < 2:
         return []
     corners = verts[tris]
+    tri_n, tri_nl = _triangle_normals(corners[:, 0], corners[:, 1], corners[:, 2])
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     i, j = _candidate_pairs(lo, hi, tol)
     keep = face[i] != face[j]
@@ -308,27 +358,33 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     i, j = i[keep], j[keep]
     hits = np.zeros(len(i), dtype=bool)
     eps = 1e-9 * max(1.0, float(np.abs(verts).max()))
-    for s in range(0, len(i), 200_000):
-        ii, jj = i[s:s + 200_000], j[s:s + 200_000]
+    chunk = 32_768  # triangle pairs at a time: a few MB of temporaries
+    for s in range(0, len(i), chunk):
+        ii, jj = i[s:s + chunk], j[s:s + chunk]
         ti, tj = corners[ii], corners[jj]
         h = np.zeros(len(ii), dtype=bool)
-        for (A, B) in ((ti, tj), (tj, ti)):
+        for (A, B, kb) in ((ti, tj, jj), (tj, ti, ii)):
+            nb = (tri_n[kb], tri_nl[kb])
             for e in range(3):
                 h |= _segments_cross_triangles(A[:, e], A[:, (e + 1) % 3], B[:, 0], B[:, 1],
-                                               B[:, 2], eps)
-        hits[s:s + 200_000] = h
+                                               B[:, 2], eps, nb)
+        hits[s:s + chunk] = h
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}
     # coplanar faces overlapping (crossing tests miss them)
-    normals, offsets = [], []
-    for rings in rings_per_face:
-        nw = newell_normal(verts[rings[0]])
-        nn = np.linalg.norm(nw)
-        nrm = nw / nn if nn > 0 else nw
-        normals.append(nrm)
-        offsets.append(float(verts[rings[0]].mean(axis=0) @ nrm))
-    normals, offsets = np.array(normals), np.array(offsets)
-    fi, fj = np.triu_indices(len(rings_per_face), 1)
+    outer = [rings[0] for rings in rings_per_face]
+    nw = _ring_normals(verts, outer)
+    nn = np.sqrt(dot3(nw, nw))
+    normals = nw / np.where(nn > 0, nn, 1.0)[:, None]
+    idx, _, starts, lens = _ring_layout(outer)
+    centre = np.add.reduceat(verts[idx], starts, axis=0) / lens[:, None]
+    offsets = dot3(centre, normals)
+    # only faces whose boxes meet can overlap (every pair of faces would be quadratic)
+    fi, fj = _candidate_pairs(np.minimum.reduceat(verts[idx], starts, axis=0),
+                              np.maximum.reduceat(verts[idx], starts, axis=0), tol)
+    fi, fj = np.minimum(fi, fj), np.maximum(fi, fj)
+    pair_order = np.lexsort((fj, fi))
+    fi, fj = fi[pair_order], fj[pair_order]
     dot = np.einsum("ij,ij->i", normals[fi], normals[fj])
     cop = (np.abs(dot) > 1 - 1e-9) & (np.abs(offsets[fi] - np.sign(dot) * offsets[fj]) < tol)
     for a, b in zip(fi[cop], fj[cop], strict=True):
@@ -382,15 +438,18 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     if not (np.abs(verts_in) / snap_tolerance < 2.0 ** 62).all():
         return [Issue(901, None, "vertex coordinates too large for the snap tolerance")]
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
-    rings_per_face = []
-    for i, s in enumerate(solid.surfaces):
-        rings = s.rings if hasattr(s, "rings") else s
-        rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
+    raw = [[np.asarray(r, dtype=np.int64).reshape(-1) for r in (s.rings if hasattr(s, "rings") else s)]
+           for s in solid.surfaces]
+    for i, rings in enumerate(raw):
         if any(len(r) and (r.min() < 0 or r.max() >= len(verts_in)) for r in rings):
             issues.append(Issue(901, i, "vertex index out of range"))
-            continue
-        rings = [remap[r] for r in rings]
-        rings_per_face.append(_ring_checks(rings, i, issues))
+    if issues:
+        return issues
+    faces = [[remap[r] for r in rings] for rings in raw]
+    if _all_rings_clean([r for rings in faces for r in rings]):
+        rings_per_face = faces
+    else:
+        rings_per_face = [_ring_checks(rings, i, issues) for i, rings in enumerate(faces)]
     if issues:
         return issues
     simple: dict[int, list] = {}

@@ -1,0 +1,118 @@
+"""Polygon fitting on the Delft 0.5 m DSM against the 132 BGT footprints (issue 16).
+
+Usage: ``PYTHONPATH=src python benchmarks/bench_dsm_fit_delft.py [DATA_DIR] [--dsm-from-laz]``
+
+Inputs: ``delft/dsm_50cm.tif`` and ``dtm_50cm.tif`` (or, with
+``--dsm-from-laz``, the DSM and DTM made by ``lidar2city rasterize`` from
+``ahn3_cropped_1.laz``), scored against ``footprints_bgt.gpkg``.
+
+Protocol (the BGT footprints cover only the two central blocks of the tile):
+
+* restricted: the predictions that touch a reference footprint, clipped to
+  the references' convex hull grown by 2 m, scored per area against all
+  references (completeness, correctness, quality) and by one-to-one
+  IoU >= 0.5 matching;
+* aligned: the share of the outline length of those predictions within 3
+  degrees of each polygon's own main axes;
+* pixel kappa of the fitted outlines on the reference-neighbourhood domain
+  of ``bench_active_contour.py`` (10 m around the references, minus
+  above-ground pieces holding no reference pixel);
+* oracle: the reference footprints rasterised on the DSM grid, fitted as if
+  they were the segmented regions: what the fitting alone loses.
+
+Row houses are separate BGT footprints; a block fitted as one outline costs
+nothing in the per-area scores, but is not matched one-to-one.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def score(pred, ref, hull, tree):
+    """Restricted per-area scores, matching and alignment of outlines ``pred``."""
+    from lidar2city.metrics.footprints import area_metrics, axis_alignment, match_objects
+
+    hits = np.unique(tree.query(pred, predicate="intersects")[0]) if pred else []
+    touching = [pred[i] for i in hits]
+    clipped = [g.intersection(hull) for g in touching]
+    clipped = [g for g in clipped if not g.is_empty]
+    am = area_metrics(clipped, ref)
+    mo = match_objects(clipped, ref, min_iou=0.5)
+    al = axis_alignment(touching, tolerance_deg=3.0)
+    return (f"quality {am['quality']:.3f} (completeness {am['completeness']:.3f}, correctness "
+            f"{am['correctness']:.3f}), matched IoU>=0.5 {mo['matched']}/{len(ref)}, aligned "
+            f"{100 * al['aligned_share']:.1f} % ({len(touching)} predictions touching a reference)")
+
+
+def main(argv):
+    import pyogrio
+    import shapely
+    import shapely.affinity
+    from rasterio import features
+
+    from lidar2city.io.raster import read_raster
+    from lidar2city.metrics.footprints import pixel_metrics
+    from lidar2city.tools.active_contour import reference_mask, scoring_domain
+    from lidar2city.tools.dsm import footprints_from_dsm, outlines_from_labels
+
+    args = [a for a in argv if not a.startswith("--")]
+    root = Path(args[0]) if args else Path(__file__).resolve().parents[2] / "shared" / "data"
+    if not (root / "delft").exists():
+        root = Path("/work/shared/data")
+    dd = root / "delft"
+    _, _, wkb, _ = pyogrio.raw.read(str(dd / "footprints_bgt.gpkg"))
+    ref = [max(shapely.get_parts(g), key=lambda p: p.area) for g in shapely.from_wkb(wkb)]
+    hull = shapely.union_all(ref).convex_hull.buffer(2.0)
+    tree = shapely.STRtree(ref)
+    with tempfile.TemporaryDirectory() as tmp:
+        dsm, dtm = dd / "dsm_50cm.tif", dd / "dtm_50cm.tif"
+        if "--dsm-from-laz" in argv:
+            from lidar2city.tools.rasterize import rasterize_files
+
+            dsm, dtm = Path(tmp) / "dsm.tif", Path(tmp) / "dtm.tif"
+            for p, prod in ((dsm, "dsm"), (dtm, "dtm")):
+                rasterize_files(dd / "ahn3_cropped_1.laz", p, product=prod, cell=0.5,
+                                crs="EPSG:28992")
+            print("DSM and DTM rasterised from ahn3_cropped_1.laz by lidar2city rasterize")
+        d = read_raster(dsm)
+        t = read_raster(dtm)
+        refm = reference_mask(dd / "footprints_bgt.gpkg", d)
+        nd = np.nan_to_num(d.array - t.array)
+        dom = scoring_domain(refm, nd > 3.0, "reference", cell=d.cell_size)
+
+        # the fitting alone, on the rasterised references
+        lab = features.rasterize([(g, i + 1) for i, g in enumerate(ref)], out_shape=d.shape,
+                                 transform=d.transform, fill=0, dtype="int32")
+        oracle = outlines_from_labels(lab, nd, cell=d.cell_size)
+        ox, oy = d.transform.c, d.transform.f
+        opred = [shapely.affinity.translate(r.footprint, ox, oy) for r in oracle if r.ok]
+        print(f"oracle (references rasterised at {d.cell_size:g} m, then fitted): "
+              f"{score(opred, ref, hull, tree)}")
+
+        out = Path(tmp) / "fp.gpkg"
+        t0 = time.perf_counter()
+        summary = footprints_from_dsm(dsm, dtm=dtm, output=out)
+        el = time.perf_counter() - t0
+        _, _, w2, f2 = pyogrio.raw.read(str(out))
+        geoms = shapely.from_wkb(w2)
+        good = ~shapely.is_empty(geoms) & ~shapely.is_missing(geoms)
+        pred = [max(shapely.get_parts(g), key=lambda p: p.area) for g in geoms[good]]
+        print(f"footprints --dsm: {summary['buildings']} outlines in {el:.1f} s "
+              f"({summary['failed']} failed), shape types {summary['shape_types']}")
+        print(f"  restricted: {score(pred, ref, hull, tree)}")
+        pm = features.rasterize([(g, 1) for g in pred], out_shape=d.shape, transform=d.transform,
+                                fill=0, dtype="uint8").astype(bool)
+        m = pixel_metrics(pm[dom], refm[dom])
+        print(f"  pixels on the reference neighbourhood: kappa {m['kappa']:.4f}, OA "
+              f"{m['overall_accuracy']:.4f}, PA {m['producers_accuracy']:.3f}, "
+              f"UA {m['users_accuracy']:.3f}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

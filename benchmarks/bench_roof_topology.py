@@ -1,0 +1,236 @@
+"""LoD2.2 roof topology (issue 12): cleanliness on Delft, wireframe F1 on synthetic roofs, speed.
+
+Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
+       [--figure docs/roof_topology_delft.png] [--topology grid]
+(default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
+section; --figure also draws a Delft block from above, the points beside our
+roofs; --topology grid measures the label-grid + snake partition, the one
+before the line arrangement)
+
+1. Delft shared tile, 132 BGT footprints, AHN3 class 6 building points (as
+   bench_lod22.py): median roof corners per building (distinct vertices where a
+   roof-face outline turns by > 10 deg, :mod:`lidar2city.metrics.wireframe`),
+   the share of roof-face edge length in edges shorter than 0.5 m, the
+   median point-to-mesh RMSE (same scoring code as bench_lod22.py), validity,
+   roof faces and time per building.
+2. Synthetic roofs with exact wireframes (:mod:`lidar2city.synthetic_roofs`):
+   corner and edge precision / recall / F1 at 0.5 m (3-D), pooled over all
+   roofs, at 8 and 25 points/m2 with 3-5 cm noise, per roof kind too.
+3. City3D dense roof-only clouds: footprint traced from the points, floor at
+   the lowest point; time per building of LoD2.2 (roof code) and with the
+   footprint tracing.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def option(name):
+    """The value after ``--name`` on the command line, or None."""
+    argv = sys.argv[1:]
+    return argv[argv.index(name) + 1] if name in argv and argv.index(name) + 1 < len(argv) else None
+
+
+def config():
+    from lidar2city.roof.building import Lod22Config
+
+    return Lod22Config(topology=option("--topology") or "arrangement")
+
+
+def data_dir() -> Path:
+    values = {option("--figure"), option("--topology")}
+    args = [a for a in sys.argv[1:] if not a.startswith("--") and a not in ("delft", "synthetic", "city3d")
+            and a not in values]
+    if args:
+        return Path(args[0])
+    if os.environ.get("LIDAR2CITY_DATA"):
+        return Path(os.environ["LIDAR2CITY_DATA"])
+    return ROOT.parent / "shared" / "data"
+
+
+def delft(d):
+    import shapely
+
+    from lidar2city.io.las import read_points
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.lod.lod1 import Lod1Config
+    from lidar2city.metrics.model import model_rmse
+    from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
+    from lidar2city.tools.reconstruct import reconstruct_buildings
+    from lidar2city.validate.solid import check_solid
+
+    laz, fpath = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
+    cloud = read_points(laz, crs="EPSG:7415")
+    fps, _ = read_footprints(fpath, origin=cloud.origin[:2], target_crs=cloud.crs)
+    cls = cloud.get("classification")
+    results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=config())
+    bxyz = cloud.xyz[cls == 6]
+    rms, corners, short, total, valid, faces, times, fallback = [], [], 0.0, 0.0, 0, 0, [], 0
+    for g, r in zip(fps.geometries, results, strict=True):
+        pts = bxyz[shapely.contains_xy(g, bxyz[:, 0], bxyz[:, 1])]
+        s22 = r.solids["2.2"]
+        s22 = s22 if isinstance(s22, list) else [s22]
+        rms.append(model_rmse(pts, s22))
+        fell = "lod22_fallback" in r.attributes
+        valid += all(not check_solid(s) for s in s22) and not fell
+        fallback += fell
+        wf = roof_wireframe(s22)
+        c, sh, tot = roof_cleanliness(wf)
+        corners.append(c)
+        short += sh
+        total += tot
+        faces += sum(surf.semantic == "RoofSurface" for s in s22 for surf in s.surfaces)
+        times.append(r.attributes.get("lod22_time", 0.0))
+    n = len(results)
+    print(f"Delft shared tile, {n} BGT footprints (AHN3 class 6 points inside each)")
+    print(f"  median roof corners per building (turn > 10 deg): {np.median(corners):.1f}  (target <= 14)")
+    print(f"  short-edge share (roof-face edge length in edges < 0.5 m): {100 * short / max(total, 1e-9):.2f} %"
+          f"  (target <= 1.8 %)")
+    print(f"  LoD2.2 RMSE point to mesh: median {np.median(rms):.3f} m  (target <= 0.15 m)")
+    print(f"  valid LoD2.2 solids {valid}/{n} (LoD1.2 fallbacks with a stated reason: {fallback}), "
+          f"roof faces {faces}")
+    print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean {1000 * np.mean(times):.1f} ms")
+    if option("--figure"):
+        figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
+
+
+def figure(path, bxyz, geoms, results, size=70.0):
+    """The densest ``size`` m square of the tile from above: building points by height beside
+    our LoD2.2 roof faces (shaded by their facing) with their edges."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import shapely
+    from matplotlib.collections import PolyCollection
+
+    cent = np.array([g.centroid.coords[0] for g in geoms])
+    counts = [np.sum(np.all(np.abs(cent - c) < size / 2, axis=1)) for c in cent]
+    c0 = cent[int(np.argmax(counts))]
+    lo, hi = c0 - size / 2, c0 + size / 2
+    box = shapely.box(*lo, *hi)
+    pts = bxyz[np.all((bxyz[:, :2] >= lo) & (bxyz[:, :2] <= hi), axis=1)]
+    inside = shapely.contains_xy(shapely.union_all([g for g in geoms if g.intersects(box)]), pts[:, 0], pts[:, 1])
+    pts = pts[inside]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 5.2))
+    ax[0].scatter(pts[:, 0], pts[:, 1], c=pts[:, 2], s=1.2, cmap="viridis", linewidths=0)
+    ax[0].set_title("AHN3 building points (height)", fontsize=10)
+    polys, colours = [], []
+    light = np.array([-1.0, 1.0, 1.5]) / np.linalg.norm([-1.0, 1.0, 1.5])
+    for g, r in zip(geoms, results, strict=True):
+        if not g.intersects(box):
+            continue
+        s22 = r.solids["2.2"]
+        for s in (s22 if isinstance(s22, list) else [s22]):
+            for surf in s.surfaces:
+                if surf.semantic != "RoofSurface":
+                    continue
+                v = s.vertices[surf.rings[0]]
+                n = np.cross(v[1] - v[0], v[2] - v[0])
+                n = n / (np.linalg.norm(n) or 1.0)
+                shade = 0.35 + 0.6 * max(float(n @ light), 0.0)
+                polys.append(v[:, :2])
+                colours.append((shade, shade * 0.8, shade * 0.7))
+    ax[1].add_collection(PolyCollection(polys, facecolors=colours, edgecolors="k", linewidths=0.5))
+    ax[1].set_title("lidar2city LoD2.2 roof faces", fontsize=10)
+    for a in ax:
+        a.set_xlim(lo[0], hi[0])
+        a.set_ylim(lo[1], hi[1])
+        a.set_aspect("equal")
+        a.set_xticks([])
+        a.set_yticks([])
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=72)
+    plt.close(fig)
+    print(f"  figure: {path} ({path.stat().st_size // 1024} kB)")
+
+
+def synthetic():
+    from lidar2city.metrics.wireframe import pooled_scores, roof_wireframe, wireframe_scores
+    from lidar2city.roof.building import reconstruct_lod22
+    from lidar2city.synthetic_roofs import ROOF_KINDS, roof_sample
+
+    keys = ("corners_matched", "corners_pred", "corners_ref", "edges_matched", "edges_pred", "edges_ref")
+    for density in (8.0, 25.0):
+        total = dict.fromkeys(keys, 0)
+        per_kind = {}
+        n_fail = 0
+        for kind in ROOF_KINDS:
+            acc = dict.fromkeys(keys, 0)
+            for seed in range(4):
+                s = roof_sample(kind, density=density, seed=seed)
+                try:
+                    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=config())
+                except Exception:  # noqa: BLE001 - a failed roof scores zero matches
+                    n_fail += 1
+                    sc = {k: 0 for k in keys}
+                    sc["corners_ref"], sc["edges_ref"] = len(s.wireframe.corners), len(s.wireframe.edges)
+                else:
+                    sc = wireframe_scores(roof_wireframe(res.solids), s.wireframe, tolerance=0.5)
+                for k in keys:
+                    acc[k] += sc[k]
+                    total[k] += sc[k]
+            per_kind[kind] = pooled_scores(acc)
+        p = pooled_scores(total)
+        print(f"Synthetic roofs, {density:g} pts/m2, 3-5 cm noise, {len(ROOF_KINDS)} kinds x 4 seeds "
+              f"({n_fail} failed): corner F1 {p['corner_f1']:.3f} (P {p['corner_precision']:.3f} "
+              f"R {p['corner_recall']:.3f}), edge F1 {p['edge_f1']:.3f} (P {p['edge_precision']:.3f} "
+              f"R {p['edge_recall']:.3f})  (targets >= 0.90 / >= 0.80)")
+        print("    " + ", ".join(f"{k} {v['corner_f1']:.2f}/{v['edge_f1']:.2f}" for k, v in per_kind.items()))
+
+
+def city3d(folder):
+    import shapely
+
+    from lidar2city.footprints import extract_footprints
+    from lidar2city.io.ply import read_ply
+    from lidar2city.metrics.model import model_rmse
+    from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
+    from lidar2city.roof.building import reconstruct_lod22
+    from lidar2city.validate.solid import check_solid
+
+    files = sorted(folder.glob("*.ply"), key=lambda p: int(p.stem))
+    clouds = [read_ply(f).xyz for f in files]
+    t_roof, t_all, rms, valid, corners = [], [], [], 0, []
+    for xyz in clouds:
+        t0 = time.perf_counter()
+        fps = extract_footprints(xyz, np.full(len(xyz), 6), regularize="snake")
+        fp = shapely.union_all([x.polygon for x in fps])
+        t1 = time.perf_counter()
+        res = reconstruct_lod22(fp, xyz, float(xyz[:, 2].min()), config=config())
+        t2 = time.perf_counter()
+        t_roof.append(t2 - t1)
+        t_all.append(t2 - t0)
+        valid += all(not check_solid(s) for s in res.solids)
+        inside = shapely.contains_xy(fp, xyz[:, 0], xyz[:, 1])
+        rms.append(model_rmse(xyz[inside], res.solids))
+        corners.append(roof_cleanliness(roof_wireframe(res.solids))[0])
+    n = len(files)
+    print(f"City3D roof-only clouds ({n}; footprint traced, floor = lowest point): valid {valid}/{n}, "
+          f"RMSE median {np.median(rms):.3f} m, corners median {np.median(corners):.0f}")
+    print(f"  time per building: LoD2.2 roof code mean {np.mean(t_roof):.3f} s (median {np.median(t_roof):.3f}, "
+          f"max {np.max(t_roof):.3f}); with footprint tracing mean {np.mean(t_all):.3f} s  (target <= 0.3 s)")
+
+
+def main():
+    sys.path.insert(0, str(ROOT / "src"))
+    only = next((a for a in sys.argv[1:] if a in ("delft", "synthetic", "city3d")), None)
+    if only in (None, "delft"):
+        delft(data_dir() / "delft")
+    if only in (None, "synthetic"):
+        synthetic()
+    if only in (None, "city3d"):
+        city3d(data_dir() / "city3d" / "building_instances")
+
+
+if __name__ == "__main__":
+    main()

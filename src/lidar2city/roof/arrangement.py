@@ -1,0 +1,673 @@
+"""Roof partition from an arrangement of straight lines: exact ridges, hips, valleys and steps.
+
+The label grid (:mod:`.topology`) says which facets meet and roughly where; its
+boundaries are staircases. Here every boundary chain between two facets is
+replaced by straight segments:
+
+- an **intersection edge** (the chain lies near the line where the two facets'
+  planes meet, or the planes are at the same height along it) becomes that
+  exact line, projected, over the chain's extent;
+- a **step edge** is split into the fewest straight pieces that each fit its
+  raw chain within 1.5 cells (split where Douglas-Peucker would, then merged
+  where neighbours fit one line), each piece made parallel / perpendicular to
+  the building direction when within ``snap_angle`` of it; consecutive pieces
+  meet at their lines' intersection.
+
+A chain near its planes' intersection line is an intersection edge only when
+that line explains the nearby points about as well as the chain does.
+
+Segments overshoot their ends a little; together with the footprint outline
+they are noded and polygonised, so the cells always partition the footprint
+and dangling overshoots vanish. Each cell takes the facet plane that fits its
+points best (robust, capped residuals); small or empty cells and faces join the
+neighbour they share the longest boundary with, and so do slivers narrower than
+a cell; same-plane cells dissolve into faces. Junction vertices are then moved
+to the least-squares meeting point of the planes by
+:func:`.refine.refine_partition`, and edges shorter than 1.5 cells collapse
+(:func:`collapse_short_edges`).
+
+References
+----------
+Main seed framework, steps 3-6 (raw topology, simplification keeping junctions,
+intersection and step edges). The arrangement-and-labelling idea follows
+3DBAG roofer's roof partition (line arrangement, then face labels).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .refine import _plane_line
+from .topology import boundary_chains, label_grid
+
+__all__ = ["arrangement_cells", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "arrangement_partition"]
+
+
+def arrangement_cells(footprint, segments):
+    """The cells into which polylines (each (m, 2)) cut a footprint polygon.
+
+    Parts of the polylines outside the footprint and dangling ends are dropped.
+    Returns a list of shapely Polygons covering the footprint without overlap.
+    """
+    import shapely
+    from shapely.geometry import MultiLineString
+
+    rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
+    lines = rings + [np.asarray(s, dtype=np.float64) for s in segments if len(s) >= 2]
+    # snap-rounded noding on a micrometre grid (robust: a crossing computed twice lands on
+    # one vertex, overlapping collinear pieces dissolve)
+    noded = shapely.set_precision(shapely.union_all(MultiLineString(lines), grid_size=1e-6), 0)
+    cells = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+    cells = cells[shapely.area(cells) > 1e-9]
+    inside = shapely.dwithin(footprint, shapely.point_on_surface(cells), 1e-9)
+    return list(cells[inside])
+
+
+def _adjacency(cells):
+    """Shared boundary length between touching cells: dict (i, j) -> length, i < j."""
+    import shapely
+
+    tree = shapely.STRtree(cells)
+    a, b = tree.query(cells, predicate="intersects")
+    keep = a < b
+    a, b = a[keep], b[keep]
+    if not len(a):
+        return {}
+    bounds = shapely.boundary(np.asarray(cells, dtype=object))
+    lengths = shapely.length(shapely.intersection(bounds[a], bounds[b]))
+    return {(int(i), int(j)): float(L) for i, j, L in zip(a, b, lengths, strict=True) if L > 1e-9}
+
+
+def _components(n, adj, labels):
+    """Connected components of same-label cells (array of component ids)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pairs = np.array([(i, j) for i, j in adj if labels[i] == labels[j]], dtype=np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(g, directed=False)[1]
+
+
+def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
+    """Merge cells into faces: same-label neighbours join; small faces take a neighbour's label.
+
+    Parameters
+    ----------
+    cells : list of shapely Polygon
+        A partition (noded: shared edges have identical vertices).
+    labels : ndarray of int, shape (len(cells),)
+        Label per cell, -1 for unknown (such cells always join a neighbour).
+    min_area : float
+        Faces smaller than this (m2) join the neighbouring face they share the
+        longest boundary with (smallest first).
+    weights : ndarray, optional
+        Per-cell evidence (e.g. point counts); a face with none joins a neighbour too.
+    min_width : float
+        Faces narrower than this on average (2 area / perimeter, m) join a neighbour too.
+
+    Returns
+    -------
+    faces : list of shapely Polygon
+    face_labels : ndarray of int
+    """
+    import shapely
+
+    n = len(cells)
+    labels = np.asarray(labels, dtype=np.int64).copy()
+    if n == 0:
+        return [], labels
+    area = shapely.area(np.asarray(cells, dtype=object))
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+    adj = _adjacency(cells)
+    length = shapely.length(np.asarray(cells, dtype=object))
+    nbr: dict = {}
+    for (i, j), L in adj.items():
+        nbr.setdefault(i, []).append((j, L))
+        nbr.setdefault(j, []).append((i, L))
+    for _ in range(4 * n):
+        comp = _components(n, adj, labels)
+        n_comp = comp.max() + 1
+        c_area = np.bincount(comp, weights=area, minlength=n_comp)
+        c_w = np.bincount(comp, weights=w, minlength=n_comp)
+        c_lab = np.zeros(n_comp, dtype=np.int64)
+        c_lab[comp] = labels
+        bad = (c_area < min_area) | (c_w <= 0) | (c_lab < 0)
+        if min_width > 0:
+            # mean width of each face: 2 area / perimeter, the perimeter from the cells' edges
+            # minus twice the edges shared inside the face
+            inner = np.zeros(n_comp)
+            for (i, j), L in adj.items():
+                if comp[i] == comp[j]:
+                    inner[comp[i]] += 2 * L
+            perim = np.bincount(comp, weights=length, minlength=n_comp) - inner
+            bad |= 2 * c_area < min_width * perim
+        if n_comp == 1 or not bad.any():
+            break
+        # the smallest bad face: its shared length with each neighbouring face
+        order = np.lexsort((np.arange(n_comp), c_lab >= 0, c_area))
+        merged = False
+        for c in order:
+            if not bad[c]:
+                continue
+            shared: dict = {}
+            for i in np.flatnonzero(comp == c):
+                for j, L in nbr.get(int(i), []):
+                    if comp[j] != c:
+                        shared[comp[j]] = shared.get(comp[j], 0.0) + L
+            cand = [(L, -k) for k, L in shared.items() if c_lab[k] >= 0 or c_lab[c] < 0]
+            if not cand:
+                continue
+            k = -max(cand)[1]
+            labels[comp == c] = c_lab[k]
+            merged = True
+            break
+        if not merged:
+            break
+    comp = _components(n, adj, labels)
+    faces, face_labels = [], []
+    for c in range(comp.max() + 1):
+        idx = np.flatnonzero(comp == c)
+        poly = shapely.union_all([cells[i] for i in idx]) if len(idx) > 1 else cells[idx[0]]
+        for p in shapely.get_parts(poly):
+            if p.geom_type == "Polygon" and p.area > 1e-9:
+                faces.append(p)
+                face_labels.append(labels[idx[0]])
+    return drop_collinear(faces), np.asarray(face_labels, dtype=np.int64)
+
+
+def _merge_close(rings, tol):
+    """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
+    across all rings) and consecutive repeats removed."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    flat = [r for rs in rings for r in rs]
+    if not flat:
+        return rings
+    pts = np.concatenate(flat)
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
+    if len(pairs):
+        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(pts), len(pts)))
+        _, comp = connected_components(g, directed=False)
+        first = np.full(comp.max() + 1, -1)
+        first[comp[::-1]] = np.arange(len(pts))[::-1]
+        pts = pts[first[comp]]
+    out, k = [], 0
+    for rs in rings:
+        new_rs = []
+        for r in rs:
+            c = pts[k:k + len(r)]
+            k += len(r)
+            new_rs.append(c[np.any(c != np.roll(c, 1, axis=0), axis=1)])
+        out.append(new_rs)
+    return out
+
+
+def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
+    """Faces without the vertices that are straight (within ``tol`` m) in every ring holding them.
+
+    Such vertices are where a dissolved cut ended; a vertex where any face turns
+    (a junction) is kept in every face, so shared edges keep identical vertices.
+    Vertices closer than ``merge`` (m; nearly concurrent lines) are first made one.
+    """
+    import shapely
+
+    from .solid import _key
+
+    rings = _merge_close([[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces], merge)
+    turning = set()
+    for rs in rings:
+        for r in rs:
+            if len(r) < 3:
+                continue
+            prev, nxt = np.roll(r, 1, axis=0), np.roll(r, -1, axis=0)
+            u, v = r - prev, nxt - r
+            cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+            dev = cross / np.maximum(np.hypot(*(nxt - prev).T), 1e-12)
+            back = np.einsum("ij,ij->i", u, v) < 0
+            for p in r[(dev > tol) | back]:
+                turning.add(_key(p))
+    out = []
+    for f, rs in zip(faces, rings, strict=True):
+        kept = [r[[_key(p) in turning for p in r]] for r in rs]
+        if len(kept[0]) < 3:
+            out.append(f)
+            continue
+        out.append(shapely.Polygon(kept[0], [h for h in kept[1:] if len(h) >= 3]))
+    if not all(f.is_valid and f.area > 0 for f in out) or \
+            abs(sum(f.area for f in out) - sum(f.area for f in faces)) > 1e-3 * max(1.0, len(faces)):
+        return list(faces)
+    return out
+
+
+def _dp(points, tol):
+    from shapely.geometry import LineString
+
+    return np.asarray(LineString(points).simplify(tol, preserve_topology=False).coords)
+
+
+def _axis_snap(d, direction, snap_angle):
+    """Unit direction d snapped to the nearest building axis when within ``snap_angle`` (deg)."""
+    ang = np.arctan2(d[1], d[0])
+    k = np.round((ang - direction) / (np.pi / 2))
+    axis = direction + k * np.pi / 2
+    if abs(ang - axis) <= np.radians(snap_angle):
+        return np.array([np.cos(axis), np.sin(axis)])
+    return d
+
+
+def _meet(p, d, q, e, fallback):
+    """Intersection of lines p + s d and q + t e; ``fallback`` when nearly parallel (< 20 deg)."""
+    cross = d[0] * e[1] - d[1] * e[0]
+    if abs(cross) < np.sin(np.radians(20)):
+        return None
+    s = ((q[0] - p[0]) * e[1] - (q[1] - p[1]) * e[0]) / cross
+    x = p + s * d
+    return x if np.hypot(*(x - fallback)) < 3.0 else None
+
+
+def _fit_line(sub, direction, snap_angle):
+    """Total-least-squares line (point, unit direction from the first to the last point) of
+    points (m, 2), its direction snapped to the building axes; and the largest distance to it."""
+    m = sub.mean(axis=0)
+    if len(sub) < 3:
+        d = sub[-1] - sub[0]
+    else:
+        w, v = np.linalg.eigh(np.cov((sub - m).T))
+        d = v[:, 1]
+    n = np.hypot(*d)
+    if n < 1e-12:
+        return None
+    d = d / n
+    if (sub[-1] - sub[0]) @ d < 0:
+        d = -d
+    d = _axis_snap(d, direction, snap_angle)
+    normal = np.array([-d[1], d[0]])
+    return m, d, float(np.abs((sub - m) @ normal).max())
+
+
+def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
+    """Pieces (lo, hi) of raw[lo..hi] each fitted by one line within ``tol`` (split at the point
+    farthest from the chord, as Douglas-Peucker)."""
+    sub = raw[lo:hi + 1]
+    fit = _fit_line(sub, direction, snap_angle)
+    if hi - lo < 3 or (fit is not None and fit[2] <= tol):
+        out.append((lo, hi))
+        return
+    a, b = raw[lo], raw[hi]
+    d = b - a
+    n = np.hypot(*d)
+    if n < 1e-9:
+        dist = np.hypot(*(sub - a).T)
+    else:
+        dist = np.abs((sub - a) @ np.array([-d[1], d[0]]) / n)
+    k = lo + int(np.argmax(dist[1:-1])) + 1
+    _split_fit(raw, lo, k, tol, direction, snap_angle, out)
+    _split_fit(raw, k, hi, tol, direction, snap_angle, out)
+
+
+def _step_polyline(chain, *, tol, direction, snap_angle, closed):
+    """Straight, direction-snapped polyline of a step chain (raw grid corners (m, 2)).
+
+    The chain is split into the fewest pieces (Douglas-Peucker order) that each
+    fit one line within ``tol``, neighbouring pieces that fit one line together
+    merge, and consecutive lines meet at their intersection (or, nearly
+    parallel, in a short jog at the vertex they share).
+    """
+    raw = np.asarray(chain, dtype=float)
+    raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+    if len(raw) < 2 or (closed and len(raw) < 5):
+        return None
+    spans = []
+    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans)
+    merged = True
+    while merged and len(spans) > 1:
+        merged = False
+        for i in range(len(spans) - 1):
+            fit = _fit_line(raw[spans[i][0]:spans[i + 1][1] + 1], direction, snap_angle)
+            if fit is not None and fit[2] <= tol:
+                spans[i:i + 2] = [(spans[i][0], spans[i + 1][1])]
+                merged = True
+                break
+    pieces = []
+    for lo, hi in spans:
+        fit = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+        if fit is not None:
+            pieces.append((fit[0], fit[1], raw[lo:hi + 1]))
+    if not pieces or (closed and len(pieces) < 3):
+        return None
+    pts = []
+    m = len(pieces)
+    for k in range(m if closed else m - 1):
+        (p, d, sa), (q, e, _) = pieces[k], pieces[(k + 1) % m]
+        corner = sa[-1]
+        x = _meet(p, d, q, e, corner)
+        if x is None:
+            # nearly parallel neighbours: a jog at the raw vertex they share
+            pts += [p + ((corner - p) @ d) * d, q + ((corner - q) @ e) * e]
+        else:
+            pts.append(x)
+    if closed:
+        return np.vstack([pts, pts[:1]]) if len(pts) >= 3 else None
+    p, d, sa = pieces[0]
+    q, e, sb = pieces[-1]
+    start = p + ((sa[0] - p) @ d) * d
+    end = q + ((sb[-1] - q) @ e) * e
+    return np.vstack([start, *pts, end]) if pts else np.vstack([start, end])
+
+
+def _extend(poly, ext):
+    """An open polyline with both end segments lengthened by ``ext``."""
+    poly = np.array(poly, dtype=float)
+    for i, j in ((0, 1), (-1, -2)):
+        d = poly[i] - poly[j]
+        n = np.hypot(*d)
+        if n > 1e-9:
+            poly[i] = poly[i] + d / n * ext
+    return poly
+
+
+def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
+    """Whether the planes' intersection line explains the points of facets ``a`` and ``b``
+    near a chain about as well as the chain (a step) does: points beyond the line take
+    the other plane; their mean capped residual may grow by at most ``tol`` (m)."""
+    xyz, lab, tree = points
+    near = np.unique(np.concatenate(tree.query_ball_point(chain, radius)).astype(np.int64)) \
+        if len(chain) else np.zeros(0, np.int64)
+    near = near[(lab[near] == a) | (lab[near] == b)]
+    if len(near) < 6:
+        return True
+    p = xyz[near]
+    side = p[:, :2] @ g + c0 > 0
+    is_a = lab[near] == a
+    a_side = np.mean(side[is_a]) >= 0.5 if is_a.any() else not np.mean(side[~is_a]) >= 0.5
+    za = p[:, :2] @ pa[:2] + pa[2]
+    zb = p[:, :2] @ pb[:2] + pb[2]
+    r_step = np.minimum(np.abs(p[:, 2] - np.where(is_a, za, zb)), cap)
+    r_line = np.minimum(np.abs(p[:, 2] - np.where(side == a_side, za, zb)), cap)
+    return float(np.mean(r_line) - np.mean(r_step)) <= tol
+
+
+def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
+                   snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
+                   tol_gain=0.05):
+    """Straight boundary polylines replacing the label grid's chains.
+
+    Parameters
+    ----------
+    chains, pairs : the inner boundary chains of a label grid and their label pairs
+        (from :func:`.topology.boundary_chains`; pairs with -1 are skipped).
+    planes : ndarray (K, 3)
+    cell : float
+        Label grid cell (m): the simplification tolerance of step edges.
+    direction : float
+        Building direction (rad).
+    t_step : float
+        Height difference (m) below which two facets meet in an intersection edge.
+    max_shift : float
+        A chain within this distance (90th percentile, m) of its planes' intersection
+        line is an intersection edge.
+    snap_angle : float
+        Step pieces within this angle (deg) of the building axes are made parallel to them.
+    step_tol : float
+        Largest distance (in cells) of a step chain's raw vertices from its straight piece.
+    overshoot : float, optional
+        Length (m) by which open polylines are extended; default one cell.
+    points : (xyz (N, 3), labels (N,), cKDTree of xyz[:, :2]), optional
+        With points, a chain near its planes' intersection line is an intersection
+        edge only when that line explains the nearby points of both facets about as
+        well as the chain does (mean capped residual, at most ``cap`` m per point,
+        grows by at most ``tol_gain`` m); else it is a step.
+
+    Returns
+    -------
+    segments : list of ndarray (m, 2)
+    kinds : list of str
+        ``"intersection"`` or ``"step"`` per polyline.
+    """
+    ext = cell if overshoot is None else overshoot
+    segs, kinds = [], []
+    for c, (a, b) in zip(chains, pairs, strict=True):
+        if a < 0 or b < 0 or len(c) < 2:
+            continue
+        c = np.asarray(c, dtype=float)
+        closed = len(c) > 3 and np.allclose(c[0], c[-1])
+        pa, pb = planes[a], planes[b]
+        dz = (pa[0] - pb[0]) * c[:, 0] + (pa[1] - pb[1]) * c[:, 1] + pa[2] - pb[2]
+        line = _plane_line(pa, pb)
+        if line is not None:
+            g, c0 = line
+            dist = np.abs(c @ g + c0)
+            near_line = np.percentile(dist, 90) <= max_shift
+            if near_line and points is not None and np.mean(np.abs(dz)) >= t_step:
+                near_line = _line_explains(points, c, a, b, pa, pb, g, c0, radius=max_shift + cell,
+                                           cap=cap, tol=tol_gain)
+            if np.mean(np.abs(dz)) < t_step or near_line:
+                u = np.array([-g[1], g[0]])
+                t = c @ u
+                foot = -c0 * g
+                lo, hi = t.min() - ext, t.max() + ext
+                segs.append(np.vstack([foot + lo * u, foot + hi * u]))
+                kinds.append("intersection")
+                continue
+        poly = _step_polyline(c, tol=step_tol * cell, direction=direction, snap_angle=snap_angle,
+                              closed=closed)
+        if poly is None or (closed and len(poly) < 4):
+            # too few vertices for straight pieces (a small island): its simplified outline
+            poly = _dp(c, cell)
+            if closed and len(poly) < 4:
+                poly = c
+        segs.append(poly if closed else _extend(poly, ext))
+        kinds.append("step")
+    return segs, kinds
+
+
+def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
+    """Open polylines lengthened at each end, along their end segment, to the first line they
+    meet (another polyline or the footprint outline), at most ``max_ext`` (m), plus ``eps``.
+
+    So the boundaries close the cells they are meant to close even when a chain
+    stopped short of its junction; a polyline that meets nothing keeps its end.
+    """
+    import shapely
+    from shapely.geometry import LineString, MultiLineString
+
+    segments = [np.array(s, dtype=float) for s in segments]
+    rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
+    everything = MultiLineString(rings + [s for s in segments if len(s) >= 2])
+    shapely.prepare(everything)
+    rays, where = [], []
+    for k, s in enumerate(segments):
+        if len(s) < 2 or np.allclose(s[0], s[-1]):
+            continue
+        for i, j in ((0, 1), (-1, -2)):
+            d = s[i] - s[j]
+            n = np.hypot(*d)
+            if n < 1e-9:
+                continue
+            d = d / n
+            rays.append(LineString([s[i] + d * 1e-6, s[i] + d * max_ext]))
+            where.append((k, i, d))
+    out = [s.copy() for s in segments]
+    if not rays:
+        return out
+    hits = shapely.intersection(np.asarray(rays, dtype=object), everything)
+    for hit, (k, i, d) in zip(hits, where, strict=True):
+        if hit.is_empty:
+            continue
+        c = shapely.get_coordinates(hit)
+        t = (c - segments[k][i]) @ d
+        out[k][i] = segments[k][i] + d * (t.min() + eps)
+    return out
+
+
+def _cell_labels(cells, xyz, planes, cap):
+    """Per cell: the plane with the least capped residual sum of its points, and point counts."""
+    import shapely
+
+    n = len(cells)
+    tree = shapely.STRtree(cells)
+    ip, ic = tree.query(shapely.points(xyz[:, :2]), predicate="intersects")
+    # a point on a shared edge counts once (its first cell)
+    first = np.unique(ip, return_index=True)[1]
+    ip, ic = ip[first], ic[first]
+    counts = np.bincount(ic, minlength=n).astype(float)
+    res = np.abs(xyz[ip, 2:3] - (xyz[ip, 0:1] * planes[:, 0] + xyz[ip, 1:2] * planes[:, 1] + planes[:, 2]))
+    cost = np.zeros((n, len(planes)))
+    np.add.at(cost, ic, np.minimum(res, cap))
+    labels = np.where(counts > 0, np.argmin(cost, axis=1), -1)
+    return labels, counts
+
+
+def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
+                          max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None):
+    """A partition of a footprint polygon into roof faces with straight boundaries.
+
+    Parameters
+    ----------
+    footprint : shapely Polygon (local metres)
+    xyz : ndarray (N, 3)
+        Roof points.
+    labels : ndarray (N,)
+        Facet per point (-1 none), indexing ``planes`` (K, 3).
+    cell : float
+        Label grid cell (m).
+    direction : float
+        Building direction (rad).
+    t_step, max_shift, snap_angle : see :func:`chain_segments`.
+    min_face_area : float, optional
+        Smallest face (m2); default 4 cells.
+    cap : float, optional
+        Residual cap (m) of the cell labelling; default ``1.5 * t_step``.
+
+    Returns
+    -------
+    faces : list of shapely Polygon
+    face_labels : ndarray of int
+    kinds : list of str
+        The kind of each boundary polyline used.
+    """
+    planes = np.asarray(planes, dtype=np.float64)
+    min_face_area = 4 * cell * cell if min_face_area is None else min_face_area
+    cap = 1.5 * t_step if cap is None else cap
+    grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
+    chains, pairs = boundary_chains(grid)
+    from scipy.spatial import cKDTree
+
+    segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
+                                 t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
+                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap)
+    x0, y0, x1, y1 = footprint.bounds
+    segs = extend_to_hits(segs, footprint, max_ext=float(np.hypot(x1 - x0, y1 - y0)))
+    cells = arrangement_cells(footprint, segs)
+    if len(planes) == 0 or not cells:
+        return [footprint], np.zeros(1, dtype=np.int64), kinds
+    cell_lab, counts = _cell_labels(cells, xyz, planes, cap)
+    faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
+                                        min_width=cell)
+    if not faces or (face_labels < 0).any():
+        return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
+            labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds
+    return faces, face_labels, kinds
+
+
+def collapse_short_edges(faces, footprint, *, min_length):
+    """A partition without edges shorter than ``min_length`` where they can go.
+
+    The ends of short edges are clustered; a cluster moves to the footprint
+    corner in it, else to its one outline vertex, else to its mean (clusters
+    holding two footprint corners or two outline vertices stay). Each cluster is
+    applied only when every face stays valid and the faces still tile the
+    footprint; a face that shrinks to nothing disappears.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+        A partition of ``footprint`` with shared vertices.
+    footprint : shapely Polygon
+    min_length : float
+        Shortest edge (m) kept.
+
+    Returns
+    -------
+    faces : list of shapely Polygon
+    kept : ndarray of int
+        Index into the input faces of each returned face.
+    """
+    import shapely
+
+    from .refine import _remove_spikes
+    from .solid import _key
+
+    rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
+    xy_of = {}
+    edges = set()
+    for rs in rings:
+        for r in rs:
+            keys = [_key(p) for p in r]
+            for p, k in zip(r, keys, strict=True):
+                xy_of[k] = p
+            for a, b in zip(keys, keys[1:] + keys[:1], strict=True):
+                if a != b:
+                    edges.add((min(a, b), max(a, b)))
+    short = [(a, b) for a, b in sorted(edges) if np.hypot(*(xy_of[a] - xy_of[b])) < min_length]
+    if not short:
+        return list(faces), np.arange(len(faces))
+    parent = {}
+
+    def find(k):
+        parent.setdefault(k, k)
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a, b in short:
+        parent[find(a)] = find(b)
+    clusters: dict = {}
+    for k in list(parent):
+        clusters.setdefault(find(k), []).append(k)
+    outline = footprint.boundary
+    corners = {_key(p) for r in shapely.get_rings(footprint) for p in np.asarray(r.coords)[:-1]}
+    total = footprint.area
+    mapping: dict = {}
+
+    def rebuild(mp):
+        out, idx = [], []
+        for fi, rs in enumerate(rings):
+            new_rs = []
+            for r in rs:
+                pts = [mp.get(_key(p), p) for p in r]
+                pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+                if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
+                    pts.pop()
+                new_rs.append(_remove_spikes(pts))
+            if len(new_rs[0]) < 3:
+                continue
+            poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
+            if poly.area <= 1e-9:
+                continue
+            out.append(poly)
+            idx.append(fi)
+        return out, idx
+
+    def ok(out):
+        return (all(f.is_valid for f in out) and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
+                and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
+
+    for members in sorted(clusters.values()):
+        pts = np.array([xy_of[k] for k in members])
+        on = np.array([outline.distance(shapely.Point(p)) < 1e-6 for p in pts])
+        fixed = [k for k in members if k in corners]
+        if len(fixed) > 1 or (not fixed and on.sum() > 1):
+            continue
+        target = xy_of[fixed[0]] if fixed else (pts[on][0] if on.any() else pts.mean(axis=0))
+        trial = {**mapping, **{k: target for k in members}}
+        out, _ = rebuild(trial)
+        if ok(out):
+            mapping = trial
+    if not mapping:
+        return list(faces), np.arange(len(faces))
+    out, idx = rebuild(mapping)
+    return [shapely.normalize(f) for f in out], np.asarray(idx, dtype=np.int64)

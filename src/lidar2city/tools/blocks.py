@@ -1,0 +1,140 @@
+"""The block planner: tiles and footprints to an ordered list of block specs.
+
+A block is a cell of a square grid of ``block_size`` metres aligned on the
+CRS's origin (not on the tiles). A building belongs to the block holding the
+centre of its footprint's bounding box. A :class:`BlockSpec` is plain,
+picklable data: the world box whose points the block reads, the headers of
+the tiles that meet it (paths, not points), and the block's footprints (or,
+without footprints, the grid cell to trace them in). Specs are numbered in a
+fixed order (grid rows south to north, west to east), and the output is
+assembled in that order whichever executor ran them and in whichever order
+they finished. :func:`lidar2city.tools.task.run_block` is what runs a spec.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["BlockSpec", "Frame", "footprint_blocks", "traced_blocks", "block_keys"]
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """The run's local frame: world origin (CRS units), CRS and metres per CRS unit."""
+
+    origin: np.ndarray
+    crs: object
+    xy_unit: float
+    z_unit: float
+
+    @classmethod
+    def of(cls, reader) -> Frame:
+        return cls(np.array(reader.origin, dtype=np.float64), reader.crs, reader.xy_unit,
+                   reader.z_unit)
+
+    def to_world(self, local_box) -> tuple:
+        """A local ``(xmin, ymin, xmax, ymax)`` box in world CRS units."""
+        o = np.asarray(self.origin[:2])
+        box = np.asarray(local_box, dtype=np.float64)
+        return tuple(float(v) for v in np.concatenate([o + box[:2] / self.xy_unit,
+                                                       o + box[2:] / self.xy_unit]))
+
+
+@dataclass(frozen=True, eq=False)
+class BlockSpec:
+    """One task: a block of the grid, as plain data.
+
+    Attributes
+    ----------
+    index : int
+        Position in the run's fixed block order.
+    cell : (int, int)
+        Grid cell ``(col, row)`` on the CRS origin.
+    world_box : tuple of 4 float or None
+        World box whose points the block reads; None when it has nothing to read
+        (all its footprints are empty).
+    tiles : tuple of TileInfo
+        Headers of the tiles meeting ``world_box``.
+    frame : Frame
+    footprints : Footprints or None
+        The block's footprints (local frame, with their file position in the
+        ``_index`` attribute); None: trace them in the cell.
+    """
+
+    index: int
+    cell: tuple
+    world_box: tuple | None
+    tiles: tuple
+    frame: Frame
+    footprints: object = None
+
+    @property
+    def size(self) -> int:
+        """Buildings known before the block runs (0 when traced)."""
+        return 0 if self.footprints is None else len(self.footprints)
+
+
+def block_keys(centres_local, frame: Frame, block_size: float) -> np.ndarray:
+    """Grid cell (on the CRS's origin) of local points: ``(col, row)`` per point."""
+    world = np.asarray(frame.origin[:2]) + np.asarray(centres_local, dtype=np.float64) / frame.xy_unit
+    return np.floor(world / (block_size / frame.xy_unit)).astype(np.int64)
+
+
+def _tiles_meeting(tiles, box):
+    if box is None:
+        return ()
+    x0, y0, x1, y1 = box
+    return tuple(t for t in tiles if t.count and not (t.maxs[0] < x0 or t.mins[0] > x1
+                                                      or t.maxs[1] < y0 or t.mins[1] > y1))
+
+
+def footprint_blocks(tiles, frame: Frame, footprints, block_size: float, margin: float) -> list:
+    """Specs of the blocks holding ``footprints`` (local frame), row by row.
+
+    ``footprints`` gets an ``_index`` attribute (its position) so that results
+    go back in the footprint file's order; inside a block that order is kept.
+    """
+    from .reconstruct import _subset
+
+    footprints.attributes["_index"] = list(range(len(footprints)))
+    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
+                       for g in footprints.geometries], dtype=np.float64).reshape(-1, 4)
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    empty = ~np.isfinite(centre).all(axis=1)
+    keys = block_keys(np.where(empty[:, None], 0.0, centre), frame, block_size)
+    # group by block, row by row (y, then x); footprint order kept inside a block
+    cells, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
+    which = np.asarray(which).reshape(-1)
+    order = np.argsort(which, kind="stable")
+    cuts = np.flatnonzero(np.diff(which[order])) + 1
+    specs = []
+    for idx in np.split(order, cuts):
+        idx = idx.tolist()
+        b = bounds[[i for i in idx if not empty[i]]]
+        world = None
+        if len(b):
+            world = frame.to_world([b[:, 0].min() - margin, b[:, 1].min() - margin,
+                                    b[:, 2].max() + margin, b[:, 3].max() + margin])
+        row, col = cells[which[idx[0]]]
+        specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
+                               _tiles_meeting(tiles, world), frame, _subset(footprints, idx)))
+    return specs
+
+
+def traced_blocks(tiles, frame: Frame, world_bounds, block_size: float, buffer: float) -> list:
+    """Specs of every cell of the tiles' extent, row by row, to trace footprints in
+    (the cell plus ``buffer`` metres is read; those centred in the cell are kept)."""
+    step = block_size / frame.xy_unit
+    k0 = np.floor(np.asarray(world_bounds[:2]) / step).astype(np.int64)
+    k1 = np.floor(np.asarray(world_bounds[2:]) / step).astype(np.int64)
+    pad = buffer / frame.xy_unit
+    specs = []
+    for row in range(k0[1], k1[1] + 1):
+        for col in range(k0[0], k1[0] + 1):
+            world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
+                     (row + 1) * step + pad)
+            specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
+                                   _tiles_meeting(tiles, world), frame))
+    return specs

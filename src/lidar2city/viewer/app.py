@@ -1,0 +1,637 @@
+"""The viewer: a viser server showing a model and its points, with semi-automatic editing.
+
+:class:`Viewer` owns the server, the scene and the GUI. Every edit goes through
+:class:`lidar2city.tools.edit.EditSession` — the same refit as ``lidar2city
+edit`` and ``reconstruct --edits`` — and a refit is only a candidate until it is
+accepted (saved atomically, edit appended to EDITS.json) or undone. The actions
+are methods (:meth:`Viewer.select`, :meth:`Viewer.refit_primitive`,
+:meth:`Viewer.rebuild_from_outline`, :meth:`Viewer.accept`, :meth:`Viewer.undo`)
+that the GUI's callbacks call and tests can call directly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DependencyError, InputError, Lidar2CityError
+from . import scene
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Viewer", "require_viser"]
+
+_SELECTED = (255, 225, 0)
+_LOD_NAMES = {"1.2": "lod12", "1.3": "lod13", "2.2": "lod22"}
+
+
+def require_viser():
+    """Import viser, or raise :class:`DependencyError` naming the extra to install."""
+    try:
+        import viser
+    except ImportError:
+        raise DependencyError("the viewer needs viser: pip install lidar2city[view]") from None
+    return viser
+
+
+def _model_from_doc(doc):
+    from ..io.cityjson import CityModel, _apply_transform
+
+    return CityModel(str(doc.get("version", "")), _apply_transform(doc.get("vertices") or [],
+                                                                   doc.get("transform")),
+                     doc["CityObjects"], doc.get("metadata") or {},
+                     (doc.get("metadata") or {}).get("referenceSystem"), {}, doc.get("transform"))
+
+
+class Viewer:
+    """A local web viewer (and editor) of a lidar2city CityJSON model.
+
+    Parameters
+    ----------
+    model : path
+        ``.city.json`` (or ``.city.jsonl``, view only).
+    points : sequence of paths
+        The LAS/LAZ tiles: shown (subsampled) and needed for editing.
+    footprints : path, optional
+        The footprint file given to ``reconstruct`` (original outlines for edits).
+    edits : path, optional
+        EDITS.json accepted edits are appended to (default ``<model>.edits.json``).
+    output : path, optional
+        Where accepted edits write the model (default: the model, atomically).
+    host, port
+        Where to listen; 127.0.0.1 by default (loopback only).
+    max_points : int
+        Points shown at most (evenly subsampled).
+    crs, id_field
+        As for ``lidar2city edit``.
+    """
+
+    def __init__(self, model, *, points=(), footprints=None, edits=None, output=None,
+                 host="127.0.0.1", port=8080, max_points=200_000, crs=None, id_field=None):
+        self.viser = require_viser()
+        from ..io.cityjson import read_cityjson
+
+        self.path = Path(model)
+        self.session = None
+        if points:
+            from ..tools.edit import EditSession
+
+            self.session = EditSession(model, list(points), footprints=footprints, crs=crs,
+                                       id_field=id_field)
+            self.model = _model_from_doc(self.session.doc)
+        else:
+            self.model = read_cityjson(model)
+        name = self.path.name
+        for end in (".city.json", ".city.jsonl", ".json"):
+            if name.endswith(end):
+                name = name[: -len(end)]
+                break
+        self.edits_path = Path(edits) if edits else self.path.with_name(f"{name}.edits.json")
+        self.output = output
+        self.host, self.port = host, int(port)
+        if self.host not in ("127.0.0.1", "localhost", "::1"):
+            logger.warning("the viewer will listen on %s: anyone who can reach this machine "
+                           "can see and edit the model", self.host)
+        self.max_points = int(max_points)
+        self.server = None
+        self.handles: dict[str, dict] = {}
+        self.attrs = {bid: dict(self.model.objects[bid].get("attributes") or {})
+                      for bid in self.model.buildings()}
+        self._index = {bid: i for i, bid in enumerate(self.attrs)}
+        self.lods = sorted({str(g.get("lod")) for o in self.model.objects.values()
+                            for g in o.get("geometry", []) or []} & set(_LOD_NAMES))
+        v = self.model.vertices
+        self.origin = (np.floor(v.min(axis=0)) if len(v) else np.zeros(3))
+        self.extent = (v.max(axis=0) - v.min(axis=0)) if len(v) else np.ones(3)
+        self.selected = None
+        self.pending = None          # (edit, result, previous attributes, previous meshes)
+        self.outline = None          # (N, 2) world vertices of the outline being edited
+        self.vertex = 0
+        self.status = ""
+        self.lock = threading.RLock()
+        self._gizmos = []
+        self._placed = None
+        self.cloud = self.classes = None
+        self._rmse_thread = None
+        self._quiet_worst = False
+        self._drawn = set()
+
+    # ------------------------------------------------------------------ data
+    def _world_solids(self, bid, lod):
+        return self.model.solids(bid, lod=lod, include_children=True)
+
+    def _result_world_solids(self, result, lod):
+        from ..datamodel import Solid
+
+        r = self.session.reader
+        unit = np.array([r.xy_unit, r.xy_unit, r.z_unit])
+        got = result.solids.get(lod)
+        solids = [] if got is None else ([got] if isinstance(got, Solid) else list(got))
+        solids += list(result.parts.get(lod, []))
+        return [Solid(r.origin + np.asarray(s.vertices) / unit, s.surfaces) for s in solids]
+
+    def _building_points(self, bid):
+        """World building points inside the building's outline (for its RMSE)."""
+        import shapely
+        from shapely.geometry import shape
+
+        if self.cloud is None or self.session is None:
+            return None
+        fp = shape(self.session.footprint(bid))
+        xyz, build = self._world_xyz, self._building_mask
+        x0, y0, x1, y1 = fp.bounds
+        idx = np.flatnonzero(build & (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1)
+                             & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1))
+        return xyz[idx[shapely.contains_xy(fp, xyz[idx, 0], xyz[idx, 1])]]
+
+    def _rmse_of(self, bid, solids):
+        from ..metrics.model import model_rmse
+
+        pts = self._building_points(bid)
+        if pts is None or not len(pts) or not solids:
+            return None
+        return round(float(model_rmse(pts, solids)), 4)
+
+    def _compute_all_rmse(self):
+        top = self.lods[-1] if self.lods else None
+        for bid in list(self.attrs):
+            try:
+                with self.lock:
+                    if self.pending is not None and self.pending[1].id == bid:
+                        continue
+                    solids = self._world_solids(bid, top)
+                value = self._rmse_of(bid, solids)
+            except Lidar2CityError:
+                continue
+            with self.lock:
+                if value is not None:
+                    self.attrs[bid]["viewer_rmse"] = value
+        with self.lock:
+            if self.server is not None and self.colour_by.value == "RMSE":
+                self.recolour()
+
+    # ------------------------------------------------------------------ server
+    def start(self, *, compute_rmse: bool = True) -> str:
+        """Start the server, build the scene and GUI; returns the URL."""
+        viser = self.viser
+        self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
+        srv = self.server
+        srv.scene.set_up_direction("+z")
+        d = float(max(self.extent[0], self.extent[1], 10.0))
+        centre = self.extent / 2
+        cam = srv.initial_camera
+        cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
+        cam.look_at = (centre[0], centre[1], 0.0)
+        self._build_gui()
+        self._draw_buildings()
+        if self.session is not None:
+            self._draw_points()
+            if compute_rmse:
+                self._rmse_thread = threading.Thread(target=self._compute_all_rmse, daemon=True)
+                self._rmse_thread.start()
+        return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
+
+    def stop(self):
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    def _draw_buildings(self, lod=None):
+        """Meshes of every building at ``lod`` (default: the LoD shown), made when first shown."""
+        lod = lod or self.lod_choice.value
+        if lod not in self.lods or lod in self._drawn:
+            return
+        self._drawn.add(lod)
+        colours, legend = scene.colours_for(scene.attribute_values(self.attrs, self.colour_by.value))
+        self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
+        # a building with a refit pending already has its candidate's meshes at every LoD
+        solids = {bid: self._world_solids(bid, lod) for bid in self.attrs
+                  if lod not in self.handles.get(bid, {})}
+        with self.server.atomic():
+            for bid, (v, t) in scene.building_meshes(solids, self.origin).items():
+                self._add_mesh(bid, lod, v, t,
+                               _SELECTED if bid == self.selected else colours[bid])
+
+    def _add_mesh(self, bid, lod, v, t, colour, *, visible=True):
+        name = f"/{_LOD_NAMES[lod]}/b{self._index[bid]}"
+        old = self.handles.setdefault(bid, {}).get(lod)
+        if old is not None:
+            old.remove()
+        h = self.server.scene.add_mesh_simple(name, v, t, color=colour, flat_shading=True,
+                                              cast_shadow=False, receive_shadow=False,
+                                              visible=visible)
+        h.on_click(lambda _event, bid=bid: self.select(bid))
+        self.handles[bid][lod] = h
+
+    def _draw_points(self):
+        world, cloud, classes = self.session.load_area()
+        self.cloud, self.classes = cloud, classes
+        self._world_xyz = world
+        self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
+        idx = scene.subsample(len(cloud), self.max_points)
+        pts = (self._world_xyz[idx] - self.origin).astype(np.float32)
+        self.points_handle = self.server.scene.add_point_cloud(
+            "/points", pts, scene.class_colours(classes[idx]), point_size=0.25,
+            precision="float32", visible=self.show_points.value)
+
+    # ------------------------------------------------------------------ GUI
+    def _build_gui(self):
+        gui = self.server.gui
+        with gui.add_folder("Display"):
+            self.lod_choice = gui.add_dropdown("LoD", [f"{v}" for v in self.lods] or ["-"],
+                                               initial_value=self.lods[-1] if self.lods else "-")
+            self.colour_by = gui.add_dropdown("Colour by", scene.COLOUR_BY, initial_value="RMSE")
+            self.show_points = gui.add_checkbox("Points", self.session is not None,
+                                                disabled=self.session is None)
+            self.legend = gui.add_markdown("")
+        with gui.add_folder("Worst buildings"):
+            worst = scene.worst_buildings(self.attrs)
+            self.worst = gui.add_dropdown("Building", [self._worst_label(b, r) for b, r in worst]
+                                          or ["-"])
+            self.next_worst = gui.add_button("Next worst")
+        with gui.add_folder("Edit", visible=True):
+            self.status_md = gui.add_markdown("Click a building." if self.session is not None else
+                                              "View only: start with --points to edit.")
+            self.kind = gui.add_dropdown("Primitive", ("auto", "box", "gable", "hip", "shed",
+                                                       "prism"), initial_value="auto")
+            self.place = gui.add_checkbox("Start from a placed primitive", False)
+            self.p_len = gui.add_number("Length (m)", 10.0, min=0.5, step=0.1, visible=False)
+            self.p_wid = gui.add_number("Width (m)", 6.0, min=0.5, step=0.1, visible=False)
+            self.refit_btn = gui.add_button("Refit as primitive", disabled=self.session is None)
+            self.outline_btn = gui.add_button("Edit outline", disabled=self.session is None)
+            self.add_v = gui.add_button("Add vertex", visible=False)
+            self.del_v = gui.add_button("Delete vertex", visible=False)
+            self.rebuild_btn = gui.add_button("Rebuild from outline", visible=False)
+            self.accept_btn = gui.add_button("Accept", color="green", disabled=True)
+            self.undo_btn = gui.add_button("Undo", color="red", disabled=True)
+        with gui.add_folder("Building"):
+            self.info = gui.add_markdown("")
+
+        for control, action in ((self.lod_choice, self._show_lod), (self.colour_by, self.recolour),
+                                (self.show_points, self._toggle_points),
+                                (self.worst, self._select_worst), (self.place, self._toggle_place),
+                                (self.p_len, self._draw_placed_box),
+                                (self.p_wid, self._draw_placed_box)):
+            control.on_update(lambda _, action=action: action())
+        for button, action in ((self.next_worst, self._next_worst),
+                               (self.refit_btn, lambda: self.refit_primitive(self.kind.value)),
+                               (self.outline_btn, self.start_outline),
+                               (self.add_v, self.add_vertex), (self.del_v, self.delete_vertex),
+                               (self.rebuild_btn, self.rebuild_from_outline),
+                               (self.accept_btn, self.accept), (self.undo_btn, self.undo)):
+            button.on_click(lambda _, action=action: action())
+
+    def worst_order(self):
+        """Every building, worst first: ``[(id, RMSE or None)]``."""
+        with self.lock:
+            return scene.worst_buildings(self.attrs, n=len(self.attrs))
+
+    @staticmethod
+    def _worst_label(bid, rmse):
+        return f"{bid} (RMSE {rmse:.2f} m)" if rmse is not None else f"{bid}"
+
+    def _show_lod(self):
+        with self.lock:
+            self._draw_buildings(self.lod_choice.value)
+            for lods in self.handles.values():
+                for lod, h in lods.items():
+                    h.visible = lod == self.lod_choice.value
+
+    def _toggle_points(self):
+        if getattr(self, "points_handle", None) is not None:
+            self.points_handle.visible = self.show_points.value
+
+    def _select_worst(self):
+        if self._quiet_worst:
+            return
+        bid = self.worst.value.split(" ")[0]
+        if bid in self.attrs and bid != self.selected:
+            self.select(bid, focus=True)
+
+    def _next_worst(self):
+        opts = list(self.worst.options)
+        if self.worst.value in opts:
+            self.worst.value = opts[(opts.index(self.worst.value) + 1) % len(opts)]
+
+    def recolour(self):
+        """Colour every building by the chosen attribute; the selected one stands out."""
+        with self.lock:
+            values = scene.attribute_values(self.attrs, self.colour_by.value)
+            colours, legend = scene.colours_for(values)
+            self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
+            with self.server.atomic():
+                for bid, lods in self.handles.items():
+                    for h in lods.values():
+                        h.color = _SELECTED if bid == self.selected else colours.get(bid, (170,) * 3)
+            worst = scene.worst_buildings(self.attrs)
+            labels = [self._worst_label(b, r) for b, r in worst] or ["-"]
+            if list(self.worst.options) != labels:
+                self._quiet_worst = True
+                try:
+                    self.worst.options = labels
+                finally:
+                    self._quiet_worst = False
+
+    def _message(self, text, *, error=False):
+        self.status = text
+        self.status_md.content = (f"<span style='color:#c00'>**Error:** {text}</span>" if error
+                                  else text)
+        if error and self.server is not None:
+            for client in self.server.get_clients().values():
+                client.add_notification("Edit refused", text, color="red", auto_close_seconds=8)
+
+    # ------------------------------------------------------------------ actions
+    def select(self, bid, *, focus=False):
+        """Show a building's attributes (and fly to it with ``focus``)."""
+        with self.lock:
+            if bid not in self.attrs:
+                self._message(f"unknown building id {bid!r}", error=True)
+                return
+            if self.pending is not None and self.pending[1].id != bid:
+                self.undo()
+            self._end_outline()
+            self.selected = bid
+            self.info.content = scene.attributes_markdown(bid, self.attrs[bid])
+            if self.session is not None and self.pending is None:
+                self._message(f"Building {bid}: refit it as a primitive, or edit its outline.")
+            self.recolour()
+            if self._placed is not None:
+                self._toggle_place()
+        if focus and self.server is not None:
+            h = self.handles.get(bid, {})
+            solids = self._world_solids(bid, self.lods[-1]) if self.lods else []
+            if solids and h:
+                c = np.concatenate([s.vertices for s in solids]).mean(axis=0) - self.origin
+                for client in self.server.get_clients().values():
+                    client.camera.look_at = tuple(c)
+                    client.camera.position = (c[0] - 25.0, c[1] - 35.0, c[2] + 30.0)
+
+    def _need(self, what="edit"):
+        if self.session is None:
+            raise InputError("start the viewer with --points to edit")
+        if self.selected is None:
+            raise InputError(f"click a building to {what} first")
+
+    def _approx(self):
+        """The placed primitive's approximate parameters (world x, y; azimuth; sizes)."""
+        if not self.place.value or self._placed is None:
+            return {}
+        p = np.asarray(self._placed.position, dtype=np.float64) + self.origin
+        w, x, y, z = self._placed.wxyz
+        az = math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+        return {"x": float(p[0]), "y": float(p[1]), "azimuth": round(az, 6),
+                "length": float(self.p_len.value), "width": float(self.p_wid.value)}
+
+    def refit_primitive(self, kind):
+        """Refit the selected building as ``kind`` (by least squares, or from the placed
+        primitive); returns the seconds taken or None on error (the message says why)."""
+        try:
+            self._need("refit")
+            edit = self.session.make_edit(self.selected, primitive=kind, approximate=self._approx())
+        except Lidar2CityError as exc:
+            self._message(str(exc), error=True)
+            return None
+        return self._run(edit)
+
+    def _run(self, edit):
+        t0 = time.perf_counter()
+        with self.lock:
+            try:
+                result = self.session.refit(edit)
+            except Lidar2CityError as exc:
+                self._message(str(exc), error=True)
+                return None
+            if self.pending is not None:
+                self.undo()
+            bid = str(result.id)
+            before = (dict(self.attrs[bid]), {lod: self._world_solids(bid, lod) for lod in self.lods})
+            attrs = {k: v for k, v in result.attributes.items()}
+            attrs["status"] = result.status
+            new = {lod: self._result_world_solids(result, lod) for lod in self.lods}
+            rmse = self._rmse_of(bid, new.get(self.lods[-1]) or [])
+            if rmse is not None:
+                attrs["viewer_rmse"] = rmse
+            self.pending = (edit, result, before[0], before[1])
+            self._show_solids(bid, new)
+            self.attrs[bid] = attrs
+            self._end_outline()
+            self.info.content = scene.attributes_markdown(bid, attrs)
+            self.accept_btn.disabled = False
+            self.undo_btn.disabled = False
+            dt = time.perf_counter() - t0
+            old = scene.attribute_values({bid: before[0]}, "RMSE")[bid]
+            self._message(f"{edit.describe()} in {dt:.2f} s: RMSE "
+                          f"{'-' if old is None else f'{old:.3f}'} -> "
+                          f"{'-' if rmse is None else f'{rmse:.3f}'} m, "
+                          f"{'valid' if attrs.get('valid', True) is not False else 'INVALID'}"
+                          f"{', LoD2.2 fallback: ' + attrs['lod22_fallback'] if attrs.get('lod22_fallback') else ''}"
+                          ". Accept or Undo.")
+            self.recolour()
+            return dt
+
+    def _show_solids(self, bid, solids_by_lod):
+        meshes = {lod: scene.building_meshes({bid: s}, self.origin).get(bid)
+                  for lod, s in solids_by_lod.items()}
+        for lod, m in meshes.items():
+            if m is None:
+                h = self.handles.get(bid, {}).pop(lod, None)
+                if h is not None:
+                    h.remove()
+                continue
+            self._add_mesh(bid, lod, m[0], m[1], _SELECTED, visible=lod == self.lod_choice.value)
+
+    def accept(self):
+        """Save the pending refit (model written atomically and validated, edit appended)."""
+        with self.lock:
+            if self.pending is None:
+                self._message("nothing to accept", error=True)
+                return None
+            edit, result, _, _ = self.pending
+            try:
+                out = self.session.save(result, edit, output=self.output, edits=self.edits_path)
+            except Lidar2CityError as exc:
+                self._message(str(exc), error=True)
+                return None
+            self.model = _model_from_doc(self.session.doc)
+            bid = str(result.id)
+            viewer_rmse = self.attrs[bid].get("viewer_rmse")
+            self.attrs[bid] = dict(self.model.objects[bid].get("attributes") or {})
+            if viewer_rmse is not None:
+                self.attrs[bid]["viewer_rmse"] = viewer_rmse
+            self.pending = None
+            self.accept_btn.disabled = self.undo_btn.disabled = True
+            self._message(f"Saved {out.name}; edit appended to {self.edits_path.name}.")
+            self.recolour()
+            return out
+
+    def undo(self):
+        """Discard the pending refit: the building is shown as it is in the model again."""
+        with self.lock:
+            if self.pending is None:
+                return
+            edit, result, attrs, solids = self.pending
+            self.pending = None
+            bid = str(result.id)
+            self.attrs[bid] = attrs
+            self._show_solids(bid, solids)
+            self.info.content = scene.attributes_markdown(bid, attrs)
+            self.accept_btn.disabled = self.undo_btn.disabled = True
+            self._message("Undone.")
+            self.recolour()
+
+    # -- outline editing
+    def start_outline(self):
+        """Show the selected building's outline with a handle per vertex."""
+        from shapely.geometry import shape
+
+        try:
+            self._need("edit the outline of")
+            geom = shape(self.session.footprint(self.selected))
+        except Lidar2CityError as exc:
+            self._message(str(exc), error=True)
+            return
+        if geom.geom_type != "Polygon":
+            geom = max(geom.geoms, key=lambda g: g.area)
+        self._holes = [list(r.coords) for r in geom.interiors]
+        self.outline = np.asarray(geom.exterior.coords, dtype=np.float64)[:-1, :2]
+        self.vertex = 0
+        for b in (self.add_v, self.del_v, self.rebuild_btn):
+            b.visible = True
+        self._draw_outline()
+        self._message("Drag the handles; Add / Delete vertex act after / on the last one moved; "
+                      "then Rebuild from outline.")
+
+    def _outline_z(self):
+        a = self.attrs.get(self.selected, {})
+        z = a.get("roof_height_max", a.get("roof_height", 0.0))
+        return float(z if isinstance(z, (int, float)) else 0.0) + 0.5 - self.origin[2]
+
+    def _draw_outline(self):
+        for g in self._gizmos:
+            g.remove()
+        self._gizmos = []
+        if self.outline is None:
+            return
+        z = self._outline_z()
+        local = self.outline - self.origin[:2]
+        self._line = self.server.scene.add_line_segments(
+            "/outline", self._outline_segments(), (255, 40, 40), thickness=3.0,
+            thickness_units="screen")
+        self._gizmos.append(self._line)
+        for i, (x, y) in enumerate(local):
+            g = self.server.scene.add_transform_controls(
+                f"/outline_v{i}", scale=1.5, active_axes=(True, True, False),
+                disable_rotations=True, position=(float(x), float(y), z))
+            g.on_update(lambda _e, i=i, g=g: self._moved(i, g))
+            self._gizmos.append(g)
+
+    def _moved(self, i, g):
+        with self.lock:
+            if self.outline is None or i >= len(self.outline):
+                return
+            self.outline[i] = np.asarray(g.position[:2], dtype=np.float64) + self.origin[:2]
+            self.vertex = i
+            self._line.points = self._outline_segments()
+
+    def _outline_segments(self):
+        """The outline's edges, (N, 2, 3) float32 in the display frame, above the roof."""
+        z = self._outline_z()
+        local = self.outline - self.origin[:2]
+        ring = np.vstack([local, local[:1]])
+        return np.stack([np.column_stack([ring[:-1], np.full(len(ring) - 1, z)]),
+                         np.column_stack([ring[1:], np.full(len(ring) - 1, z)])],
+                        axis=1).astype(np.float32)
+
+    def move_vertex(self, i, xy):
+        """Move outline vertex ``i`` to world ``xy`` (what dragging its handle does)."""
+        self.outline[i] = np.asarray(xy, dtype=np.float64)
+        self.vertex = i
+        self._draw_outline()
+
+    def add_vertex(self):
+        """Insert a vertex in the middle of the edge after the last vertex moved."""
+        if self.outline is None:
+            return
+        i = self.vertex
+        mid = (self.outline[i] + self.outline[(i + 1) % len(self.outline)]) / 2
+        self.outline = np.insert(self.outline, i + 1, mid, axis=0)
+        self.vertex = i + 1
+        self._draw_outline()
+
+    def delete_vertex(self):
+        """Delete the last vertex moved (an outline keeps at least 3)."""
+        if self.outline is None:
+            return
+        if len(self.outline) <= 3:
+            self._message("an outline needs at least 3 vertices", error=True)
+            return
+        self.outline = np.delete(self.outline, self.vertex, axis=0)
+        self.vertex = self.vertex % len(self.outline)
+        self._draw_outline()
+
+    def rebuild_from_outline(self):
+        """Re-run the selected building's reconstruction from the edited outline."""
+        if self.outline is None:
+            self._message("press Edit outline first", error=True)
+            return None
+        ring = [[float(x), float(y)] for x, y in self.outline] + \
+            [[float(self.outline[0, 0]), float(self.outline[0, 1])]]
+        poly = {"type": "Polygon", "coordinates": [ring, *[[list(map(float, c[:2])) for c in h]
+                                                           for h in self._holes]]}
+        try:
+            self._need("rebuild")
+            edit = self.session.make_edit(self.selected, footprint=poly)
+        except Lidar2CityError as exc:
+            self._message(str(exc), error=True)
+            return None
+        return self._run(edit)
+
+    def _end_outline(self):
+        self.outline = None
+        for g in self._gizmos:
+            g.remove()
+        self._gizmos = []
+        for b in (self.add_v, self.del_v, self.rebuild_btn):
+            b.visible = False
+
+    def _toggle_place(self):
+        """Show (or hide) the handle of a user-placed primitive on the selected building."""
+        import shapely
+        from shapely.geometry import shape
+
+        if self._placed is not None:
+            self._placed.remove()
+            self._placed = None
+        self.p_len.visible = self.p_wid.visible = bool(self.place.value)
+        if not self.place.value or self.selected is None or self.session is None:
+            return
+        try:
+            fp = shape(self.session.footprint(self.selected))
+        except Lidar2CityError as exc:
+            self._message(str(exc), error=True)
+            return
+        rect = np.asarray(shapely.minimum_rotated_rectangle(fp).exterior.coords)[:4]
+        e1, e2 = rect[1] - rect[0], rect[2] - rect[1]
+        long_, short = (e1, e2) if np.hypot(*e1) >= np.hypot(*e2) else (e2, e1)
+        az = math.atan2(long_[1], long_[0])
+        self.p_len.value = round(float(np.hypot(*long_)), 2)
+        self.p_wid.value = round(float(np.hypot(*short)), 2)
+        c = np.asarray(fp.centroid.coords[0]) - self.origin[:2]
+        self._placed = self.server.scene.add_transform_controls(
+            "/placed", scale=3.0, active_axes=(True, True, False),
+            position=(float(c[0]), float(c[1]), self._outline_z()),
+            wxyz=(math.cos(az / 2), 0.0, 0.0, math.sin(az / 2)))
+        self._draw_placed_box()
+
+    def _draw_placed_box(self):
+        """A translucent box of the placed primitive's length and width under its handle."""
+        if self._placed is None:
+            return
+        self.server.scene.add_box("/placed/box", color=(255, 225, 0),
+                                  dimensions=(float(self.p_len.value), float(self.p_wid.value), 1.0),
+                                  opacity=0.45, position=(0.0, 0.0, -0.5))

@@ -1,0 +1,110 @@
+import numpy as np
+import pytest
+import shapely
+
+from lidar2city.errors import FitError
+from lidar2city.metrics.wireframe import roof_wireframe, wireframe_scores
+from lidar2city.roof.arrangement import (
+    arrangement_cells,
+    collapse_short_edges,
+    dissolve_cells,
+    drop_collinear,
+    extend_to_hits,
+)
+from lidar2city.roof.building import Lod22Config, reconstruct_lod22
+from lidar2city.synthetic_roofs import roof_sample
+from lidar2city.validate.solid import check_solid
+
+SQ = shapely.box(0, 0, 10, 10)
+
+
+def test_cells_tile_and_dangles_vanish():
+    cells = arrangement_cells(SQ, [np.array([[-1, 5], [11, 5]]), np.array([[5, 5], [5, 8]])])
+    assert len(cells) == 2  # the dangling piece cuts nothing
+    assert sum(c.area for c in cells) == pytest.approx(100)
+
+
+def test_extend_to_hits_closes_a_cell():
+    short = [np.array([[2.0, 5.0], [8.0, 5.0]])]
+    assert len(arrangement_cells(SQ, short)) == 1
+    ext = extend_to_hits(short, SQ, max_ext=20)
+    assert ext[0][0, 0] < 0 and ext[0][-1, 0] > 10
+    assert len(arrangement_cells(SQ, ext)) == 2
+
+
+def test_dissolve_merges_labels_small_and_empty_cells():
+    lines = [np.array([[-1, y], [11, y]]) for y in (3, 6)] + [np.array([[5, -1], [5, 11]])]
+    cells = arrangement_cells(SQ, lines)
+    assert len(cells) == 6
+    labels = np.array([0 if c.centroid.y < 6 else 1 for c in cells])
+    faces, lab = dissolve_cells(cells, labels)
+    assert sorted(lab.tolist()) == [0, 1]
+    # a straight boundary: the merged faces are rectangles (4 vertices each)
+    assert all(len(f.exterior.coords) == 5 for f in faces)
+    labels[0] = -1
+    faces, lab = dissolve_cells(cells, labels)
+    assert (lab >= 0).all() and sum(f.area for f in faces) == pytest.approx(100)
+
+
+def test_drop_collinear_keeps_junctions():
+    a = shapely.Polygon([(0, 0), (5, 0), (5, 5), (5, 10), (0, 10)])
+    b = shapely.Polygon([(5, 0), (10, 0), (10, 5), (5, 5)])
+    c = shapely.Polygon([(5, 5), (10, 5), (10, 10), (5, 10)])
+    out = drop_collinear([a, b, c])
+    # (5, 5) is straight in a but a corner of b and c: kept everywhere
+    assert len(out[0].exterior.coords) == 6
+
+
+def test_collapse_short_edges():
+    a = shapely.Polygon([(0, 0), (5, 0), (5.2, 10), (0, 10)])
+    b = shapely.Polygon([(5, 0), (10, 0), (10, 10), (5.2, 10)])
+    c = shapely.Polygon([(0, 0), (5, 0), (4.9, 4.9), (5.1, 5.0), (5.2, 10), (0, 10)])
+    d = shapely.Polygon([(5, 0), (10, 0), (10, 10), (5.2, 10), (5.1, 5.0), (4.9, 4.9)])
+    fp = shapely.box(0, 0, 10, 10)
+    out, kept = collapse_short_edges([a, b], fp, min_length=0.5)
+    assert len(out) == 2  # the 0.2 m outline pieces are between footprint corners' neighbours
+    out, kept = collapse_short_edges([c, d], fp, min_length=0.5)
+    assert all(len(f.exterior.coords) == 6 for f in out)
+    assert sum(f.area for f in out) == pytest.approx(100)
+
+
+@pytest.mark.parametrize("kind", ["gable", "hip", "L", "stepped"])
+def test_exact_wireframes_on_clean_roofs(kind):
+    s = roof_sample(kind, density=25, seed=0)
+    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z)
+    assert all(not check_solid(x) for x in res.solids)
+    sc = wireframe_scores(roof_wireframe(res.solids), s.wireframe, tolerance=0.5)
+    assert sc["corner_f1"] >= 0.9
+    assert sc["edge_f1"] >= 0.85
+
+
+def test_grid_topology_still_available():
+    s = roof_sample("hip", density=8, seed=0)
+    res = reconstruct_lod22(s.footprint, s.xyz, 0.0, config=Lod22Config(topology="grid"))
+    assert all(not check_solid(x) for x in res.solids)
+
+
+def test_deterministic():
+    s = roof_sample("T", density=8, seed=2)
+    a = reconstruct_lod22(s.footprint, s.xyz, 0.0).solids[0]
+    b = reconstruct_lod22(s.footprint, s.xyz, 0.0).solids[0]
+    assert np.array_equal(a.vertices, b.vertices)
+    assert [list(map(list, x.rings)) for x in a.surfaces] == [list(map(list, x.rings)) for x in b.surfaces]
+
+
+@pytest.mark.parametrize(("fp", "pts", "reason"), [
+    (SQ, np.array([[5.0, 5.0, 8.0]]), "too few points"),
+    (SQ, np.column_stack([np.linspace(0, 10, 50), np.linspace(0, 10, 50), np.full(50, 8.0)]), "one line"),
+    (shapely.box(0, 0, 0.1, 0.1), np.array([[0.05, 0.05, 8], [0.02, 0.03, 8.1], [0.08, 0.01, 8.05]]),
+     "smaller than one label cell"),
+])
+def test_bad_input_gives_a_reason(fp, pts, reason):
+    with pytest.raises(FitError, match=reason):
+        reconstruct_lod22(fp, pts, 0.0)
+
+
+def test_bad_topology_option():
+    from lidar2city.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="lod22.topology"):
+        Lod22Config(topology="magic")

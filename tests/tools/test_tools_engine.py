@@ -1,0 +1,218 @@
+"""reconstruct on executors: same bytes on 1 / 2 workers and an external Dask cluster,
+resume from the journal, failing blocks and dead workers."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+
+import pytest
+
+from lidar2city.errors import InputError
+from lidar2city.io.journal import journal_path
+from lidar2city.io.las import write_points
+from lidar2city.io.vector import write_polygons
+from lidar2city.synthetic import make_town
+from lidar2city.tools import engine, task
+from lidar2city.tools.engine import DaskExecutor
+from lidar2city.tools.reconstruct import reconstruct
+
+BLOCK = 50.0
+
+# dask.distributed leaves sockets to the garbage collector when clients and clusters close
+pytestmark = pytest.mark.filterwarnings("ignore::ResourceWarning",
+                                        "ignore::pytest.PytestUnraisableExceptionWarning")
+
+
+class Crash(BaseException):
+    """A crash of the whole run (not a task failure the executor would retry)."""
+
+
+@pytest.fixture(scope="module")
+def area(tmp_path_factory):
+    d = tmp_path_factory.mktemp("engine")
+    town = make_town(size=(160.0, 120.0), density=3.0, seed=5, n_trees=5)
+    write_points(d / "town.laz", town.cloud)
+    write_polygons(d / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    return d
+
+
+def _run(area, out, **kw):
+    kw.setdefault("block_size", BLOCK)
+    return reconstruct([area / "town.laz"], out, footprints=area / "fp.gpkg", lods=("1.2", "1.3"),
+                       **kw)
+
+
+@pytest.fixture(scope="module")
+def reference(area, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "ref.city.json"
+    summary = _run(area, out)
+    assert summary.blocks >= 3 and summary.done >= 5 and summary.failed == 0
+    assert not journal_path(out).exists()  # removed once the output is written
+    return out.read_bytes(), summary
+
+
+def test_two_workers_give_the_same_bytes(area, reference, tmp_path):
+    out = tmp_path / "w2.city.json"
+    summary = _run(area, out, workers=2)
+    assert out.read_bytes() == reference[0]
+    assert summary.done == reference[1].done
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    """A scheduler and one worker started with the standard `dask` commands (loopback)."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler",
+                               "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                              **quiet)]
+    procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address,
+                                   "--nworkers", "1", "--nthreads", "1", "--host", "127.0.0.1",
+                                   "--no-dashboard"], **quiet))
+    from distributed import Client
+
+    with Client(address, timeout="60s", set_as_default=False) as c:
+        c.wait_for_workers(1, timeout=60)
+    yield address
+    for p in procs[::-1]:
+        p.terminate()
+        p.wait(timeout=30)
+
+
+def test_an_external_scheduler_gives_the_same_bytes(area, reference, dask_cluster, tmp_path):
+    out = tmp_path / "ext.city.json"
+    _run(area, out, scheduler=dask_cluster)
+    assert out.read_bytes() == reference[0]
+
+
+def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missing(
+        area, reference, tmp_path, monkeypatch):
+    real, ran = task.run_block, []
+
+    def crash_on_third(spec, options):
+        if len(ran) == 2:
+            raise Crash
+        ran.append(spec.index)
+        return real(spec, options)
+
+    out = tmp_path / "r.city.json"
+    monkeypatch.setattr(task, "run_block", crash_on_third)
+    with pytest.raises(Crash):
+        _run(area, out)
+    assert not out.exists() and len(list(journal_path(out).glob("block-*"))) == 2
+
+    def counting(spec, options):
+        ran.append(spec.index)
+        return real(spec, options)
+
+    monkeypatch.setattr(task, "run_block", counting)
+    first, ran[:] = list(ran), []
+    summary = _run(area, out, resume=True)
+    assert out.read_bytes() == reference[0]
+    assert summary.resumed == 2 and sorted(ran + first) == list(range(summary.blocks))
+    assert not journal_path(out).exists()
+
+
+def test_a_journal_of_other_options_is_an_error_without_and_with_resume(area, tmp_path,
+                                                                        monkeypatch):
+    real = task.run_block
+
+    def crash_after_first(spec, options):
+        if spec.index > 0:
+            raise Crash
+        return real(spec, options)
+
+    out = tmp_path / "j.city.json"
+    monkeypatch.setattr(task, "run_block", crash_after_first)
+    with pytest.raises(Crash):
+        _run(area, out)
+    assert journal_path(out).exists()
+    monkeypatch.undo()
+    with pytest.raises(InputError, match="--resume"):
+        _run(area, out, block_size=60.0)
+    with pytest.raises(InputError, match="another run"):
+        _run(area, out, block_size=60.0, resume=True)
+    assert not out.exists()
+
+
+def test_a_block_failing_once_is_retried_and_twice_gives_its_buildings_a_reason(
+        area, reference, tmp_path, monkeypatch):
+    real, calls, broken = task.run_block, Counter(), {"for good": False}
+
+    def flaky(spec, options):
+        calls[spec.index] += 1
+        if spec.index == 1 and (broken["for good"] or calls[1] == 1):
+            raise RuntimeError("disk on fire")
+        return real(spec, options)
+
+    monkeypatch.setattr(task, "run_block", flaky)
+    out = tmp_path / "once.city.json"
+    _run(area, out)  # fails once, retried: nothing lost
+    assert calls[1] == 2 and out.read_bytes() == reference[0]
+    calls.clear()
+    broken["for good"] = True
+    out = tmp_path / "twice.city.json"
+    summary = _run(area, out)
+    assert calls[1] == 2
+    lost = json.loads(out.read_text())["CityObjects"]
+    reasons = {a["attributes"].get("reason") for a in lost.values() if a["type"] == "Building"}
+    assert "block failed twice: RuntimeError: disk on fire" in reasons
+    assert 0 < summary.failed < summary.total and summary.done == summary.total - summary.failed
+    assert not journal_path(out).exists()
+
+
+def test_a_dead_workers_task_is_run_again_on_another_worker(tmp_path):
+    marker = tmp_path / "died"
+
+    def square_or_die(i):
+        if i == 2 and not marker.exists():
+            marker.touch()
+            os.kill(os.getpid(), signal.SIGKILL)
+        return i * i
+
+    with DaskExecutor(workers=2) as ex:
+        got = dict(ex.map(square_or_die, range(5)))
+    assert marker.exists() and got == {i: i * i for i in range(5)}
+
+
+def test_a_scheduler_that_does_not_answer_is_an_input_error_in_time(monkeypatch):
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 2)
+    t0 = time.perf_counter()
+    with pytest.raises(InputError, match="no Dask scheduler answers"):
+        with DaskExecutor(scheduler=f"tcp://127.0.0.1:{_free_port()}"):
+            pass
+    assert time.perf_counter() - t0 < 15
+
+
+@pytest.mark.slow
+def test_resume_after_sigkill_gives_the_same_bytes(area, reference, tmp_path):
+    out = tmp_path / "k.city.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    cmd = [sys.executable, "-m", "lidar2city.cli.main", "reconstruct", str(area / "town.laz"),
+           "--footprints", str(area / "fp.gpkg"), "--lod", "1.2", "--lod", "1.3",
+           "--block-size", str(BLOCK), "-o", str(out), "-q"]
+    p = subprocess.Popen(cmd, env=env)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(journal_path(out).glob("block-*.pickle")):
+        time.sleep(0.05)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    assert not out.exists()
+    done = len(list(journal_path(out).glob("block-*.pickle")))
+    assert done >= 1
+    r = subprocess.run(cmd + ["--resume"], env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == reference[0]

@@ -1,0 +1,68 @@
+"""A real headless browser (Debian's chromium, SwiftShader WebGL) loads the viewer and draws it;
+the `view` command serves its client on loopback and nothing else."""
+
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+
+from lidar2city.viewer.browser import capture_when_drawn, find_chromium, scene_drawn
+
+
+@pytest.mark.slow
+def test_headless_chromium_draws_the_buildings(viewer, tmp_path):
+    if find_chromium() is None:
+        pytest.skip("chromium is not installed (apt-get install chromium; .ci/run installs it)")
+    url = f"http://127.0.0.1:{viewer.port}"
+    png, seconds, drawn = capture_when_drawn(url, timeout=60.0)
+    (tmp_path / "viewer.png").write_bytes(png)
+    assert drawn, f"nothing drawn after {seconds:.1f} s (screenshot in {tmp_path})"
+    from io import BytesIO
+
+    from PIL import Image
+
+    img = np.asarray(Image.open(BytesIO(png)).convert("RGB"))
+    assert img.shape[0] > 100 and img.std() > 10  # not a uniform page
+    # the buildings' colours are on the canvas: the RMSE ramp's colours are saturated
+    assert scene_drawn(img)
+
+
+def test_drawn_is_false_for_a_blank_page():
+    assert not scene_drawn(np.full((50, 80, 3), 255, dtype=np.uint8))
+    grey = np.full((50, 80, 3), 200, dtype=np.uint8)
+    grey[10:20, 10:20] = (200, 30, 30)
+    assert scene_drawn(grey)
+
+
+def test_view_command_serves_only_its_client(edit_town, port):
+    proc = subprocess.Popen([sys.executable, "-m", "lidar2city.cli.main", "view",
+                             str(edit_town.model), "--port", str(port), "--no-browser"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        end = time.monotonic() + 60
+        while True:
+            try:
+                with urllib.request.urlopen(url + "/", timeout=5) as r:
+                    page = r.read().decode("utf-8", "replace")
+                break
+            except (urllib.error.URLError, ConnectionError):
+                if proc.poll() is not None or time.monotonic() > end:
+                    raise AssertionError(proc.stderr.read()) from None
+                time.sleep(0.3)
+        assert "<html" in page.lower()
+        for path in ("/../../../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd",
+                     "/" + str(edit_town.model)):
+            try:
+                with urllib.request.urlopen(url + path, timeout=5) as r:
+                    body = r.read().decode("utf-8", "replace")
+            except urllib.error.HTTPError:
+                continue
+            assert "root:" not in body and '"CityObjects"' not in body
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=20)

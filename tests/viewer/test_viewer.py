@@ -1,0 +1,159 @@
+"""The viewer's actions without a browser: select, refit, outline edits, accept, undo."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lidar2city.io.cityjson import read_cityjson
+
+
+def test_loopback_scene_and_colours(viewer):
+    assert viewer.server.get_host() == "127.0.0.1"
+    assert set(viewer.lods) == {"1.2", "2.2"}
+    assert set(viewer.handles) == set(viewer.attrs) == {"b00", "b01", "b02", "b03"}
+    # the RMSE of the LoD shown, from the points, for every building
+    assert all(isinstance(a.get("viewer_rmse"), float) for a in viewer.attrs.values())
+    for by in ("RMSE", "roof type", "status", "validity", "height", "edited"):
+        viewer.colour_by.value = by
+        viewer.recolour()
+        assert viewer.legend.content.startswith(f"**{by}**")
+    assert viewer.points_handle.points.shape[0] <= 20_000
+    # LoD2.2 is shown first; LoD1.2's meshes are made when it is chosen
+    assert all(set(h) == {"2.2"} for h in viewer.handles.values())
+    viewer.lod_choice.value = "1.2"
+    viewer._show_lod()
+    assert all(set(h) == {"1.2", "2.2"} and h["1.2"].visible and not h["2.2"].visible
+               for h in viewer.handles.values())
+
+
+def test_refit_undo_accept(viewer):
+    viewer.select("b00")
+    assert "Building b00" in viewer.info.content
+    seconds = viewer.refit_primitive("gable")
+    assert seconds is not None and "refit as gable" in viewer.status
+    assert viewer.attrs["b00"]["primitive"] == "gable"
+    viewer.undo()
+    assert "primitive" not in viewer.attrs["b00"]
+    assert not (viewer.edits_path).exists()
+    viewer.refit_primitive("box")
+    out = viewer.accept()
+    assert out == viewer.path and "Saved" in viewer.status
+    model = read_cityjson(viewer.path)
+    assert model.objects["b00"]["attributes"]["primitive"] == "box"
+    edits = json.loads(viewer.edits_path.read_text())["edits"]
+    assert [(e["building"], e["primitive"]) for e in edits] == [("b00", "box")]
+    from lidar2city.tools.validate import validate_file
+
+    assert validate_file(viewer.path).valid
+
+
+def test_outline_edit_and_rebuild(viewer):
+    viewer.select("b02")
+    viewer.start_outline()
+    n = len(viewer.outline)
+    viewer.add_vertex()
+    assert len(viewer.outline) == n + 1
+    viewer.delete_vertex()
+    assert len(viewer.outline) == n
+    centre = viewer.outline.mean(axis=0)
+    viewer.move_vertex(0, viewer.outline[0] + 0.5 * (viewer.outline[0] - centre)
+                       / np.linalg.norm(viewer.outline[0] - centre))
+    assert viewer.rebuild_from_outline() is not None, viewer.status
+    assert viewer.attrs["b02"]["edit"].startswith("footprint edited")
+    viewer.accept()
+    edits = json.loads(viewer.edits_path.read_text())["edits"]
+    assert edits[0]["action"] == "footprint"
+
+
+@pytest.mark.parametrize("case", ["unknown", "unfittable", "self-intersecting"])
+def test_bad_edits_give_a_message_and_change_nothing(viewer, case):
+    before = viewer.path.read_bytes()
+    if case == "unknown":
+        viewer.select("nope")
+        assert "unknown building id" in viewer.status
+    elif case == "unfittable":
+        viewer.select("b02")
+        assert viewer.refit_primitive("gable") is None
+        assert "cannot be fitted" in viewer.status
+    else:
+        viewer.select("b00")
+        viewer.start_outline()
+        viewer.outline[[1, 2]] = viewer.outline[[2, 1]]  # crossed edges
+        assert viewer.rebuild_from_outline() is None
+        assert "self-intersecting" in viewer.status
+    assert "Error" in viewer.status_md.content
+    assert viewer.pending is None and viewer.path.read_bytes() == before
+
+
+def test_view_only_without_points(edit_town, port):
+    from lidar2city.viewer.app import Viewer
+
+    v = Viewer(edit_town.model, port=port)
+    v.start()
+    try:
+        v.select("b01")
+        assert v.refit_primitive("box") is None and "--points" in v.status
+    finally:
+        v.stop()
+
+
+def test_missing_viser_is_a_one_line_error(monkeypatch):
+    import sys
+
+    from lidar2city.errors import DependencyError
+    from lidar2city.viewer.app import require_viser
+
+    monkeypatch.setitem(sys.modules, "viser", None)
+    with pytest.raises(DependencyError, match=r"lidar2city\[view\]"):
+        require_viser()
+
+
+def test_cli_view_errors(runner, tmp_path):
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, ["view", str(tmp_path / "absent.city.json"), "--no-browser"])
+    assert res.exit_code == 1 and "no such file" in res.output
+
+
+def test_other_hosts_are_warned_about(edit_town, caplog):
+    import logging
+
+    from lidar2city.viewer.app import Viewer
+
+    with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
+        Viewer(edit_town.model, host="0.0.0.0")  # not started: nothing is bound
+    assert "anyone who can reach this machine" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
+        Viewer(edit_town.model)
+    assert caplog.text == ""
+
+
+def test_refit_from_a_placed_primitive(viewer):
+    viewer.select("b00")
+    viewer.place.value = True
+    viewer._toggle_place()
+    assert viewer._placed is not None and viewer.p_len.value > viewer.p_wid.value > 0
+    approx = viewer._approx()
+    assert set(approx) == {"x", "y", "azimuth", "length", "width"}
+    assert viewer.refit_primitive("gable") is not None, viewer.status
+    assert viewer.attrs["b00"]["edit"] == "refit as gable (user-placed)"
+    viewer.place.value = False
+    viewer._toggle_place()
+    assert viewer._placed is None
+
+
+def test_gui_controls_are_wired(viewer):
+    import time
+
+    viewer.colour_by.value = "validity"  # as if chosen in the page: the callback recolours
+    end = time.monotonic() + 10
+    while not viewer.legend.content.startswith("**validity**") and time.monotonic() < end:
+        time.sleep(0.05)
+    assert viewer.legend.content.startswith("**validity**")
+    viewer.show_points.value = False
+    end = time.monotonic() + 10
+    while viewer.points_handle.visible and time.monotonic() < end:
+        time.sleep(0.05)
+    assert not viewer.points_handle.visible
