@@ -81,11 +81,20 @@ class BlockOutput:
     worker_mb: float = 0.0
 
 
-# decoded tiles kept per process across blocks: blocks visited in grid order
-# read each tile about once, and a worker holds at most this many tiles
+# decoded tiles kept per process across blocks, least recently used first out: a
+# block reads its buildings plus a margin, so it meets up to 3 x 3 tiles and a run
+# of neighbouring blocks (:mod:`lidar2city.tools.engine` gives a worker runs of
+# consecutive blocks) reuses them. At least ``_TILE_CACHE_SIZE`` tiles are kept,
+# more while they hold no more than ``_TILE_CACHE_POINTS`` points in all, so a
+# worker's memory is bounded whatever the area (about 40 bytes a point)
 _TILE_CACHE_SIZE = 4
+_TILE_CACHE_POINTS = 3_000_000
 _tiles: OrderedDict = OrderedDict()
 _tiles_lock = threading.Lock()
+
+
+def _cached_points() -> int:
+    return sum(len(world) for world, _ in _tiles.values())
 
 
 class _SharedTileReader(TileReader):
@@ -104,7 +113,7 @@ class _SharedTileReader(TileReader):
         self._tiles.clear()
         with _tiles_lock:
             _tiles[key] = hit
-            while len(_tiles) > _TILE_CACHE_SIZE:
+            while len(_tiles) > _TILE_CACHE_SIZE and _cached_points() > _TILE_CACHE_POINTS:
                 _tiles.popitem(last=False)
         return hit
 
