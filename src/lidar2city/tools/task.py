@@ -26,7 +26,7 @@ from ..io.las import TileReader
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BlockOptions", "BlockOutput", "run_block", "reconstruct_block"]
+__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,6 +151,20 @@ def _traced_footprints(spec, options, cloud, classes):
     return _subset(fps, idx) if idx else None
 
 
+def block_footprints(spec):
+    """The spec's footprints read from their file by feature id, in the block's
+    order, local frame, with their output positions in ``_index``."""
+    from ..datamodel import Footprints
+    from ..io.vector import read_footprints
+
+    ref, frame = spec.footprints, spec.frame
+    fps, _ = read_footprints(ref.path, layer=ref.layer, id_field=ref.id_field,
+                             origin=frame.origin[:2], xy_unit=frame.xy_unit,
+                             target_crs=frame.crs, fids=ref.fids, unique_ids=False)
+    return Footprints(fps.geometries, list(ref.ids), {**fps.attributes,
+                                                      "_index": list(ref.positions)})
+
+
 def run_block(spec, options: BlockOptions) -> BlockOutput:
     """Every building of one block (the task a worker runs); see :func:`_run_block`."""
     out = _run_block(spec, options)
@@ -185,7 +199,7 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
     from ..datamodel import Footprints
 
     cloud, classes = _block_cloud(spec, options)
-    fps = spec.footprints
+    fps = None if spec.footprints is None else block_footprints(spec)
     if fps is None:  # traced
         fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
         if fps is None:
