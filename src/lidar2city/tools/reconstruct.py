@@ -261,12 +261,12 @@ def load_footprints(path, cloud, *, id_field=None, layer=None, extent=None):
 FOOTPRINT_CHUNK = 50_000
 
 
-def index_footprints(path, frame, *, id_field=None, layer=None, extent=None,
-                     chunk=FOOTPRINT_CHUNK):
+def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chunk=None):
     """Feature ids, building ids and local bounds of the footprints meeting ``extent``.
 
     The planner's view of a footprint file of any size: it is scanned
-    ``chunk`` features at a time and only these three are kept; each block's
+    ``chunk`` features at a time (default :data:`FOOTPRINT_CHUNK`) and only
+    these three are kept; each block's
     footprints are read again by their feature ids on the worker
     (:func:`lidar2city.tools.task.block_footprints`). The footprints kept and
     their ids are those of :func:`load_footprints` (ids made unique over the
@@ -283,6 +283,7 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None,
 
     from ..io.vector import read_footprints, unique
 
+    chunk = int(chunk or FOOTPRINT_CHUNK)
     area = shapely.box(*extent)
     all_ids, fids, keep, bounds = [], [], [], []
     while True:
