@@ -10,7 +10,9 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
 - :class:`InProcess` (``workers=1``, the default): tasks one after the other.
 - :class:`DaskExecutor`: a ``dask.distributed`` ``LocalCluster`` of ``workers``
   processes (one thread each), or an existing cluster given by its scheduler
-  address (started with ``dask scheduler`` / ``dask worker``).
+  address (started with ``dask scheduler`` / ``dask worker``). A cluster task
+  is a run of consecutive items (:func:`runs_of`), so a worker's items are
+  neighbours that share their inputs (a block's tiles).
 """
 
 from __future__ import annotations

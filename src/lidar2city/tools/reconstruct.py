@@ -4,14 +4,14 @@ The job, for any number of tiles and buildings, in four parts:
 
 1. plan (:func:`plan_reconstruct`, :mod:`lidar2city.tools.blocks`): index the
    tiles by their headers (:func:`lidar2city.io.las.scan_tiles`), decide once
-   whether the input is classified or raw, read the footprints into one local
-   frame (:func:`load_footprints`) and group them by the cell of a CRS-aligned
-   grid of ``block_size`` metres holding the centre of their bounding box (or,
+   whether the input is classified or raw, scan the footprint file in chunks
+   for their ids and bounds (:func:`index_footprints`) and group them by the
+   cell of a CRS-aligned grid of ``block_size`` metres holding the centre of their bounding box (or,
    without footprints, one cell per grid cell to trace them in): an ordered
    list of picklable block specs;
 2. one task per block (:func:`lidar2city.tools.task.run_block`, what runs on a
-   worker): read the points of its buildings plus a margin from the tiles that
-   meet it, classify them if the input is raw (:func:`point_roles`), and give
+   worker): read its footprints by feature id and the points of its
+   buildings plus a margin from the tiles that meet it, classify them if the input is raw (:func:`point_roles`), and give
    each building exactly the points within its footprint's bounding box plus
    ``search_radius`` metres, so a result does not depend on tiling, blocks,
    workers or order;
