@@ -77,6 +77,13 @@ class DaskExecutor:
         import dask
         from distributed import Client, LocalCluster
 
+        # distributed logs at INFO on its own handlers, tracebacks of connections it closes
+        # itself included: only its warnings reach the user unless our log is at debug
+        self._dlog = logging.getLogger("distributed")
+        self._dlog_level = self._dlog.level
+        if logging.getLogger("lidar2city").getEffectiveLevel() > logging.DEBUG:
+            self._dlog.setLevel(logging.WARNING)
+
         if self.scheduler is not None:
             try:
                 self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s",
@@ -105,6 +112,7 @@ class DaskExecutor:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
+        self._dlog.setLevel(self._dlog_level)
         return False
 
     def map(self, fn, items, *args):
