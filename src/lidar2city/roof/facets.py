@@ -335,14 +335,14 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
 
     Rough or curved patches (roof gardens, vaulted roofs, clutter) defeat region
     growing; left unassigned they would be covered by a neighbour's plane far
-    from them. A cluster as large as the smallest facet gets its least-squares
+    from them. A cluster of half the smallest facet (6 points at least) gets its least-squares
     plane, or a horizontal one at its median height when no plane fits it.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     free = (labels < 0) & usable
-    if free.sum() < min_points:
+    if free.sum() < max(min_points // 2, 6):
         return labels, planes
     idx = np.flatnonzero(free)
     pos = np.full(len(labels), -1)
@@ -358,7 +358,7 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     sizes = np.bincount(comp, minlength=n_comp)
     planes = list(planes)
     labels = labels.copy()
-    for c in np.flatnonzero(sizes >= min_points):
+    for c in np.flatnonzero(sizes >= max(min_points // 2, 6)):
         members = idx[comp == c]
         pts = xyz[members]
         p = fit_plane(pts)
