@@ -254,26 +254,24 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         ii, jj = np.triu_indices(n_labels, 1)
         touching = np.zeros((n_labels, n_labels), dtype=bool)
         touching[pairs[:, 0], pairs[:, 1]] = True
-        far = ~touching[ii, jj]
+        far = np.flatnonzero(~touching[ii, jj])
         rms = _union_rms(xyz, labels, n_labels, ii[far], jj[far])
+        fit = rms <= dist_tol / 2
+        far, rms = far[fit], rms[fit]
         # and one of the two planes (the better supported) carries the other's points: two
-        # level strips at different heights fit one tilted plane, but neither carries the other
-        on = labels >= 0
-        med = np.full((n_labels, n_labels), np.inf)
-        d = _point_plane_dist(xyz[on], planes)
-        for lab in np.unique(labels[on]):
-            med[lab] = np.median(d[labels[on] == lab], axis=0)
-        carried = (med[ii, jj] <= dist_tol / 2) | (med[jj, ii] <= dist_tol / 2)
-        # a narrow strip's fitted tilt is poorly known: level pieces at one height are one plane
-        level_z = np.full(n_labels, np.nan)
-        for lab in np.unique(labels[on]):
-            z = xyz[labels == lab, 2]
-            if np.sqrt(np.mean((z - np.median(z)) ** 2)) <= dist_tol / 2:
-                level_z[lab] = np.median(z)
-        carried |= np.abs(level_z[ii] - level_z[jj]) <= dist_tol / 2
-        ok = (rms <= dist_tol / 2) & carried[far]
-        pairs = np.vstack([pairs, np.column_stack([ii[far][ok], jj[far][ok]])]).astype(np.int64)
-        cos = np.concatenate([cos, cos_merge - 1.0 - rms[ok]])
+        # level strips at different heights fit one tilted plane, but neither carries the other;
+        # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
+        ok = np.zeros(len(far), dtype=bool)
+        for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
+            pi, pj = xyz[labels == i], xyz[labels == j]
+            zi, zj = np.median(pi[:, 2]), np.median(pj[:, 2])
+            level = (abs(zi - zj) <= dist_tol / 2 and np.sqrt(np.mean((pi[:, 2] - zi) ** 2)) <= dist_tol / 2
+                     and np.sqrt(np.mean((pj[:, 2] - zj) ** 2)) <= dist_tol / 2)
+            ok[m] = level or min(np.median(_point_plane_dist(pi, planes[j:j + 1])),
+                                 np.median(_point_plane_dist(pj, planes[i:i + 1]))) <= dist_tol / 2
+        far, rms = far[ok], rms[ok]
+        pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
+        cos = np.concatenate([cos, cos_merge - 1.0 - rms])
     parent = np.arange(n_labels)
 
     def find(a):
