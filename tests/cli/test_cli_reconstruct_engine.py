@@ -47,3 +47,17 @@ def test_workers_and_scheduler_together_and_with_dsm_are_one_line_errors(runner,
     assert r.exit_code == 1 and "apply to point clouds" in r.output
     r = runner.invoke(cli, ["reconstruct", str(tile), "--workers", "0", "-o", out])
     assert r.exit_code == 2 and "--workers" in r.output
+
+
+@pytest.mark.slow
+def test_two_workers_quiet_print_no_cluster_log_or_traceback(tile, tmp_path):
+    # distributed logs at INFO on its own handlers (and a CommClosedError traceback when
+    # the client closes): -q must leave only our summary
+    out = tmp_path / "w.city.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    r = subprocess.run([sys.executable, "-m", "lidar2city.cli.main", "-q", "reconstruct",
+                        str(tile), "--block-size", "60", "--workers", "2", "-o", str(out)],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and "distributed" not in r.stderr, r.stderr
+    assert out.exists()

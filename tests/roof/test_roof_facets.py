@@ -46,3 +46,17 @@ def test_segment_planes_recovers_truth(town):
             nb = np.array([-best[0], -best[1], 1]) / np.linalg.norm([best[0], best[1], 1])
             assert np.degrees(np.arccos(min(1, abs(nt @ nb)))) < 2.0
         assert (labels >= 0).mean() > 0.9
+
+
+def test_segment_planes_joins_apart_pieces_of_one_plane():
+    """Two rim strips on one plane with a lower roof between them end as one facet; at a
+    different height they stay two."""
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 10, (900, 2))
+    strip = (xy[:, 0] < 0.8) | (xy[:, 0] > 9.2)
+    z = np.where(strip, 8.0, 7.0) + rng.normal(0, 0.03, len(xy))
+    labels, planes = segment_planes(np.column_stack([xy, z]))
+    assert len(np.unique(labels[strip & (labels >= 0)])) == 1
+    z2 = np.where(xy[:, 0] > 9.2, 8.6, z)
+    labels, _ = segment_planes(np.column_stack([xy, z2]))
+    assert len(np.unique(labels[strip & (labels >= 0)])) == 2

@@ -216,3 +216,83 @@ def test_resume_after_sigkill_gives_the_same_bytes(area, reference, tmp_path):
     r = subprocess.run(cmd + ["--resume"], env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert out.read_bytes() == reference[0]
+
+
+def test_footprints_are_read_block_by_block_from_gpkg_and_flatgeobuf(area, reference, tmp_path,
+                                                                     monkeypatch):
+    """The planner scans the footprint file in chunks and keeps references; the blocks read
+    their own features by id; the output is the same bytes from a GPKG or a FlatGeobuf."""
+    from lidar2city.io import vector
+    from lidar2city.tools import reconstruct as rec
+    from lidar2city.tools.blocks import FootprintRef
+
+    monkeypatch.setattr(rec, "FOOTPRINT_CHUNK", 4)
+    plan = rec.plan_reconstruct([area / "town.laz"], tmp_path / "p.city.json",
+                                footprints=area / "fp.gpkg", block_size=BLOCK)
+    assert len(plan.specs) >= 3
+    assert all(isinstance(s.footprints, FootprintRef) for s in plan.specs)
+    positions = sorted(p for s in plan.specs for p in s.footprints.positions)
+    assert positions == list(range(plan.total))
+    reads = []
+    real = vector.read_footprints
+
+    def spy(*a, **kw):
+        out = real(*a, **kw)
+        reads.append((kw.get("fids"), len(out[0])))
+        return out
+
+    monkeypatch.setattr(vector, "read_footprints", spy)
+    _run(area, tmp_path / "gpkg.city.json")
+    assert (tmp_path / "gpkg.city.json").read_bytes() == reference[0]
+    by_block = [n for fids, n in reads if fids is not None]
+    assert len(by_block) == len(plan.specs) and sum(by_block) == plan.total
+    assert max(n for fids, n in reads if fids is None) <= 4  # the planner's chunks
+    fgb = tmp_path / "fp.fgb"
+    town = make_town(size=(160.0, 120.0), density=3.0, seed=5, n_trees=5)
+    write_polygons(fgb, town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=town.cloud.origin, crs=town.cloud.crs, layer="fp")
+    # a FlatGeobuf is written in its spatial index's order: the same order in a GeoPackage
+    order = [town.footprints.ids.index(i) for i in real(fgb)[0].ids]
+    write_polygons(tmp_path / "same.gpkg", [town.footprints.geometries[i] for i in order],
+                   {"id": [town.footprints.ids[i] for i in order]}, origin=town.cloud.origin,
+                   crs=town.cloud.crs)
+    outs = []
+    for fp in (fgb, tmp_path / "same.gpkg"):
+        outs.append(tmp_path / f"{fp.suffix[1:]}.city.json")
+        reconstruct([area / "town.laz"], outs[-1], footprints=fp, lods=("1.2", "1.3"),
+                    block_size=BLOCK, workers=2 if fp == fgb else 1)
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+
+
+def test_ids_repeated_across_the_planners_chunks_are_made_unique_as_in_a_whole_read(tmp_path):
+    import numpy as np
+    import shapely
+    from pyproj import CRS
+
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.tools.blocks import Frame
+    from lidar2city.tools.reconstruct import index_footprints
+
+    boxes = [shapely.box(10 * i, 0, 10 * i + 5, 5) for i in range(5)]
+    ids = ["a", "b", "a", "c", "a"]
+    write_polygons(tmp_path / "fp.gpkg", boxes, {"id": ids}, origin=(0.0, 0.0, 0.0),
+                   crs=CRS("EPSG:28992"))
+    frame = Frame(np.zeros(3), CRS("EPSG:28992"), 1.0, 1.0)
+    whole, _ = read_footprints(tmp_path / "fp.gpkg")
+    for chunk in (1, 2, 5):
+        fids, got, bounds = index_footprints(tmp_path / "fp.gpkg", frame, extent=(0, 0, 100, 10),
+                                             chunk=chunk)
+        assert got == whole.ids == ["a", "b", "a-2", "c", "a-3"]
+        assert len(set(fids)) == 5 and bounds.shape == (5, 4)
+    fids, got, _ = index_footprints(tmp_path / "fp.gpkg", frame, extent=(18, 0, 32, 10), chunk=2)
+    assert got == ["a-2", "c"]  # unique over the whole file, then cut to the extent
+
+
+@pytest.mark.parametrize("n,workers", [(1, 2), (7, 2), (48, 2), (48, 3), (3, 8)])
+def test_a_cluster_takes_runs_of_consecutive_items_covering_all_once(n, workers):
+    runs = engine.runs_of(n, workers)
+    assert runs[0][0] == 0 and runs[-1][1] == n
+    assert all(a < b for a, b in runs)
+    assert all(b == c for (_, b), (c, _) in zip(runs[:-1], runs[1:]))
+    assert len(runs) == min(n, engine.RUNS_PER_WORKER * workers)
+    assert max(b - a for a, b in runs) - min(b - a for a, b in runs) <= 1

@@ -104,7 +104,8 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     if workers != 1 and scheduler is not None:
         raise InputError("give either --workers (a local cluster) or --scheduler, not both")
-    # a bar over buildings when their number is known (footprints given), else over blocks
+    # a bar over buildings when their number is known (footprints given, with the blocks
+    # done beside it), else over blocks (with the buildings traced so far)
     bar_state = {"bar": None}
 
     def open_bar(total, label):
@@ -120,6 +121,8 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
     def on_block(done, total):
         if footprints is None:
             open_bar(total, "blocks").update(1, current_item=f"{on_block.buildings} buildings")
+        elif bar_state["bar"] is not None:  # buildings counted, blocks shown beside
+            bar_state["bar"].update(0, current_item=f"block {done}/{total}")
 
     def count(done, total, result):
         on_block.buildings = done

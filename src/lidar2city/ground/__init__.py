@@ -1,10 +1,11 @@
 """Ground filtering: which points are bare earth, and terrain models from them.
 
-Methods (:data:`GROUND_METHODS`): ``"smrf_refined"`` (the default: SMRF
-with the surface continued across the tile edges, optional surface-based
-cleanup; lower leave-one-sample-out error than plain SMRF on the ISPRS
-samples and the synthetic terrains), ``"smrf"`` (Pingel et al. 2013) and
-``"pmf"`` (Zhang et al. 2003). All set low
+Methods (:data:`GROUND_METHODS`): ``"smrf"`` (Pingel et al. 2013, the
+default), ``"smrf_refined"`` (SMRF with the surface continued across the
+tile edges by point reflection, optional surface-based cleanup: lower
+leave-one-sample-out error on the ISPRS samples, but a building at the edge
+of a small tile is reflected into a pit that can take all the ground away,
+so it is not the default) and ``"pmf"`` (Zhang et al. 2003). All set low
 outliers aside first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
 into a gap-free terrain model and :func:`height_above_ground` reads it back
 at points.
@@ -48,7 +49,7 @@ GROUND_METHODS = {"smrf": smrf, "smrf_refined": smrf_refined, "pmf": pmf}
 _SLOPE_DEFAULTS = {"smrf": 0.15, "smrf_refined": 0.15, "pmf": 0.3}
 
 
-def ground_mask(xyz, *, method: str = "smrf_refined", **params) -> np.ndarray:
+def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
     """Ground points of ``xyz`` (N, 3) by ``method`` (see :data:`GROUND_METHODS`).
 
     ``params`` are the method's keyword arguments; unknown ones raise.
@@ -81,8 +82,8 @@ class GroundConfig:
     """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
 
     method: Literal["smrf", "smrf_refined", "pmf"] = field(
-        "smrf_refined", "ground filter: smrf_refined (SMRF + edge extension and optional "
-        "surface cleanup), smrf (Pingel 2013) or pmf (Zhang 2003)")
+        "smrf", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
+        "optional surface cleanup) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
     slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf and smrf_refined, 0.3 for pmf")
     window: float = field(24.0, "smrf: largest opening radius (m); wider objects survive")

@@ -14,7 +14,7 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "read_footprints", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
+__all__ = ["no_pam", "read_footprints", "unique", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
            "to_local", "to_world"]
 
 
@@ -123,8 +123,25 @@ def no_pam():
         pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": before})
 
 
+def no_usable_footprint(path, geometries, notes) -> None:
+    """Raise when no footprint of the source ``path`` is a usable polygon, saying why.
+
+    Raises
+    ------
+    EmptyInputError
+        When every geometry is None (``notes``: the reason of each).
+    """
+    if len(geometries) and all(g is None for g in geometries):
+        from collections import Counter
+
+        why = "; ".join(f"{k}" + (f" (x{c})" if c > 1 else "") for k, c in Counter(notes).items())
+        raise EmptyInputError(f"{str(path)!r}: none of its {len(geometries)} footprint(s) is a "
+                              f"usable polygon: {why}")
+
+
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
-                    target_crs=None, bbox=None) -> tuple[Footprints, object]:
+                    target_crs=None, bbox=None, fids=None, skip_features=0, max_features=None,
+                    unique_ids=True, with_fids=False) -> tuple[Footprints, object]:
     """Read building footprints from any OGR source into local metric coordinates.
 
     Parameters
@@ -143,6 +160,16 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         CRS of the point cloud; footprints in another CRS are reprojected.
     bbox : tuple, optional
         (xmin, ymin, xmax, ymax) in the source's coordinates to read only part.
+    fids : sequence of int, optional
+        Read only these features (OGR feature ids), in this order.
+    skip_features, max_features : int, optional
+        Read only the features from ``skip_features`` on, at most ``max_features``
+        (a large source scanned in chunks).
+    unique_ids : bool
+        Suffix repeated ids (``-2``, ``-3``...) to keep them usable as keys; a
+        caller reading part of a source makes them unique over the whole itself.
+    with_fids : bool
+        Put the OGR feature ids in ``attributes['_fid']``.
 
     Returns
     -------
@@ -157,14 +184,19 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     from pyproj import CRS, Transformer
 
     p = check_input_file(path)
+    fids_given = fids
     try:
         with no_pam():
             meta, fids, wkb, field_data = pyogrio.raw.read(
-                str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox)
+                str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox,
+                fids=None if fids is None else np.asarray(fids, dtype=np.int64),
+                skip_features=skip_features, max_features=max_features)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
         raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
     n = len(wkb) if wkb is not None else 0
     if n == 0:
+        if skip_features or max_features is not None:
+            return Footprints([], [], {}), None
         raise EmptyInputError(f"{str(p)!r} holds no footprints")
     src_crs = CRS.from_user_input(meta["crs"]) if meta.get("crs") else None
     geoms = shapely.from_wkb(wkb)
@@ -182,14 +214,8 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         id_field = next((f for f in ("identificatie", "identificatiebagpnd", "id", "fid", "OBJECTID")
                          if f in fields), None)
     ids = [str(v) for v in fields[id_field]] if id_field else [str(int(f)) for f in fids]
-    if len(set(ids)) != len(ids):
-        # keep them usable as unique CityJSON keys
-        seen: dict[str, int] = {}
-        unique = []
-        for i in ids:
-            seen[i] = seen.get(i, 0) + 1
-            unique.append(i if seen[i] == 1 else f"{i}-{seen[i]}")
-        ids = unique
+    if unique_ids:
+        ids = unique(ids)
     out, notes = [], []
     for g in geoms:
         fixed, note = repair_polygonal(g)
@@ -197,14 +223,25 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         notes.append(note)
         if note:
             logger.info("footprint %s", note)
-    if all(g is None for g in out):
-        from collections import Counter
-
-        why = "; ".join(f"{k}" + (f" (x{c})" if c > 1 else "") for k, c in Counter(notes).items())
-        raise EmptyInputError(f"{str(p)!r}: none of its {n} footprint(s) is a usable polygon: {why}")
+    if fids_given is None and not skip_features and max_features is None:
+        no_usable_footprint(p, out, notes)  # a part read (a block, a chunk) may be empty
     local = [None if g is None else to_local(g, origin, xy_unit) for g in out]
     fields["_note"] = notes
+    if with_fids:
+        fields["_fid"] = [int(f) for f in fids]
     return Footprints(local, ids, fields), src_crs
+
+
+def unique(ids) -> list:
+    """``ids`` with repeated ones suffixed ``-2``, ``-3``... in order (usable as keys)."""
+    if len(set(ids)) == len(ids):
+        return list(ids)
+    seen: dict[str, int] = {}
+    out = []
+    for i in ids:
+        seen[i] = seen.get(i, 0) + 1
+        out.append(i if seen[i] == 1 else f"{i}-{seen[i]}")
+    return out
 
 
 @dataclass(eq=False)

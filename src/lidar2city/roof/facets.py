@@ -214,7 +214,26 @@ def _point_plane_dist(xyz, planes):
     return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
 
 
-def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge):
+def _union_rms(xyz, labels, n_labels, ii, jj):
+    """Vertical RMS of the least-squares plane through the points of facets ii[m] and jj[m]."""
+    on = labels >= 0
+    x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
+    cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
+    mom = np.zeros((n_labels, 10))
+    np.add.at(mom, labels[on], cols)
+    n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = (mom[ii] + mom[jj]).T
+    mx, my, mz = sx / n, sy / n, sz / n
+    cxx, cxy, cxz = sxx / n - mx * mx, sxy / n - mx * my, sxz / n - mx * mz
+    cyy, cyz, czz = syy / n - my * my, syz / n - my * mz, szz / n - mz * mz
+    det = cxx * cyy - cxy * cxy
+    safe = np.where(det > 1e-12, det, 1.0)
+    a = (cxz * cyy - cyz * cxy) / safe
+    b = (cyz * cxx - cxz * cxy) / safe
+    var = czz - a * cxz - b * cyz
+    return np.where(det > 1e-12, np.sqrt(np.maximum(var, 0.0) / (1 + a * a + b * b)), np.inf)
+
+
+def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     """Merge adjacent regions whose union still fits one plane (greedy, best pairs first)."""
     n_labels = len(planes)
     if n_labels < 2:
@@ -223,6 +242,36 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge):
     lj = labels[nbrs]
     m = (li >= 0) & (lj >= 0) & (li != lj)
     pairs = np.unique(np.sort(np.column_stack([li[m], lj[m]]), axis=1), axis=0)
+    normals = np.column_stack([-planes[:, 0], -planes[:, 1], np.ones(n_labels)])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) if len(pairs) else np.zeros(0)
+    n_touch = len(pairs)
+    if coplanar:
+        # facets apart from each other on one plane (the sides of a parapet rim, pieces of a
+        # facet cut by clutter) are one facet too. A narrow strip's fitted orientation says
+        # little, so such pairs are chosen by the fit of their union (from moments), tried
+        # after the touching pairs, best fit first
+        ii, jj = np.triu_indices(n_labels, 1)
+        touching = np.zeros((n_labels, n_labels), dtype=bool)
+        touching[pairs[:, 0], pairs[:, 1]] = True
+        far = np.flatnonzero(~touching[ii, jj])
+        rms = _union_rms(xyz, labels, n_labels, ii[far], jj[far])
+        fit = rms <= dist_tol / 2
+        far, rms = far[fit], rms[fit]
+        # and one of the two planes (the better supported) carries the other's points: two
+        # level strips at different heights fit one tilted plane, but neither carries the other;
+        # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
+        ok = np.zeros(len(far), dtype=bool)
+        for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
+            pi, pj = xyz[labels == i], xyz[labels == j]
+            zi, zj = np.median(pi[:, 2]), np.median(pj[:, 2])
+            level = (abs(zi - zj) <= dist_tol / 2 and np.sqrt(np.mean((pi[:, 2] - zi) ** 2)) <= dist_tol / 2
+                     and np.sqrt(np.mean((pj[:, 2] - zj) ** 2)) <= dist_tol / 2)
+            ok[m] = level or min(np.median(_point_plane_dist(pi, planes[j:j + 1])),
+                                 np.median(_point_plane_dist(pj, planes[i:i + 1]))) <= dist_tol / 2
+        far, rms = far[ok], rms[ok]
+        pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
+        cos = np.concatenate([cos, cos_merge - 1.0 - rms])
     parent = np.arange(n_labels)
 
     def find(a):
@@ -231,12 +280,9 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge):
             a = parent[a]
         return a
 
-    normals = np.column_stack([-planes[:, 0], -planes[:, 1], np.ones(n_labels)])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) if len(pairs) else np.zeros(0)
-    for idx in np.argsort(-cos):
-        if cos[idx] < cos_merge:
-            break
+    for idx in np.argsort(-cos, kind="stable"):
+        if cos[idx] < cos_merge and idx < n_touch:
+            continue
         a, b = find(pairs[idx, 0]), find(pairs[idx, 1])
         if a == b:
             continue
@@ -287,14 +333,14 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
 
     Rough or curved patches (roof gardens, vaulted roofs, clutter) defeat region
     growing; left unassigned they would be covered by a neighbour's plane far
-    from them. A cluster at least twice the smallest facet gets its least-squares
+    from them. A cluster of half the smallest facet (6 points at least) gets its least-squares
     plane, or a horizontal one at its median height when no plane fits it.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     free = (labels < 0) & usable
-    if free.sum() < 2 * min_points:
+    if free.sum() < max(min_points // 2, 6):
         return labels, planes
     idx = np.flatnonzero(free)
     pos = np.full(len(labels), -1)
@@ -310,7 +356,7 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     sizes = np.bincount(comp, minlength=n_comp)
     planes = list(planes)
     labels = labels.copy()
-    for c in np.flatnonzero(sizes >= 2 * min_points):
+    for c in np.flatnonzero(sizes >= max(min_points // 2, 6)):
         members = idx[comp == c]
         pts = xyz[members]
         p = fit_plane(pts)
@@ -389,9 +435,13 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
     if n_labels == 0:
         return labels, np.zeros((0, 3))
     planes, _ = _refit(local, labels, n_labels, dist_tol)
-    labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, np.cos(np.radians(merge_angle)))
+    cos_merge = np.cos(np.radians(merge_angle))
+    labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge, coplanar=False)
     planes, _ = _refit(local, labels, n_labels, dist_tol)
     labels, n_labels = _absorb_small(local, labels, planes, nbrs[:, 1:], dist_tol, 3 * int(min_points))
+    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    # small facets that no neighbour absorbs: those on one plane apart from each other join
+    labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
     planes, _ = _refit(local, labels, n_labels, dist_tol)
     # unassigned points join the nearest-fitting adjacent facet when close to its plane
     un = np.flatnonzero(labels < 0)
@@ -408,8 +458,13 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
         take = d[np.arange(len(un)), best] <= dist_tol
         labels[un[take]] = best[take]
         planes, _ = _refit(local, labels, n_labels, dist_tol)
+    n_before = len(planes)
     labels, planes = _leftover_facets(local, labels, planes, nbrs[:, 1:], usable, dist_tol,
                                       int(min_points))
+    if len(planes) > n_before:
+        # leftover clusters on the plane of a facet (or of each other) join it
+        labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
+        planes, _ = _refit(local, labels, n_labels, dist_tol)
     # back to the caller's frame: z = a (x - cx) + b (y - cy) + c + cz
     out = planes.copy()
     out[:, 2] = planes[:, 2] + center[2] - planes[:, 0] * center[0] - planes[:, 1] * center[1]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BlockSpec", "Frame", "footprint_blocks", "traced_blocks", "block_keys"]
+__all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,9 +58,9 @@ class BlockSpec:
     tiles : tuple of TileInfo
         Headers of the tiles meeting ``world_box``.
     frame : Frame
-    footprints : Footprints or None
-        The block's footprints (local frame, with their file position in the
-        ``_index`` attribute); None: trace them in the cell.
+    footprints : FootprintRef or None
+        The block's footprints (read by the worker from the file); None: trace
+        them in the cell.
     """
 
     index: int
@@ -90,17 +90,47 @@ def _tiles_meeting(tiles, box):
                                                       or t.maxs[1] < y0 or t.mins[1] > y1))
 
 
-def footprint_blocks(tiles, frame: Frame, footprints, block_size: float, margin: float) -> list:
-    """Specs of the blocks holding ``footprints`` (local frame), row by row.
+@dataclass(frozen=True, eq=False)
+class FootprintRef:
+    """A block's footprints by reference: the worker reads them from the file.
 
-    ``footprints`` gets an ``_index`` attribute (its position) so that results
-    go back in the footprint file's order; inside a block that order is kept.
+    Attributes
+    ----------
+    path, layer, id_field
+        The footprint source, as given to ``reconstruct``.
+    fids : tuple of int
+        OGR feature ids of the block's footprints, in the file's order.
+    ids : tuple of str
+        Their building ids (made unique over the whole file by the planner).
+    positions : tuple of int
+        Their positions in the run's output order.
     """
-    from .reconstruct import _subset
 
-    footprints.attributes["_index"] = list(range(len(footprints)))
-    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
-                       for g in footprints.geometries], dtype=np.float64).reshape(-1, 4)
+    path: str
+    layer: object
+    id_field: str | None
+    fids: tuple
+    ids: tuple
+    positions: tuple
+
+    def __len__(self) -> int:
+        return len(self.fids)
+
+
+def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: float,
+                     footprints) -> list:
+    """Specs of the blocks of footprints given by their local ``bounds``, row by row.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (N, 4)
+        Local ``(xmin, ymin, xmax, ymax)`` of each footprint in output order
+        (NaN for an empty one: it goes to the block of the origin).
+    footprints : callable
+        ``footprints(idx)``: what a spec carries for the footprints ``idx``
+        (positions, in order), e.g. a :class:`FootprintRef`.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     empty = ~np.isfinite(centre).all(axis=1)
     keys = block_keys(np.where(empty[:, None], 0.0, centre), frame, block_size)
@@ -119,7 +149,7 @@ def footprint_blocks(tiles, frame: Frame, footprints, block_size: float, margin:
                                     b[:, 2].max() + margin, b[:, 3].max() + margin])
         row, col = cells[which[idx[0]]]
         specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
-                               _tiles_meeting(tiles, world), frame, _subset(footprints, idx)))
+                               _tiles_meeting(tiles, world), frame, footprints(idx)))
     return specs
 
 

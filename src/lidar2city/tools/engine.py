@@ -10,7 +10,9 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
 - :class:`InProcess` (``workers=1``, the default): tasks one after the other.
 - :class:`DaskExecutor`: a ``dask.distributed`` ``LocalCluster`` of ``workers``
   processes (one thread each), or an existing cluster given by its scheduler
-  address (started with ``dask scheduler`` / ``dask worker``).
+  address (started with ``dask scheduler`` / ``dask worker``). A cluster task
+  is a run of consecutive items (:func:`runs_of`), so a worker's items are
+  neighbours that share their inputs (a block's tiles).
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["InProcess", "DaskExecutor", "make_executor", "RETRIES", "CONNECT_TIMEOUT"]
+__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "RETRIES", "CONNECT_TIMEOUT",
+           "RUNS_PER_WORKER"]
 
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
@@ -74,6 +77,13 @@ class DaskExecutor:
         import dask
         from distributed import Client, LocalCluster
 
+        # distributed logs at INFO on its own handlers, tracebacks of connections it closes
+        # itself included: only its warnings reach the user unless our log is at debug
+        self._dlog = logging.getLogger("distributed")
+        self._dlog_level = self._dlog.level
+        if logging.getLogger("lidar2city").getEffectiveLevel() > logging.DEBUG:
+            self._dlog.setLevel(logging.WARNING)
+
         if self.scheduler is not None:
             try:
                 self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s",
@@ -102,6 +112,7 @@ class DaskExecutor:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
+        self._dlog.setLevel(self._dlog_level)
         return False
 
     def map(self, fn, items, *args):
@@ -112,21 +123,25 @@ class DaskExecutor:
             return
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
-        futures = self._client.map(fn, items, *[[a] * len(items) for a in shared], pure=False,
+        runs = runs_of(len(items), self.workers)
+        futures = self._client.map(_run_many, [items[a:b] for a, b in runs],
+                                   *[[a] * len(runs) for a in shared], fn=fn, pure=False,
                                    retries=RETRIES)
-        where = {f.key: i for i, f in enumerate(futures)}
+        where = {f.key: r for f, r in zip(futures, runs, strict=True)}
         try:
             with self._client.as_current():
                 completed = as_completed(futures)
             for fut in completed:
-                i = where[fut.key]
+                start, stop = where[fut.key]
                 try:
-                    out = fut.result()
+                    outs = fut.result()
                 except Exception as exc:  # noqa: BLE001 - reported per task, the run goes on
-                    logger.warning("task %d failed on the cluster: %s", i, exc)
-                    out = exc
+                    logger.warning("tasks %d to %d failed on the cluster: %s", start, stop - 1,
+                                   exc)
+                    outs = [(j, exc) for j in range(stop - start)]
                 fut.release()
-                yield i, out
+                for j, out in outs:
+                    yield start + j, out
         finally:
             for f in futures:
                 f.cancel()
@@ -134,6 +149,31 @@ class DaskExecutor:
     def describe(self) -> str:
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
+
+
+#: runs per worker: enough for the workers to finish together, few enough for
+#: each run to be a long stretch of neighbouring items
+RUNS_PER_WORKER = 4
+
+
+def runs_of(n: int, workers: int) -> list:
+    """``(start, stop)`` of the runs of consecutive items the cluster's tasks take.
+
+    Items given in a spatial order (the planner's blocks, row by row) share
+    their inputs with their neighbours (the tiles a block reads): a worker that
+    takes a run of consecutive items decodes each tile about once, where items
+    dealt one by one to alternate workers make every worker decode every tile.
+    About ``RUNS_PER_WORKER`` runs per worker, of equal length.
+    """
+    count = max(1, min(n, RUNS_PER_WORKER * max(1, int(workers or 1))))
+    cuts = [n * k // count for k in range(count + 1)]
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+
+
+def _run_many(items, *args, fn):
+    """One cluster task: ``fn`` over a run of items in turn, each tried as in
+    :class:`InProcess`; ``[(offset in the run, result or exception)]``."""
+    return list(InProcess().map(fn, items, *args))
 
 
 def make_executor(workers: int = 1, scheduler: str | None = None):

@@ -4,14 +4,14 @@ The job, for any number of tiles and buildings, in four parts:
 
 1. plan (:func:`plan_reconstruct`, :mod:`lidar2city.tools.blocks`): index the
    tiles by their headers (:func:`lidar2city.io.las.scan_tiles`), decide once
-   whether the input is classified or raw, read the footprints into one local
-   frame (:func:`load_footprints`) and group them by the cell of a CRS-aligned
-   grid of ``block_size`` metres holding the centre of their bounding box (or,
+   whether the input is classified or raw, scan the footprint file in chunks
+   for their ids and bounds (:func:`index_footprints`) and group them by the
+   cell of a CRS-aligned grid of ``block_size`` metres holding the centre of their bounding box (or,
    without footprints, one cell per grid cell to trace them in): an ordered
    list of picklable block specs;
 2. one task per block (:func:`lidar2city.tools.task.run_block`, what runs on a
-   worker): read the points of its buildings plus a margin from the tiles that
-   meet it, classify them if the input is raw (:func:`point_roles`), and give
+   worker): read its footprints by feature id and the points of its
+   buildings plus a margin from the tiles that meet it, classify them if the input is raw (:func:`point_roles`), and give
    each building exactly the points within its footprint's bounding box plus
    ``search_radius`` metres, so a result does not depend on tiling, blocks,
    workers or order;
@@ -36,7 +36,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["FORMATS", "ReconstructSummary", "ReconstructPlan", "PointGrid", "format_from_name",
            "lod1_config", "point_roles", "load_footprints", "reconstruct_buildings",
-           "write_buildings", "plan_reconstruct", "run_blocks", "InOrder",
+           "index_footprints", "write_buildings", "plan_reconstruct", "run_blocks", "InOrder",
            "reconstruct"]
 
 #: output format name -> file name endings that select it.
@@ -255,6 +255,67 @@ def load_footprints(path, cloud, *, id_field=None, layer=None, extent=None):
     if len(keep) < len(fps):
         logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
     return _subset(fps, keep)
+
+
+#: footprints read at a time by the planner's scan of the footprint file
+FOOTPRINT_CHUNK = 50_000
+
+
+def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chunk=None):
+    """Feature ids, building ids and local bounds of the footprints meeting ``extent``.
+
+    The planner's view of a footprint file of any size: it is scanned
+    ``chunk`` features at a time (default :data:`FOOTPRINT_CHUNK`) and only
+    these three are kept; each block's
+    footprints are read again by their feature ids on the worker
+    (:func:`lidar2city.tools.task.block_footprints`). The footprints kept and
+    their ids are those of :func:`load_footprints` (ids made unique over the
+    whole file, in its order).
+
+    Returns
+    -------
+    fids : list of int
+    ids : list of str
+    bounds : ndarray, shape (M, 4)
+        NaN for an empty footprint.
+    """
+    import shapely
+
+    from ..io.vector import no_usable_footprint, read_footprints, unique
+
+    chunk = int(chunk or FOOTPRINT_CHUNK)
+    area = shapely.box(*extent)
+    all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
+    while True:
+        part, _ = read_footprints(path, layer=layer, id_field=id_field, origin=frame.origin[:2],
+                                  xy_unit=frame.xy_unit, target_crs=frame.crs,
+                                  skip_features=len(all_ids), max_features=chunk,
+                                  unique_ids=False, with_fids=True)
+        # the geometries only as far as "is there one": for the error when none is usable
+        geoms += [None if g is None else True for g in part.geometries]
+        notes += part.attributes.get("_note", [""] * len(part))
+        for g, f in zip(part.geometries, part.attributes.get("_fid", []), strict=True):
+            if g is None or g.intersects(area):
+                keep.append(True)
+                fids.append(f)
+                bounds.append([np.nan] * 4 if g is None or g.is_empty else g.bounds)
+            else:
+                keep.append(False)
+        all_ids += part.ids
+        if len(part) < chunk:
+            break
+    if not all_ids:
+        raise EmptyInputError(f"{str(path)!r} holds no footprints")
+    no_usable_footprint(path, geoms, notes)  # say why, once, before any block runs
+    ids = unique(all_ids)
+    kept = [i for i, k in enumerate(keep) if k]
+    if not kept:
+        raise EmptyInputError(f"none of the {len(all_ids)} footprints of {str(path)!r} meets the "
+                              "point cloud's extent (check both CRSs)")
+    if len(kept) < len(all_ids):
+        logger.info("%d footprint(s) outside the point cloud's extent skipped",
+                    len(all_ids) - len(kept))
+    return fids, [ids[i] for i in kept], np.array(bounds, dtype=np.float64).reshape(-1, 4)
 
 
 def _chunk_order(geometries, chunk):
@@ -830,7 +891,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     Keywords as :func:`reconstruct`.
     """
     from ..io.las import TileReader, scan_tiles
-    from .blocks import Frame, footprint_blocks, traced_blocks
+    from .blocks import FootprintRef, Frame, footprint_blocks, traced_blocks
     from .task import BlockOptions
 
     fmt = format_from_name(output, fmt)
@@ -890,13 +951,18 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         wb = reader.world_bounds()
         lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
         hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-        fps = load_footprints(footprints, frame, id_field=id_field, layer=layer,
-                              extent=(*lo, *hi))
-        specs = footprint_blocks(tiles, frame, fps, block_size, margin)
+        fids, ids, bounds = index_footprints(footprints, frame, id_field=id_field, layer=layer,
+                                             extent=(*lo, *hi))
+
+        def ref(idx):
+            return FootprintRef(str(footprints), layer, id_field, tuple(fids[i] for i in idx),
+                                tuple(ids[i] for i in idx), tuple(idx))
+
+        specs = footprint_blocks(tiles, frame, bounds, block_size, margin, ref)
         if options.edits:  # an unknown building id: an error before any block runs
             from .edit import check_edit_ids
 
-            check_edit_ids(options.edits, fps.ids, source=str(edits))
+            check_edit_ids(options.edits, ids, source=str(edits))
     return ReconstructPlan(specs, options, frame, fmt, want, resolved, footprints is None,
                            None if footprints is None else sum(s.size for s in specs))
 
@@ -929,7 +995,15 @@ def _failed_block(spec, exc):
     from ..datamodel import Footprints
     from .task import BlockOutput
 
-    fps = spec.footprints if spec.footprints is not None else Footprints([], [])
+    fps = Footprints([], [])
+    if spec.footprints is not None:
+        from .task import block_footprints
+
+        try:  # the block's fields for its stated reasons
+            fps = block_footprints(spec)
+        except Exception:  # noqa: BLE001 - the reason is stated without them
+            ref = spec.footprints
+            fps = Footprints([None] * len(ref), list(ref.ids), {"_index": list(ref.positions)})
     msg = str(exc).splitlines()[0] if str(exc) else ""
     reason = f"block failed twice: {type(exc).__name__}{': ' + msg if msg else ''}"
     if spec.footprints is None:

@@ -26,7 +26,7 @@ from ..io.las import TileReader
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BlockOptions", "BlockOutput", "run_block", "reconstruct_block"]
+__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,11 +88,20 @@ class BlockOutput:
     worker_mb: float = 0.0
 
 
-# decoded tiles kept per process across blocks: blocks visited in grid order
-# read each tile about once, and a worker holds at most this many tiles
+# decoded tiles kept per process across blocks, least recently used first out: a
+# block reads its buildings plus a margin, so it meets up to 3 x 3 tiles and a run
+# of neighbouring blocks (:mod:`lidar2city.tools.engine` gives a worker runs of
+# consecutive blocks) reuses them. At least ``_TILE_CACHE_SIZE`` tiles are kept,
+# more while they hold no more than ``_TILE_CACHE_POINTS`` points in all, so a
+# worker's memory is bounded whatever the area (about 40 bytes a point)
 _TILE_CACHE_SIZE = 4
+_TILE_CACHE_POINTS = 3_000_000
 _tiles: OrderedDict = OrderedDict()
 _tiles_lock = threading.Lock()
+
+
+def _cached_points() -> int:
+    return sum(len(world) for world, _ in _tiles.values())
 
 
 class _SharedTileReader(TileReader):
@@ -111,7 +120,7 @@ class _SharedTileReader(TileReader):
         self._tiles.clear()
         with _tiles_lock:
             _tiles[key] = hit
-            while len(_tiles) > _TILE_CACHE_SIZE:
+            while len(_tiles) > _TILE_CACHE_SIZE and _cached_points() > _TILE_CACHE_POINTS:
                 _tiles.popitem(last=False)
         return hit
 
@@ -149,6 +158,20 @@ def _traced_footprints(spec, options, cloud, classes):
     return _subset(fps, idx) if idx else None
 
 
+def block_footprints(spec):
+    """The spec's footprints read from their file by feature id, in the block's
+    order, local frame, with their output positions in ``_index``."""
+    from ..datamodel import Footprints
+    from ..io.vector import read_footprints
+
+    ref, frame = spec.footprints, spec.frame
+    fps, _ = read_footprints(ref.path, layer=ref.layer, id_field=ref.id_field,
+                             origin=frame.origin[:2], xy_unit=frame.xy_unit,
+                             target_crs=frame.crs, fids=ref.fids, unique_ids=False)
+    return Footprints(fps.geometries, list(ref.ids), {**fps.attributes,
+                                                      "_index": list(ref.positions)})
+
+
 def run_block(spec, options: BlockOptions) -> BlockOutput:
     """Every building of one block (the task a worker runs); see :func:`_run_block`."""
     out = _run_block(spec, options)
@@ -183,7 +206,7 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
     from ..datamodel import Footprints
 
     cloud, classes = _block_cloud(spec, options)
-    fps = spec.footprints
+    fps = None if spec.footprints is None else block_footprints(spec)
     if fps is not None and cloud is not None and not options.classified:
         # raw input: the footprints say where the buildings are
         from ..footprints.points import claim_footprint_points
