@@ -677,3 +677,27 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
         for p in out.iterdir():
             shutil.rmtree(p) if p.is_dir() else p.unlink()
     assert interrupted, "every run ended before its signal"
+
+
+def test_footprints_with_touching_holes_give_files_that_validate(runner, block, tmp_path):
+    """Valid outlines whose hole meets the outer ring, or two holes meeting at a point:
+    every building modelled and the file validates (the plain prisms would be 303)."""
+    from shapely.geometry import Polygon
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import read_points
+    from lidar2city.io.vector import write_polygons
+
+    fps = [Polygon([(6, 6), (18, 6), (18, 16), (6, 16), (6, 11)], [[(6, 11), (9, 9), (9, 13)]]),
+           Polygon([(24, 8), (34, 8), (34, 20), (24, 20)],
+                   [[(26, 10), (29, 14), (26, 14)], [(29, 14), (32, 18), (32, 14)]])]
+    assert all(p.is_valid for p in fps)
+    write_polygons(tmp_path / "holes.gpkg", fps, {"id": ["A", "B"]},
+                   origin=np.array([85000.0, 447000.0]), crs=read_points(block / "t.laz").crs)
+    for out in (tmp_path / "h.city.json", tmp_path / "h.city.jsonl"):
+        res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                                  str(tmp_path / "holes.gpkg"), "--lod", "1.2", "--lod", "1.3",
+                                  "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        res = runner.invoke(cli, ["validate", str(out)])
+        assert res.exit_code == 0, res.output

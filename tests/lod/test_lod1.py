@@ -7,6 +7,7 @@ from shapely.geometry import MultiPolygon, Polygon, box
 from lidar2city.errors import ConfigError, InputError
 from lidar2city.lod import (
     Lod1Config,
+    clean_polygon,
     height_parts,
     lod12_solid,
     lod12_solids,
@@ -149,6 +150,22 @@ def test_lod13_sloped_roof_stays_one_part_and_small_parts_merge():
     assert len(height_parts(fp, chimney, step=3.0, min_area=10.0)) == 1
 
 
+def test_lod13_steep_gable_stays_one_part_and_annex_below_its_eave_splits():
+    # a 60 degree gable (eave 6 m, ridge 14.7 m over 10 m depth) and a flat annex at
+    # 5 m behind it: the step at the eave is only 1 m, the surfaces' heights differ by ~6 m
+    house, annex = box(0, 0, 12, 10), box(0, 10, 12, 16)
+    steep = _grid_points(house, lambda xy: 14.7 - np.sqrt(3) * np.abs(xy[:, 1] - 5))
+    assert len(height_parts(house, steep, step=2.0)) == 1
+    fp = box(0, 0, 12, 16)
+    pts = np.concatenate([steep, _grid_points(annex, 5.0)])
+    parts = height_parts(fp, pts, step=2.0, min_area=5.0)
+    assert len(parts) == 2
+    assert sorted(round(p.area, 6) for p in parts) == [72.0, 120.0]
+    # the same roof with a 1 m high annex difference stays one part
+    level = np.concatenate([_grid_points(house, 6.0), _grid_points(annex, 5.0)])
+    assert len(height_parts(fp, level, step=2.0)) == 1
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.floats(-1e4, 1e4), st.floats(-1e4, 1e4), st.floats(-50, 50))
 def test_translation_does_not_change_the_model(dx, dy, dz):
@@ -184,3 +201,48 @@ def test_lod13_parts_tile_the_footprint_exactly(levels, seed):
     assert union.symmetric_difference(fp).area < 1e-3
     for p in parts:
         assert check_solid(prism_solid(p, 0.0, 40.0, grid=0.001)) == []
+
+
+# --- rings touching at a point (valid polygons, non-manifold prisms) -----------------------------
+
+_SQUARE = [(0, 0), (10, 0), (10, 10), (0, 10), (0, 5)]
+TOUCHING = {
+    # a hole meeting the outer ring at the outer ring's vertex (0, 5)
+    "hole-outer": Polygon(_SQUARE, [[(0, 5), (4, 3), (4, 7)]]),
+    # two holes meeting at (5, 5)
+    "hole-hole": Polygon(_SQUARE, [[(2, 2), (5, 5), (2, 5)], [(5, 5), (8, 8), (8, 5)]]),
+    # a hole meeting an edge of the outer ring (its walls would touch a wall along a line)
+    "hole-on-edge": Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(0, 5), (4, 3), (4, 7)]]),
+    # a hole meeting the outer ring and another hole
+    "hole-outer-hole": Polygon(_SQUARE, [[(0, 5), (4, 3), (4, 7)], [(4, 7), (6, 9), (6, 6)]]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(TOUCHING))
+def test_touching_rings_are_opened_into_valid_prisms(name):
+    poly = TOUCHING[name]
+    assert poly.is_valid
+    # as it is, the prism is invalid: a wall edge of four faces (303)
+    if name != "hole-on-edge":
+        assert 303 in [i.code for i in check_solid(prism_solid(poly, 0.0, 3.0, grid=0.001))]
+    parts = clean_polygon(poly, grid=0.001)
+    assert parts
+    for p in parts:
+        rings = [p.exterior, *p.interiors]
+        assert min((a.distance(b) for i, a in enumerate(rings) for b in rings[i + 1:]),
+                   default=1.0) >= 0.0025
+    # the cuts are a few millimetres: the area is kept
+    assert abs(sum(p.area for p in parts) - poly.area) < 1e-3
+    solids = lod12_solids(poly, 0.0, 3.0, grid=0.001)
+    assert len(solids) == len(parts) == 1
+    for s in solids:
+        assert check_solid(s) == []
+
+
+def test_touching_rings_give_a_valid_lod1_building():
+    poly = TOUCHING["hole-hole"]
+    r = reconstruct_building(poly, _grid_points(poly, 6.0), _ground_ring(box(0, 0, 10, 10)))
+    assert r.ok and r.attributes["valid"], r.attributes.get("validity_errors")
+    lod12 = r.solids["1.2"]
+    for s in [*(lod12 if isinstance(lod12, list) else [lod12]), *r.parts.get("1.3", [])]:
+        assert check_solid(s) == []

@@ -74,8 +74,57 @@ def clean_polygon(polygon, *, grid: float = 0.0):
                      if 2.0 * abs(shapely.Polygon(h).area) / h.length >= thin]
             if len(holes) < len(q.interiors):
                 q = shapely.Polygon(q.exterior, holes)
-            out.append(orient(q, 1.0))
+            out.extend(orient(r, 1.0) for r in _separate_rings(q, grid, thin))
     return out
+
+
+def _separate_rings(polygon, grid: float, thin: float) -> list:
+    """``polygon`` with no two rings closer than the validator's snap tolerance.
+
+    A valid polygon may have a hole touching its exterior, or two holes
+    touching, at a point; its prism then has a wall edge used by four faces
+    (non-manifold, val3dity 303). Each such contact (rings closer than 2.5 grid
+    steps, the distance :func:`_ring_coords` keeps vertices apart) is opened:
+    a square of ``thin`` metres centred on it is cut out, so that the hole
+    becomes a notch of the outline (or the two holes one hole). A part the cuts
+    split off is kept as a part of its own.
+    """
+    import shapely
+
+    tol = 2.5 * max(grid, 0.001)
+    half = max(thin, 2.0 * tol)
+    todo, out = [polygon], []
+    for _ in range(64):  # each cut removes one contact; bounded for pathological inputs
+        if not todo:
+            break
+        q = todo.pop()
+        contact = _ring_contact(q, tol)
+        if contact is None:
+            out.append(q)
+            continue
+        x, y = contact
+        g = q.difference(shapely.box(x - half, y - half, x + half, y + half))
+        if grid > 0:
+            with np.errstate(all="ignore"):
+                g = shapely.set_precision(g, grid)
+        if not g.is_valid:
+            g = shapely.make_valid(g)
+        todo.extend(p for p in shapely.get_parts(g) if p.geom_type == "Polygon"
+                    and p.area > max(grid, 1e-6) ** 2 and 2.0 * p.area / p.length >= thin)
+    return out + [p for p in todo if _ring_contact(p, tol) is None]
+
+
+def _ring_contact(polygon, tol: float):
+    """``(x, y)`` where two rings of ``polygon`` come closer than ``tol``, or None."""
+    from shapely.ops import nearest_points
+
+    rings = [polygon.exterior, *polygon.interiors]
+    for i in range(len(rings)):
+        for j in range(i + 1, len(rings)):
+            if rings[i].distance(rings[j]) < tol:
+                a, b = nearest_points(rings[i], rings[j])
+                return (a.x + b.x) / 2.0, (a.y + b.y) / 2.0
+    return None
 
 
 def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -> Solid:
