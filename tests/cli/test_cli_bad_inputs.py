@@ -660,8 +660,10 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
         _, err = proc.communicate(timeout=120)
         _, alive = psutil.wait_procs(children, timeout=30)
         assert not alive, [p.cmdline() for p in alive]
-        if proc.returncode == 0:  # finished before the signal
-            assert _left(out) == ["x.city.jsonl"], err
+        if proc.returncode in (0, -signal.SIGINT):
+            # finished before the signal, or caught while the interpreter was shutting
+            # down after the run: a complete run, its output kept
+            assert "Traceback" not in err and _left(out) == ["x.city.jsonl"], err
         else:
             assert proc.returncode == 130, (frac, proc.returncode, err)
             interrupted += 1
