@@ -232,16 +232,32 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
 
     verts: list = []
     index: dict = {}
+    level_lists = {k: v.tolist() for k, v in level_sets.items()}
+
+    def level_index(k, z):
+        """Index of the level at vertex k nearest to z (the first of equals)."""
+        zs = level_lists[k]
+        if len(zs) == 1:
+            return 0
+        best, bj = abs(zs[0] - z), 0
+        for j in range(1, len(zs)):
+            d = abs(zs[j] - z)
+            if d < best:
+                best, bj = d, j
+        return bj
+
+    def vid_at(k, zi):
+        key = (k, zi)
+        i = index.get(key)
+        if i is None:
+            i = index[key] = len(verts)
+            p = xy_of[k]
+            verts.append((p[0], p[1], level_lists[k][zi]))
+        return i
 
     def vid(k, z):
-        zs = level_sets[k]
-        zi = 0 if len(zs) == 1 else int(np.argmin(np.abs(zs - z)))
-        key = (k, zi)
-        if key not in index:
-            index[key] = len(verts)
-            p = xy_of[k]
-            verts.append((p[0], p[1], zs[zi]))
-        return index[key], zi
+        zi = level_index(k, z)
+        return vid_at(k, zi), zi
 
     surfaces = []
     # roofs
@@ -254,11 +270,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     def stack(k, lo, hi):
         """Vertex ids at vertex k from level index lo to hi inclusive (ascending or descending)."""
         step = 1 if hi >= lo else -1
-        return [vid(k, level_sets[k][j])[0] for j in range(lo, hi + step, step)]
-
-    def level_index(k, z):
-        zs = level_sets[k]
-        return 0 if len(zs) == 1 else int(np.argmin(np.abs(zs - z)))
+        return [vid_at(k, j) for j in range(lo, hi + step, step)]
 
     # walls: each directed edge (p -> q) of face f whose other side is lower (or outside)
     for (kp, kq), fi in owner.items():
