@@ -26,7 +26,7 @@ def _key(p):
 
 
 def _ring_keys(r) -> list:
-    """:func:`_key` of every vertex of a ring, in one vectorised pass (same rounding: half to even)."""
+    """:func:`_key` of every vertex of a ring, vectorised (same rounding: half to even)."""
     return list(map(tuple, np.rint(np.asarray(r)[:, :2] * _KEY).astype(np.int64).tolist()))
 
 
@@ -79,7 +79,8 @@ def conform(rings_per_face, *, tol=1e-3):
     e, c = e[keep], c[keep]
     cp, de, pe, qe = pts[c], d[e], P[e], Q[e]
     t = ((cp[:, 0] - pe[:, 0]) * de[:, 0] + (cp[:, 1] - pe[:, 1]) * de[:, 1]) / L2[e]
-    dist = np.abs((cp[:, 0] - pe[:, 0]) * de[:, 1] - (cp[:, 1] - pe[:, 1]) * de[:, 0]) / np.sqrt(L2[e])
+    cross = (cp[:, 0] - pe[:, 0]) * de[:, 1] - (cp[:, 1] - pe[:, 1]) * de[:, 0]
+    dist = np.abs(cross) / np.sqrt(L2[e])
     ends = np.minimum(np.hypot(*(cp - pe).T), np.hypot(*(cp - qe).T))
     on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
     e, cp, t = e[on], cp[on], t[on]
