@@ -468,7 +468,8 @@ class RoofRegionsConfig:
     expand_roughness: float = field(0.2, "the growing by expand does not enter blobs "
                                          "wider than 2 m whose 3 x 3 plane-fit residual "
                                          "exceeds this (m): tree crowns touching a roof stay "
-                                         "out, thin rough eaves are joined; 0 disables")
+                                         "out, thin rough eaves are joined; 0 disables (off "
+                                         "on rasters coarser than 1 m)")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -637,7 +638,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped. Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM) except rough blobs wider than 2 m (3 x 3 plane-fit residual
-    above ``expand_roughness``: tree crowns touching a roof), are split where
+    above ``expand_roughness``: tree crowns touching a roof; only on rasters
+    of 1 m or finer), are split where
     they hold several summits separated by
     saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
     a share of their roof height (:func:`trim_to_edges` with
@@ -699,11 +701,13 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     if expand > 0:
         grown = expand_labels(lab, distance=expand / cell)
         target = elevated
-        if expand_roughness > 0:
+        disk = _disk(1.0 / cell)
+        if expand_roughness > 0 and disk is not None:
             # rough blobs wider than 2 m (tree crowns) are not grown into; thin rough strips
-            # (eaves, walls, roof furniture) are removed by the opening and still joined
+            # (eaves, walls, roof furniture) are removed by the opening and still joined.
+            # Coarser than 1 m a 3 x 3 window spans whole roofs: the test is off there.
             rough = elevated & (lab == 0) & (roughness(ndsm) > expand_roughness)
-            rough = ndimage.binary_opening(rough, structure=_disk(1.0 / cell))
+            rough = ndimage.binary_opening(rough, structure=disk)
             target = elevated & ~rough
         lab = np.where(target, grown, 0)
     if saddle_depth > 0:
