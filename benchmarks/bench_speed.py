@@ -4,11 +4,13 @@ Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced]
 (default $LIDAR2CITY_DATA or ../shared/data; 3 runs)
 
 Every figure is a whole process as a user runs it, measured from outside
-(wall time with time.perf_counter, peak RSS from os.wait4's resource usage of
-that child), and the time is given as a ratio to a baseline measured in the
-same call: a fresh Python reading the same tile with ``laspy.read``. Baseline
-and reconstruct runs alternate and the ratio is taken pair by pair, so it holds
-when the machine's speed drifts. Prints, against issue 13's targets:
+(wall time with time.perf_counter; peak RSS and user + system CPU seconds from
+os.wait4's resource usage of that child), and the time is given as a ratio to a
+baseline measured in the same call: a fresh Python reading the same tile with
+``laspy.read``. Baseline and reconstruct runs alternate and the ratio is taken
+pair by pair, so it holds when the machine's speed drifts; CPU seconds are
+printed beside wall times because on a shared machine they drift less.
+Prints, against issue 13's targets:
 
 * ``reconstruct --lod 1.2 --lod 1.3 --lod 2.2`` with the 132 BGT footprints:
   time / laspy floor (target <= 9) and peak RSS (target <= 200 MB);
@@ -34,8 +36,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(cmd, env) -> tuple[float, float]:
-    """``(wall seconds, peak RSS in MB)`` of one child process (fails loudly)."""
+def run(cmd, env) -> tuple[float, float, float]:
+    """``(wall seconds, peak RSS in MB, user + system CPU seconds)`` of one child process
+    (fails loudly)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -45,7 +48,7 @@ def run(cmd, env) -> tuple[float, float]:
     proc.stderr.close()
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(map(str, cmd))} failed ({proc.returncode}):\n{err}")
-    return wall, usage.ru_maxrss / 1024.0  # Linux: kilobytes
+    return wall, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # Linux: kilobytes
 
 
 def data_dir(arg):
@@ -83,13 +86,16 @@ def main():
         floors.append(a)
         fulls.append(b)
         ratios.append(b[0] / a[0])
-    f_t = statistics.median(t for t, _ in floors)
-    f_m = statistics.median(m for _, m in floors)
-    r_t = statistics.median(t for t, _ in fulls)
-    r_m = max(m for _, m in fulls)
+    f_t = statistics.median(t for t, _, _ in floors)
+    f_m = statistics.median(m for _, m, _ in floors)
+    f_c = statistics.median(c for _, _, c in floors)
+    r_t = statistics.median(t for t, _, _ in fulls)
+    r_m = max(m for _, m, _ in fulls)
+    r_c = statistics.median(c for _, _, c in fulls)
     print(f"laspy read floor (fresh python, laspy.read of the tile): median {f_t:.2f} s, "
-          f"peak RSS {f_m:.0f} MB ({len(floors)} runs)")
-    print(f"reconstruct LoD1.2+1.3+2.2, 132 footprints: median {r_t:.2f} s; "
+          f"{f_c:.2f} CPU s, peak RSS {f_m:.0f} MB ({len(floors)} runs)")
+    print(f"reconstruct LoD1.2+1.3+2.2, 132 footprints: median {r_t:.2f} s, {r_c:.2f} CPU s "
+          f"(CPU / floor CPU {r_c / f_c:.1f}x); "
           f"time / laspy floor median {statistics.median(ratios):.1f}x "
           f"(pairs: {', '.join(f'{r:.1f}' for r in ratios)}) [target <= 9x]")
     print(f"reconstruct LoD1.2+1.3+2.2, 132 footprints: peak RSS {r_m:.0f} MB "
@@ -112,9 +118,9 @@ def main():
 
     if not args.no_traced:
         a = run(floor, env)
-        t, m = run(base + ["--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
-                           "-o", str(tmp / "traced.city.json")], env)
-        print(f"reconstruct without footprints (traced), LoD1.2+1.3+2.2: {t:.1f} s "
+        t, m, c = run(base + ["--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
+                              "-o", str(tmp / "traced.city.json")], env)
+        print(f"reconstruct without footprints (traced), LoD1.2+1.3+2.2: {t:.1f} s, {c:.1f} CPU s "
               f"({t / a[0]:.0f}x the laspy floor of {a[0]:.2f} s), peak RSS {m:.0f} MB "
               f"[targets <= 10 s, <= 300 MB]")
 

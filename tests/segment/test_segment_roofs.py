@@ -170,3 +170,27 @@ def test_inset_default_drops_one_ring_at_half_and_one_metre_none_at_two():
     lab[2:10, 2:10] = 1
     for cell, kept in ((0.5, 36), (1.0, 36), (2.0, 64)):
         assert (inset_regions(lab, cell=cell, inset=0.5) > 0).sum() == kept
+
+
+def test_expand_roughness_keeps_touching_tree_crown_out_but_joins_eaves():
+    # 0.5 m grid: a flat 6 m roof, a rough tree crown touching its east side and
+    # a thin rough eave strip on its west side (walls and gutters are rough too)
+    rng = np.random.default_rng(3)
+    nd = np.zeros((60, 80))
+    house = np.zeros(nd.shape, bool)
+    house[10:50, 10:40] = True
+    nd[house] = 6.0
+    tree = np.zeros(nd.shape, bool)
+    tree[15:45, 40:65] = True
+    nd[tree] = 6.0 + rng.normal(0.0, 1.5, tree.sum())
+    eave = np.zeros(nd.shape, bool)
+    eave[10:50, 9] = True
+    nd[eave] = 6.0 + rng.normal(0.0, 1.5, eave.sum())
+    kw = dict(cell=0.5, min_area=10.0, expand=2.0, edge_inset=0.0, saddle_depth=0.0)
+    on, _ = roof_regions(nd + 1.0, nd, **kw)
+    off, _ = roof_regions(nd + 1.0, nd, expand_roughness=0.0, **kw)
+    best = np.bincount(on[house]).argmax()
+    assert best > 0 and _iou(on == best, house | eave) > 0.9
+    assert (on[tree] > 0).mean() < 0.05                # the crown stays out
+    assert (on[eave] == best).mean() > 0.8             # the thin strip is joined
+    assert (off[tree] > 0).mean() > 0.1                # without the cue it is grown into

@@ -598,14 +598,17 @@ def collapse_short_edges(faces, footprint, *, min_length):
     import shapely
 
     from .refine import _remove_spikes
-    from .solid import _key
+    from .solid import _key, _ring_keys
 
     rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
+    ring_keys = [[_ring_keys(r) for r in rs] for rs in rings]
     xy_of = {}
     edges = set()
-    for rs in rings:
-        for r in rs:
-            keys = [_key(p) for p in r]
+    faces_of: dict = {}  # vertex key -> faces using it
+    for fi, rs in enumerate(rings):
+        for r, keys in zip(rs, ring_keys[fi], strict=True):
+            for k in keys:
+                faces_of.setdefault(k, set()).add(fi)
             for p, k in zip(r, keys, strict=True):
                 xy_of[k] = p
             for a, b in zip(keys, keys[1:] + keys[:1], strict=True):
@@ -633,20 +636,28 @@ def collapse_short_edges(faces, footprint, *, min_length):
     total = footprint.area
     mapping: dict = {}
 
+    def rebuild_face(fi, mp):
+        new_rs = []
+        for r, keys in zip(rings[fi], ring_keys[fi], strict=True):
+            pts = [mp.get(k, p) for k, p in zip(keys, r, strict=True)]
+            pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+            if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
+                pts.pop()
+            new_rs.append(_remove_spikes(pts))
+        if len(new_rs[0]) < 3:
+            return None
+        poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
+        return None if poly.area <= 1e-9 else poly
+
+    unmoved = [rebuild_face(fi, {}) for fi in range(len(rings))]
+
     def rebuild(mp):
+        # only the faces with a moved vertex change; the others are built once
+        moved = set().union(*(faces_of.get(k, ()) for k in mp))
         out, idx = [], []
-        for fi, rs in enumerate(rings):
-            new_rs = []
-            for r in rs:
-                pts = [mp.get(_key(p), p) for p in r]
-                pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
-                if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
-                    pts.pop()
-                new_rs.append(_remove_spikes(pts))
-            if len(new_rs[0]) < 3:
-                continue
-            poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
-            if poly.area <= 1e-9:
+        for fi in range(len(rings)):
+            poly = rebuild_face(fi, mp) if fi in moved else unmoved[fi]
+            if poly is None:
                 continue
             out.append(poly)
             idx.append(fi)

@@ -25,6 +25,11 @@ def _key(p):
     return (int(round(p[0] * _KEY)), int(round(p[1] * _KEY)))
 
 
+def _ring_keys(r) -> list:
+    """:func:`_key` of every vertex of a ring, vectorised (same rounding: half to even)."""
+    return list(map(tuple, np.rint(np.asarray(r)[:, :2] * _KEY).astype(np.int64).tolist()))
+
+
 def _rings(poly):
     """Exterior counter-clockwise then holes clockwise, as (m, 2) arrays without closing vertex."""
     from shapely.geometry.polygon import orient
@@ -39,13 +44,14 @@ def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
 
-def _edge_owner(rings_per_face) -> dict:
+def _edge_owner(rings_per_face, keys_per_face=None) -> dict:
     """Directed edge ``(key(p), key(q))`` -> index of the face whose ring runs p -> q."""
+    if keys_per_face is None:
+        keys_per_face = [[_ring_keys(r) for r in rs] for rs in rings_per_face]
     owner = {}
-    for fi, rs in enumerate(rings_per_face):
-        for r in rs:
-            for k in range(len(r)):
-                owner[(_key(r[k]), _key(r[(k + 1) % len(r)]))] = fi
+    for fi, ks in enumerate(keys_per_face):
+        for k in ks:
+            owner.update(zip(zip(k, k[1:] + k[:1]), [fi] * len(k)))
     return owner
 
 
@@ -57,38 +63,49 @@ def conform(rings_per_face, *, tol=1e-3):
     """
     import shapely
 
-    pts = np.unique(np.concatenate([r for rs in rings_per_face for r in rs]), axis=0)
+    rings = [r for rs in rings_per_face for r in rs]
+    pts = np.unique(np.concatenate(rings), axis=0)
     tree = shapely.STRtree(shapely.points(pts))
+    # every directed edge p -> q of every ring, in ring order
+    P = np.concatenate(rings)
+    Q = np.concatenate([np.roll(r, -1, axis=0) for r in rings])
+    lo, hi = np.minimum(P, Q) - tol, np.maximum(P, Q) + tol
+    # candidates: points in the edge's box grown by tol (a superset of its tol-buffer),
+    # then the exact test below
+    e, c = tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+    d = Q - P
+    L2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    keep = L2[e] != 0
+    e, c = e[keep], c[keep]
+    cp, de, pe, qe = pts[c], d[e], P[e], Q[e]
+    t = ((cp[:, 0] - pe[:, 0]) * de[:, 0] + (cp[:, 1] - pe[:, 1]) * de[:, 1]) / L2[e]
+    cross = (cp[:, 0] - pe[:, 0]) * de[:, 1] - (cp[:, 1] - pe[:, 1]) * de[:, 0]
+    dist = np.abs(cross) / np.sqrt(L2[e])
+    ends = np.minimum(np.hypot(*(cp - pe).T), np.hypot(*(cp - qe).T))
+    on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
+    e, cp, t = e[on], cp[on], t[on]
+    order = np.lexsort((t, e))
+    inserts: dict = {}
+    for i, x in zip(e[order].tolist(), cp[order], strict=True):
+        inserts.setdefault(i, []).append(x)
+    return _insert_at(rings_per_face, inserts)
 
-    def on_edge(p, q):
-        d = q - p
-        L2 = float(d @ d)
-        if L2 == 0:
-            return []
-        cand = tree.query(shapely.LineString([p, q]).buffer(tol))
-        if not len(cand):
-            return []
-        c = pts[cand]
-        t = ((c - p) @ d) / L2
-        dist = np.abs((c[:, 0] - p[0]) * d[1] - (c[:, 1] - p[1]) * d[0]) / np.sqrt(L2)
-        ends = np.minimum(np.hypot(*(c - p).T), np.hypot(*(c - q).T))
-        on = (t > 0) & (t < 1) & (dist < tol) & (ends > tol)
-        return list(c[on][np.argsort(t[on])])
 
-    return _insert_on_edges(rings_per_face, on_edge)
-
-
-def _insert_on_edges(rings_per_face, inserted):
-    """The rings with ``inserted(p, q)`` (points inside edge p -> q, in order) added."""
+def _insert_at(rings_per_face, inserts: dict):
+    """The rings with ``inserts[i]`` (points in order) added inside the i-th edge (edges
+    numbered through all rings of all faces in order)."""
+    if not inserts:
+        return [list(rs) for rs in rings_per_face]
     out = []
+    i = 0
     for rs in rings_per_face:
         new_rs = []
         for r in rs:
             seq = []
             for k in range(len(r)):
-                p, q = r[k], r[(k + 1) % len(r)]
-                seq.append(p)
-                seq.extend(inserted(p, q))
+                seq.append(r[k])
+                seq.extend(inserts.get(i + k, ()))
+            i += len(r)
             new_rs.append(np.asarray(seq))
         out.append(new_rs)
     return out
@@ -118,29 +135,42 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
         Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
     """
     rings = conform([_rings(f) for f in faces])
-    owner = _edge_owner(rings)
+    keys = [[_ring_keys(r) for r in rs] for rs in rings]
+    owner = _edge_owner(rings, keys)
     inserts = {}
     for fi, rs in enumerate(rings):
-        for r in rs:
-            for k in range(len(r)):
-                p, q = r[k], r[(k + 1) % len(r)]
-                g = owner.get((_key(q), _key(p)))
+        for r, ks in zip(rs, keys[fi], strict=True):
+            zf = planes[fi, 0] * r[:, 0] + planes[fi, 1] * r[:, 1] + planes[fi, 2]
+            m = len(r)
+            for k in range(m):
+                kp, kq = ks[k], ks[(k + 1) % m]
+                g = owner.get((kq, kp))
                 if g is None or g < fi:
                     continue
-                dp = _z(planes[fi], p) - _z(planes[g], p)
-                dq = _z(planes[fi], q) - _z(planes[g], q)
+                p, q = r[k], r[(k + 1) % m]
+                dp = zf[k] - _z(planes[g], p)
+                dq = zf[(k + 1) % m] - _z(planes[g], q)
                 if (dp > tol and dq < -tol) or (dp < -tol and dq > tol):
                     t = dp / (dp - dq)
                     x = p + t * (q - p)
                     if min(np.hypot(*(x - p)), np.hypot(*(x - q))) < min_gap:
                         continue  # the levels at that end merge instead
                     x = np.round(x / grid) * grid  # on the output grid, as the faces are
-                    inserts[(_key(p), _key(q))] = x
-                    inserts[(_key(q), _key(p))] = x
+                    inserts[(kp, kq)] = x
+                    inserts[(kq, kp)] = x
     if not inserts:
         return rings
-    return _insert_on_edges(rings, lambda p, q: [x] if (x := inserts.get((_key(p), _key(q)))) is not None
-                            else [])
+    at = {}
+    i = 0
+    for ks_face in keys:
+        for ks in ks_face:
+            m = len(ks)
+            for k in range(m):
+                x = inserts.get((ks[k], ks[(k + 1) % m]))
+                if x is not None:
+                    at[i + k] = [x]
+            i += m
+    return _insert_at(rings, at)
 
 
 def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
@@ -172,26 +202,29 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     planes = np.asarray(planes, dtype=np.float64)
     rings = split_crossings(faces, planes, tol=level_tol)
     # heights of every face at its vertices
+    keys = [[_ring_keys(r) for r in rs] for rs in rings]
     levels: dict = {}
+    zs_face = []
     for fi, rs in enumerate(rings):
-        for r in rs:
+        zs_face.append([])
+        for r, ks in zip(rs, keys[fi], strict=True):
             z = planes[fi, 0] * r[:, 0] + planes[fi, 1] * r[:, 1] + planes[fi, 2]
             if np.any(z < ground_z + min_height):
                 raise FitError(f"roof plane {fi} goes below the floor ({z.min():.2f} < {ground_z:.2f} + {min_height})")
-            for p, zz in zip(r, z, strict=True):
-                levels.setdefault(_key(p), []).append(zz)
+            zs_face[fi].append(z)
+            for k, zz in zip(ks, z, strict=True):
+                levels.setdefault(k, []).append(zz)
     # directed edges and which face uses them
-    owner = _edge_owner(rings)
+    owner = _edge_owner(rings, keys)
     outer_edges = [e for e in owner if (e[1], e[0]) not in owner]
     for e in outer_edges:
         levels[e[0]].append(ground_z)
         levels[e[1]].append(ground_z)
     # unify levels per vertex
     xy_of = {}
-    for rs in rings:
-        for r in rs:
-            for p in r:
-                xy_of[_key(p)] = p
+    for rs, ks_face in zip(rings, keys, strict=True):
+        for r, ks in zip(rs, ks_face, strict=True):
+            xy_of.update(zip(ks, r))
     level_sets = {}
     for k, zs in levels.items():
         zs = np.sort(np.asarray(zs))
@@ -200,36 +233,45 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
 
     verts: list = []
     index: dict = {}
+    level_lists = {k: v.tolist() for k, v in level_sets.items()}
+
+    def level_index(k, z):
+        """Index of the level at vertex k nearest to z (the first of equals)."""
+        zs = level_lists[k]
+        if len(zs) == 1:
+            return 0
+        best, bj = abs(zs[0] - z), 0
+        for j in range(1, len(zs)):
+            d = abs(zs[j] - z)
+            if d < best:
+                best, bj = d, j
+        return bj
+
+    def vid_at(k, zi):
+        key = (k, zi)
+        i = index.get(key)
+        if i is None:
+            i = index[key] = len(verts)
+            p = xy_of[k]
+            verts.append((p[0], p[1], level_lists[k][zi]))
+        return i
 
     def vid(k, z):
-        zs = level_sets[k]
-        zi = int(np.argmin(np.abs(zs - z)))
-        key = (k, zi)
-        if key not in index:
-            index[key] = len(verts)
-            p = xy_of[k]
-            verts.append((p[0], p[1], zs[zi]))
-        return index[key], zi
+        zi = level_index(k, z)
+        return vid_at(k, zi), zi
 
     surfaces = []
     # roofs
     for fi, rs in enumerate(rings):
         ids = []
-        for r in rs:
-            ring = []
-            for p in r:
-                i, _ = vid(_key(p), _z(planes[fi], p))
-                ring.append(i)
-            ids.append(np.asarray(ring))
+        for ks, z in zip(keys[fi], zs_face[fi], strict=True):
+            ids.append(np.asarray([vid(k, zz)[0] for k, zz in zip(ks, z, strict=True)]))
         surfaces.append(Surface(ids, "RoofSurface"))
 
     def stack(k, lo, hi):
         """Vertex ids at vertex k from level index lo to hi inclusive (ascending or descending)."""
         step = 1 if hi >= lo else -1
-        return [vid(k, level_sets[k][j])[0] for j in range(lo, hi + step, step)]
-
-    def level_index(k, z):
-        return int(np.argmin(np.abs(level_sets[k] - z)))
+        return [vid_at(k, j) for j in range(lo, hi + step, step)]
 
     # walls: each directed edge (p -> q) of face f whose other side is lower (or outside)
     for (kp, kq), fi in owner.items():

@@ -465,6 +465,11 @@ class RoofRegionsConfig:
                                       "reaches this fraction of its roof height (the upper "
                                       "quartile of its nDSM): the edge of a blurred step lies "
                                       "at half its height; 0 disables the trimming")
+    expand_roughness: float = field(0.2, "the growing by expand does not enter blobs "
+                                         "wider than 2 m whose 3 x 3 plane-fit residual "
+                                         "exceeds this (m): tree crowns touching a roof stay "
+                                         "out, thin rough eaves are joined; 0 disables (off "
+                                         "on rasters coarser than 1 m)")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -621,7 +626,8 @@ def inset_regions(labels, *, cell, inset):
 
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
-                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8):
+                 saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
+                 expand_roughness=0.2):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -631,7 +637,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     another height and from tree crowns, whose rough surfaces break into
     fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped. Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
-    smoothed DSM), are split where they hold several summits separated by
+    smoothed DSM) except rough blobs wider than 2 m (3 x 3 plane-fit residual
+    above ``expand_roughness``: tree crowns touching a roof; only on rasters
+    of 1 m or finer), are split where
+    they hold several summits separated by
     saddles ``saddle_depth`` deep (:func:`split_at_saddles`), are cut back to
     a share of their roof height (:func:`trim_to_edges` with
     ``edge_fraction``), small holes are filled and large ones kept as
@@ -691,7 +700,16 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     lab = np.where(keep[lab], lab, 0)
     if expand > 0:
         grown = expand_labels(lab, distance=expand / cell)
-        lab = np.where(elevated, grown, 0)
+        target = elevated
+        disk = _disk(1.0 / cell)
+        if expand_roughness > 0 and disk is not None:
+            # rough blobs wider than 2 m (tree crowns) are not grown into; thin rough strips
+            # (eaves, walls, roof furniture) are removed by the opening and still joined.
+            # Coarser than 1 m a 3 x 3 window spans whole roofs: the test is off there.
+            rough = elevated & (lab == 0) & (roughness(ndsm) > expand_roughness)
+            rough = ndimage.binary_opening(rough, structure=disk)
+            target = elevated & ~rough
+        lab = np.where(target, grown, 0)
     if saddle_depth > 0:
         lab, _ = split_at_saddles(lab, ndsm, depth=saddle_depth,
                                   min_pixels=min_px)
