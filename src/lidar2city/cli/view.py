@@ -40,6 +40,7 @@ def command(model, points, footprints, id_field, edits, output, port, host, max_
     reconstruction; Accept writes the model atomically (it always validates)
     and appends the edit to EDITS.json for `reconstruct --edits`.
     """
+    import signal
     import time
     import webbrowser
 
@@ -51,10 +52,15 @@ def command(model, points, footprints, id_field, edits, output, port, host, max_
     click.echo(f"lidar2city viewer at {url} (Ctrl+C to stop)", err=True)
     if not no_browser:
         webbrowser.open(url)
+    # Ctrl+C is how a viewer is closed, not an interrupted run: the root command's handler
+    # (which reports "interrupted" and exits 130) gives way to a plain KeyboardInterrupt here;
+    # saves are atomic (temporary name, rename), so stopping between them leaves the model whole
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:
-        pass
+        click.echo("viewer stopped", err=True)
     finally:
+        signal.signal(signal.SIGINT, previous)
         viewer.stop()
