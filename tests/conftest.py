@@ -17,6 +17,27 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 ROOT = Path(__file__).resolve().parents[1]
 
 
+class RunCrash(BaseException):
+    """A crash of the whole run (not a task failure the executor would retry)."""
+
+
+@pytest.fixture
+def crash_after_first_block(monkeypatch):
+    """Every block after the first crashes the run (``monkeypatch.undo()`` lifts it);
+    returns the exception class raised."""
+    from lidar2city.tools import task
+
+    real = task.run_block
+
+    def run_block(spec, options):
+        if spec.index > 0:
+            raise RunCrash
+        return real(spec, options)
+
+    monkeypatch.setattr(task, "run_block", run_block)
+    return RunCrash
+
+
 def data_dir() -> Path:
     """``$LIDAR2CITY_DATA`` or ``../shared/data`` beside the checkout."""
     env = os.environ.get("LIDAR2CITY_DATA")

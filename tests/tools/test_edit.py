@@ -280,24 +280,13 @@ def test_an_unknown_edit_id_is_refused_before_any_block_runs(edit_town, tmp_path
         reconstruct([edit_town.laz], tmp_path / "x.city.json", lods=("1.2",), edits=edits)
 
 
-def test_a_run_resumed_with_other_edits_is_refused(edit_town, town_edits, tmp_path, monkeypatch):
+def test_a_run_resumed_with_other_edits_is_refused(edit_town, town_edits, tmp_path, monkeypatch,
+                                                  crash_after_first_block):
     from lidar2city.io.journal import journal_path
-    from lidar2city.tools import task
-
-    class Crash(BaseException):  # a crash of the run, not a task failure to retry
-        pass
-
-    real = task.run_block
-
-    def crash_after_first(spec, options):
-        if spec.index > 0:
-            raise Crash
-        return real(spec, options)
 
     out = tmp_path / "r.city.json"
     run = dict(footprints=edit_town.footprints, lods=("1.2", "2.2"), block_size=60.0)
-    monkeypatch.setattr(task, "run_block", crash_after_first)
-    with pytest.raises(Crash):
+    with pytest.raises(crash_after_first_block):
         reconstruct([edit_town.laz], out, edits=town_edits, **run)
     assert journal_path(out).exists()
     monkeypatch.undo()

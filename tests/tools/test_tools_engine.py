@@ -126,18 +126,10 @@ def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missi
     assert not journal_path(out).exists()
 
 
-def test_a_journal_of_other_options_is_an_error_without_and_with_resume(area, tmp_path,
-                                                                        monkeypatch):
-    real = task.run_block
-
-    def crash_after_first(spec, options):
-        if spec.index > 0:
-            raise Crash
-        return real(spec, options)
-
+def test_a_journal_of_other_options_is_an_error_without_and_with_resume(
+        area, tmp_path, monkeypatch, crash_after_first_block):
     out = tmp_path / "j.city.json"
-    monkeypatch.setattr(task, "run_block", crash_after_first)
-    with pytest.raises(Crash):
+    with pytest.raises(crash_after_first_block):
         _run(area, out)
     assert journal_path(out).exists()
     monkeypatch.undo()
