@@ -202,7 +202,7 @@ def add_canopy(town: SyntheticTown, *, seed: int = 0, cover: float = 0.3,
     """The town with the vegetation of a modern multi-echo survey.
 
     Stands of overlapping ellipsoidal crowns (radius 2-6 m, 6-26 m high, each
-    with its own surface roughness, 0.08-0.4 m: some crowns are smooth) cover
+    with its own surface roughness drawn from ``roughness``) cover
     about ``cover`` of the open space; crowns may reach over roofs by up to
     ``overhang`` metres. A pulse under a crown returns its first echo on the
     crown; with probability ``opaque`` that is its only echo (a dense crown),
@@ -224,6 +224,11 @@ def add_canopy(town: SyntheticTown, *, seed: int = 0, cover: float = 0.3,
         Most echoes per pulse (2 to 15).
     opaque : float
         Share of the pulses on crowns that give one echo only.
+    roughness : (float, float)
+        Range (m) of the crowns' surface roughness (standard deviation of the
+        first echo about the crown's surface). The default's local residuals
+        span those measured on real crowns (Delft AHN3, the Nebraska sample);
+        smoother crowns look like roofs to geometry alone.
 
     Returns
     -------
