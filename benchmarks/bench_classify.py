@@ -19,6 +19,8 @@ read), and the synthetic town re-written as other surveys would record it
 shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
 25 pts/m2) with building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
+``--nebraska-png PATH`` draws where the Nebraska sample's building points are
+missed (docs/classify_nebraska_misses.png; the breakdown is always printed);
 ``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
 footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
 
@@ -26,7 +28,8 @@ Reference mappings: AHN (Delft) class 6 building, class 1 "unclassified
 (vegetation and other)" counted as vegetation, 9 water and 26 civil
 structures ignored; ASPRS files 3/4/5 vegetation, 6 building, 7 noise ignored.
 
-Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR] [--png PATH] [--reconstruct]``.
+Run: ``PYTHONPATH=src python benchmarks/bench_classify.py [DATA_DIR] [--png PATH]
+[--nebraska-png PATH] [--reconstruct]``.
 """
 
 from __future__ import annotations
@@ -101,6 +104,108 @@ def main(data: Path):
                       f"{s.f1[k]:6.3f} {dt:7.2f}")
             print(f"{'':<44} {gname:<9} overall accuracy {s.overall_accuracy:.3f}, "
                   f"kappa {s.kappa:.3f}")
+
+
+NEBRASKA = "misc/file_with_both_wkt_and_geotiff_vlrs.las"
+
+
+def nebraska_misses(data: Path, png=None):
+    """Where the Nebraska sample's reference building points are missed, and why.
+
+    Every missed building point (reference 6, called something else; ground =
+    the file's class 2) goes to the first of: under ``min_height`` (2 m) above
+    the terrain; more than 1 m above the roof (the highest smooth building
+    point called building within 1 m horizontally); rough (local residual above
+    3 times the median of the building points found: canopy-like); the rest
+    (smooth at roof level: roof edges, small buildings, our misses). Also the local residual of hits,
+    misses and reference high vegetation, and the share with a reference
+    vegetation point within 0.3 m. ``png``: top view and two vertical slices.
+    """
+    from scipy.spatial import cKDTree
+
+    from lidar2city.classify.core import _classify
+
+    path = data / NEBRASKA
+    if not path.exists():
+        return
+    cloud = read_points(path)
+    a = cloud.attributes
+    ref = a["classification"]
+    xyz = cloud.xyz
+    out = _classify(xyz, ref == 2, return_number=a["return_number"],
+                    number_of_returns=a["number_of_returns"])
+    cls, hag = out["classes"], out["hag"]
+    res = np.full(len(xyz), np.nan)
+    res[out["obj_idx"]] = out["residual"]
+    bld = ref == 6
+    hit, miss = bld & (cls == 6), bld & (cls != 6)
+    # rough: a local residual 3 times that of the typical building point found
+    smooth_res = 3.0 * np.nanmedian(res[hit])
+    rough = ~(res <= smooth_res)
+    false = (cls == 6) & ~bld & (ref != 7)
+    smooth_roof = hit & ~rough
+    tree = cKDTree(xyz[smooth_roof, :2])
+    roof_z = np.full(len(xyz), -np.inf)
+    for i, nb in zip(np.flatnonzero(miss), tree.query_ball_point(xyz[miss, :2], 1.0), strict=True):
+        if nb:
+            roof_z[i] = xyz[smooth_roof][nb, 2].max()
+    low = miss & (hag < 2.0)
+    above = miss & ~low & (xyz[:, 2] > roof_z + 1.0)
+    rough_m = miss & ~low & ~above & rough
+    rest = miss & ~low & ~above & ~rough_m
+    veg = np.isin(ref, (3, 4, 5))
+    d_veg, _ = cKDTree(xyz[veg]).query(xyz, k=1)
+    print(f"\nNebraska sample ({len(xyz)} points, single returns, ground = file class 2): "
+          f"{int(bld.sum())} building points, {int(hit.sum())} found, {int(miss.sum())} missed, "
+          f"{int(false.sum())} false")
+    print(f"  missed: {int(low.sum())} under 2 m above the terrain, {int(above.sum())} more than "
+          f"1 m above the roof beside them, {int(rough_m.sum())} rough at roof level, "
+          f"{int(rest.sum())} smooth at roof level")
+    best = hit.sum() + rest.sum()
+    print(f"  upper bound with every smooth miss found and no false building: precision 1, "
+          f"recall {best / bld.sum():.3f}, F1 {2 * best / (best + bld.sum()):.3f}")
+    high_veg = ref == 5
+    for name, m in (("found", hit), ("missed", miss), ("false", false),
+                    ("ref. high vegetation", high_veg)):
+        print(f"  {name:<21} local residual median {np.nanmedian(res[m]):.3f} m "
+              f"(rough above {smooth_res:.3f}): rough {np.mean(rough[m]):.2f}, "
+              f"ref. vegetation within 0.3 m {np.mean(d_veg[m] < 0.3):.2f}")
+    if png is None:
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    other = ~(hit | miss | false)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), gridspec_kw={"width_ratios": [1.4, 1, 1]})
+    groups = ((other & (ref == 2), "ground", "tan", 0.5),
+              (other & veg, "ref. vegetation", "yellowgreen", 0.8),
+              (hit, "building found", "red", 1.5), (miss, "building missed", "blue", 2.5),
+              (false, "vegetation called building", "orange", 2.5))
+    for m, label, colour, size in groups:
+        order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
+        axes[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
+    axes[0].set_title("top view (highest on top)", fontsize=9)
+    axes[0].legend(fontsize=7, markerscale=4, loc="upper left")
+    z0 = xyz[:, 2].min()
+    for ax, (axis, lo, hi) in zip(axes[1:], ((0, 0.5, 1.5), (1, 5.0, 6.0)), strict=True):
+        sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
+        u = 1 - axis
+        for m, label, colour, size in groups:
+            mm = m & sl
+            ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
+        ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
+        ax.set_xlabel(f"{'xy'[u]} (m)")
+        ax.set_ylabel("height (m)")
+    for ax in axes:
+        ax.set_aspect("equal")
+    fig.suptitle("Nebraska sample: reference building points missed (blue) and where they are",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png, dpi=80)
+    plt.close(fig)
+    print(f"  figure written to {png}")
 
 
 def density_sweep(data: Path):
@@ -226,19 +331,29 @@ def synthetic_surveys():
 
     print("\nSynthetic town (200 m x 150 m, seed 0) as other surveys, raw "
           "(ground = ground_mask default):")
-    print(f"{'survey':<26} {'points':>7} {'bld P':>6} {'bld R':>6} {'bld F1':>6} {'time s':>7}")
-    cases = [("multi-echo, 10 pts/m2", "multi", 10.0, False),
-             ("first/last pairs", "pairs", 10.0, False),
-             ("first/last pairs shuffled", "pairs", 10.0, True),
-             ("single returns", "single", 10.0, False),
-             ("no return fields", "no_returns", 10.0, False),
-             ("feet (LAS file)", "feet", 10.0, False),
-             ("1.5 pts/m2", "multi", 1.5, False),
-             ("1.5 pts/m2 pairs", "pairs", 1.5, False),
-             ("1.5 pts/m2 single returns", "single", 1.5, False),
-             ("25 pts/m2", "multi", 25.0, False)]
-    for label, kind, density, shuffle in cases:
-        cloud = make_survey(kind, density=density, shuffle=shuffle)
+    print(f"{'survey':<28} {'points':>7} {'bld P':>6} {'bld R':>6} {'bld F1':>6} {'time s':>7}")
+    cases = [("multi-echo, 10 pts/m2", "multi", 10.0, False, False),
+             ("first/last pairs", "pairs", 10.0, False, False),
+             ("first/last pairs shuffled", "pairs", 10.0, True, False),
+             ("single returns", "single", 10.0, False, False),
+             ("no return fields", "no_returns", 10.0, False, False),
+             ("feet (LAS file)", "feet", 10.0, False, False),
+             ("1.5 pts/m2", "multi", 1.5, False, False),
+             ("1.5 pts/m2 pairs", "pairs", 1.5, False, False),
+             ("1.5 pts/m2 single returns", "single", 1.5, False, False),
+             ("25 pts/m2", "multi", 25.0, False, False),
+             # with add_canopy: stands of crowns, up to 5 echoes, crowns over roofs
+             ("canopy, 5 echoes, 10 pts/m2", "multi", 10.0, False, True),
+             ("canopy, 5 echoes, 25 pts/m2", "multi", 25.0, False, True),
+             ("canopy, pairs, 10 pts/m2", "pairs", 10.0, False, True),
+             ("canopy, single, 10 pts/m2", "single", 10.0, False, True),
+             ("canopy, single, 25 pts/m2", "single", 25.0, False, True),
+             ("canopy, no returns, 10", "no_returns", 10.0, False, True),
+             ("canopy, 5 echoes, 1.5", "multi", 1.5, False, True),
+             ("canopy, pairs, 1.5", "pairs", 1.5, False, True),
+             ("canopy, single, 1.5", "single", 1.5, False, True)]
+    for label, kind, density, shuffle, canopy in cases:
+        cloud = make_survey(kind, density=density, shuffle=shuffle, canopy=canopy)
         if kind == "feet":
             from lidar2city.io.las import write_points
 
@@ -250,7 +365,7 @@ def synthetic_surveys():
         dt = time.perf_counter() - t0
         s = classification_scores(cloud.attributes["classification"], cls, mapping=ASPRS_MAPPING,
                                   predicted_mapping=ASPRS_MAPPING, ignore=(7,))
-        print(f"{label:<26} {len(cloud):>7} {s.precision['building']:6.3f} "
+        print(f"{label:<28} {len(cloud):>7} {s.precision['building']:6.3f} "
               f"{s.recall['building']:6.3f} {s.f1['building']:6.3f} {dt:7.2f}")
 
 
@@ -300,6 +415,7 @@ def reconstruct_csite4(data: Path):
 if __name__ == "__main__":
     args = sys.argv[1:]
     png = None
+    neb_png = None
     rebuild = "--reconstruct" in args
     if rebuild:
         args.remove("--reconstruct")
@@ -307,10 +423,15 @@ if __name__ == "__main__":
         i = args.index("--png")
         png = Path(args[i + 1])
         del args[i:i + 2]
+    if "--nebraska-png" in args:
+        i = args.index("--nebraska-png")
+        neb_png = Path(args[i + 1])
+        del args[i:i + 2]
     default = os.environ.get("LIDAR2CITY_DATA", Path(__file__).resolve().parents[1].parent
                              / "shared" / "data")
     folder = Path(args[0] if args else default)
     main(folder)
+    nebraska_misses(folder, neb_png)
     density_sweep(folder)
     isprs_sites(folder, png)
     synthetic_surveys()

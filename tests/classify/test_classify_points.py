@@ -299,6 +299,8 @@ def test_bad_inputs():
         classify_points(xyz, truth == GROUND, bogus=1)
     with pytest.raises(ConfigError, match="classify.min_height"):
         ClassifyConfig(min_height=-1)
+    with pytest.raises(ConfigError, match="classify.max_region_roughness"):
+        ClassifyConfig(max_region_roughness=0)
 
 
 def test_empty_input():

@@ -10,7 +10,7 @@ from lidar2city.classify.core import _classify
 from lidar2city.errors import InputError
 from lidar2city.metrics.classification import ASPRS_MAPPING, classification_scores
 from lidar2city.synthetic import make_town
-from lidar2city.synthetic_surveys import SURVEY_KINDS, make_survey, survey_variant
+from lidar2city.synthetic_surveys import SURVEY_KINDS, add_canopy, make_survey, survey_variant
 
 
 def _building_f1(cloud, cls):
@@ -160,6 +160,66 @@ def test_feet_file_round_trip_building_f1(town, tmp_path):
 def test_density_building_f1(density):
     cloud = make_survey("multi", density=density, size=(120, 90) if density > 2 else (200, 150),
                         seed=1)
+    assert _building_f1(cloud, _classify_cloud(cloud)) >= 0.95
+
+
+# --- dense multi-echo canopy (IGN LiDAR HD style) -------------------------------
+
+
+@pytest.fixture(scope="module")
+def canopy_town():
+    return add_canopy(make_town(size=(120, 90), density=6, seed=2), seed=2)
+
+
+def test_canopy_echoes_are_consistent_pulses(canopy_town):
+    a = canopy_town.cloud.attributes
+    rn, nr = a["return_number"].astype(int), a["number_of_returns"].astype(int)
+    assert nr.max() == 5 and (rn >= 1).all() and (rn <= nr).all()
+    # every canopy pulse of n echoes stores echoes 1..n at one x, y (make_town's
+    # own trees give at most 2; where two of its crowns overlap they are not
+    # consistent, so only the pulses of 3 or more echoes are checked)
+    xy = canopy_town.cloud.xyz[:, :2]
+    _, inv = np.unique(xy, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    count = np.bincount(inv)
+    deep = nr >= 3
+    assert deep.sum() > 1000
+    assert (count[inv[deep]] == nr[deep]).all()
+    pulses = np.unique(inv[deep])
+    assert (np.bincount(inv, rn)[pulses] == count[pulses] * (count[pulses] + 1) / 2).all()
+    # crowns over roofs: some roof points are later echoes under vegetation
+    cls = a["classification"]
+    assert ((cls == 6) & (rn > 1)).any()
+    veg = np.isin(cls, (3, 4, 5))
+    assert veg.mean() > 0.2
+
+
+def test_canopy_is_deterministic_and_checked(canopy_town):
+    again = add_canopy(make_town(size=(120, 90), density=6, seed=2), seed=2)
+    assert np.array_equal(again.cloud.xyz, canopy_town.cloud.xyz)
+    town = make_town(size=(60, 50), density=2, seed=1)
+    with pytest.raises(InputError):
+        add_canopy(town, max_returns=1)
+    with pytest.raises(InputError):
+        add_canopy(town, cover=1.5)
+
+
+@pytest.mark.parametrize("kind", ["multi", "pairs", "single", "no_returns"])
+def test_canopy_variant_building_f1(canopy_town, kind):
+    cloud = survey_variant(canopy_town, kind)
+    if kind == "pairs":
+        assert (cloud.attributes["number_of_returns"] == 2).all()
+    assert _building_f1(cloud, _classify_cloud(cloud)) >= 0.95
+
+
+def test_smooth_crowns_need_the_region_roughness_cue(canopy_town):
+    """Without returns, smooth crowns grow large planar regions; their points
+    barely pass the planarity threshold while a roof's lie well inside it.
+    Measured at 6 pts/m2: building F1 0.99 with the cue, 0.54 without."""
+    cloud = survey_variant(canopy_town, "single")
+    a = cloud.attributes
+    off = classify_points(cloud.xyz, a["classification"] == 2, max_region_roughness=1.0)
+    assert _building_f1(cloud, off) < 0.8
     assert _building_f1(cloud, _classify_cloud(cloud)) >= 0.95
 
 

@@ -22,7 +22,10 @@ Rabbani et al. 2006; Vosselman 2009):
    kNN edges joining locally coplanar points (:mod:`.regions`). Roof facets
    become large planar regions; vegetation breaks into small incoherent ones.
    Regions that are large, fit a plane, are not steep and are mostly made of
-   single / last returns are roof seeds.
+   single / last returns are roof seeds — unless their points' mean local
+   residual is more than ``max_region_roughness`` of the planarity threshold
+   (feature spacing up to 0.5 m): a smooth crown grows a large region of
+   points that barely pass it, a roof's points lie well inside it.
 5. **Morphology on a grid**: clusters of touching roof seed cells smaller
    than ``min_seed_cluster_area`` or with more than
    ``max_cluster_multi_return`` multi-echo seeds (smooth patches in crowns)
@@ -74,6 +77,12 @@ _MAX_CELLS = 100_000_000
 _CONTACT_HEIGHT = 0.5
 #: A roof seed facet covers at least this many feature spacings squared.
 _FACET_POINTS = 8.0
+#: Feature spacing (m) above which the region roughness cue
+#: (max_region_roughness) is not used: on sparser data a k-neighbourhood spans
+#: roof detail and the planarity threshold grows with the spacing, so a roof's
+#: mean residual is no longer well inside it (ISPRS Stuttgart, 1 pt/m2: the cue
+#: dropped roof regions whose pulses are 85 % one-echo).
+_ROUGHNESS_MAX_SPACING = 0.5
 
 
 @dataclass(frozen=True)
@@ -95,6 +104,7 @@ class ClassifyConfig:
     max_facet_slope: float = field(70.0, "Steepest seed region (degrees); steeper ones are walls, not roofs.")
     max_ground_contact: float = field(0.05, "Largest fraction of a seed region's points within 0.5 m of the terrain (planes reaching the ground are ramps and bridge decks).")
     max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
+    max_region_roughness: float = field(0.5, "Largest mean local residual of a seed region's points, as a fraction of max_residual (smooth crowns gather points that barely pass it; roofs lie well inside); 1 disables.")
     max_multi_return: float = field(0.5, "Largest fraction of multi-return points in a seed region.")
     max_cluster_multi_return: float = field(0.3, "Largest fraction of multi-echo points among the seed points of a cluster of touching seed cells (canopy patches); 1 disables.")
     min_seed_cluster_area: float = field(7.5, "Smallest area (m2) of roof seed cells in a cluster of touching seed cells (smooth patches in crowns); 0 disables.")
@@ -137,6 +147,9 @@ class ClassifyConfig:
         if not 0 <= self.max_cluster_multi_return <= 1:
             raise ConfigError("classify.max_cluster_multi_return must be in [0, 1], "
                               f"got {self.max_cluster_multi_return!r}")
+        if not 0 < self.max_region_roughness <= 1:
+            raise ConfigError("classify.max_region_roughness must be in (0, 1], "
+                              f"got {self.max_region_roughness!r}")
         if not 0 <= self.max_multi_return <= 1:
             raise ConfigError(f"classify.max_multi_return must be in [0, 1], got {self.max_multi_return!r}")
         if not 4 <= self.k <= 100:
@@ -423,6 +436,9 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
     closing_radius = max(c.closing_radius, _CLOSING_PER_SPACING * s_f)
     # a seed facet must hold enough points to be told from a smooth bit of canopy
     min_facet_area = max(c.min_facet_area, _FACET_POINTS * s_f * s_f)
+    if s_f > _ROUGHNESS_MAX_SPACING and c.max_region_roughness < 1:
+        logger.info("feature spacing %.2f m: region roughness cue not used (over %.1f m a "
+                    "neighbourhood spans roof detail)", s_f, _ROUGHNESS_MAX_SPACING)
     regions = planar_regions(q, shape, max_residual=max_residual, max_angle=c.max_angle,
                              max_distance=max_distance, area_cell=cell)
     lab = regions.labels[nn]
@@ -449,13 +465,18 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
         low_frac = np.bincount(lab[inr], ph[inr] < _CONTACT_HEIGHT, minlength=r) / size
         # parallel wires at one height form a "plane" of linear neighbourhoods
         mean_lin = np.bincount(lab[inr], shape.linearity[nn][inr], minlength=r) / size
+        # a roof's points lie well inside the planarity threshold; a smooth
+        # crown's region gathers the points that just pass it
+        mean_res = np.bincount(lab[inr], residual[inr], minlength=r) / size / max_residual
         # one plane, or a large smooth surface (facets chained over ridges)
         fits = (regions.rms <= c.max_facet_rms) | (regions.area >= c.large_region_area)
         seed_region = ((regions.area >= min_facet_area) & fits
                        & (regions.normal[:, 2] >= np.cos(np.radians(c.max_facet_slope)))
                        & (multi_frac <= c.max_multi_return) & (green_frac <= 0.5)
                        & (mean_h >= c.min_height) & (low_frac <= c.max_ground_contact)
-                       & (mean_lin <= c.max_linearity))
+                       & (mean_lin <= c.max_linearity)
+                       & ((mean_res <= c.max_region_roughness)
+                          | (s_f > _ROUGHNESS_MAX_SPACING)))
     else:
         seed_region = fits = np.zeros(0, bool)
     seed = np.zeros(len(p), bool)
@@ -582,5 +603,6 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
                 "%d building cells", n, spacing, k, r, int(seed_region.sum()),
                 int(building_grid.sum()))
     return {"classes": cls, "hag": hag, "obj_idx": obj_idx, "shape": shape, "regions": regions,
+            "residual": residual, "max_residual": max_residual,
             "seed": seed, "labels": lab, "in_zone": in_zone, "in_building": in_building, "veg_over": veg_over,
             "edge_veg": edge_veg, "linearity": shape.linearity[nn], "spacing": spacing, "k": k, "building_grid": building_grid}
