@@ -111,10 +111,13 @@ class Viewer:
                            "can see and edit the model", self.host)
         self.max_points = int(max_points)
         self.server = None
-        self.handles: dict[str, dict] = {}
+        #: LoD -> {colour: (ids, mesh handle)}: the buildings drawn, one mesh per colour
+        self.groups: dict[str, dict] = {}
+        self._meshes: dict[str, dict] = {}   # LoD -> {id: (vertices, triangles) or None}
+        self._pickable: dict[str, tuple] = {}  # LoD -> (vertices, triangles, owner, ids)
+        self._dirty: dict[str, set] = {}     # LoD -> ids whose mesh changed since drawn
         self.attrs = {bid: dict(self.model.objects[bid].get("attributes") or {})
                       for bid in self.model.buildings()}
-        self._index = {bid: i for i, bid in enumerate(self.attrs)}
         self.lods = sorted({str(g.get("lod")) for o in self.model.objects.values()
                             for g in o.get("geometry", []) or []} & set(_LOD_NAMES))
         v = self.model.vertices
@@ -131,7 +134,7 @@ class Viewer:
         self.cloud = self.classes = None
         self._rmse_thread = None
         self._quiet_worst = False
-        self._drawn = set()
+        self._candidate = {}   # LoD -> {id: mesh} of the pending refit
 
     # ------------------------------------------------------------------ data
     def _world_solids(self, bid, lod):
@@ -215,31 +218,81 @@ class Viewer:
             self.server = None
 
     def _draw_buildings(self, lod=None):
-        """Meshes of every building at ``lod`` (default: the LoD shown), made when first shown."""
+        """Every building at ``lod`` (default: the LoD shown), meshed when first shown and
+        drawn as one mesh per colour (a few scene nodes, not one per building)."""
         lod = lod or self.lod_choice.value
-        if lod not in self.lods or lod in self._drawn:
+        if lod not in self.lods or lod in self._meshes:
             return
-        self._drawn.add(lod)
+        # a building with a refit pending already has its candidate's mesh at every LoD
+        have = self._pending_meshes.get(lod, {})
+        todo = {bid: self._world_solids(bid, lod) for bid in self.attrs if bid not in have}
+        made = scene.building_meshes(todo, self.origin)
+        self._meshes[lod] = {**{bid: made.get(bid) for bid in todo}, **have}
+        self._sync_groups(lod, self._colours())
+
+    @property
+    def _pending_meshes(self):
+        return self._candidate if self.pending is not None else {}
+
+    def _colours(self):
+        """Each building's colour now (the selected one stands out); updates the legend."""
         colours, legend = scene.colours_for(scene.attribute_values(self.attrs, self.colour_by.value))
         self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
-        # a building with a refit pending already has its candidate's meshes at every LoD
-        solids = {bid: self._world_solids(bid, lod) for bid in self.attrs
-                  if lod not in self.handles.get(bid, {})}
-        with self.server.atomic():
-            for bid, (v, t) in scene.building_meshes(solids, self.origin).items():
-                self._add_mesh(bid, lod, v, t,
-                               _SELECTED if bid == self.selected else colours[bid])
+        if self.selected in colours:
+            colours[self.selected] = _SELECTED
+        return colours
 
-    def _add_mesh(self, bid, lod, v, t, colour, *, visible=True):
-        name = f"/{_LOD_NAMES[lod]}/b{self._index[bid]}"
-        old = self.handles.setdefault(bid, {}).get(lod)
-        if old is not None:
-            old.remove()
-        h = self.server.scene.add_mesh_simple(name, v, t, color=colour, flat_shading=True,
-                                              cast_shadow=False, receive_shadow=False,
-                                              visible=visible)
-        h.on_click(lambda _event, bid=bid: self.select(bid))
-        self.handles[bid][lod] = h
+    def _sync_groups(self, lod, colours):
+        """Send the meshes of ``lod``'s colour groups that changed (membership or a
+        building's mesh) and remove the groups no longer used."""
+        meshes = {b: m for b, m in self._meshes[lod].items() if m is not None}
+        want = scene.group_by_colour({b: colours.get(b, (170, 170, 170)) for b in meshes})
+        have = self.groups.setdefault(lod, {})
+        dirty = self._dirty.pop(lod, set())
+        visible = lod == self.lod_choice.value
+        with self.server.atomic():
+            for colour in [c for c in have if c not in want]:
+                have.pop(colour)[1].remove()
+            for colour, ids in want.items():
+                old = have.get(colour)
+                if old is not None and old[0] == tuple(ids) and not dirty.intersection(ids):
+                    continue
+                v, t, _ = scene.merge_meshes(meshes, ids)
+                name = "/{}/{:02x}{:02x}{:02x}".format(_LOD_NAMES[lod], *colour)
+                h = self.server.scene.add_mesh_simple(
+                    name, v, t, color=colour, flat_shading=True, cast_shadow=False,
+                    receive_shadow=False, visible=visible)
+                h.on_click(self._clicked)
+                have[colour] = (tuple(ids), h)
+
+    def scene_nodes(self) -> list[str]:
+        """Names of the scene nodes that make the scene shown (its building meshes and
+        the points when shown): what a page must have drawn to be complete."""
+        with self.lock:
+            names = [h.name for _, h in self.groups.get(self.lod_choice.value, {}).values()]
+            if getattr(self, "points_handle", None) is not None and self.show_points.value:
+                names.append(self.points_handle.name)
+            return names
+
+    def _clicked(self, event):
+        """A click on a building mesh: the building whose triangle the click's ray hits first."""
+        bid = self.pick(event.ray_origin, event.ray_direction)
+        if bid is not None:
+            self.select(bid)
+
+    def pick(self, origin, direction, lod=None):
+        """The id of the building of ``lod`` (default: shown) a display-frame ray hits
+        first, or None."""
+        lod = lod or self.lod_choice.value
+        with self.lock:
+            if lod not in self._meshes:
+                return None
+            if lod not in self._pickable:
+                ids = sorted(b for b, m in self._meshes[lod].items() if m is not None)
+                self._pickable[lod] = (*scene.merge_meshes(self._meshes[lod], ids), ids)
+            v, t, owner, ids = self._pickable[lod]
+        k = scene.ray_pick(v, t, origin, direction)
+        return None if k is None else ids[owner[k]]
 
     def _draw_points(self):
         world, cloud, classes = self.session.load_area()
@@ -311,8 +364,8 @@ class Viewer:
     def _show_lod(self):
         with self.lock:
             self._draw_buildings(self.lod_choice.value)
-            for lods in self.handles.values():
-                for lod, h in lods.items():
+            for lod, groups in self.groups.items():
+                for _, h in groups.values():
                     h.visible = lod == self.lod_choice.value
 
     def _toggle_points(self):
@@ -334,13 +387,9 @@ class Viewer:
     def recolour(self):
         """Colour every building by the chosen attribute; the selected one stands out."""
         with self.lock:
-            values = scene.attribute_values(self.attrs, self.colour_by.value)
-            colours, legend = scene.colours_for(values)
-            self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
-            with self.server.atomic():
-                for bid, lods in self.handles.items():
-                    for h in lods.values():
-                        h.color = _SELECTED if bid == self.selected else colours.get(bid, (170,) * 3)
+            colours = self._colours()
+            for lod in self._meshes:
+                self._sync_groups(lod, colours)
             worst = scene.worst_buildings(self.attrs)
             labels = [self._worst_label(b, r) for b, r in worst] or ["-"]
             if list(self.worst.options) != labels:
@@ -376,9 +425,8 @@ class Viewer:
             if self._placed is not None:
                 self._toggle_place()
         if focus and self.server is not None:
-            h = self.handles.get(bid, {})
             solids = self._world_solids(bid, self.lods[-1]) if self.lods else []
-            if solids and h:
+            if solids:
                 c = np.concatenate([s.vertices for s in solids]).mean(axis=0) - self.origin
                 for client in self.server.get_clients().values():
                     client.camera.look_at = tuple(c)
@@ -447,16 +495,17 @@ class Viewer:
             self.recolour()
             return dt
 
-    def _show_solids(self, bid, solids_by_lod):
+    def _show_solids(self, bid, solids_by_lod, *, candidate=True):
+        """Show ``bid`` with these solids at each LoD (the candidate of a refit, or with
+        ``candidate=False`` the model's again); drawn at the next :meth:`recolour`."""
         meshes = {lod: scene.building_meshes({bid: s}, self.origin).get(bid)
                   for lod, s in solids_by_lod.items()}
+        self._candidate = {lod: {bid: m} for lod, m in meshes.items()} if candidate else {}
         for lod, m in meshes.items():
-            if m is None:
-                h = self.handles.get(bid, {}).pop(lod, None)
-                if h is not None:
-                    h.remove()
-                continue
-            self._add_mesh(bid, lod, m[0], m[1], _SELECTED, visible=lod == self.lod_choice.value)
+            if lod in self._meshes:
+                self._meshes[lod][bid] = m
+                self._dirty.setdefault(lod, set()).add(bid)
+                self._pickable.pop(lod, None)
 
     def accept(self):
         """Save the pending refit (model written atomically and validated, edit appended)."""
@@ -491,7 +540,7 @@ class Viewer:
             self.pending = None
             bid = str(result.id)
             self.attrs[bid] = attrs
-            self._show_solids(bid, solids)
+            self._show_solids(bid, solids, candidate=False)
             self.info.content = scene.attributes_markdown(bid, attrs)
             self.accept_btn.disabled = self.undo_btn.disabled = True
             self._message("Undone.")
