@@ -10,7 +10,7 @@ import urllib.request
 import numpy as np
 import pytest
 
-from lidar2city.viewer.browser import capture_when_drawn, find_chromium, scene_drawn
+from lidar2city.viewer.browser import find_chromium, scene_drawn, time_page
 
 
 @pytest.mark.slow
@@ -18,17 +18,24 @@ def test_headless_chromium_draws_the_buildings(viewer, tmp_path):
     if find_chromium() is None:
         pytest.skip("chromium is not installed (apt-get install chromium; .ci/run installs it)")
     url = f"http://127.0.0.1:{viewer.port}"
-    png, seconds, drawn = capture_when_drawn(url, timeout=60.0)
-    (tmp_path / "viewer.png").write_bytes(png)
-    assert drawn, f"nothing drawn after {seconds:.1f} s (screenshot in {tmp_path})"
+    expect = viewer.scene_nodes()
+    assert "/points" in expect and len(expect) == 1 + len(viewer.groups["2.2"])
+    t = time_page(url, expect, timeout=60.0)
+    (tmp_path / "viewer.png").write_bytes(t.png)
+    assert t.page_complete is not None, f"not drawn in 60 s (screenshot in {tmp_path})"
+    assert 0 < t.page_booted <= t.page_nodes <= t.page_complete
+    assert t.wall_from_launch > t.wall_from_navigate > 0 and t.chromium_cpu > 0
     from io import BytesIO
 
     from PIL import Image
 
-    img = np.asarray(Image.open(BytesIO(png)).convert("RGB"))
+    img = np.asarray(Image.open(BytesIO(t.png)).convert("RGB"))
     assert img.shape[0] > 100 and img.std() > 10  # not a uniform page
     # the buildings' colours are on the canvas: the RMSE ramp's colours are saturated
-    assert scene_drawn(img)
+    assert t.drawn and scene_drawn(img)
+    # a scene node the page never gets: the probe does not call the page complete
+    t = time_page(url, ["/no-such-node"], timeout=4.0)
+    assert t.page_booted is not None and t.page_nodes is None and t.page_complete is None
 
 
 def test_drawn_is_false_for_a_blank_page():

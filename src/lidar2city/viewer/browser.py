@@ -1,10 +1,13 @@
-"""A headless chromium that opens a page and screenshots it once it has drawn.
+"""A headless chromium that opens a viser page and times it until its scene is drawn.
 
 Used by the browser test, ``benchmarks/bench_viewer.py`` (page-ready time) and to
 make the README's screenshot. Chromium runs headless with SwiftShader WebGL,
 no sandbox, no network services, a throw-away profile, and is driven over the
-DevTools protocol on loopback: the page is navigated to and screenshotted every
-``poll`` seconds until ``drawn(image)`` holds.
+DevTools protocol on loopback. A script installed before the page's own watches
+viser's client state on every animation frame and notes, by the page's clock,
+when the client booted, when every expected scene node held its geometry and the
+first frame drawn after that on a fully opaque canvas; the page is then
+screenshotted.
 """
 
 from __future__ import annotations
@@ -24,8 +27,7 @@ import numpy as np
 
 from ..errors import DependencyError, Lidar2CityError
 
-__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "capture_when_drawn", "PageTiming",
-           "time_page"]
+__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "time_page"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
@@ -174,46 +176,6 @@ def _screenshot(dev):
         return None
     png = base64.b64decode(shot["data"])
     return png, np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
-
-
-def capture_when_drawn(url: str, *, timeout: float = 30.0, poll: float = 0.25,
-                       drawn=scene_drawn, width: int = 1280, height: int = 800,
-                       chromium: str | None = None):
-    """Open ``url`` in headless chromium; return ``(png bytes, seconds, drawn)``.
-
-    ``seconds`` runs from the navigation to the first screenshot for which
-    ``drawn(image array)`` holds (or to ``timeout``, with ``drawn`` False).
-    ``capture_when_drawn.last_cpu`` is then the CPU seconds chromium's processes used
-    (Linux), a figure less dependent on the machine's load than ``seconds``.
-
-    Raises
-    ------
-    DependencyError
-        When no chromium is installed.
-    """
-    exe = chromium or find_chromium()
-    if exe is None:
-        raise DependencyError("no chromium found (apt-get install chromium)")
-    with _Browser(exe, width, height) as (proc, dev):
-        t0 = time.perf_counter()
-        dev.call("Page.navigate", url=url)
-        png, ok = b"", False
-        while True:
-            shot = _screenshot(dev)
-            if shot is not None:
-                png = shot[0]
-                if drawn(shot[1]):
-                    ok = True
-                    break
-            if time.perf_counter() - t0 > timeout:
-                break
-            time.sleep(poll)
-        seconds = time.perf_counter() - t0
-        capture_when_drawn.last_cpu = _tree_cpu_seconds(proc.pid)
-        return png, seconds, ok
-
-
-capture_when_drawn.last_cpu = None
 
 
 @dataclasses.dataclass(frozen=True)
