@@ -222,12 +222,25 @@ _PROBE = """(() => {
       if (g && g.attributes && g.attributes.position) n += g.attributes.position.count; });
     return n > 0;
   };
+  // a name ending in "/" stands for every node received under it (at least one)
+  const wanted = () => {
+    const tree = window.__viserSceneTree ? window.__viserSceneTree.getState() : {};
+    const have = Object.keys(tree).filter((k) => tree[k]);
+    const out = [];
+    for (const e of expect) {
+      if (!e.endsWith("/")) { out.push(e); continue; }
+      const got = have.filter((k) => k.startsWith(e));
+      if (!got.length) return null;
+      out.push(...got);
+    }
+    return out;
+  };
   let seenAt = null;
   const tick = () => {
     const m = window.__viserMutable, tp = window.__viserTestpoints;
     if (m && m.scene && out.booted === null) out.booted = performance.now();
-    if (m && tp && seenAt === null && expect.every((n) => m.nodeRefFromName[n] &&
-                                                   filled(m.nodeRefFromName[n]))) {
+    const names = m && tp && seenAt === null ? wanted() : null;
+    if (names && names.every((n) => m.nodeRefFromName[n] && filled(m.nodeRefFromName[n]))) {
       seenAt = tp.rendererInfo.render.frame;
       out.nodes = performance.now();
     }
@@ -244,20 +257,26 @@ _PROBE = """(() => {
 
 
 def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
-              width: int = 1280, height: int = 800, chromium: str | None = None) -> PageTiming:
+              width: int = 1280, height: int = 800, settle: float = 0.0,
+              chromium: str | None = None) -> PageTiming:
     """Open ``url`` (a viser page) in headless chromium and time it until drawn.
 
     Parameters
     ----------
     url : str
     expect : sequence of str
-        Names of the scene nodes (e.g. ``"/lod22/c0"``, ``"/points"``) that make the
-        scene complete; each must hold geometry with vertices.
+        Names of the scene nodes (e.g. ``"/lod22/2a788e"``, ``"/points"``) that make the
+        scene complete; each must hold geometry with vertices. A name ending in ``/``
+        (``"/lod22/"``) stands for every node the page has received under it, at
+        least one.
     timeout : float
         Seconds after the navigation to give up (the result then has ``None`` times).
     poll : float
         Seconds between reads of the page's state (a cheap ``Runtime.evaluate``;
         unlike screenshots these take no time from the page's drawing).
+    settle : float
+        Seconds to wait, once timed, before the screenshot (for a picture of the page
+        at rest: its control panel animates as it opens).
 
     Returns
     -------
@@ -293,6 +312,7 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
                 break
             time.sleep(poll)
         cpu = _tree_cpu_seconds(proc.pid)
+        time.sleep(settle)
         shot = _screenshot(dev)
     png, img = shot if shot is not None else (b"", np.zeros((1, 1, 3), np.uint8))
 
