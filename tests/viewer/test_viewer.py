@@ -181,3 +181,25 @@ def test_gui_controls_are_wired(viewer):
     while viewer.points_handle.visible and time.monotonic() < end:
         time.sleep(0.05)
     assert not viewer.points_handle.visible
+
+
+def test_background_rmse_arrives_and_matches(edit_town, tmp_path, port):
+    """`view` computes every building's RMSE in the background (a forked child where the
+    platform forks) and recolours when the values arrive: the same values as computed
+    in place."""
+    import shutil
+
+    from lidar2city.viewer.app import Viewer
+
+    model = tmp_path / "m.city.json"
+    shutil.copy(edit_town.model, model)
+    v = Viewer(model, points=[edit_town.laz], port=port, max_points=5_000)
+    v.start()
+    try:
+        v._rmse_thread.join(timeout=60)
+        assert not v._rmse_thread.is_alive()
+        got = {b: a.get("viewer_rmse") for b, a in v.attrs.items()}
+        assert got == v._rmse_values() and all(isinstance(x, float) for x in got.values())
+        assert v.legend.content.startswith("**RMSE**")
+    finally:
+        v.stop()

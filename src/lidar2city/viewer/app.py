@@ -61,6 +61,18 @@ def _plain_lighting(scene_api):
     scene_api.add_light_ambient("/light/ambient", intensity=2.4)
 
 
+def _rmse_child(viewer, conn):
+    """The forked child of :meth:`Viewer._start_rmse`: compute, send, exit."""
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+    try:
+        conn.send(viewer._rmse_values())
+    finally:
+        conn.close()
+
+
 class Viewer:
     """A local web viewer (and editor) of a lidar2city CityJSON model.
 
@@ -133,7 +145,8 @@ class Viewer:
         self._gizmos = []
         self._placed = None
         self.cloud = self.classes = None
-        self._rmse_thread = None
+        self._rmse_thread = self._rmse_child = None
+        self._refitted = set()       # ids whose refit was accepted (their RMSE is their own)
         self._quiet_worst = False
         self._candidate = {}   # LoD -> {id: mesh} of the pending refit
 
@@ -173,34 +186,70 @@ class Viewer:
             return None
         return round(float(model_rmse(pts, solids)), 4)
 
-    def _compute_all_rmse(self, *, background=False):
-        if background and hasattr(os, "setpriority"):
-            # behind the browser drawing the page on the same cores (Linux: per thread)
-            try:
-                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
-            except OSError:
-                pass
+    def _rmse_values(self) -> dict:
+        """``{id: RMSE}`` of each building's points to its model at the top LoD."""
         top = self.lods[-1] if self.lods else None
+        out = {}
         for bid in list(self.attrs):
             try:
-                with self.lock:
-                    if self.pending is not None and self.pending[1].id == bid:
-                        continue
-                    solids = self._world_solids(bid, top)
-                value = self._rmse_of(bid, solids)
+                value = self._rmse_of(bid, self._world_solids(bid, top))
             except Lidar2CityError:
                 continue
-            with self.lock:
-                if value is not None:
-                    self.attrs[bid]["viewer_rmse"] = value
+            if value is not None:
+                out[bid] = value
+        return out
+
+    def _compute_all_rmse(self, values=None):
+        """Set every building's ``viewer_rmse`` (``values`` when already computed) but
+        those refitted meanwhile, and recolour when colouring by RMSE."""
+        values = self._rmse_values() if values is None else values
         with self.lock:
+            busy = {str(self.pending[1].id)} if self.pending is not None else set()
+            for bid, value in values.items():
+                if bid not in self._refitted and bid not in busy:
+                    self.attrs[bid]["viewer_rmse"] = value
             if self.server is not None and self.colour_by.value == "RMSE":
                 self.recolour()
+
+    def _start_rmse(self):
+        """Compute the RMSEs in the background: in a forked child at the lowest CPU
+        priority where the platform forks (no lock shared with the server, so the
+        browser loading the page is not slowed down), else in a thread.
+        ``self._rmse_thread`` applies the values when they arrive."""
+        import multiprocessing as mp
+
+        if "fork" not in mp.get_all_start_methods():
+            self._rmse_thread = threading.Thread(target=self._compute_all_rmse, daemon=True)
+            self._rmse_thread.start()
+            return
+        ctx = mp.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        self._rmse_child = ctx.Process(target=_rmse_child, args=(self, send), daemon=True)
+        self._rmse_child.start()
+        send.close()
+
+        def wait():
+            try:
+                values = recv.recv()
+            except (EOFError, OSError):  # the child died (or the viewer was stopped)
+                logger.warning("the viewer's RMSE computation ended without a result")
+                return
+            finally:
+                recv.close()
+                self._rmse_child.join()
+            self._compute_all_rmse(values)
+
+        self._rmse_thread = threading.Thread(target=wait, daemon=True)
+        self._rmse_thread.start()
 
     # ------------------------------------------------------------------ server
     def start(self, *, compute_rmse: bool = True) -> str:
         """Start the server, build the scene and GUI; returns the URL."""
         viser = self.viser
+        if self.session is not None:
+            self._load_points()
+            if compute_rmse:
+                self._start_rmse()  # (forks before the server starts its threads)
         self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
         srv = self.server
         srv.scene.set_up_direction("+z")
@@ -214,13 +263,12 @@ class Viewer:
         self._draw_buildings()
         if self.session is not None:
             self._draw_points()
-            if compute_rmse:
-                self._rmse_thread = threading.Thread(target=self._compute_all_rmse,
-                                                     kwargs={"background": True}, daemon=True)
-                self._rmse_thread.start()
         return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
 
     def stop(self):
+        child = getattr(self, "_rmse_child", None)
+        if child is not None and child.is_alive():
+            child.terminate()
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -311,12 +359,15 @@ class Viewer:
         k = scene.ray_pick(v, t, origin, direction)
         return None if k is None else ids[owner[k]]
 
-    def _draw_points(self):
+    def _load_points(self):
         world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
         self._world_xyz = world
         self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
-        idx = scene.subsample(len(cloud), self.max_points)
+
+    def _draw_points(self):
+        classes = self.classes
+        idx = scene.subsample(len(self.cloud), self.max_points)
         pts = self._world_xyz[idx] - self.origin
         # about the cloud's centre, float16 keeps 6 cm within 128 m (half the bytes)
         mid = np.round((pts.min(axis=0) + pts.max(axis=0)) / 2) if len(pts) else np.zeros(3)
@@ -542,6 +593,7 @@ class Viewer:
                 return None
             self.model = _model_from_doc(self.session.doc)
             bid = str(result.id)
+            self._refitted.add(bid)
             viewer_rmse = self.attrs[bid].get("viewer_rmse")
             self.attrs[bid] = dict(self.model.objects[bid].get("attributes") or {})
             if viewer_rmse is not None:
