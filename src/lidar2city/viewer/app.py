@@ -213,12 +213,14 @@ class Viewer:
 
     def _start_rmse(self):
         """Compute the RMSEs in the background: in a forked child at the lowest CPU
-        priority where the platform forks (no lock shared with the server, so the
-        browser loading the page is not slowed down), else in a thread.
+        priority where the platform forks and no other thread runs yet (no lock shared
+        with the server, so the browser loading the page is not slowed down), else
+        in a thread.
         ``self._rmse_thread`` applies the values when they arrive."""
         import multiprocessing as mp
 
-        if "fork" not in mp.get_all_start_methods():
+        # forking a process that runs other threads can deadlock the child: a thread then
+        if "fork" not in mp.get_all_start_methods() or threading.active_count() > 1:
             self._rmse_thread = threading.Thread(target=self._compute_all_rmse, daemon=True)
             self._rmse_thread.start()
             return
