@@ -11,7 +11,10 @@ from lidar2city.io.cityjson import read_cityjson
 def test_loopback_scene_and_colours(viewer):
     assert viewer.server.get_host() == "127.0.0.1"
     assert set(viewer.lods) == {"1.2", "2.2"}
-    assert set(viewer.handles) == set(viewer.attrs) == {"b00", "b01", "b02", "b03"}
+    assert set(viewer.attrs) == {"b00", "b01", "b02", "b03"}
+    # one mesh per colour, holding every building once
+    drawn = [b for ids, _ in viewer.groups["2.2"].values() for b in ids]
+    assert sorted(drawn) == sorted(viewer.attrs)
     # the RMSE of the LoD shown, from the points, for every building
     assert all(isinstance(a.get("viewer_rmse"), float) for a in viewer.attrs.values())
     for by in ("RMSE", "roof type", "status", "validity", "height", "edited"):
@@ -20,21 +23,42 @@ def test_loopback_scene_and_colours(viewer):
         assert viewer.legend.content.startswith(f"**{by}**")
     assert viewer.points_handle.points.shape[0] <= 20_000
     # LoD2.2 is shown first; LoD1.2's meshes are made when it is chosen
-    assert all(set(h) == {"2.2"} for h in viewer.handles.values())
+    assert set(viewer.groups) == {"2.2"}
     viewer.lod_choice.value = "1.2"
     viewer._show_lod()
-    assert all(set(h) == {"1.2", "2.2"} and h["1.2"].visible and not h["2.2"].visible
-               for h in viewer.handles.values())
+    assert set(viewer.groups) == {"1.2", "2.2"}
+    assert all(h.visible for _, h in viewer.groups["1.2"].values())
+    assert not any(h.visible for _, h in viewer.groups["2.2"].values())
+
+
+def test_selection_is_its_own_group_and_a_click_ray_finds_the_building(viewer):
+    from shapely.geometry import shape
+
+    viewer.select("b01")
+    groups = viewer.groups["2.2"]
+    assert groups[(255, 225, 0)][0] == ("b01",)
+    assert sum(ids.count("b01") for ids, _ in groups.values()) == 1
+    for bid in viewer.attrs:  # straight down onto each building's footprint centre
+        c = shape(viewer.session.footprint(bid)).representative_point()
+        origin = (c.x - viewer.origin[0], c.y - viewer.origin[1], 500.0)
+        assert viewer.pick(origin, (0.0, 0.0, -1.0)) == bid
+    assert viewer.pick((-1e4, -1e4, 500.0), (0.0, 0.0, -1.0)) is None
 
 
 def test_refit_undo_accept(viewer):
     viewer.select("b00")
     assert "Building b00" in viewer.info.content
+    shown = viewer._meshes["2.2"]["b00"]
     seconds = viewer.refit_primitive("gable")
     assert seconds is not None and "refit as gable" in viewer.status
     assert viewer.attrs["b00"]["primitive"] == "gable"
+    # the candidate is drawn (in the selection's colour) in place of the building
+    candidate = viewer._meshes["2.2"]["b00"]
+    assert candidate[0].shape != shown[0].shape or not np.array_equal(candidate[0], shown[0])
+    assert viewer.groups["2.2"][(255, 225, 0)][0] == ("b00",)
     viewer.undo()
     assert "primitive" not in viewer.attrs["b00"]
+    assert np.array_equal(viewer._meshes["2.2"]["b00"][0], shown[0])
     assert not (viewer.edits_path).exists()
     viewer.refit_primitive("box")
     out = viewer.accept()
@@ -157,3 +181,25 @@ def test_gui_controls_are_wired(viewer):
     while viewer.points_handle.visible and time.monotonic() < end:
         time.sleep(0.05)
     assert not viewer.points_handle.visible
+
+
+def test_background_rmse_arrives_and_matches(edit_town, tmp_path, port):
+    """`view` computes every building's RMSE in the background (a forked child where the
+    platform forks) and recolours when the values arrive: the same values as computed
+    in place."""
+    import shutil
+
+    from lidar2city.viewer.app import Viewer
+
+    model = tmp_path / "m.city.json"
+    shutil.copy(edit_town.model, model)
+    v = Viewer(model, points=[edit_town.laz], port=port, max_points=5_000)
+    v.start()
+    try:
+        v._rmse_thread.join(timeout=60)
+        assert not v._rmse_thread.is_alive()
+        got = {b: a.get("viewer_rmse") for b, a in v.attrs.items()}
+        assert got == v._rmse_values() and all(isinstance(x, float) for x in got.values())
+        assert v.legend.content.startswith("**RMSE**")
+    finally:
+        v.stop()

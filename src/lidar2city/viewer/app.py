@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -46,6 +47,30 @@ def _model_from_doc(doc):
                                                                    doc.get("transform")),
                      doc["CityObjects"], doc.get("metadata") or {},
                      (doc.get("metadata") or {}).get("referenceSystem"), {}, doc.get("transform"))
+
+
+def _plain_lighting(scene_api):
+    """Directional lights without shadows and an ambient light, no environment map.
+
+    viser's default environment map (an HDR image prefiltered in the browser) keeps
+    the canvas nearly transparent until it is ready: seconds with software WebGL.
+    Flat-shaded buildings read well under plain lights, which cost nothing to set up.
+    """
+    scene_api.configure_environment_map(None)
+    scene_api.configure_default_lights(True, cast_shadow=False)
+    scene_api.add_light_ambient("/light/ambient", intensity=2.4)
+
+
+def _rmse_child(viewer, conn):
+    """The forked child of :meth:`Viewer._start_rmse`: compute, send, exit."""
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+    try:
+        conn.send(viewer._rmse_values())
+    finally:
+        conn.close()
 
 
 class Viewer:
@@ -99,10 +124,13 @@ class Viewer:
                            "can see and edit the model", self.host)
         self.max_points = int(max_points)
         self.server = None
-        self.handles: dict[str, dict] = {}
+        #: LoD -> {colour: (ids, mesh handle)}: the buildings drawn, one mesh per colour
+        self.groups: dict[str, dict] = {}
+        self._meshes: dict[str, dict] = {}   # LoD -> {id: (vertices, triangles) or None}
+        self._pickable: dict[str, tuple] = {}  # LoD -> (vertices, triangles, owner, ids)
+        self._dirty: dict[str, set] = {}     # LoD -> ids whose mesh changed since drawn
         self.attrs = {bid: dict(self.model.objects[bid].get("attributes") or {})
                       for bid in self.model.buildings()}
-        self._index = {bid: i for i, bid in enumerate(self.attrs)}
         self.lods = sorted({str(g.get("lod")) for o in self.model.objects.values()
                             for g in o.get("geometry", []) or []} & set(_LOD_NAMES))
         v = self.model.vertices
@@ -117,9 +145,10 @@ class Viewer:
         self._gizmos = []
         self._placed = None
         self.cloud = self.classes = None
-        self._rmse_thread = None
+        self._rmse_thread = self._rmse_child = None
+        self._refitted = set()       # ids whose refit was accepted (their RMSE is their own)
         self._quiet_worst = False
-        self._drawn = set()
+        self._candidate = {}   # LoD -> {id: mesh} of the pending refit
 
     # ------------------------------------------------------------------ data
     def _world_solids(self, bid, lod):
@@ -157,31 +186,76 @@ class Viewer:
             return None
         return round(float(model_rmse(pts, solids)), 4)
 
-    def _compute_all_rmse(self):
+    def _rmse_values(self) -> dict:
+        """``{id: RMSE}`` of each building's points to its model at the top LoD."""
         top = self.lods[-1] if self.lods else None
+        out = {}
         for bid in list(self.attrs):
             try:
-                with self.lock:
-                    if self.pending is not None and self.pending[1].id == bid:
-                        continue
-                    solids = self._world_solids(bid, top)
-                value = self._rmse_of(bid, solids)
+                value = self._rmse_of(bid, self._world_solids(bid, top))
             except Lidar2CityError:
                 continue
-            with self.lock:
-                if value is not None:
-                    self.attrs[bid]["viewer_rmse"] = value
+            if value is not None:
+                out[bid] = value
+        return out
+
+    def _compute_all_rmse(self, values=None):
+        """Set every building's ``viewer_rmse`` (``values`` when already computed) but
+        those refitted meanwhile, and recolour when colouring by RMSE."""
+        values = self._rmse_values() if values is None else values
         with self.lock:
+            busy = {str(self.pending[1].id)} if self.pending is not None else set()
+            for bid, value in values.items():
+                if bid not in self._refitted and bid not in busy:
+                    self.attrs[bid]["viewer_rmse"] = value
             if self.server is not None and self.colour_by.value == "RMSE":
                 self.recolour()
+
+    def _start_rmse(self):
+        """Compute the RMSEs in the background: in a forked child at the lowest CPU
+        priority where the platform forks and no other thread runs yet (no lock shared
+        with the server, so the browser loading the page is not slowed down), else
+        in a thread.
+        ``self._rmse_thread`` applies the values when they arrive."""
+        import multiprocessing as mp
+
+        # forking a process that runs other threads can deadlock the child: a thread then
+        if "fork" not in mp.get_all_start_methods() or threading.active_count() > 1:
+            self._rmse_thread = threading.Thread(target=self._compute_all_rmse, daemon=True)
+            self._rmse_thread.start()
+            return
+        ctx = mp.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        self._rmse_child = ctx.Process(target=_rmse_child, args=(self, send), daemon=True)
+        self._rmse_child.start()
+        send.close()
+
+        def wait():
+            try:
+                values = recv.recv()
+            except (EOFError, OSError):  # the child died (or the viewer was stopped)
+                logger.warning("the viewer's RMSE computation ended without a result")
+                return
+            finally:
+                recv.close()
+                self._rmse_child.join()
+            self._compute_all_rmse(values)
+
+        self._rmse_thread = threading.Thread(target=wait, daemon=True)
+        self._rmse_thread.start()
 
     # ------------------------------------------------------------------ server
     def start(self, *, compute_rmse: bool = True) -> str:
         """Start the server, build the scene and GUI; returns the URL."""
         viser = self.viser
+        if self.session is not None:
+            self._load_points()
+            if compute_rmse:
+                self._start_rmse()  # (forks before the server starts its threads)
         self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
         srv = self.server
         srv.scene.set_up_direction("+z")
+        _plain_lighting(srv.scene)
         d = float(max(self.extent[0], self.extent[1], 10.0))
         centre = self.extent / 2
         cam = srv.initial_camera
@@ -191,53 +265,119 @@ class Viewer:
         self._draw_buildings()
         if self.session is not None:
             self._draw_points()
-            if compute_rmse:
-                self._rmse_thread = threading.Thread(target=self._compute_all_rmse, daemon=True)
-                self._rmse_thread.start()
         return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
 
     def stop(self):
+        child = getattr(self, "_rmse_child", None)
+        if child is not None and child.is_alive():
+            child.terminate()
         if self.server is not None:
             self.server.stop()
             self.server = None
 
     def _draw_buildings(self, lod=None):
-        """Meshes of every building at ``lod`` (default: the LoD shown), made when first shown."""
+        """Every building at ``lod`` (default: the LoD shown), meshed when first shown and
+        drawn as one mesh per colour (a few scene nodes, not one per building)."""
         lod = lod or self.lod_choice.value
-        if lod not in self.lods or lod in self._drawn:
+        if lod not in self.lods or lod in self._meshes:
             return
-        self._drawn.add(lod)
+        # a building with a refit pending already has its candidate's mesh at every LoD
+        have = self._pending_meshes.get(lod, {})
+        todo = {bid: self._world_solids(bid, lod) for bid in self.attrs if bid not in have}
+        made = scene.building_meshes(todo, self.origin)
+        self._meshes[lod] = {**{bid: made.get(bid) for bid in todo}, **have}
+        self._sync_groups(lod, self._colours())
+
+    @property
+    def _pending_meshes(self):
+        return self._candidate if self.pending is not None else {}
+
+    def _colours(self):
+        """Each building's colour now (the selected one stands out); updates the legend."""
         colours, legend = scene.colours_for(scene.attribute_values(self.attrs, self.colour_by.value))
         self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
-        # a building with a refit pending already has its candidate's meshes at every LoD
-        solids = {bid: self._world_solids(bid, lod) for bid in self.attrs
-                  if lod not in self.handles.get(bid, {})}
+        if self.selected in colours:
+            colours[self.selected] = _SELECTED
+        return colours
+
+    def _sync_groups(self, lod, colours):
+        """Send the meshes of ``lod``'s colour groups that changed (membership or a
+        building's mesh) and remove the groups no longer used."""
+        meshes = {b: m for b, m in self._meshes[lod].items() if m is not None}
+        want = scene.group_by_colour({b: colours.get(b, (170, 170, 170)) for b in meshes})
+        have = self.groups.setdefault(lod, {})
+        dirty = self._dirty.pop(lod, set())
+        visible = lod == self.lod_choice.value
         with self.server.atomic():
-            for bid, (v, t) in scene.building_meshes(solids, self.origin).items():
-                self._add_mesh(bid, lod, v, t,
-                               _SELECTED if bid == self.selected else colours[bid])
+            for colour in [c for c in have if c not in want]:
+                have.pop(colour)[1].remove()
+            for colour, ids in want.items():
+                old = have.get(colour)
+                if old is not None and old[0] == tuple(ids) and not dirty.intersection(ids):
+                    continue
+                v, t, _ = scene.merge_meshes(meshes, ids)
+                name = "/{}/{:02x}{:02x}{:02x}".format(_LOD_NAMES[lod], *colour)
+                h = self.server.scene.add_mesh_simple(
+                    name, v, t, color=colour, flat_shading=True, cast_shadow=False,
+                    receive_shadow=False, visible=visible)
+                h.on_click(self._clicked)
+                have[colour] = (tuple(ids), h)
 
-    def _add_mesh(self, bid, lod, v, t, colour, *, visible=True):
-        name = f"/{_LOD_NAMES[lod]}/b{self._index[bid]}"
-        old = self.handles.setdefault(bid, {}).get(lod)
-        if old is not None:
-            old.remove()
-        h = self.server.scene.add_mesh_simple(name, v, t, color=colour, flat_shading=True,
-                                              cast_shadow=False, receive_shadow=False,
-                                              visible=visible)
-        h.on_click(lambda _event, bid=bid: self.select(bid))
-        self.handles[bid][lod] = h
+    def scene_nodes(self) -> list[str]:
+        """Names of the scene nodes that make the scene shown (its building meshes and
+        the points when shown): what a page must have drawn to be complete."""
+        with self.lock:
+            names = [h.name for _, h in self.groups.get(self.lod_choice.value, {}).values()]
+            if getattr(self, "points_handle", None) is not None and self.show_points.value:
+                names.append(self.points_handle.name)
+            return names
 
-    def _draw_points(self):
+    def scene_prefixes(self) -> list[str]:
+        """:meth:`scene_nodes` as name prefixes (``"/lod22/"``, ``"/points"``), which stay
+        right when a recolour renames the meshes."""
+        with self.lock:
+            names = [f"/{_LOD_NAMES[self.lod_choice.value]}/"] if self.groups else []
+            if getattr(self, "points_handle", None) is not None and self.show_points.value:
+                names.append(self.points_handle.name)
+            return names
+
+    def _clicked(self, event):
+        """A click on a building mesh: the building whose triangle the click's ray hits first."""
+        bid = self.pick(event.ray_origin, event.ray_direction)
+        if bid is not None:
+            self.select(bid)
+
+    def pick(self, origin, direction, lod=None):
+        """The id of the building of ``lod`` (default: shown) a display-frame ray hits
+        first, or None."""
+        lod = lod or self.lod_choice.value
+        with self.lock:
+            if lod not in self._meshes:
+                return None
+            if lod not in self._pickable:
+                ids = sorted(b for b, m in self._meshes[lod].items() if m is not None)
+                self._pickable[lod] = (*scene.merge_meshes(self._meshes[lod], ids), ids)
+            v, t, owner, ids = self._pickable[lod]
+        k = scene.ray_pick(v, t, origin, direction)
+        return None if k is None else ids[owner[k]]
+
+    def _load_points(self):
         world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
         self._world_xyz = world
         self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
-        idx = scene.subsample(len(cloud), self.max_points)
-        pts = (self._world_xyz[idx] - self.origin).astype(np.float32)
+
+    def _draw_points(self):
+        classes = self.classes
+        idx = scene.subsample(len(self.cloud), self.max_points)
+        pts = self._world_xyz[idx] - self.origin
+        # about the cloud's centre, float16 keeps 6 cm within 128 m (half the bytes)
+        mid = np.round((pts.min(axis=0) + pts.max(axis=0)) / 2) if len(pts) else np.zeros(3)
+        half = float(np.abs(pts - mid).max()) if len(pts) else 0.0
         self.points_handle = self.server.scene.add_point_cloud(
-            "/points", pts, scene.class_colours(classes[idx]), point_size=0.25,
-            precision="float32", visible=self.show_points.value)
+            "/points", pts - mid, scene.class_colours(classes[idx]), point_size=0.25,
+            precision="float16" if half <= 128.0 else "float32", position=tuple(mid),
+            visible=self.show_points.value)
 
     # ------------------------------------------------------------------ GUI
     def _build_gui(self):
@@ -298,8 +438,8 @@ class Viewer:
     def _show_lod(self):
         with self.lock:
             self._draw_buildings(self.lod_choice.value)
-            for lods in self.handles.values():
-                for lod, h in lods.items():
+            for lod, groups in self.groups.items():
+                for _, h in groups.values():
                     h.visible = lod == self.lod_choice.value
 
     def _toggle_points(self):
@@ -321,13 +461,9 @@ class Viewer:
     def recolour(self):
         """Colour every building by the chosen attribute; the selected one stands out."""
         with self.lock:
-            values = scene.attribute_values(self.attrs, self.colour_by.value)
-            colours, legend = scene.colours_for(values)
-            self.legend.content = scene.legend_markdown(self.colour_by.value, legend)
-            with self.server.atomic():
-                for bid, lods in self.handles.items():
-                    for h in lods.values():
-                        h.color = _SELECTED if bid == self.selected else colours.get(bid, (170,) * 3)
+            colours = self._colours()
+            for lod in self._meshes:
+                self._sync_groups(lod, colours)
             worst = scene.worst_buildings(self.attrs)
             labels = [self._worst_label(b, r) for b, r in worst] or ["-"]
             if list(self.worst.options) != labels:
@@ -363,9 +499,8 @@ class Viewer:
             if self._placed is not None:
                 self._toggle_place()
         if focus and self.server is not None:
-            h = self.handles.get(bid, {})
             solids = self._world_solids(bid, self.lods[-1]) if self.lods else []
-            if solids and h:
+            if solids:
                 c = np.concatenate([s.vertices for s in solids]).mean(axis=0) - self.origin
                 for client in self.server.get_clients().values():
                     client.camera.look_at = tuple(c)
@@ -434,16 +569,17 @@ class Viewer:
             self.recolour()
             return dt
 
-    def _show_solids(self, bid, solids_by_lod):
+    def _show_solids(self, bid, solids_by_lod, *, candidate=True):
+        """Show ``bid`` with these solids at each LoD (the candidate of a refit, or with
+        ``candidate=False`` the model's again); drawn at the next :meth:`recolour`."""
         meshes = {lod: scene.building_meshes({bid: s}, self.origin).get(bid)
                   for lod, s in solids_by_lod.items()}
+        self._candidate = {lod: {bid: m} for lod, m in meshes.items()} if candidate else {}
         for lod, m in meshes.items():
-            if m is None:
-                h = self.handles.get(bid, {}).pop(lod, None)
-                if h is not None:
-                    h.remove()
-                continue
-            self._add_mesh(bid, lod, m[0], m[1], _SELECTED, visible=lod == self.lod_choice.value)
+            if lod in self._meshes:
+                self._meshes[lod][bid] = m
+                self._dirty.setdefault(lod, set()).add(bid)
+                self._pickable.pop(lod, None)
 
     def accept(self):
         """Save the pending refit (model written atomically and validated, edit appended)."""
@@ -459,6 +595,7 @@ class Viewer:
                 return None
             self.model = _model_from_doc(self.session.doc)
             bid = str(result.id)
+            self._refitted.add(bid)
             viewer_rmse = self.attrs[bid].get("viewer_rmse")
             self.attrs[bid] = dict(self.model.objects[bid].get("attributes") or {})
             if viewer_rmse is not None:
@@ -478,7 +615,7 @@ class Viewer:
             self.pending = None
             bid = str(result.id)
             self.attrs[bid] = attrs
-            self._show_solids(bid, solids)
+            self._show_solids(bid, solids, candidate=False)
             self.info.content = scene.attributes_markdown(bid, attrs)
             self.accept_btn.disabled = self.undo_btn.disabled = True
             self._message("Undone.")

@@ -1,15 +1,19 @@
-"""A headless chromium that opens a page and screenshots it once it has drawn.
+"""A headless chromium that opens a viser page and times it until its scene is drawn.
 
 Used by the browser test, ``benchmarks/bench_viewer.py`` (page-ready time) and to
 make the README's screenshot. Chromium runs headless with SwiftShader WebGL,
 no sandbox, no network services, a throw-away profile, and is driven over the
-DevTools protocol on loopback: the page is navigated to and screenshotted every
-``poll`` seconds until ``drawn(image)`` holds.
+DevTools protocol on loopback. A script installed before the page's own watches
+viser's client state on every animation frame and notes, by the page's clock,
+when the client booted, when every expected scene node held its geometry and the
+first frame drawn after that on a fully opaque canvas; the page is then
+screenshotted.
 """
 
 from __future__ import annotations
 
 import base64
+import dataclasses
 import io
 import json
 import os
@@ -23,7 +27,7 @@ import numpy as np
 
 from ..errors import DependencyError, Lidar2CityError
 
-__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "capture_when_drawn"]
+__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "time_page"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
@@ -113,76 +117,217 @@ class _Devtools:
         self.ws.close()
 
 
-def capture_when_drawn(url: str, *, timeout: float = 30.0, poll: float = 0.25,
-                       drawn=scene_drawn, width: int = 1280, height: int = 800,
-                       chromium: str | None = None):
-    """Open ``url`` in headless chromium; return ``(png bytes, seconds, drawn)``.
+class _Browser:
+    """Headless chromium with a throw-away profile, driven over DevTools on loopback:
+    ``with _Browser(exe, w, h) as (process, devtools):``. ``launched`` is the
+    ``time.perf_counter()`` at which the process was started."""
 
-    ``seconds`` runs from the navigation to the first screenshot for which
-    ``drawn(image array)`` holds (or to ``timeout``, with ``drawn`` False).
-    ``capture_when_drawn.last_cpu`` is then the CPU seconds chromium's processes used
-    (Linux), a figure less dependent on the machine's load than ``seconds``.
+    def __init__(self, exe, width, height):
+        self.exe, self.width, self.height = exe, width, height
+        self.proc = self.dev = None
+
+    def __enter__(self):
+        self.profile = tempfile.mkdtemp(prefix="lidar2city-chromium-")
+        self.launched = time.perf_counter()
+        self.proc = subprocess.Popen(
+            [self.exe, *chromium_flags(self.profile, width=self.width, height=self.height)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            port_file = os.path.join(self.profile, "DevToolsActivePort")
+            end = time.monotonic() + 30.0
+            while not _read(port_file).strip():
+                if self.proc.poll() is not None or time.monotonic() > end:
+                    raise Lidar2CityError("chromium did not start its DevTools endpoint")
+                time.sleep(0.02)
+            port = int(_read(port_file).split()[0])
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
+                pages = [t for t in json.load(r) if t.get("type") == "page"]
+            self.dev = _Devtools(pages[0]["webSocketDebuggerUrl"])
+            self.dev.call("Emulation.setDeviceMetricsOverride", width=self.width,
+                          height=self.height, deviceScaleFactor=1, mobile=False)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self.proc, self.dev
+
+    def __exit__(self, *exc):
+        if self.dev is not None:
+            try:
+                self.dev.close()
+            except Exception:  # the browser is being killed anyway
+                pass
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        shutil.rmtree(self.profile, ignore_errors=True)
+        return False
+
+
+def _screenshot(dev):
+    """The page as (png bytes, RGB array), or None while it is between documents."""
+    from PIL import Image
+
+    try:
+        shot = dev.call("Page.captureScreenshot", format="png")
+    except Lidar2CityError:  # the page is between documents (navigation)
+        return None
+    png = base64.b64decode(shot["data"])
+    return png, np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+
+@dataclasses.dataclass(frozen=True)
+class PageTiming:
+    """How long a viser page took to draw, from :func:`time_page`.
+
+    The ``page_*`` figures are read from the page's own clock (milliseconds since
+    its navigation started, ``performance.now()``), converted to seconds; the
+    ``wall_*`` figures from this process's clock. ``None``: not reached in time.
+    """
+
+    #: the viser client has booted: its three.js scene exists (page clock)
+    page_booted: float | None
+    #: every expected scene node holds its geometry (page clock)
+    page_nodes: float | None
+    #: the first frame rendered after that, with the canvas fully opaque (page clock)
+    page_complete: float | None
+    #: Page.navigate sent -> page_complete seen (wall)
+    wall_from_navigate: float | None
+    #: chromium process launched -> page_complete seen (wall; includes browser start-up)
+    wall_from_launch: float | None
+    #: chromium process launched -> its DevTools endpoint answered (wall)
+    wall_browser_start: float
+    #: CPU seconds (user + system) of chromium's processes at the end (Linux; else None)
+    chromium_cpu: float | None
+    #: the final screenshot shows buildings (:func:`scene_drawn`)
+    drawn: bool
+    #: that screenshot (PNG bytes)
+    png: bytes
+
+
+# Installed before the page's own scripts: on every animation frame, look up the expected
+# scene nodes in viser's client state (window.__viserMutable, which viser exposes for its
+# end-to-end tests). ``nodes``: each holds a mesh or point geometry with vertices;
+# ``complete``: the renderer's first frame (three.js WebGLInfo.render.frame) after that
+# moment in which the canvas is fully opaque (viser keeps the canvas at 5 % opacity
+# until its environment map is ready, then fades it in).
+_PROBE = """(() => {
+  const expect = %s;
+  const out = window.__l2cTiming = {booted: null, nodes: null, complete: null};
+  const filled = (o) => {
+    let n = 0;
+    o.traverse((c) => { const g = c.geometry;
+      if (g && g.attributes && g.attributes.position) n += g.attributes.position.count; });
+    return n > 0;
+  };
+  // a name ending in "/" stands for every node received under it (at least one)
+  const wanted = () => {
+    const tree = window.__viserSceneTree ? window.__viserSceneTree.getState() : {};
+    const have = Object.keys(tree).filter((k) => tree[k]);
+    const out = [];
+    for (const e of expect) {
+      if (!e.endsWith("/")) { out.push(e); continue; }
+      const got = have.filter((k) => k.startsWith(e));
+      if (!got.length) return null;
+      out.push(...got);
+    }
+    return out;
+  };
+  let seenAt = null, ticks = 0;
+  // frames the renderer drew (viser's test hook), else this loop's own frames
+  const frame = () => {
+    const tp = window.__viserTestpoints;
+    return tp && tp.rendererInfo ? tp.rendererInfo.render.frame : ticks;
+  };
+  const tick = () => {
+    ticks += 1;
+    const m = window.__viserMutable;
+    if (m && m.scene && out.booted === null) out.booted = performance.now();
+    const names = m && seenAt === null ? wanted() : null;
+    if (names && names.every((n) => m.nodeRefFromName[n] && filled(m.nodeRefFromName[n]))) {
+      seenAt = frame();
+      out.nodes = performance.now();
+    }
+    if (seenAt !== null && frame() > seenAt && m.canvas &&
+        parseFloat(getComputedStyle(m.canvas).opacity) >= 0.999) {
+      out.complete = performance.now();
+      performance.mark("lidar2city-scene-complete");
+      return;
+    }
+    requestAnimationFrame(tick);
+  };
+  requestAnimationFrame(tick);
+})();"""
+
+
+def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
+              width: int = 1280, height: int = 800, settle: float = 0.0,
+              chromium: str | None = None) -> PageTiming:
+    """Open ``url`` (a viser page) in headless chromium and time it until drawn.
+
+    Parameters
+    ----------
+    url : str
+    expect : sequence of str
+        Names of the scene nodes (e.g. ``"/lod22/2a788e"``, ``"/points"``) that make the
+        scene complete; each must hold geometry with vertices. A name ending in ``/``
+        (``"/lod22/"``) stands for every node the page has received under it, at
+        least one.
+    timeout : float
+        Seconds after the navigation to give up (the result then has ``None`` times).
+    poll : float
+        Seconds between reads of the page's state (a cheap ``Runtime.evaluate``;
+        unlike screenshots these take no time from the page's drawing).
+    settle : float
+        Seconds to wait, once timed, before the screenshot (for a picture of the page
+        at rest: its control panel animates as it opens).
+
+    Returns
+    -------
+    PageTiming
+        The page clock's figures, the wall figures, chromium's CPU seconds and a
+        screenshot taken once the scene is complete.
 
     Raises
     ------
     DependencyError
         When no chromium is installed.
     """
-    from PIL import Image
-
     exe = chromium or find_chromium()
     if exe is None:
         raise DependencyError("no chromium found (apt-get install chromium)")
-    profile = tempfile.mkdtemp(prefix="lidar2city-chromium-")
-    proc = subprocess.Popen([exe, *chromium_flags(profile, width=width, height=height)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    dev = None
-    try:
-        port_file = os.path.join(profile, "DevToolsActivePort")
-        end = time.monotonic() + 30.0
-        while not _read(port_file).strip():
-            if proc.poll() is not None or time.monotonic() > end:
-                raise Lidar2CityError("chromium did not start its DevTools endpoint")
-            time.sleep(0.05)
-        port = int(_read(port_file).split()[0])
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
-            pages = [t for t in json.load(r) if t.get("type") == "page"]
-        dev = _Devtools(pages[0]["webSocketDebuggerUrl"])
-        dev.call("Emulation.setDeviceMetricsOverride", width=width, height=height,
-                 deviceScaleFactor=1, mobile=False)
+    browser = _Browser(exe, width, height)
+    with browser as (proc, dev):
+        started = time.perf_counter() - browser.launched
+        dev.call("Page.enable")  # (without it the script below is not installed)
+        dev.call("Page.addScriptToEvaluateOnNewDocument", source=_PROBE % json.dumps(list(expect)))
         t0 = time.perf_counter()
         dev.call("Page.navigate", url=url)
-        png, ok = b"", False
-        while True:
+        got, seen = {}, None
+        while time.perf_counter() - t0 < timeout:
             try:
-                shot = dev.call("Page.captureScreenshot", format="png")
-            except Lidar2CityError:  # the page is between documents (navigation)
-                shot = None
-            if shot is not None:
-                png = base64.b64decode(shot["data"])
-                img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
-                if drawn(img):
-                    ok = True
-                    break
-            if time.perf_counter() - t0 > timeout:
+                r = dev.call("Runtime.evaluate", expression="JSON.stringify(window.__l2cTiming)",
+                             returnByValue=True)
+                got = json.loads(r.get("result", {}).get("value") or "null") or {}
+            except Lidar2CityError:  # between documents
+                got = {}
+            if got.get("complete") is not None:
+                seen = time.perf_counter()
                 break
             time.sleep(poll)
-        seconds = time.perf_counter() - t0
-        capture_when_drawn.last_cpu = _tree_cpu_seconds(proc.pid)
-        return png, seconds, ok
-    finally:
-        if dev is not None:
-            try:
-                dev.close()
-            except Exception:  # the browser is being killed anyway
-                pass
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        shutil.rmtree(profile, ignore_errors=True)
+        cpu = _tree_cpu_seconds(proc.pid)
+        time.sleep(settle)
+        shot = _screenshot(dev)
+    png, img = shot if shot is not None else (b"", np.zeros((1, 1, 3), np.uint8))
 
+    def sec(ms):
+        return None if ms is None else ms / 1000.0
 
-capture_when_drawn.last_cpu = None
+    return PageTiming(page_booted=sec(got.get("booted")), page_nodes=sec(got.get("nodes")),
+                      page_complete=sec(got.get("complete")),
+                      wall_from_navigate=None if seen is None else seen - t0,
+                      wall_from_launch=None if seen is None else seen - browser.launched,
+                      wall_browser_start=started, chromium_cpu=cpu,
+                      drawn=bool(len(png)) and scene_drawn(img), png=png)

@@ -8,8 +8,9 @@ import math
 
 import numpy as np
 
-__all__ = ["COLOUR_BY", "building_meshes", "attribute_values", "colours_for", "legend_markdown",
-           "subsample", "class_colours", "worst_buildings", "attributes_markdown"]
+__all__ = ["COLOUR_BY", "building_meshes", "merge_meshes", "group_by_colour", "ray_pick",
+           "attribute_values", "colours_for", "legend_markdown", "subsample", "class_colours",
+           "worst_buildings", "attributes_markdown"]
 
 #: "Colour by" choices -> how a building's value is found (see :func:`attribute_values`)
 COLOUR_BY = ("RMSE", "roof type", "status", "validity", "height", "edited")
@@ -49,6 +50,87 @@ def building_meshes(solids_by_building: dict, origin) -> dict:
     return out
 
 
+def merge_meshes(meshes: dict, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One mesh of several buildings' meshes: ``(vertices (V, 3), triangles (T, 3), owner (T,))``.
+
+    ``meshes`` maps an id to ``(vertices, triangles)`` as from :func:`building_meshes`;
+    ``ids`` lists the ids to merge, in order (ids without a mesh are skipped);
+    ``owner[k]`` is the position in ``ids`` of the building triangle ``k`` belongs to.
+
+    Examples
+    --------
+    >>> tri = (np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.int32))
+    >>> v, t, owner = merge_meshes({"a": tri, "b": tri}, ["a", "b"])
+    >>> t.tolist(), owner.tolist()
+    ([[0, 1, 2], [3, 4, 5]], [0, 1])
+    """
+    parts = [(i, meshes[b]) for i, b in enumerate(ids) if b in meshes]
+    if not parts:
+        return (np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32),
+                np.zeros(0, np.int64))
+    sizes = np.array([len(v) for _, (v, _) in parts])
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    verts = np.concatenate([v for _, (v, _) in parts]).astype(np.float32)
+    tris = np.concatenate([np.asarray(t, np.int64) + o for (_, (_, t)), o in zip(parts, offsets)])
+    owner = np.repeat([i for i, _ in parts], [len(t) for _, (_, t) in parts])
+    return verts, tris.astype(np.int32), owner.astype(np.int64)
+
+
+def group_by_colour(colours: dict) -> dict:
+    """``{(r, g, b): [ids, sorted]}``: the buildings drawn as one mesh per colour."""
+    groups: dict = {}
+    for bid, c in colours.items():
+        groups.setdefault(tuple(int(x) for x in c), []).append(bid)
+    return {c: sorted(ids) for c, ids in sorted(groups.items())}
+
+
+def ray_pick(vertices, triangles, origin, direction, *, eps: float = 1e-9):
+    """Index of the nearest triangle a ray hits, or None (Möller–Trumbore, vectorised).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array
+    triangles : (T, 3) int array
+    origin, direction : (3,) arrays
+        The ray, in the vertices' frame (``direction`` need not be unit length).
+
+    References
+    ----------
+    T. Möller, B. Trumbore (1997), Fast, minimum storage ray-triangle intersection,
+    Journal of Graphics Tools 2(1): 21-28.
+
+    Examples
+    --------
+    >>> v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    >>> ray_pick(v, np.array([[0, 1, 2]]), (0.2, 0.2, 5.0), (0, 0, -1.0))
+    0
+    >>> ray_pick(v, np.array([[0, 1, 2]]), (2.0, 2.0, 5.0), (0, 0, -1.0)) is None
+    True
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    if len(t) == 0:
+        return None
+    o = np.asarray(origin, dtype=np.float64)
+    d = np.asarray(direction, dtype=np.float64)
+    a = v[t[:, 0]]
+    e1, e2 = v[t[:, 1]] - a, v[t[:, 2]] - a
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > eps
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = o - a
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    w = (q @ d) * inv
+    dist = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (dist > 0)
+    if not hit.any():
+        return None
+    idx = np.flatnonzero(hit)
+    return int(idx[np.argmin(dist[idx])])
+
+
 def _rmse(a: dict):
     for k in ("viewer_rmse", "rmse_lod22", "primitive_residual_rmse", "rmse_lod13", "rmse_lod12"):
         v = a.get(k)
@@ -82,12 +164,15 @@ def attribute_values(attributes: dict, by: str) -> dict:
     return out
 
 
-def colours_for(values: dict) -> tuple[dict, list]:
+def colours_for(values: dict, *, levels: int = 16) -> tuple[dict, list]:
     """Colours per building and the legend entries ``[(label, (r, g, b))]``.
 
-    Numbers get a ramp between their 2nd and 98th percentiles (5 legend stops),
-    text a palette in sorted order; None is grey.
+    Numbers get a ramp between their 2nd and 98th percentiles, in ``levels``
+    steps (so that the buildings are drawn as a few meshes, one per colour; 5
+    legend stops), text a palette in sorted order; None is grey.
     """
+    if levels < 2:
+        raise ValueError(f"levels must be at least 2, got {levels}")
     nums = [v for v in values.values() if isinstance(v, (int, float)) and not isinstance(v, bool)]
     colours, legend = {}, []
     if nums and len(nums) == sum(v is not None for v in values.values()):
@@ -95,7 +180,8 @@ def colours_for(values: dict) -> tuple[dict, list]:
         hi = hi if hi > lo else lo + 1e-9
 
         def ramp(v):
-            t = float(np.clip((v - lo) / (hi - lo), 0, 1)) * (len(_RAMP) - 1)
+            t = round(float(np.clip((v - lo) / (hi - lo), 0, 1)) * (levels - 1)) / (levels - 1)
+            t *= len(_RAMP) - 1
             i = min(int(t), len(_RAMP) - 2)
             c = _RAMP[i] + (t - i) * (_RAMP[i + 1] - _RAMP[i])
             return tuple(int(round(x)) for x in c)
