@@ -36,7 +36,6 @@ And the mean over the seven samples. A minute or two (CSF is the slow part).
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
@@ -47,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_ground import load  # noqa: E402
+from bench_ground import arg_parser, load, reference_paths  # noqa: E402
 from lidar2city.ground import GroundConfig, dtm_from_ground, low_outliers, smrf_refined  # noqa: E402
 from lidar2city.ground._grid import (  # noqa: E402
     gradient_magnitude,
@@ -153,14 +152,10 @@ def csf(xyz, rigidness):
 
 
 def main():
-    default = Path(os.environ.get("LIDAR2CITY_DATA", ROOT.parent / "shared" / "data"))
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=default)
+    ap = arg_parser(__doc__)
     ap.add_argument("--no-csf", action="store_true")
     args = ap.parse_args()
-    refs = sorted((args.data / "isprs" / "reference").glob("samp*.laz"))
-    if not refs:
-        sys.exit(f"no ISPRS reference samples under {args.data}")
+    refs = reference_paths(args.data)
     try:
         import CSF  # noqa: F401
         have_csf = not args.no_csf

@@ -187,25 +187,6 @@ def _near_surface(xyz, surface, spec, *, threshold, scalar):
     return np.abs(xyz[:, 2] - ref) <= tol
 
 
-def _smrf_setup(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
-                **extra):
-    """Validate SMRF's parameters and find the low outliers of ``xyz`` (checked, (N, 3)).
-
-    ``extra`` holds further positive parameters of the caller to validate with these.
-    Returns the low-outlier mask, or None when no point is left to filter.
-    """
-    _check_positive(cell=cell, slope=slope, window=window, threshold=threshold,
-                    outlier_radius=outlier_radius, outlier_depth=outlier_depth, **extra)
-    if not scalar >= 0:
-        raise InputError(f"scalar must be >= 0, got {scalar!r}")
-    n = len(xyz)
-    if n == 0:
-        return None
-    outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
-                if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
-    return None if outliers.all() else outliers
-
-
 def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
           extend=0.0, **extra):
     """SMRF's ground mask and low-outlier mask; ``extend`` as in :func:`smrf_surface`.
@@ -213,12 +194,17 @@ def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlie
     ``extra`` holds further positive parameters of the caller to validate with these.
     """
     xyz = _check_xyz(xyz)
+    _check_positive(cell=cell, slope=slope, window=window, threshold=threshold,
+                    outlier_radius=outlier_radius, outlier_depth=outlier_depth, **extra)
+    if not scalar >= 0:
+        raise InputError(f"scalar must be >= 0, got {scalar!r}")
     n = len(xyz)
-    outliers = _smrf_setup(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
-                           threshold=threshold, outlier_radius=outlier_radius,
-                           outlier_depth=outlier_depth, **extra)
-    if outliers is None:
-        return np.zeros(n, dtype=bool), np.ones(n, dtype=bool)
+    if n == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+    outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
+                if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
+    if outliers.all():
+        return np.zeros(n, dtype=bool), outliers
     surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
                                     exclude=outliers, extend=extend)
     ground = _near_surface(xyz, surface, spec, threshold=threshold, scalar=scalar)
