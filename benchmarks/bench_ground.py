@@ -51,6 +51,22 @@ LOO_GRID = {
 }
 
 
+def arg_parser(doc):
+    """The scripts' argument parser, with ``--data`` (default ``LIDAR2CITY_DATA``)."""
+    default = Path(os.environ.get("LIDAR2CITY_DATA", ROOT.parent / "shared" / "data"))
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=default)
+    return ap
+
+
+def reference_paths(data):
+    """The ISPRS reference samples under ``data``, or exit saying there are none."""
+    refs = sorted((data / "isprs" / "reference").glob("samp*.laz"))
+    if not refs:
+        sys.exit(f"no ISPRS reference samples under {data}")
+    return refs
+
+
 def load(path):
     import laspy
 
@@ -102,35 +118,39 @@ def synthetic(scenes):
 
 def leave_one_out(samples, scenes):
     for method, grid in LOO_GRID.items():
-        fn = GROUND_METHODS[method]
-        base = GroundConfig(method=method).method_params()
-        keys = list(grid)
-        table = []
-        for values in itertools.product(*(grid[k] for k in keys)):
-            params = dict(base, **dict(zip(keys, values)))
-            real = {n: ground_errors(fn(xyz, **params), ref)["total"]
-                    for n, (xyz, ref) in samples.items()}
-            syn = np.mean([ground_errors(fn(s.xyz, **params), s.ground)["total"]
-                           for s in scenes.values()])
-            table.append((dict(zip(keys, values)), real, syn))
+        leave_one_out_method(method, GROUND_METHODS[method],
+                             GroundConfig(method=method).method_params(), grid, samples, scenes)
 
-        def objective(row, held_out):
-            return np.mean([v for n, v in row[1].items() if n != held_out] + [row[2]])
 
-        print(f"\nleave-one-out, {method} ({len(table)} parameter sets; chosen on the other six "
-              f"samples + synthetic terrains)")
-        held = []
-        for name in samples:
-            best = min(table, key=lambda row: objective(row, name))
-            held.append(best[1][name])
-            print(f"{name:<8} held-out total {100 * best[1][name]:5.2f} %  chosen "
-                  f"{', '.join(f'{k}={v}' for k, v in best[0].items())}")
-        print(f"{method} leave-one-out mean total {100 * np.mean(held):.2f} %, "
-              f"max {100 * np.max(held):.2f} %")
-        best = min(table, key=lambda row: objective(row, None))
-        print(f"{method} chosen on all seven: {', '.join(f'{k}={v}' for k, v in best[0].items())} "
-              f"(mean {100 * np.mean(list(best[1].values())):.2f} %, synthetic "
-              f"{100 * best[2]:.2f} %)")
+def leave_one_out_method(method, fn, base, grid, samples, scenes):
+    """Print the leave-one-sample-out check of ``fn(xyz, **params)`` over ``grid``."""
+    keys = list(grid)
+    table = []
+    for values in itertools.product(*(grid[k] for k in keys)):
+        params = dict(base, **dict(zip(keys, values)))
+        real = {n: ground_errors(fn(xyz, **params), ref)["total"]
+                for n, (xyz, ref) in samples.items()}
+        syn = np.mean([ground_errors(fn(s.xyz, **params), s.ground)["total"]
+                       for s in scenes.values()])
+        table.append((dict(zip(keys, values)), real, syn))
+
+    def objective(row, held_out):
+        return np.mean([v for n, v in row[1].items() if n != held_out] + [row[2]])
+
+    print(f"\nleave-one-out, {method} ({len(table)} parameter sets; chosen on the other six "
+          f"samples + synthetic terrains)")
+    held = []
+    for name in samples:
+        best = min(table, key=lambda row: objective(row, name))
+        held.append(best[1][name])
+        print(f"{name:<8} held-out total {100 * best[1][name]:5.2f} %  chosen "
+              f"{', '.join(f'{k}={v}' for k, v in best[0].items())}")
+    print(f"{method} leave-one-out mean total {100 * np.mean(held):.2f} %, "
+          f"max {100 * np.max(held):.2f} %")
+    best = min(table, key=lambda row: objective(row, None))
+    print(f"{method} chosen on all seven: {', '.join(f'{k}={v}' for k, v in best[0].items())} "
+          f"(mean {100 * np.mean(list(best[1].values())):.2f} %, synthetic "
+          f"{100 * best[2]:.2f} %)")
 
 
 def best_time(cmd, env, repeat):
@@ -163,17 +183,12 @@ def speed(site, repeat, methods=("smrf", "smrf_refined")):
 
 
 def main():
-    default = Path(os.environ.get("LIDAR2CITY_DATA", ROOT.parent / "shared" / "data"))
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=default)
+    ap = arg_parser(__doc__)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--loo", action="store_true")
     args = ap.parse_args()
-    refs = sorted((args.data / "isprs" / "reference").glob("samp*.laz"))
-    if not refs:
-        sys.exit(f"no ISPRS reference samples under {args.data}")
-    samples = {p.name.split("-")[0]: load(p) for p in refs}
+    samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     accuracy(samples)
     scenes = synthetic_scenes()
     synthetic(scenes)
