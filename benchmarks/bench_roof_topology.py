@@ -15,10 +15,14 @@ before the line arrangement)
    roof faces and time per building.
 2. Synthetic roofs with exact wireframes (:mod:`lidar2city.synthetic_roofs`):
    corner and edge precision / recall / F1 at 0.5 m (3-D), pooled over all
-   roofs, at 8 and 25 points/m2 with 3-5 cm noise, per roof kind too.
+   roofs, at 8 and 25 points/m2 with 3-5 cm noise, per roof kind too; and the
+   roof type attribute against the kind's type (:data:`ROOF_TYPE_OF_KIND`),
+   right / total per density and the kinds typed wrong.
 3. City3D dense roof-only clouds: footprint traced from the points, floor at
    the lowest point; time per building of LoD2.2 (roof code) and with the
-   footprint tracing.
+   footprint tracing; roof types found (counts).
+
+Sections 1 and 3 also print the count of each roof type found.
 """
 
 from __future__ import annotations
@@ -31,6 +35,19 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# the roof type a modeller gives each synthetic kind (dormers do not change a gable,
+# gables meeting in valleys are a cross gable, a flat roof with a parapet is flat)
+ROOF_TYPE_OF_KIND = {"gable": "gable", "hip": "hip", "half_hip": "half_hip", "mansard": "mansard",
+                     "L": "cross_gable", "T": "cross_gable", "U": "cross_gable", "dormer": "gable",
+                     "stepped": "complex", "parapet": "flat"}
+
+
+def type_counts(types):
+    """``'gable 9, hip 5, ...'``: counts of each roof type, most frequent first."""
+    kinds, counts = np.unique(np.asarray(types, dtype=str), return_counts=True)
+    order = np.lexsort((kinds, -counts))
+    return ", ".join(f"{kinds[i]} {counts[i]}" for i in order)
 
 
 def option(name):
@@ -74,6 +91,7 @@ def delft(d):
     results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=config())
     bxyz = cloud.xyz[cls == 6]
     rms, corners, short, total, valid, faces, times, fallback = [], [], 0.0, 0.0, 0, 0, [], 0
+    types = []
     for g, r in zip(fps.geometries, results, strict=True):
         pts = bxyz[shapely.contains_xy(g, bxyz[:, 0], bxyz[:, 1])]
         s22 = r.solids["2.2"]
@@ -89,6 +107,7 @@ def delft(d):
         total += tot
         faces += sum(surf.semantic == "RoofSurface" for s in s22 for surf in s.surfaces)
         times.append(r.attributes.get("lod22_time", 0.0))
+        types.append(r.attributes.get("roof_type", "-"))
     n = len(results)
     print(f"Delft shared tile, {n} BGT footprints (AHN3 class 6 points inside each)")
     print(f"  median roof corners per building (turn > 10 deg): {np.median(corners):.1f}  (target <= 14)")
@@ -98,6 +117,7 @@ def delft(d):
     print(f"  valid LoD2.2 solids {valid}/{n} (LoD1.2 fallbacks with a stated reason: {fallback}), "
           f"roof faces {faces}")
     print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean {1000 * np.mean(times):.1f} ms")
+    print(f"  roof types: {type_counts(types)}")
     if option("--figure"):
         figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
 
@@ -163,7 +183,7 @@ def synthetic():
     for density in (8.0, 25.0):
         total = dict.fromkeys(keys, 0)
         per_kind = {}
-        n_fail = 0
+        n_fail, typed, wrong = 0, 0, []
         for kind in ROOF_KINDS:
             acc = dict.fromkeys(keys, 0)
             for seed in range(4):
@@ -176,6 +196,10 @@ def synthetic():
                     sc["corners_ref"], sc["edges_ref"] = len(s.wireframe.corners), len(s.wireframe.edges)
                 else:
                     sc = wireframe_scores(roof_wireframe(res.solids), s.wireframe, tolerance=0.5)
+                    found = res.attributes["roof_type"]
+                    typed += found == ROOF_TYPE_OF_KIND[kind]
+                    if found != ROOF_TYPE_OF_KIND[kind]:
+                        wrong.append(f"{kind}#{seed} as {found}")
                 for k in keys:
                     acc[k] += sc[k]
                     total[k] += sc[k]
@@ -186,6 +210,7 @@ def synthetic():
               f"R {p['corner_recall']:.3f}), edge F1 {p['edge_f1']:.3f} (P {p['edge_precision']:.3f} "
               f"R {p['edge_recall']:.3f})  (targets >= 0.90 / >= 0.80)")
         print("    " + ", ".join(f"{k} {v['corner_f1']:.2f}/{v['edge_f1']:.2f}" for k, v in per_kind.items()))
+        print(f"  roof type right {typed}/{4 * len(ROOF_KINDS)}" + (f" (wrong: {', '.join(wrong)})" if wrong else ""))
 
 
 def city3d(folder):
@@ -200,7 +225,7 @@ def city3d(folder):
 
     files = sorted(folder.glob("*.ply"), key=lambda p: int(p.stem))
     clouds = [read_ply(f).xyz for f in files]
-    t_roof, t_all, rms, valid, corners = [], [], [], 0, []
+    t_roof, t_all, rms, valid, corners, types = [], [], [], 0, [], []
     for xyz in clouds:
         t0 = time.perf_counter()
         fps = extract_footprints(xyz, np.full(len(xyz), 6), regularize="snake")
@@ -214,11 +239,13 @@ def city3d(folder):
         inside = shapely.contains_xy(fp, xyz[:, 0], xyz[:, 1])
         rms.append(model_rmse(xyz[inside], res.solids))
         corners.append(roof_cleanliness(roof_wireframe(res.solids))[0])
+        types.append(res.attributes["roof_type"])
     n = len(files)
     print(f"City3D roof-only clouds ({n}; footprint traced, floor = lowest point): valid {valid}/{n}, "
           f"RMSE median {np.median(rms):.3f} m, corners median {np.median(corners):.0f}")
     print(f"  time per building: LoD2.2 roof code mean {np.mean(t_roof):.3f} s (median {np.median(t_roof):.3f}, "
           f"max {np.max(t_roof):.3f}); with footprint tracing mean {np.mean(t_all):.3f} s  (target <= 0.3 s)")
+    print(f"  roof types: {type_counts(types)}")
 
 
 def main():
