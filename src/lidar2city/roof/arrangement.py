@@ -403,8 +403,8 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
     ``dz`` (m,) is the height difference of the two planes at the chain's vertices and
     ``dist`` (m,) their distance to the planes' line; a vertex is on a step where the
     running medians (3 vertices) of both reach ``t_step`` and ``min_dist`` (a staircase
-    along a steep intersection line stays one line), and runs shorter than
-    ``min_length`` (m) join their neighbours. Returns ``[(kind, sub), ...]`` with
+    along a steep intersection line stays one line) and it lies in a run at either end
+    of the chain; runs shorter than ``min_length`` (m) join their neighbours. Returns ``[(kind, sub), ...]`` with
     ``kind`` "intersection" or "step" and consecutive sub-chains sharing a vertex, or None
     when the chain is not clearly both.
     """
@@ -416,6 +416,10 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
 
     step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
     along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
+    # a wall leaves the line at a chain's end (at the outline or a junction); a step
+    # between two stretches on the line is the staircase of the label grid
+    for lo, hi in _runs(step)[1:-1]:
+        step[lo:hi] = False
     while True:
         runs = _runs(step)
         if len(runs) < 2:
@@ -489,8 +493,10 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                 foot = -c0 * g
                 for kind, sub in runs:
                     if kind == "step":
+                        # a wall this short (a dormer's side) has a noisy direction of its
+                        # own: it snaps to the building axes from twice as far
                         poly = _step_polyline(sub, tol=step_tol * cell, direction=direction,
-                                              snap_angle=snap_angle, closed=False)
+                                              snap_angle=2 * snap_angle, closed=False)
                         if poly is not None:
                             segs.append(_extend(poly, ext))
                             kinds.append("step")
