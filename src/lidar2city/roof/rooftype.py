@@ -7,24 +7,23 @@ dormers and a chimney, is still a gable.
 
 Every sloped face gets one of the four building axes as its down-slope
 direction (``k = 0..3``, the building direction plus ``k * 90`` degrees) when
-it is within ``axis_tol`` of one. Faces of one axis whose planes agree within
-``merge_angle`` (slope) are one *roof plane* (noise splits merged). Then, in this
-order:
+it is within ``axis_tol`` of one; the faces of one axis count together (a slope
+split by noise is still one side of the roof). Then, in this order:
 
 * ``flat``: flat faces cover all but ``minor`` of the roof area;
 * ``shed``: one sloped roof plane covers all but ``minor``;
 * ``mansard`` / ``gambrel``: in four / two axes a steep face lies below a
   face of the same axis at least ``break_angle`` shallower;
 * ``gable``: two opposite roof planes meet in a ridge (they share an edge)
-  and cover all but ``minor``, the rest being small raised parts (dormers,
-  chimneys) that do not reach both main planes;
+  and cover all but ``raised``, the rest being raised parts (dormers) that do
+  not reach both main planes, or faces below ``tiny`` (chimneys);
 * ``hip`` / ``half_hip`` / ``pyramid``: two opposite main planes with a ridge
   and, at each end, one face of a perpendicular axis touching both (a hip
   end); ``half_hip`` when those ends start more than ``eave_tol`` above the
   main eaves; ``pyramid`` when four planes of the four axes meet at one apex
   without a ridge;
-* ``cross_gable``: ridges along both axes (gables meeting in valleys: L, T,
-  U shapes);
+* ``cross_gable``: ridges along both axes, the perpendicular gables covering
+  more than ``raised`` (wings meeting the main roof in valleys: L, T, U shapes);
 * ``complex`` otherwise (flat and sloped parts together, oblique faces...).
 
 References
@@ -82,7 +81,7 @@ def _face_heights(faces, planes):
 
 
 def classify_roof(faces, planes, direction, *, flat_slope=5.0, axis_tol=25.0, minor=0.15,
-                  tiny=0.02, merge_angle=8.0, break_angle=20.0, eave_tol=0.5, min_shared=0.5) -> str:
+                  raised=0.25, tiny=0.02, break_angle=20.0, eave_tol=0.5, min_shared=0.5) -> str:
     """The roof type of a roof's faces.
 
     Parameters
@@ -98,12 +97,15 @@ def classify_roof(faces, planes, direction, *, flat_slope=5.0, axis_tol=25.0, mi
     axis_tol : float
         Largest angle (deg) between a face's down-slope direction and its axis.
     minor : float
-        Largest share of the roof area left to small raised parts (dormers,
-        chimneys) or noise faces beside the main planes of a type.
+        Largest share of the roof area left to noise faces, clutter, oblique or
+        flat faces beside the main planes of a sloped type (or sloped ones on a
+        flat roof).
+    raised : float
+        Largest share of the roof area of the perpendicular faces raised on a
+        gable or hip (dormers); a perpendicular gable larger than this is a wing
+        (cross gable).
     tiny : float
         Faces below this share of the roof area are ignored (clutter).
-    merge_angle : float
-        Faces of one axis whose slopes differ by less than this (deg) are one roof plane.
     break_angle : float
         Smallest slope change (deg) between the steep and shallow faces of a mansard.
     eave_tol : float
@@ -185,11 +187,11 @@ def classify_roof(faces, planes, direction, *, flat_slope=5.0, axis_tol=25.0, mi
     ends = np.array([bool(adj[p, sides[0]].any() and adj[p, sides[1]].any()) for p in perp])
     end_axes = set(axis[perp[ends]].tolist())
     others = share[perp[~ends]].sum()
-    if ridges[1 - main] and pair[1 - main] - share[perp[ends]].sum() > minor:
+    if ridges[1 - main] and pair[1 - main] > raised:
         return "cross_gable"
-    if len(end_axes) == 2 and others <= minor:
+    if len(end_axes) == 2 and others <= raised:
         eave = np.median(lo[mains])
         return "half_hip" if np.min(lo[perp[ends]]) > eave + eave_tol else "hip"
-    if not ends.any() and pair[main] >= 1 - minor:
+    if not ends.any() and pair[main] >= 1 - raised:
         return "gable"
     return "complex"
