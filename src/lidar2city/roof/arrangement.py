@@ -14,7 +14,11 @@ replaced by straight segments:
   meet at their lines' intersection.
 
 A chain near its planes' intersection line is an intersection edge only when
-that line explains the nearby points about as well as the chain does.
+that line explains the nearby points about as well as the chain does. A chain
+that starts or ends well off the line, where the planes differ in height (a
+dormer's side wall running into its valley), is cut there: a straight step piece
+(snapped to the axes from twice ``snap_angle``, its direction being noisy) and
+the exact line.
 
 Segments overshoot their ends a little; together with the footprint outline
 they are noded and polygonised, so the cells always partition the footprint
@@ -404,9 +408,9 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
     ``dist`` (m,) their distance to the planes' line; a vertex is on a step where the
     running medians (3 vertices) of both reach ``t_step`` and ``min_dist`` (a staircase
     along a steep intersection line stays one line) and it lies in a run at either end
-    of the chain; runs shorter than ``min_length`` (m) join their neighbours. Returns ``[(kind, sub), ...]`` with
-    ``kind`` "intersection" or "step" and consecutive sub-chains sharing a vertex, or None
-    when the chain is not clearly both.
+    of the chain; runs shorter than ``min_length`` (m) join their neighbours. Returns
+    ``[(kind, sub), ...]`` with ``kind`` "intersection" or "step" and consecutive
+    sub-chains sharing a vertex, or None when the chain is not clearly both.
     """
     if len(chain) < 4:
         return None
@@ -486,8 +490,9 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             g, c0 = line
             dist = np.abs(c @ g + c0)
             near_line = np.percentile(dist, 90) <= max_shift
-            runs = None if closed or not near_line else _mixed_runs(c, dz, dist, t_step, step_tol * cell,
-                                                                       2 * cell)
+            runs = None
+            if near_line and not closed:
+                runs = _mixed_runs(c, dz, dist, t_step, step_tol * cell, 2 * cell)
             if runs:
                 u = np.array([-g[1], g[0]])
                 foot = -c0 * g
