@@ -5,7 +5,9 @@ import shapely
 from lidar2city.errors import FitError
 from lidar2city.metrics.wireframe import roof_wireframe, wireframe_scores
 from lidar2city.roof.arrangement import (
+    _mixed_runs,
     arrangement_cells,
+    chain_segments,
     collapse_short_edges,
     dissolve_cells,
     drop_collinear,
@@ -66,6 +68,44 @@ def test_collapse_short_edges():
     out, kept = collapse_short_edges([c, d], fp, min_length=0.5)
     assert all(len(f.exterior.coords) == 6 for f in out)
     assert sum(f.area for f in out) == pytest.approx(100)
+
+
+def _wall_then_valley(step=0.4):
+    # planes z = 0.6 y + 5 (a main slope) and z = -0.7 x + 12 (a dormer's): they meet on
+    # 0.7 x + 0.6 y = 7; the chain climbs a side wall at x = 5 up to that line, then follows it
+    wall = np.column_stack([np.full(15, 5.0), np.arange(15) * step])
+    xs = 5.0 - (np.arange(1, 9) * step)
+    valley = np.column_stack([xs, (7 - 0.7 * xs) / 0.6])
+    planes = np.array([[0.0, 0.6, 5.0], [-0.7, 0.0, 12.0]])
+    return np.vstack([wall, valley]), planes
+
+
+def test_mixed_chain_gives_a_wall_and_a_valley():
+    chain, planes = _wall_then_valley()
+    dz = chain @ (planes[0, :2] - planes[1, :2]) + planes[0, 2] - planes[1, 2]
+    g = planes[0, :2] - planes[1, :2]
+    dist = np.abs(dz) / np.hypot(*g)
+    runs = _mixed_runs(chain, dz, dist, 0.3, 0.6, 0.8)
+    assert [k for k, _ in runs] == ["step", "intersection"]
+    assert np.allclose(runs[0][1][-1], runs[1][1][0])  # the pieces share their vertex
+    segs, kinds = chain_segments([chain], [(0, 1)], planes, cell=0.4, direction=0.0, max_shift=5.0)
+    assert kinds == ["step", "intersection"]
+    assert np.allclose(segs[0][1:-1, 0], 5.0)  # the wall stays at x = 5 ...
+    on_line = segs[1] @ g + planes[0, 2] - planes[1, 2]
+    assert np.allclose(on_line, 0, atol=1e-9)  # ... and the valley is the exact line
+    # a chain that is only a staircase along the line stays one intersection edge
+    jag = chain[15:] + np.array([[0.1, 0.0], [-0.1, 0.0]] * 4)
+    dzj = jag @ g + planes[0, 2] - planes[1, 2]
+    assert _mixed_runs(jag, dzj, np.abs(dzj) / np.hypot(*g), 0.3, 0.6, 0.8) is None
+
+
+def test_dormer_side_walls_kept_at_8_points():
+    # the dormers' side walls survive the refinement as vertical steps (they used to be
+    # pulled onto the valley line, leaving triangular dormers)
+    s = roof_sample("dormer", density=8, seed=2)
+    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z)
+    sc = wireframe_scores(roof_wireframe(res.solids), s.wireframe, tolerance=0.5)
+    assert sc["corners_matched"] >= 20, sc
 
 
 @pytest.mark.parametrize("kind", ["gable", "hip", "L", "stepped"])

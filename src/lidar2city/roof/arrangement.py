@@ -14,7 +14,11 @@ replaced by straight segments:
   meet at their lines' intersection.
 
 A chain near its planes' intersection line is an intersection edge only when
-that line explains the nearby points about as well as the chain does.
+that line explains the nearby points about as well as the chain does. A chain
+that starts or ends well off the line, where the planes differ in height (a
+dormer's side wall running into its valley), is cut there: a straight step piece
+(snapped to the axes from twice ``snap_angle``, its direction being noisy) and
+the exact line.
 
 Segments overshoot their ends a little; together with the footprint outline
 they are noded and polygonised, so the cells always partition the footprint
@@ -389,6 +393,52 @@ def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
     return float(np.mean(r_line) - np.mean(r_step)) <= tol
 
 
+def _runs(flags):
+    """Maximal runs of equal flags: list of [lo, hi) index pairs."""
+    cut = np.flatnonzero(flags[1:] != flags[:-1]) + 1
+    bounds = np.r_[0, cut, len(flags)]
+    return list(zip(bounds[:-1], bounds[1:], strict=True))
+
+
+def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
+    """A boundary chain (m, 2) split where its two facets stop meeting in a line and start to
+    differ in height (a dormer's valley running into its side wall).
+
+    ``dz`` (m,) is the height difference of the two planes at the chain's vertices and
+    ``dist`` (m,) their distance to the planes' line; a vertex is on a step where the
+    running medians (3 vertices) of both reach ``t_step`` and ``min_dist`` (a staircase
+    along a steep intersection line stays one line) and it lies in a run at either end
+    of the chain; runs shorter than ``min_length`` (m) join their neighbours. Returns
+    ``[(kind, sub), ...]`` with ``kind`` "intersection" or "step" and consecutive
+    sub-chains sharing a vertex, or None when the chain is not clearly both.
+    """
+    if len(chain) < 4:
+        return None
+    def med3(a):
+        a = np.abs(np.asarray(a, dtype=float))
+        return np.median(np.stack([np.r_[a[:1], a[:-1]], a, np.r_[a[1:], a[-1:]]]), axis=0)
+
+    step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
+    # a wall leaves the line at a chain's end (at the outline or a junction); a step
+    # between two stretches on the line is the staircase of the label grid
+    for lo, hi in _runs(step)[1:-1]:
+        step[lo:hi] = False
+    while True:
+        runs = _runs(step)
+        if len(runs) < 2:
+            return None
+        lengths = [along[min(hi, len(chain) - 1)] - along[lo] for lo, hi in runs]
+        k = int(np.argmin(lengths))
+        if lengths[k] >= min_length:
+            break
+        lo, hi = runs[k]
+        step[lo:hi] = ~step[lo]
+    # each piece ends on the first vertex of the next, so the pieces meet
+    return [("step" if step[lo] else "intersection", chain[lo:min(hi, len(chain) - 1) + 1])
+            for lo, hi in runs]
+
+
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
                    snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
                    tol_gain=0.05):
@@ -440,6 +490,26 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             g, c0 = line
             dist = np.abs(c @ g + c0)
             near_line = np.percentile(dist, 90) <= max_shift
+            runs = None
+            if near_line and not closed:
+                runs = _mixed_runs(c, dz, dist, t_step, step_tol * cell, 2 * cell)
+            if runs:
+                u = np.array([-g[1], g[0]])
+                foot = -c0 * g
+                for kind, sub in runs:
+                    if kind == "step":
+                        # a wall this short (a dormer's side) has a noisy direction of its
+                        # own: it snaps to the building axes from twice as far
+                        poly = _step_polyline(sub, tol=step_tol * cell, direction=direction,
+                                              snap_angle=2 * snap_angle, closed=False)
+                        if poly is not None:
+                            segs.append(_extend(poly, ext))
+                            kinds.append("step")
+                        continue
+                    t = sub @ u
+                    segs.append(np.vstack([foot + (t.min() - ext) * u, foot + (t.max() + ext) * u]))
+                    kinds.append("intersection")
+                continue
             if near_line and points is not None and np.mean(np.abs(dz)) >= t_step:
                 near_line = _line_explains(points, c, a, b, pa, pb, g, c0, radius=max_shift + cell,
                                            cap=cap, tol=tol_gain)

@@ -14,12 +14,13 @@ from ..validate.solid import check_solid
 from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
+from .rooftype import classify_roof
 from .solid import partition_solid
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes", "roof_type"]
+__all__ = ["Lod22Config", "Lod22Result", "reconstruct_lod22", "regularize_planes"]
 
 
 TOPOLOGY_METHODS = ("arrangement", "grid")
@@ -107,28 +108,6 @@ def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_s
         (s, c), *_ = np.linalg.lstsq(A, pts[:, 2], rcond=None)
         out[k] = (s * np.cos(axis), s * np.sin(axis), c)
     return out
-
-
-def roof_type(planes, n_step_edges=0, *, flat_slope=5.0) -> str:
-    """flat, shed, gable, hip or complex, from the distinct roof planes (K, 3) and step edges."""
-    p = np.unique(np.round(np.asarray(planes, dtype=float), 9), axis=0)
-    n = len(p)
-    slopes = np.degrees(np.arctan(np.hypot(p[:, 0], p[:, 1])))
-    if np.all(slopes < flat_slope):
-        return "flat"
-    if n == 1:
-        return "shed"
-    if n_step_edges != 0 or np.any(slopes < flat_slope):
-        return "complex"
-    az = np.degrees(np.arctan2(-p[:, 1], -p[:, 0])) % 360
-    if n == 2 and abs((az[0] - az[1]) % 360 - 180) < 20:
-        return "gable"
-    if n == 4:
-        turns = np.round((az - az[0]) / 90.0)
-        dev = np.abs((az - az[0]) - turns * 90)
-        if len(np.unique(turns % 4)) == 4 and np.all(dev < 20):
-            return "hip"
-    return "complex"
 
 
 def _direction(footprint):
@@ -298,7 +277,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     xyz = np.asarray(building_xyz, dtype=np.float64)
     solids, attrs = [], {}
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
-    roof_areas, roof_planes = [], []
+    roof_areas, roof_planes, roof_faces, directions = [], [], [], []
     parts = _parts(footprint)
     skipped = 0
     for poly in parts:
@@ -348,6 +327,8 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         n_planes += len(np.unique(face_labels))
         roof_areas += [f.area for f in faces]
         roof_planes += [planes_k[k] for k in face_labels]
+        roof_faces += list(faces)
+        directions.append((poly.area, d))
     if not solids:
         raise FitError(f"every footprint part is smaller than one label cell ({skipped} parts)")
     if skipped:
@@ -356,7 +337,8 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     zmax = max(float(s.vertices[:, 2].max()) for s in solids)
     attrs.update(
         roof_planes=n_planes,
-        roof_type=roof_type(np.asarray(roof_planes), n_step, flat_slope=max(cfg.flat_slope, 5.0)),
+        roof_type=classify_roof(roof_faces, np.asarray(roof_planes), max(directions)[1],
+                                flat_slope=max(cfg.flat_slope, 5.0)),
         ridge_height=round(zmax, 3),
         main_slope=round(float(np.degrees(np.arctan(np.hypot(main[0], main[1])))), 2),
         main_azimuth=round(float(np.degrees(np.arctan2(-main[0], -main[1])) % 360), 2),

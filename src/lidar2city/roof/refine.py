@@ -80,7 +80,7 @@ def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
                     kind = "intersection"
             if kind == "intersection" and line is None:
                 kind = "step"  # coplanar-parallel planes only meet as steps
-            out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter}
+            out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter, "planes": (pa, pb)}
     return out
 
 
@@ -130,6 +130,34 @@ def _segment_line(p, q):
     return g, -float(g @ p)
 
 
+def _split_mixed(coords, edge, t_step, on_line=1e-4):
+    """A shared boundary classified as an intersection, split where it leaves the planes'
+    line: a straight boundary of the line arrangement that lies exactly on the line
+    for part of its length and elsewhere runs where the planes differ by ``t_step`` or
+    more (a dormer's valley, then its side wall) keeps the wall vertices. Returns
+    ``[(kind, vertices), ...]`` with ``kind`` "intersection" or "step"; other
+    boundaries come back whole as one intersection piece."""
+    line = edge["line"]
+    if len(coords) < 3 or line is None:
+        return [("intersection", coords)]
+    g, c = line
+    pa, pb = edge["planes"]
+    on = np.abs(coords @ g + c) < on_line
+    mid = (coords[1:] + coords[:-1]) / 2
+    dz = np.abs(mid @ (pa[:2] - pb[:2]) + pa[2] - pb[2])
+    seg_on = on[1:] & on[:-1]
+    seg_step = ~seg_on & (dz >= t_step)
+    if not seg_step.any() or not seg_on.any():
+        return [("intersection", coords)]
+    out, lo = [], 0
+    for k in range(1, len(seg_step) + 1):
+        if k == len(seg_step) or seg_step[k] != seg_step[lo]:
+            piece = coords[lo:k + 1]
+            out.append(("step" if seg_step[lo] else "intersection", piece))
+            lo = k
+    return out
+
+
 def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0.25, fixed=()):
     """Move vertices onto plane intersections and straighten intersection edges.
 
@@ -172,10 +200,12 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     wall_lines: dict = {}
     interior_of_intersection = set()
     for v in types.values():
-        coords_parts = [np.asarray(g.coords) for g in _line_parts(v["shared"])]
-        for coords in coords_parts:
+        coords_parts = [(v["type"], np.asarray(g.coords)) for g in _line_parts(v["shared"])]
+        if v["type"] == "intersection":
+            coords_parts = [q for _, c in coords_parts for q in _split_mixed(c, v, t_step)]
+        for kind, coords in coords_parts:
             ends = [coords[0], coords[-1]]
-            if v["type"] == "intersection":
+            if kind == "intersection":
                 for p in ends:
                     inter_lines.setdefault(_key(p), []).append(v["line"])
                 for p in coords[1:-1]:
