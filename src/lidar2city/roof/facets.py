@@ -103,16 +103,19 @@ def local_normals(xyz, neighbors) -> tuple[np.ndarray, np.ndarray]:
 def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
     """Region growing from the flattest seeds; ``(labels, number of regions)``.
 
-    A plain Python loop over lists: as fast as the former numba kernel here (the
-    accepted points are few per building) without numba's ~140 MB of import and
-    JIT-cache memory. The arithmetic is the same IEEE double sequence, so the
-    labels are identical.
+    A plain Python loop (~0.1 s for Delft's 75 000 roof points, as fast as the
+    former numba kernel with its per-call overhead) without numba's ~140 MB of
+    import and JIT-cache memory. The arithmetic is the same IEEE double
+    sequence, so the labels are identical.
     """
-    n = len(nbrs)
-    X, Y, Z = xyz[:, 0].tolist(), xyz[:, 1].tolist(), xyz[:, 2].tolist()
-    NX, NY, NZ = normals[:, 0].tolist(), normals[:, 1].tolist(), normals[:, 2].tolist()
-    NB = nbrs.tolist()
-    ok = usable.tolist()
+    n, k = nbrs.shape
+    # memoryviews: Python numbers made on access, none held per point (a traced block of
+    # row houses has ~1e5 points: lists of its neighbour indices would take ~50 MB)
+    X, Y, Z, NX, NY, NZ = (memoryview(np.ascontiguousarray(a, dtype=np.float64))
+                           for a in (xyz[:, 0], xyz[:, 1], xyz[:, 2],
+                                     normals[:, 0], normals[:, 1], normals[:, 2]))
+    NB = memoryview(np.ascontiguousarray(nbrs, dtype=np.int64).reshape(-1))
+    ok = memoryview(np.ascontiguousarray(usable, dtype=np.bool_))
     labels = [-1] * n
     next_label = 0
     sqrt = math.sqrt
@@ -140,9 +143,9 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
         syz = sy * sz
         refit_at = 8
         while head < len(queue):
-            i = queue[head]
+            i = queue[head] * k
             head += 1
-            for j in NB[i]:
+            for j in NB[i:i + k]:
                 if labels[j] != -1 or not ok[j]:
                     continue
                 x, y, z = X[j], Y[j], Z[j]
