@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import atomic_path, scratch_path
+from ._atomic import _reason, atomic_path, scratch_path
 from .cityjson import _extent, _header, cityjson_features
 
 __all__ = ["CityJSONSeqWriter"]
@@ -65,12 +65,23 @@ class CityJSONSeqWriter:
         extra = {k: [v] for k, v in (attributes or {}).items()}
         for feat in cityjson_features([result], scale=h["scale"], xy_unit=h["xy_unit"],
                                       z_unit=h["z_unit"], attributes=extra):
-            self._spool.write(json.dumps(feat, separators=(",", ":")) + "\n")
+            try:
+                self._spool.write(json.dumps(feat, separators=(",", ":")) + "\n")
+            except OSError as exc:  # disk full while spooling: the output is what fails
+                from ..errors import FileFormatError
+
+                raise FileFormatError(f"cannot write {str(self.path)!r}: {_reason(exc)}") from exc
         self.count += 1
 
     def close(self) -> None:
         """Write the header and the features to the output (atomically)."""
-        self._spool.close()
+        try:
+            self._spool.close()  # flushes the last features
+        except OSError as exc:
+            from ..errors import FileFormatError
+
+            self.abort()
+            raise FileFormatError(f"cannot write {str(self.path)!r}: {_reason(exc)}") from exc
         h = dict(self._head)
         extent = (np.concatenate([self._lo, self._hi]) if np.all(np.isfinite(self._lo))
                   else None)

@@ -179,20 +179,20 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     crs : pyproj.CRS or None
         The source's CRS.
     """
-    import pyogrio
     import shapely
     from pyproj import CRS, Transformer
 
+    from .gpkg import read_gpkg_raw
+
     p = check_input_file(path)
     fids_given = fids
-    try:
-        with no_pam():
-            meta, fids, wkb, field_data = pyogrio.raw.read(
-                str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox,
-                fids=None if fids is None else np.asarray(fids, dtype=np.int64),
-                skip_features=skip_features, max_features=max_features)
-    except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
-        raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
+    # a plain GeoPackage is read with sqlite3: the same features without GDAL's memory
+    raw = None if bbox is not None else read_gpkg_raw(
+        p, layer=layer, fids=fids, skip_features=skip_features, max_features=max_features)
+    if raw is None:
+        raw = _read_ogr(p, layer=layer, bbox=bbox, fids=fids, skip_features=skip_features,
+                        max_features=max_features)
+    meta, fids, wkb, field_data = raw
     n = len(wkb) if wkb is not None else 0
     if n == 0:
         if skip_features or max_features is not None:
@@ -200,6 +200,8 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         raise EmptyInputError(f"{str(p)!r} holds no footprints")
     src_crs = CRS.from_user_input(meta["crs"]) if meta.get("crs") else None
     geoms = shapely.from_wkb(wkb)
+    if shapely.has_z(geoms).any():
+        geoms = shapely.force_2d(geoms)
     if target_crs is not None and src_crs is not None and not src_crs.equals(target_crs, ignore_axis_order=True):
         try:
             tr = Transformer.from_crs(src_crs, target_crs, always_xy=True)
@@ -230,6 +232,20 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     if with_fids:
         fields["_fid"] = [int(f) for f in fids]
     return Footprints(local, ids, fields), src_crs
+
+
+def _read_ogr(p, *, layer, bbox, fids, skip_features, max_features):
+    """``pyogrio.raw.read`` of a vector source (2-D, with feature ids)."""
+    import pyogrio
+
+    try:
+        with no_pam():
+            return pyogrio.raw.read(
+                str(p), layer=layer, force_2d=True, return_fids=True, bbox=bbox,
+                fids=None if fids is None else np.asarray(fids, dtype=np.int64),
+                skip_features=skip_features, max_features=max_features)
+    except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
+        raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
 
 
 def unique(ids) -> list:

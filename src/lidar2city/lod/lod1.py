@@ -204,19 +204,26 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             return _failed(result, f"roof {roof:.2f} m is less than {cfg.min_height} m above "
                                    f"ground {ground:.2f} m", t0)
         issues: list[int] = []
+        solids, codes12 = None, []
         if "1.2" in cfg.lods:
             solids = [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
             result.solids["1.2"] = solids[0] if len(solids) == 1 else solids
             result.attributes["rmse_lod12"] = round(model_rmse(inside, solids), 4)
             if cfg.validate:
-                issues += _codes(solids)
+                codes12 = _codes(solids)
+                issues += codes12
         if "1.3" in cfg.lods:
             parts = _lod13(polys, inside, ground, cfg)
             result.parts["1.3"] = parts
             result.attributes["lod13_parts"] = len(parts)
-            result.attributes["rmse_lod13"] = round(model_rmse(inside, parts), 4)
-            if cfg.validate:
-                issues += _codes(parts)
+            if solids is not None and _same_solids(parts, solids):
+                # one part per polygon at the LoD1.2 height: the LoD1.2 prisms again
+                result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"]
+                issues += codes12
+            else:
+                result.attributes["rmse_lod13"] = round(model_rmse(inside, parts), 4)
+                if cfg.validate:
+                    issues += _codes(parts)
         if cfg.validate:
             result.attributes["valid"] = not issues
             result.attributes["validity_errors"] = " ".join(str(c) for c in sorted(set(issues)))
@@ -227,6 +234,21 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         kind = "invalid footprint" if isinstance(exc, InputError) else "error"
         return _failed(result, f"{kind}: {msg}", t0)
+
+
+def _same_solids(a, b) -> bool:
+    """Whether two lists of solids hold the same vertices and surfaces, in order."""
+    if len(a) != len(b):
+        return False
+    for s, t in zip(a, b, strict=True):
+        if (s.vertices.shape != t.vertices.shape or not np.array_equal(s.vertices, t.vertices)
+                or len(s.surfaces) != len(t.surfaces)):
+            return False
+        for f, g in zip(s.surfaces, t.surfaces, strict=True):
+            if f.semantic != g.semantic or len(f.rings) != len(g.rings) or not all(
+                    np.array_equal(r, q) for r, q in zip(f.rings, g.rings, strict=True)):
+                return False
+    return True
 
 
 def _codes(solids) -> list[int]:

@@ -170,15 +170,62 @@ def triangulate_surfaces(vertices: np.ndarray, surfaces) -> tuple[np.ndarray, np
         Index of the surface each triangle comes from.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
-    tris, faces = [], []
-    for i, s in enumerate(surfaces):
-        rings = s.rings if hasattr(s, "rings") else s
-        t = triangulate_polygon(vertices, rings)
-        tris.append(t)
-        faces.append(np.full(len(t), i, dtype=np.int64))
+    all_rings = [s.rings if hasattr(s, "rings") else s for s in surfaces]
+    tris: list = [None] * len(all_rings)
+    # single-ring faces, most of them walls: those clearly convex are fanned in one go per
+    # vertex count; the others (and any close call) go through triangulate_polygon
+    by_len: dict[int, list] = {}
+    for i, rings in enumerate(all_rings):
+        if len(rings) == 1 and 3 <= len(rings[0]) <= _FAN_MAX:
+            by_len.setdefault(len(rings[0]), []).append(i)
+    for k, idx in by_len.items():
+        ext = np.array([np.asarray(all_rings[i][0], dtype=np.int64).reshape(-1) for i in idx])
+        fan = _clear_fans(vertices[ext])
+        if not fan.any():
+            continue
+        e = ext[fan]
+        t = np.stack([np.repeat(e[:, :1], k - 2, axis=1), e[:, 1:-1], e[:, 2:]], axis=-1)
+        for j, i in enumerate(np.asarray(idx)[fan]):
+            tris[i] = t[j]
+    faces = []
+    for i, rings in enumerate(all_rings):
+        if tris[i] is None:
+            tris[i] = triangulate_polygon(vertices, rings)
+        faces.append(np.full(len(tris[i]), i, dtype=np.int64))
     if not tris:
         return np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
     return np.concatenate(tris), np.concatenate(faces)
+
+
+#: largest ring fanned by :func:`triangulate_surfaces`' batched path
+_FAN_MAX = 8
+
+
+def _clear_fans(p):
+    """Which rings ``p`` (F, k, 3) :func:`triangulate_polygon` surely fans.
+
+    A ring is fanned there when its area is not negligible and it is strictly
+    convex in its plane (or a triangle). Here only rings whose every turn is
+    convex by a margin far above rounding (sine of the turn > 1e-6, area well
+    above the threshold) count, so the answer is the one the per-face test
+    gives; rings near a straight angle are left to that test.
+    """
+    q = np.concatenate([p[:, 1:], p[:, :1]], axis=1)
+    d, s = p - q, p + q
+    n = np.stack([np.sum(d[..., 1] * s[..., 2], axis=1), np.sum(d[..., 2] * s[..., 0], axis=1),
+                  np.sum(d[..., 0] * s[..., 1], axis=1)], axis=1)
+    area2 = np.sqrt(dot3(n, n))
+    ok = np.isfinite(area2) & (area2 > 1e-9)
+    if p.shape[1] == 3:
+        return ok
+    u, v = plane_bases(np.where(ok[:, None], n, 1.0))
+    p2 = np.stack([dot3(p, u[:, None, :]), dot3(p, v[:, None, :])], axis=-1)
+    d1 = np.concatenate([p2[:, 1:], p2[:, :1]], axis=1) - p2
+    d2 = np.concatenate([d1[:, 1:], d1[:, :1]], axis=1)
+    cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+    lens = np.sqrt(np.sum(d1 * d1, axis=-1))
+    margin = 1e-6 * lens * np.concatenate([lens[:, 1:], lens[:, :1]], axis=1)
+    return ok & np.all(cross > margin, axis=1)
 
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

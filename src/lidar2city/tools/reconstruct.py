@@ -712,8 +712,10 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         if pending:
             with make_executor(workers, scheduler) as executor:
                 logger.info("%d blocks on %s", len(pending), executor.describe())
-                for out in run_blocks(executor, plan, pending):
-                    if not out.failed:  # a failed block is tried again by --resume
+                for k, out in enumerate(run_blocks(executor, plan, pending), start=1):
+                    # a failed block is tried again by --resume; the last one to finish
+                    # is not saved (nothing runs after it: no block would be spared)
+                    if not out.failed and k < len(pending):
                         journal.save(out.index, out)
                     take(out)
         ordered.check()

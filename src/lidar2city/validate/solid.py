@@ -364,10 +364,19 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
         ti, tj = corners[ii], corners[jj]
         h = np.zeros(len(ii), dtype=bool)
         for (A, B, kb) in ((ti, tj, jj), (tj, ti, ii)):
-            nb = (tri_n[kb], tri_nl[kb])
+            nb, nlb = tri_n[kb], tri_nl[kb]
+            # an edge of A crosses B only when A has corners on both sides of B's plane
+            # (the same signed distances as the crossing test's): test those pairs only
+            d = [dot3(A[:, e] - B[:, 0], nb) for e in range(3)]
+            hi_d = np.maximum(np.maximum(d[0], d[1]), d[2])
+            lo_d = np.minimum(np.minimum(d[0], d[1]), d[2])
+            sel = np.flatnonzero((hi_d > eps) & (lo_d < -eps) & (nlb > 0))
+            if len(sel) == 0:
+                continue
+            As, Bs, ns = A[sel], B[sel], (nb[sel], nlb[sel])
             for e in range(3):
-                h |= _segments_cross_triangles(A[:, e], A[:, (e + 1) % 3], B[:, 0], B[:, 1],
-                                               B[:, 2], eps, nb)
+                h[sel] |= _segments_cross_triangles(As[:, e], As[:, (e + 1) % 3], Bs[:, 0],
+                                                    Bs[:, 1], Bs[:, 2], eps, ns)
         hits[s:s + chunk] = h
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}

@@ -1,0 +1,81 @@
+"""The sqlite3 GeoPackage reader gives what GDAL gives, or steps aside (None)."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import numpy as np
+import pytest
+import shapely
+
+from lidar2city.io.gpkg import read_gpkg_raw
+from lidar2city.io.vector import read_footprints, write_polygons
+
+pyogrio_raw = pytest.importorskip("pyogrio.raw")
+
+
+def _same_as_gdal(path, **kw):
+    ogr_kw = dict(kw)
+    if "fids" in ogr_kw:
+        ogr_kw["fids"] = np.asarray(ogr_kw["fids"], dtype=np.int64)
+    a = pyogrio_raw.read(str(path), return_fids=True, force_2d=True, **ogr_kw)
+    b = read_gpkg_raw(path, **kw)
+    assert b is not None
+    assert a[0]["crs"] == b[0]["crs"]
+    assert list(a[0]["fields"]) == list(b[0]["fields"])
+    assert a[1].dtype == b[1].dtype and np.array_equal(a[1], b[1])
+    ga = shapely.from_wkb(a[2])
+    gb = shapely.force_2d(shapely.from_wkb(b[2]))
+    assert list(shapely.to_wkb(ga)) == list(shapely.to_wkb(gb))
+    for x, y in zip(a[3], b[3], strict=True):
+        assert x.dtype == y.dtype
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f")
+        assert [type(v) for v in x] == [type(v) for v in y]
+    return b
+
+
+@pytest.mark.parametrize(("kw", "count"), [({}, 132), ({"fids": [5, 3, 100]}, 3),
+                                           ({"skip_features": 10, "max_features": 20}, 20),
+                                           ({"skip_features": 130, "max_features": 50}, 2)])
+def test_delft_footprints_as_gdal_reads_them(data, kw, count):
+    b = _same_as_gdal(data / "delft" / "footprints_bgt.gpkg", **kw)
+    assert len(b[1]) == count
+
+
+def test_null_reals_are_nan_as_in_gdal(data):
+    b = _same_as_gdal(data / "alexandria" / "footprints_west.gpkg")
+    assert np.isnan(b[3][0]).sum() == 2
+
+
+def test_several_layers_or_unknown_layer_step_aside(data):
+    assert read_gpkg_raw(data / "delft" / "bgt_terrain.gpkg") is None
+    assert read_gpkg_raw(data / "delft" / "footprints_bgt.gpkg", layer="nope") is None
+    assert read_gpkg_raw(data / "delft" / "footprints_bgt.gpkg", fids=[1, 99999]) is None
+
+
+def test_unmapped_types_step_aside_and_read_footprints_still_reads(tmp_path):
+    from pyproj import CRS
+
+    path = tmp_path / "fp.gpkg"
+    sq = shapely.box(0, 0, 10, 8)
+    write_polygons(path, [sq, shapely.box(20, 0, 30, 5)], {"id": ["a", "b"]}, origin=(100.0, 200.0),
+                   crs=CRS.from_epsg(28992))
+    assert read_gpkg_raw(path) is not None
+    fps, crs = read_footprints(path)
+    assert fps.ids == ["a", "b"] and crs.to_epsg() == 28992
+    assert shapely.equals(fps.geometries[0], shapely.box(100, 200, 110, 208))
+    with sqlite3.connect(path) as con:  # a DATE column: GDAL's mapping is GDAL's business
+        table = con.execute("SELECT table_name FROM gpkg_contents").fetchone()[0]
+        con.execute(f'ALTER TABLE "{table}" ADD COLUMN "built" DATE')
+    con.close()
+    assert read_gpkg_raw(path) is None
+    fps2, _ = read_footprints(path)  # read through GDAL instead
+    assert fps2.ids == ["a", "b"]
+    assert shapely.equals(fps2.geometries[1], fps.geometries[1])
+
+
+def test_not_a_geopackage_steps_aside(tmp_path):
+    bad = tmp_path / "x.gpkg"
+    bad.write_bytes(b"not sqlite")
+    assert read_gpkg_raw(bad) is None
+    assert read_gpkg_raw(tmp_path / "x.geojson") is None
