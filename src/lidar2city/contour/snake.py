@@ -284,7 +284,7 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     Energy of a contour ``v(s)`` (Kass et al. 1988 internal terms)::
 
         E = integral alpha |v'|^2 + beta |v''|^2
-              + gamma E_GVF + mu E_RVE + epsilon E_AVE  ds
+              + gamma E_GVF + mu E_RVE + epsilon E_AVE + anchor E_start  ds
 
     External forces per vertex:
 
@@ -328,6 +328,19 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
         Height above ground (m), finite.
     alpha, beta, gamma, mu, epsilon : float
         The five energy weights (>= 0).
+    anchor : float
+        Weight (>= 0) of the anchor to the start: a normal force
+        ``-anchor * clip(start_distance(v), -1, 1)`` pulling each vertex back
+        to the zero level of ``start_distance``, so the image forces move a
+        good start only where they outweigh it.
+    start_distance : ndarray, shape (H, W), optional
+        Signed distance (pixels, > 0 outside) to the initial regions' edge;
+        the anchor is off without it.
+    offset : float
+        The image forces (GVF, regional and altitudinal) are sampled this
+        many pixels outside each vertex along its outward normal, so the
+        contour settles ``offset`` inside the edges they find (a
+        highest-point DSM shows roofs beyond the walls); 0: at the vertex.
     callback : callable, optional
         ``callback(iteration, contours)`` after each iteration (a list of copies).
 
@@ -349,7 +362,6 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
             raise InputError(f"weight {name} must be a finite number >= 0, got {w}")
     if tau <= 0 or spacing <= 0 or resample_every < 1 or max_iter < 0 or not offset >= 0:
         raise InputError("tau and spacing must be > 0, resample_every >= 1, max_iter and offset >= 0")
-
     image = np.asarray(image, dtype=np.float64)
     ndsm = np.asarray(ndsm, dtype=np.float64)
     gvf = np.asarray(gvf, dtype=np.float64)
@@ -399,12 +411,10 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
         if mu > 0 or epsilon > 0 or use_anchor:
             push = np.zeros(len(v))
             sid = rag.sid
-            if not (mu > 0 or epsilon > 0):
-                pass
-            elif local:
+            if local:
                 c_in, c_out, m_in, m_out, v_in, v_out, ok, _ = _sample(stats, at)
                 empty = ok < 0.5
-            else:
+            elif mu > 0 or epsilon > 0:
                 c_in, c_out = stats["c_in"][sid], stats["c_out"][sid]
                 m_in, m_out = stats["m_in"][sid], stats["m_out"][sid]
                 v_in, v_out = stats["v_in"][sid], stats["v_out"][sid]
