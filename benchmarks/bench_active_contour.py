@@ -3,7 +3,7 @@
 ``--area delft`` (default): the shared 0.5 m DSM / DTM of the Delft AHN3 tile
 and its 132 BGT footprints (issue 16); ``--area alexandria``: the 2 m west
 half and its 56 footprints (the coarse case, issue 7). The rows of the
-reference's extent are split in two: the GA tunes the five weights on the
+reference's extent are split in two: the GA tunes the six weights on the
 NORTH part only (fitness (FP + FN) / N over the reference neighbourhood,
 weights searched as log10 in [-2, 1]); pixel metrics are reported on the
 SOUTH part, never seen by the tuning, for
@@ -39,8 +39,10 @@ Two scoring protocols, both reported:
 The rows "previous pipeline" use the initialisation and region statistics of
 the first version (edge-based initial contours without split, height cut or
 aspect test; one region mean
-per contour and a band outside it); the altitudinal force's two-sided
-normalisation is the current one.
+per contour and a band outside it; no anchor to the initial contour, image
+forces at the vertex); the altitudinal force's two-sided normalisation is the
+current one. The GA searches six weights: the five energies and the anchor
+that holds the contour near its (roof-region) start.
 
 Usage::
 
@@ -147,7 +149,8 @@ def main():
     cfg = ActiveContourConfig().with_weights(UNTUNED_WEIGHTS)
     prev = dataclasses.replace(cfg, init="edges", split_distance=0, relative_height=0.0,
                                min_aspect_coherence=0.0,
-                               local_sigma=0.0)
+                               local_sigma=0.0, force_offset=0.0, anchor=0.0)
+    prev_weights = {**UNTUNED_WEIGHTS, "anchor": 0.0}
     frame = PixelFrame(cell=cell)
     print(f"untuned weights {UNTUNED_WEIGHTS}")
     print(f"shipped default weights {DEFAULT_WEIGHTS}")
@@ -187,7 +190,7 @@ def main():
     preds = {}
     preds["previous pipeline: initial contours"] = rasterize_polygons(
         contours_to_polygons(scene_prev.contours, frame, simplify=0), shape, frame)
-    preds["previous pipeline: untuned weights"] = predict(scene_prev, UNTUNED_WEIGHTS, prev, frame, shape)
+    preds["previous pipeline: untuned weights"] = predict(scene_prev, prev_weights, prev, frame, shape)
     preds["initial contours (no snake)"] = rasterize_polygons(
         contours_to_polygons(scene.contours, frame, simplify=0), shape, frame)
     t0 = time.perf_counter()

@@ -18,7 +18,13 @@ Protocol (the BGT footprints cover only the two central blocks of the tile):
   of ``bench_active_contour.py`` (10 m around the references, minus
   above-ground pieces holding no reference pixel);
 * oracle: the reference footprints rasterised on the DSM grid, fitted as if
-  they were the segmented regions: what the fitting alone loses.
+  they were the segmented regions: what the fitting alone loses;
+* segmentation alone: the same regions' pixel outlines, not fitted
+  (``--regularize none``), and the pixel error budget of the fitted outlines
+  on the reference neighbourhood: false positives / negatives within one
+  cell of a reference edge (edge placement) and farther than two cells
+  (whole objects: trees, sheds and annexes without a footprint, missed low
+  annexes).
 
 Row houses are separate BGT footprints; a block fitted as one outline costs
 nothing in the per-area scores, but is not matched one-to-one.
@@ -48,6 +54,19 @@ def score(pred, ref, hull, tree):
     return (f"quality {am['quality']:.3f} (completeness {am['completeness']:.3f}, correctness "
             f"{am['correctness']:.3f}), matched IoU>=0.5 {mo['matched']}/{len(ref)}, aligned "
             f"{100 * al['aligned_share']:.1f} % ({len(touching)} predictions touching a reference)")
+
+
+def error_budget(pred, ref, dom):
+    """Pixel errors on ``dom`` split by their distance to the reference's edge."""
+    from scipy import ndimage
+
+    fp, fn = pred & ~ref & dom, ref & ~pred & dom
+    d_out = ndimage.distance_transform_edt(~ref)  # outside: cells to the nearest reference pixel
+    d_in = ndimage.distance_transform_edt(ref)  # inside: cells to the nearest non-reference pixel
+    return (f"FP {int(fp.sum())} px ({int((fp & (d_out <= 1)).sum())} within one cell of a "
+            f"reference edge, {int((fp & (d_out > 2)).sum())} farther than two cells), "
+            f"FN {int(fn.sum())} px ({int((fn & (d_in <= 1)).sum())} within one cell, "
+            f"{int((fn & (d_in > 2)).sum())} deeper than two cells)")
 
 
 def main(argv):
@@ -112,6 +131,16 @@ def main(argv):
         print(f"  pixels on the reference neighbourhood: kappa {m['kappa']:.4f}, OA "
               f"{m['overall_accuracy']:.4f}, PA {m['producers_accuracy']:.3f}, "
               f"UA {m['users_accuracy']:.3f}")
+        print(f"  error budget: {error_budget(pm, refm, dom)}")
+
+        raw = Path(tmp) / "raw.gpkg"
+        footprints_from_dsm(dsm, dtm=dtm, output=raw, regularize="none")
+        _, _, w3, _ = pyogrio.raw.read(str(raw))
+        g3 = shapely.from_wkb(w3)
+        g3 = g3[~shapely.is_empty(g3) & ~shapely.is_missing(g3)]
+        rpred = [max(shapely.get_parts(g), key=lambda p: p.area) for g in g3]
+        print(f"segmentation alone (the same regions' pixel outlines, not fitted): "
+              f"{score(rpred, ref, hull, tree)}")
 
 
 if __name__ == "__main__":

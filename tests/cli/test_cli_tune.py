@@ -42,8 +42,8 @@ def test_tune_writes_weights(runner, tmp_path):
     assert res.exit_code == 0, res.output
     data = tomllib.loads(out.read_text())
     w = data["active_contour"]
-    assert set(w) == {"alpha", "beta", "gamma", "mu", "epsilon"}
-    assert all(0.0 <= v <= 3.0 for v in w.values())
+    assert set(w) == {"alpha", "beta", "gamma", "mu", "epsilon", "anchor"}
+    assert all(0.01 - 1e-9 <= v <= 10.0 + 1e-9 for v in w.values())  # the log scale: 10 ** [-2, 1]
     assert data["tune"]["cost"] <= data["tune"]["default_cost"]
     assert data["tune"]["cost"] < 0.02   # three clean boxes: almost every pixel right
     assert (d / "ga.png").stat().st_size > 1000

@@ -114,10 +114,18 @@ def test_outlines_of_a_synthetic_building_in_metres():
     polys = active_contour_outlines(dsm, dsm, cell=0.5, transform=(0.5, 0, 100.0, 0, -0.5, 200.0),
                                     origin=(100.0, 200.0))
     assert len(polys) == 1
-    # the building spans cols 12..40, rows 15..45 of 0.5 m pixels
-    truth = shapely.box(6.0, -22.5, 20.0, -7.5)
+    # the building spans cols 12..40, rows 15..45 of 0.5 m pixels; the outline is
+    # drawn 0.5 m inside the DSM's roof edge (edge_inset, force_offset: the walls of
+    # a highest-point DSM with eaves)
+    truth = shapely.box(6.5, -22.0, 19.5, -8.0)
     p = polys[0]
     assert p.intersection(truth).area / p.union(truth).area > 0.9
+    # without the offsets, on the DSM's edge
+    cfg = ActiveContourConfig(force_offset=0.0, anchor=0.0)
+    polys = active_contour_outlines(dsm, dsm, cell=0.5, transform=(0.5, 0, 100.0, 0, -0.5, 200.0),
+                                    origin=(100.0, 200.0), config=cfg)
+    edge = shapely.box(6.0, -22.5, 20.0, -7.5)
+    assert polys[0].intersection(edge).area / polys[0].union(edge).area > 0.9
 
 
 def test_outlines_do_not_mutate_inputs_and_ortho_is_used():
@@ -165,7 +173,9 @@ def test_weights_validated():
         ActiveContourConfig().with_weights([1, 2, 3])
     with pytest.raises(ConfigError):
         ActiveContourConfig().with_weights({"delta": 1.0})
-    assert ActiveContourConfig().with_weights([0, 1, 2, 3, 0]).mu == 3
+    assert ActiveContourConfig().with_weights([0, 1, 2, 3, 0, 1]).mu == 3
+    with pytest.raises(ConfigError):  # the anchor is the sixth weight
+        ActiveContourConfig().with_weights([0, 1, 2, 3, 0])
 
 
 @settings(max_examples=30, deadline=None)
@@ -216,3 +226,30 @@ def test_evaluation_domain_excludes_border_and_cut_objects():
     assert not dom[30:38, 2:8].any()
     with pytest.raises(InputError):
         evaluation_domain(np.zeros((5, 5), bool))
+
+
+def test_anchor_keeps_a_good_start_and_offset_moves_the_edge_inward():
+    from lidar2city.contour.outlines import start_signed_distance
+
+    _, sc = _scene()
+    start = resample_contour(np.array([[14.5, 11.5], [14.5, 39.5], [44.5, 39.5], [44.5, 11.5]]), 1.0)
+    region = np.zeros((60, 60), int)
+    region[ROWS, COLS] = 1
+    sd = start_signed_distance(region)
+    assert sd[ROWS, COLS].max() < 0 < sd[0, 0]
+    assert sd[15, 20] == pytest.approx(-0.5) and sd[14, 20] == pytest.approx(0.5)
+    # a stiff snake without image forces shrinks; the anchor holds it on its start
+    kw = dict(alpha=2.0, beta=2.0, gamma=0.0, mu=0.0, epsilon=0.0, max_iter=100)
+    free = evolve_contours([start], sc.gvf, sc.image, sc.ndsm, **kw)[0]
+    held = evolve_contours([start], sc.gvf, sc.image, sc.ndsm, anchor=3.0, start_distance=sd, **kw)[0]
+    assert _iou(free) < 0.9 < 0.97 < _iou(held)
+    # image forces felt 2 px outside each vertex: the contour settles 2 px inside the edge
+    kw = dict(alpha=0.2, beta=0.2, gamma=1.0, mu=1.0, epsilon=1.0, max_iter=300)
+    at_edge = evolve_contours([start], sc.gvf, sc.image, sc.ndsm, **kw)[0]
+    inside = evolve_contours([start], sc.gvf, sc.image, sc.ndsm, offset=2.0, **kw)[0]
+    assert _iou(at_edge) > 0.93
+    shrunk = shapely.box(13.5, 16.5, 37.5, 42.5)
+    p = shapely.make_valid(shapely.Polygon(inside[:, ::-1]))
+    assert p.intersection(shrunk).area / p.union(shrunk).area > 0.9
+    with pytest.raises(InputError):
+        evolve_contours([start], sc.gvf, sc.image, sc.ndsm, offset=-1.0)

@@ -89,7 +89,7 @@ def test_tune_weights_on_a_synthetic_dsm_is_reproducible_across_jobs():
     b = tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=2, n_jobs=2)
     assert a == b
     weights, history = a
-    assert set(weights) == {"alpha", "beta", "gamma", "mu", "epsilon"}
+    assert set(weights) == {"alpha", "beta", "gamma", "mu", "epsilon", "anchor"}
     assert history[-1]["best_cost"] < 0.05
     with pytest.raises(InputError):
         tune_weights(dsm, dsm, ref[:10], cell=1.0)

@@ -31,7 +31,7 @@ _path = click.Path(dir_okay=False)
               help="Genes: log10 of the weights (0.01 to 10) or the weights themselves (0 to 3).")
 def command(dsm, dtm, ortho, reference, output, seed, population, generations, jobs, objective,
             config_path, figure, domain, scale):
-    """Tune the five active-contour weights (alpha, beta, gamma, mu, epsilon) with a genetic algorithm.
+    """Tune the active-contour weights (alpha, beta, gamma, mu, epsilon, anchor) with a genetic algorithm.
 
     The cost is the share of wrongly classified pixels, (FP + FN) / N, of the
     snake outlines against the reference buildings. Writes the weights as TOML

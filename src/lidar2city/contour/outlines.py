@@ -19,13 +19,15 @@ from .snake import evolve_contours
 logger = logging.getLogger(__name__)
 
 __all__ = ["WEIGHT_NAMES", "WEIGHT_BOUNDS", "LOG_WEIGHT_BOUNDS", "DEFAULT_WEIGHTS", "UNTUNED_WEIGHTS", "ActiveContourConfig", "normalize_weights",
-           "ContourScene", "prepare_scene", "run_scene", "contours_to_polygons",
+           "ContourScene", "start_signed_distance", "prepare_scene", "run_scene", "contours_to_polygons",
            "active_contour_outlines"]
 
 #: Initial contour choices (``ActiveContourConfig.init``).
 INITIALISATIONS = ("roofs", "edges")
-#: The five energy weights, in chromosome order.
-WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
+#: The energy weights, in chromosome order: Kass's elasticity and rigidity, the GVF
+#: edge force, the regional and altitudinal variance energies and the anchor to the
+#: initial contour.
+WEIGHT_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon", "anchor")
 #: Range searched by the genetic algorithm for every weight.
 WEIGHT_BOUNDS = (0.0, 3.0)
 #: Range of log10 of every weight searched by the GA on its (default) log scale: 0.01 to 10.
@@ -36,9 +38,11 @@ LOG_WEIGHT_BOUNDS = (-2.0, 1.0)
 #: split / half-height / aspect-coherence initialisation and localised region
 #: statistics (benchmarks/bench_active_contour.py). Retune for other data with
 #: ``lidar2city tune``.
-DEFAULT_WEIGHTS = {"alpha": 0.488, "beta": 0.206, "gamma": 1.879, "mu": 2.896, "epsilon": 1.817}
+#: The anchor (issue 16) is hand-set to 1, as in the untuned weights.
+DEFAULT_WEIGHTS = {"alpha": 0.488, "beta": 0.206, "gamma": 1.879, "mu": 2.896, "epsilon": 1.817,
+                   "anchor": 1.0}
 #: Hand-set weights before tuning (kept as the untuned baseline of the benchmark).
-UNTUNED_WEIGHTS = {"alpha": 0.2, "beta": 0.2, "gamma": 1.0, "mu": 1.0, "epsilon": 1.0}
+UNTUNED_WEIGHTS = {"alpha": 0.2, "beta": 0.2, "gamma": 1.0, "mu": 1.0, "epsilon": 1.0, "anchor": 1.0}
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,8 @@ class ActiveContourConfig:
     gamma: float = field(DEFAULT_WEIGHTS["gamma"], "Weight of the gradient-vector-flow edge force.")
     mu: float = field(DEFAULT_WEIGHTS["mu"], "Weight of the regional variance energy (image or DSM inside vs outside).")
     epsilon: float = field(DEFAULT_WEIGHTS["epsilon"], "Weight of the altitudinal variance energy (nDSM inside vs outside).")
+    anchor: float = field(DEFAULT_WEIGHTS["anchor"], "Weight of the anchor to the initial regions: a normal force toward the initial region's edge, proportional to the signed distance from it (pixels, clipped to 1), so the image forces move a good start only where they agree (0: off).")
+    force_offset: float | None = field(None, "The image forces (GVF, regional and altitudinal) act on each vertex from this distance (m) outside it: a DSM keeping the highest point per cell shows roofs reaching half a cell beyond the walls on average, and eaves overhang them; None: the inset the initial regions had (the roof regions' edge_inset as applied at this cell size, 0 for init='edges'); 0: at the vertex.")
     min_height: float = field(3.0, "Candidate building pixels are higher than this above the terrain (m).")
     max_roughness: float = field(1.0, "Regions whose median roughness index (terrain ruggedness / cell) exceeds this are vegetation.")
     min_area: float = field(20.0, "Smallest building region kept (m2).")
@@ -81,6 +87,8 @@ class ActiveContourConfig:
             w = getattr(self, name)
             if not np.isfinite(w) or w < 0:
                 raise ConfigError(f"active_contour.{name}: must be >= 0, got {w}")
+        if self.force_offset is not None and not (np.isfinite(self.force_offset) and self.force_offset >= 0):
+            raise ConfigError(f"active_contour.force_offset: must be >= 0, got {self.force_offset}")
         for name in ("tau", "spacing", "max_step", "tol", "band", "gvf_mu"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"active_contour.{name}: must be > 0, got {getattr(self, name)}")
@@ -110,7 +118,7 @@ class ActiveContourConfig:
 
 
 def normalize_weights(weights) -> dict:
-    """``{name: float}`` for the five weights from a mapping or a sequence in WEIGHT_NAMES order."""
+    """``{name: float}`` for the weights from a mapping or a sequence in WEIGHT_NAMES order."""
     if weights is None:
         return dict(DEFAULT_WEIGHTS)
     if isinstance(weights, dict):
@@ -146,8 +154,14 @@ class ContourScene:
         Intensity of the regional term (grey orthoimage, or the DSM).
     ndsm : ndarray (H, W)
         Height above terrain, NaN filled.
+    start_distance : ndarray (H, W)
+        Signed distance (pixels) to the edge of the initial regions, > 0
+        outside them: the anchor energy's field.
     cell : float
         Pixel size (m): the configuration's lengths in metres become pixels.
+    inset : float
+        Distance (m) by which the initial regions were moved inside the
+        DSM's roof edges (``roof_regions``' ``edge_inset`` as applied).
     """
 
     contours: list
@@ -155,7 +169,9 @@ class ContourScene:
     gvf: np.ndarray
     image: np.ndarray
     ndsm: np.ndarray
+    start_distance: np.ndarray | None = None
     cell: float = 1.0
+    inset: float = 0.0
 
 
 def _grey(ortho, shape):
@@ -165,6 +181,31 @@ def _grey(ortho, shape):
     if o.shape != shape:
         raise InputError(f"orthoimage shape {o.shape} differs from the DSM's {shape}; resample it onto the DSM grid")
     return _filled(o)
+
+
+def start_signed_distance(labels) -> np.ndarray:
+    """Signed distance (pixels) to the edge of the hole-filled regions, > 0 outside.
+
+    The edge is the pixel border between a region and the background: a
+    boundary pixel centre is at -0.5, its outside neighbour at +0.5, so the
+    bilinear zero crossing lies on the border, as the initial contour does
+    (iso-line 0.5 of the region mask).
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, > 0 regions.
+
+    Returns
+    -------
+    ndarray of float64, shape (H, W)
+    """
+    mask = ndi.binary_fill_holes(np.asarray(labels) > 0)
+    if not mask.any():
+        return np.full(mask.shape, 1.0)
+    inside = ndi.distance_transform_edt(mask)
+    outside = ndi.distance_transform_edt(~mask)
+    return np.where(mask, 0.5 - inside, outside - 0.5)
 
 
 def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfig | None = None,
@@ -195,9 +236,12 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
     if cfg.init == "roofs":
         from ..segment.dsm import RoofRegionsConfig, roof_regions
 
-        labels, _ = roof_regions(dsm, ndsm, cell=cell,
-                                 **dataclasses.asdict(roof_config or RoofRegionsConfig()))
+        rc = roof_config or RoofRegionsConfig()
+        labels, _ = roof_regions(dsm, ndsm, cell=cell, **dataclasses.asdict(rc))
+        # inset_regions drops the pixel rings k with (k - 1/2) cell <= edge_inset
+        inset = np.floor(rc.edge_inset / cell + 0.5 + 1e-9) * cell
     else:
+        inset = 0.0
         labels = building_regions(z, nd, cell=cell, min_height=cfg.min_height,
                                   max_roughness=cfg.max_roughness, min_area=cfg.min_area,
                                   split_distance=int(round(cfg.split_distance / cell)),
@@ -223,7 +267,8 @@ def prepare_scene(dsm, ndsm, *, ortho=None, cell=1.0, config: ActiveContourConfi
         image = ndi.gaussian_filter(image, cfg.smooth)
         nd = ndi.gaussian_filter(nd, cfg.smooth)
     logger.info("%d initial contours", len(contours))
-    return ContourScene(contours, labels, g, image, nd, float(cell))
+    return ContourScene(contours, labels, g, image, nd, start_signed_distance(labels), float(cell),
+                        float(inset))
 
 
 def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig | None = None,
@@ -235,9 +280,11 @@ def run_scene(scene: ContourScene, weights=None, *, config: ActiveContourConfig 
     return evolve_contours(
         scene.contours, scene.gvf, scene.image, scene.ndsm,
         alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma, mu=cfg.mu, epsilon=cfg.epsilon,
-        tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
+        anchor=cfg.anchor, start_distance=scene.start_distance, tau=cfg.tau, max_step=cfg.max_step, step_decay=cfg.step_decay, max_iter=cfg.max_iter, tol=cfg.tol,
         spacing=cfg.spacing, resample_every=cfg.resample_every, band=cfg.band / scene.cell,
-        local_sigma=cfg.local_sigma / scene.cell, callback=callback)
+        local_sigma=cfg.local_sigma / scene.cell,
+        offset=(scene.inset if cfg.force_offset is None else cfg.force_offset) / scene.cell,
+        callback=callback)
 
 
 def contours_to_polygons(contours, frame: PixelFrame, *, simplify=0.5, min_area=0.0) -> list:
@@ -282,7 +329,7 @@ def active_contour_outlines(dsm, ndsm, *, ortho=None, weights=None, cell=1.0, tr
     ortho : ndarray, shape (H, W) or (B, H, W), optional
         Orthoimage on the DSM grid for the regional variance energy.
     weights : mapping or 5-sequence, optional
-        ``alpha, beta, gamma, mu, epsilon``; default: those of ``config``.
+        ``alpha, beta, gamma, mu, epsilon, anchor``; default: those of ``config``.
     cell : float
         Pixel size (m); used for areas and, without ``transform``, coordinates.
     transform : affine.Affine, optional

@@ -277,13 +277,14 @@ def local_region_fields(contours, shape, image, ndsm, *, sigma=3.0, var_floor=0.
 def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.0, mu=1.0,
                     epsilon=1.0, tau=0.5, max_step=1.0, step_decay=0.9, max_iter=200, tol=0.02,
                     spacing=1.0, resample_every=5, band=3.0, var_floor=0.25, local_sigma=0.0,
-                    min_vertices=8, callback=None) -> list:
+                    min_vertices=8, anchor=0.0, start_distance=None, offset=0.0,
+                    callback=None) -> list:
     """Evolve closed contours by minimising the snake energy.
 
     Energy of a contour ``v(s)`` (Kass et al. 1988 internal terms)::
 
         E = integral alpha |v'|^2 + beta |v''|^2
-              + gamma E_GVF + mu E_RVE + epsilon E_AVE  ds
+              + gamma E_GVF + mu E_RVE + epsilon E_AVE + anchor E_start  ds
 
     External forces per vertex:
 
@@ -327,6 +328,19 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
         Height above ground (m), finite.
     alpha, beta, gamma, mu, epsilon : float
         The five energy weights (>= 0).
+    anchor : float
+        Weight (>= 0) of the anchor to the start: a normal force
+        ``-anchor * clip(start_distance(v), -1, 1)`` pulling each vertex back
+        to the zero level of ``start_distance``, so the image forces move a
+        good start only where they outweigh it.
+    start_distance : ndarray, shape (H, W), optional
+        Signed distance (pixels, > 0 outside) to the initial regions' edge;
+        the anchor is off without it.
+    offset : float
+        The image forces (GVF, regional and altitudinal) are sampled this
+        many pixels outside each vertex along its outward normal, so the
+        contour settles ``offset`` inside the edges they find (a
+        highest-point DSM shows roofs beyond the walls); 0: at the vertex.
     callback : callable, optional
         ``callback(iteration, contours)`` after each iteration (a list of copies).
 
@@ -341,12 +355,13 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     Xu, C., Prince, J. L. (1998). Snakes, shapes, and gradient vector flow. IEEE TIP 7(3).
     Chan, T. F., Vese, L. A. (2001). Active contours without edges. IEEE TIP 10(2).
     """
-    weights = {"alpha": alpha, "beta": beta, "gamma": gamma, "mu": mu, "epsilon": epsilon}
+    weights = {"alpha": alpha, "beta": beta, "gamma": gamma, "mu": mu, "epsilon": epsilon,
+               "anchor": anchor}
     for name, w in weights.items():
         if not np.isfinite(w) or w < 0:
             raise InputError(f"weight {name} must be a finite number >= 0, got {w}")
-    if tau <= 0 or spacing <= 0 or resample_every < 1 or max_iter < 0:
-        raise InputError("tau and spacing must be > 0, resample_every >= 1, max_iter >= 0")
+    if tau <= 0 or spacing <= 0 or resample_every < 1 or max_iter < 0 or not offset >= 0:
+        raise InputError("tau and spacing must be > 0, resample_every >= 1, max_iter and offset >= 0")
     image = np.asarray(image, dtype=np.float64)
     ndsm = np.asarray(ndsm, dtype=np.float64)
     gvf = np.asarray(gvf, dtype=np.float64)
@@ -355,14 +370,21 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
         raise InputError(f"image {shape}, ndsm {ndsm.shape} and gvf {gvf.shape} do not match")
     if not len(contours):
         return []
-    fields = np.stack([image, ndsm, gvf[0], gvf[1]])
+    use_anchor = anchor > 0 and start_distance is not None
+    if use_anchor:
+        start_distance = np.asarray(start_distance, dtype=np.float64)
+        if start_distance.shape != shape:
+            raise InputError(f"start_distance {start_distance.shape} and image {shape} do not match")
+        fields = np.stack([image, ndsm, gvf[0], gvf[1], start_distance])
+    else:
+        fields = np.stack([image, ndsm, gvf[0], gvf[1]])
     contours = [resample_contour(c, spacing, min_vertices=min_vertices) for c in contours]
     # a jagged contour must not grow without bound: at most 3 times its first vertex count
     caps = [3 * len(c) for c in contours]
     hi = np.array([shape[0] - 1, shape[1] - 1], dtype=np.float64)
     # the fixed point A v = F does not depend on the time step: scale it with the
     # external weights so the explicit external step stays stable for any weights
-    tau0 = tau / max(1.0, gamma + mu + epsilon)
+    tau0 = tau / max(1.0, gamma + mu + epsilon + (anchor if use_anchor else 0.0))
     tau, limit = tau0, max_step
     rag = _Ragged(contours)
     lu = rag.system(alpha, beta, tau)
@@ -377,23 +399,28 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     v = rag.v
     it = 0
     for it in range(1, max_iter + 1):
-        val, h, g_r, g_c = _sample(fields, v)
+        normal, _ = rag.outward_normals(v)
+        # the image forces act ``offset`` pixels outside the vertex (the roof edge a
+        # highest-point DSM shows lies outside the walls); the anchor at the vertex
+        at = v + offset * normal if offset > 0 else v
+        val, h, g_r, g_c = _sample(fields[:4], at)
         force = np.zeros_like(v)
         if gamma > 0:
             force[:, 0] += gamma * g_r
             force[:, 1] += gamma * g_c
-        if mu > 0 or epsilon > 0:
-            normal, _ = rag.outward_normals(v)
+        if mu > 0 or epsilon > 0 or use_anchor:
             push = np.zeros(len(v))
             sid = rag.sid
             if local:
-                c_in, c_out, m_in, m_out, v_in, v_out, ok, _ = _sample(stats, v)
+                c_in, c_out, m_in, m_out, v_in, v_out, ok, _ = _sample(stats, at)
                 empty = ok < 0.5
-            else:
+            elif mu > 0 or epsilon > 0:
                 c_in, c_out = stats["c_in"][sid], stats["c_out"][sid]
                 m_in, m_out = stats["m_in"][sid], stats["m_out"][sid]
                 v_in, v_out = stats["v_in"][sid], stats["v_out"][sid]
                 empty = (stats["n_in"][sid] == 0) | (stats["n_out"][sid] == 0)
+            if use_anchor:
+                push -= anchor * np.clip(_sample(fields[4:], v)[0], -1.0, 1.0)
             if mu > 0:
                 contrast = np.maximum((c_in - c_out) ** 2, 1e-12)
                 f_rve = ((val - c_out) ** 2 - (val - c_in) ** 2) / contrast

@@ -11,7 +11,7 @@ from ._atomic import atomic_path, check_input_file
 
 __all__ = ["read_weights", "write_weights", "read_stage_table"]
 
-_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon")
+_NAMES = ("alpha", "beta", "gamma", "mu", "epsilon", "anchor")
 
 
 def _load(path) -> dict:
@@ -33,7 +33,7 @@ def read_stage_table(path, stage) -> dict:
 
 
 def read_weights(path) -> dict:
-    """The five weights of a TOML file.
+    """The active-contour weights of a TOML file.
 
     The weights are read from an ``[active_contour]`` table (the run-config
     section of the stage, so a weights file is also a valid run config) or,

@@ -104,7 +104,7 @@ def footprints_active_contour(dsm, *, output, dtm=None, ortho=None, weights=None
     dict
         ``buildings`` (count), ``weights`` used, ``output``.
     """
-    from ..contour.outlines import ActiveContourConfig, active_contour_outlines
+    from ..contour.outlines import WEIGHT_NAMES, ActiveContourConfig, active_contour_outlines
     from ..io.vector import write_polygons
 
     cfg = config or ActiveContourConfig()
@@ -122,7 +122,7 @@ def footprints_active_contour(dsm, *, output, dtm=None, ortho=None, weights=None
     fields = {"id": np.arange(1, len(polys) + 1, dtype=np.int64),
               "area_m2": np.array([round(p.area, 2) for p in polys], dtype=np.float64)}
     write_polygons(output, polys, fields, origin=origin, crs=r.crs, xy_unit=r.xy_unit)
-    used = {k: getattr(cfg, k) for k in ("alpha", "beta", "gamma", "mu", "epsilon")}
+    used = {k: getattr(cfg, k) for k in WEIGHT_NAMES}
     return {"buildings": len(polys), "weights": used, "output": str(output)}
 
 
@@ -170,7 +170,7 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
         ``weights``, ``cost``, ``default_cost`` (the default weights' cost on the
         same pixels), ``history`` (per generation), ``stopped``.
     """
-    from ..contour.outlines import ActiveContourConfig, normalize_weights
+    from ..contour.outlines import WEIGHT_NAMES, ActiveContourConfig, normalize_weights
     from ..io.weights import write_weights
     from ..tune.ga import _init_worker, tune_weights, weights_cost
 
@@ -193,7 +193,7 @@ def tune(dsm, *, reference, output, dtm=None, ortho=None, seed=0, population=30,
 
     scene = prepare_scene(inp["dsm"], inp["ndsm"], ortho=inp["ortho"], cell=inp["cell"], config=cfg)
     _init_worker(scene, PixelFrame(cell=inp["cell"]), ref, domain, cfg, objective)
-    default = normalize_weights({k: getattr(cfg, k) for k in ("alpha", "beta", "gamma", "mu", "epsilon")})
+    default = normalize_weights({k: getattr(cfg, k) for k in WEIGHT_NAMES})
     default_cost = weights_cost(list(default.values()))
     if default_cost < cost:
         logger.warning("the default weights (cost %.5f) beat the tuned ones (%.5f) on the "

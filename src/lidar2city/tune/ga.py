@@ -1,4 +1,4 @@
-"""A continuous genetic algorithm (DEAP) for the five active-contour weights.
+"""A continuous genetic algorithm (DEAP) for the active-contour weights.
 
 Selection by roulette on ``1 / cost`` (probability inversely proportional to
 the cost), blend crossover, bounded Gaussian mutation, elitism; stops when 95 %
@@ -334,7 +334,7 @@ def _near_domain(scene, domain, *, margin):
 def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None, config=None,
                  population=30, generations=15, seed=None, n_jobs=1, cxpb=0.8, mutpb=0.04,
                  objective="cost", scale="log", callback=None):
-    """Learn the five active-contour weights from reference buildings.
+    """Learn the active-contour weights from reference buildings.
 
     The cost of a weight vector is the share of wrongly classified pixels,
     ``(FP + FN) / N``, of the rasterised snake outlines against
@@ -369,7 +369,7 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     Returns
     -------
     weights : dict
-        ``{alpha, beta, gamma, mu, epsilon}`` of the best chromosome.
+        ``{alpha, beta, gamma, mu, epsilon, anchor}`` of the best chromosome.
     history : list of dict
         Per generation records (see :class:`GAResult`), ``best_cost`` included.
     """
