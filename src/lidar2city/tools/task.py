@@ -7,7 +7,10 @@ none were given, and builds every building of the block with
 :func:`reconstruct_block` (the per-building step). The same spec and options
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
-in which blocks finish.
+in which blocks finish. :func:`trace_block` is the task of ``footprints`` on a
+folder of tiles (the same blocks, traced). Decoded tiles are shared by the
+blocks a process runs in turn and kept only while its next blocks read them
+(:func:`tile_keeper`).
 """
 
 from __future__ import annotations
@@ -28,8 +31,7 @@ from ..io.las import TileReader
 logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block",
-           "tile_keeper",
-           "TracedBlock", "trace_block"]
+           "tile_keeper", "TracedBlock", "trace_block"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +83,7 @@ class BlockOutput:
     no block does is an error); ``failed``: the task failed twice and every
     building carries that reason; ``worker_mb`` the peak resident memory of
     the process that ran it, ``cpu`` the CPU seconds that process spent on the
-block and ``worker`` which process it was (measures of the run, never written).
+    block and ``worker`` which process it was (measures of the run, never written).
     """
 
     index: int
@@ -121,6 +123,8 @@ class _TileCache:
         self.largest = max(self.largest, int(n))
 
     def get(self, tile, decode):
+        """The decoded ``tile`` (``decode()`` when it is not kept), keyed by its file's
+        path, size and modification time."""
         st = os.stat(tile.path)
         key = (tile.path, st.st_size, st.st_mtime_ns)
         with self.lock:
@@ -133,6 +137,7 @@ class _TileCache:
         return hit
 
     def start(self, specs) -> None:
+        """A run of ``specs`` begins: index which of its blocks read which tile."""
         later = {}
         for k, spec in enumerate(specs):
             if spec.world_box is not None:
@@ -169,6 +174,7 @@ class _TileCache:
                     self.tiles[key] = hit
 
     def stop(self) -> None:
+        """The run is over: drop every tile."""
         with self.lock:
             self.tiles.clear()
             self.later = None
