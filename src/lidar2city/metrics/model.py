@@ -207,8 +207,28 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
         best[idx] = _brute(points[idx], tris[cand]) ** 2
     best = np.sqrt(best)
     far = best > cell
-    if far.any():
-        best[far] = _brute(points[far], tris)
+    if not far.any():
+        return best
+    # a closer triangle lies within ``best`` of the point: its bbox meets the cells within
+    # ceil(best / cell) around it; search those (every triangle when nothing was found)
+    lost = far & ~np.isfinite(best)
+    if lost.any():
+        best[lost] = _brute(points[lost], tris)
+    far &= ~lost
+    fidx = np.flatnonzero(far)
+    fkey = pkey[fidx]
+    forder = np.argsort(fkey, kind="stable")
+    uk, gstart = np.unique(fkey[forder], return_index=True)
+    gstop = np.r_[gstart[1:], len(fidx)]
+    for k, a0, a1 in zip(uk, gstart, gstop, strict=True):
+        idx = fidx[forder[a0:a1]]
+        r = int(np.ceil(best[idx].max() / cell))
+        cx0, cy0 = divmod(int(k), int(ny))
+        cols = np.arange(cx0 - r, cx0 + r + 1) * ny
+        st = np.searchsorted(key, cols + (cy0 - r), side="left")
+        sp = np.searchsorted(key, cols + (cy0 + r), side="right")
+        cand = np.unique(np.concatenate([tri_id[x:y] for x, y in zip(st, sp, strict=True)]))
+        best[idx] = _brute(points[idx], tris[cand])
     return best
 
 

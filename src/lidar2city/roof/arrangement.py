@@ -649,23 +649,24 @@ def collapse_short_edges(faces, footprint, *, min_length):
         poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
         return None if poly.area <= 1e-9 else poly
 
-    unmoved = [rebuild_face(fi, {}) for fi in range(len(rings))]
+    # the faces as of the accepted moves; a cluster rebuilds and checks only the faces
+    # using its vertices (the others keep their edges), so each check is local
+    current = [rebuild_face(fi, {}) for fi in range(len(rings))]
+    tol = 1e-6 * max(total, 1)
 
-    def rebuild(mp):
-        # only the faces with a moved vertex change; the others are built once
-        moved = set().union(*(faces_of.get(k, ()) for k in mp))
-        out, idx = [], []
-        for fi in range(len(rings)):
-            poly = rebuild_face(fi, mp) if fi in moved else unmoved[fi]
-            if poly is None:
-                continue
-            out.append(poly)
-            idx.append(fi)
-        return out, idx
-
-    def ok(out):
-        return (all(f.is_valid for f in out) and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
-                and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
+    def local_ok(old, new):
+        # the moved faces stay valid and tile the same region as before (the rest of
+        # the partition is untouched, so the whole still tiles the footprint)
+        if not all(f.is_valid for f in new):
+            return False
+        a_old = sum(f.area for f in old)
+        if abs(sum(f.area for f in new) - a_old) >= tol:
+            return False
+        u_new = shapely.union_all(new) if new else shapely.Polygon()
+        if abs(u_new.area - a_old) >= tol:
+            return False
+        u_old = shapely.union_all(old) if old else shapely.Polygon()
+        return shapely.symmetric_difference(u_new, u_old).area < tol
 
     for members in sorted(clusters.values()):
         pts = np.array([xy_of[k] for k in members])
@@ -675,10 +676,15 @@ def collapse_short_edges(faces, footprint, *, min_length):
             continue
         target = xy_of[fixed[0]] if fixed else (pts[on][0] if on.any() else pts.mean(axis=0))
         trial = {**mapping, **{k: target for k in members}}
-        out, _ = rebuild(trial)
-        if ok(out):
+        touched = sorted(set().union(*(faces_of.get(k, ()) for k in members)))
+        rebuilt = {fi: rebuild_face(fi, trial) for fi in touched}
+        if local_ok([current[fi] for fi in touched if current[fi] is not None],
+                    [f for f in rebuilt.values() if f is not None]):
             mapping = trial
+            for fi, f in rebuilt.items():
+                current[fi] = f
     if not mapping:
         return list(faces), np.arange(len(faces))
-    out, idx = rebuild(mapping)
+    idx = [fi for fi in range(len(rings)) if current[fi] is not None]
+    out = [current[fi] for fi in idx]
     return [shapely.normalize(f) for f in out], np.asarray(idx, dtype=np.int64)
