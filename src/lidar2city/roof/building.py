@@ -418,14 +418,24 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     return solid, faces, face_labels, planes_f, info
 
 
-def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
+#: the largest exact roof snake solve (table elements, about 1 CPU second per 1e8): the
+#: roof graph of a block of many houses is too wide for it and keeps its simplified faces
+SNAKE_MAX_WORK = 1e8
+
+
+def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2,
+                  max_work=SNAKE_MAX_WORK):
     """The 2-D snake over the whole roof topology graph at once (seed step 5).
 
     The inner vertices of the partition move to the global minimum of
     E = C_Dir E_Dir + C_Dis E_Dis (:func:`lidar2city.regularize.snake.adjust_planar_graph`);
     the footprint outline stays fixed (it is the given boundary). The deviation
     energy is measured against the raw label-grid boundaries. When the moved
-    graph is no longer a partition of the footprint the faces are kept as they were.
+    graph is no longer a partition of the footprint, or when the exact solve
+    would touch more than ``max_work`` table elements
+    (:func:`lidar2city.snake.solver.reduction_work`, checked before any energy
+    table is built: a large block's roof graph is too wide for it), the faces
+    are kept as they were (``snake_fallback``).
 
     Returns ``(faces, info)`` with the solver's reduction counts in ``info``.
     """
@@ -433,6 +443,7 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     from shapely.geometry import Polygon
 
     from ..regularize.snake import adjust_planar_graph
+    from ..snake.solver import reduction_work
     from .refine import _remove_spikes
     from .solid import _key
 
@@ -458,6 +469,12 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     e = np.array(sorted(edges), dtype=np.int64)
     e = e[~(fixed[e[:, 0]] & fixed[e[:, 1]])]
     segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in raw_chains if len(c) > 1])
+    # the exact solve grows with the graph's width (tables over several vertices of
+    # (2w+1)^2 states): a roof graph too wide for it keeps its simplified faces
+    work = reduction_work(np.where(fixed, 1, (2 * window + 1) ** 2), e)
+    if work > max_work:
+        logger.debug("roof snake skipped: ~%.3g table elements (limit %.3g)", work, max_work)
+        return faces, {"snake_fallback": True}
     new, info = adjust_planar_graph(xy, e, original_segments=segs, cell=cell, window=window,
                                     direction=direction, fixed=fixed)
     face_ids = [[keys[_key(p)] for ring in [f.exterior, *f.interiors]
