@@ -471,12 +471,12 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     stopped short of its junction; a polyline that meets nothing keeps its end.
     """
     import shapely
-    from shapely.geometry import LineString, MultiLineString
+    from shapely.geometry import LineString
 
     segments = [np.array(s, dtype=float) for s in segments]
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
-    everything = MultiLineString(rings + [s for s in segments if len(s) >= 2])
-    shapely.prepare(everything)
+    lines = np.asarray([LineString(c) for c in rings + [s for s in segments if len(s) >= 2]],
+                       dtype=object)
     rays, where = [], []
     for k, s in enumerate(segments):
         if len(s) < 2 or np.allclose(s[0], s[-1]):
@@ -492,12 +492,18 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     out = [s.copy() for s in segments]
     if not rays:
         return out
-    hits = shapely.intersection(np.asarray(rays, dtype=object), everything)
-    for hit, (k, i, d) in zip(hits, where, strict=True):
-        if hit.is_empty:
-            continue
-        c = shapely.get_coordinates(hit)
-        t = (c - segments[k][i]) @ d
+    # each ray against the lines whose boxes it meets (an index, not every line)
+    rays = np.asarray(rays, dtype=object)
+    ir, il = shapely.STRtree(lines).query(rays, predicate="intersects")
+    hits = shapely.intersection(rays[ir], lines[il])
+    coords, counts = shapely.get_coordinates(hits), shapely.get_num_coordinates(hits)
+    owner = np.repeat(ir, counts)  # sorted: the query returns the rays in order
+    if not len(owner):
+        return out
+    starts = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+    for a, b in zip(starts, np.r_[starts[1:], len(owner)], strict=True):
+        k, i, d = where[owner[a]]
+        t = (coords[a:b] - segments[k][i]) @ d
         out[k][i] = segments[k][i] + d * (t.min() + eps)
     return out
 
