@@ -519,9 +519,14 @@ def _cell_labels(cells, xyz, planes, cap):
     first = np.unique(ip, return_index=True)[1]
     ip, ic = ip[first], ic[first]
     counts = np.bincount(ic, minlength=n).astype(float)
-    res = np.abs(xyz[ip, 2:3] - (xyz[ip, 0:1] * planes[:, 0] + xyz[ip, 1:2] * planes[:, 1] + planes[:, 2]))
     cost = np.zeros((n, len(planes)))
-    np.add.at(cost, ic, np.minimum(res, cap))
+    # points by chunks: a block of many houses has ~1e4-1e5 points and ~1e2 planes
+    # (the same sums, added in the same order)
+    for s in range(0, len(ip), 8192):
+        p, c = ip[s:s + 8192], ic[s:s + 8192]
+        res = np.abs(xyz[p, 2:3] - (xyz[p, 0:1] * planes[:, 0] + xyz[p, 1:2] * planes[:, 1]
+                                     + planes[:, 2]))
+        np.add.at(cost, c, np.minimum(res, cap))
     labels = np.where(counts > 0, np.argmin(cost, axis=1), -1)
     return labels, counts
 
