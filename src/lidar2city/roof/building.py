@@ -224,12 +224,15 @@ def _nonmanifold_points(solid):
     return np.unique(np.round(solid.vertices[[e[0] for e in bad], :2], 6), axis=0)
 
 
-def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
+def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8,
+                    repair=True):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
     longest-shared neighbour's plane, until the shell is 2-manifold.
 
-    Returns ``(solid, relabelled)``, the number of faces that took another plane."""
+    Returns ``(solid, relabelled)``, the number of faces that took another plane. With
+    ``repair=False`` a shell with a saddle is returned at once with ``relabelled = 1``
+    (the caller has another partition to try: each repair round rebuilds the solid)."""
     import shapely
 
     face_labels = np.array(face_labels, copy=True)
@@ -238,6 +241,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         bad = _nonmanifold_points(solid)
         if not len(bad):
             return solid, r
+        if not repair:
+            return solid, 1
         p = bad[0]
         at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
@@ -407,12 +412,14 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
-    for faces, face_labels in variants:
+    for k, (faces, face_labels) in enumerate(variants):
         # collapsing short edges can pinch faces at different heights into a saddle; the
         # uncollapsed partition is used then rather than a face taking a neighbour's plane
+        # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2)
+        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
+                                            repair=k == len(variants) - 1)
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info
