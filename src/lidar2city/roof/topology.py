@@ -114,13 +114,18 @@ def _merge_small_regions(grid, inside, min_cells):
             if n == 0:
                 continue
             sizes = np.bincount(comp.ravel())
-            for c in np.flatnonzero(sizes[1:] < min_cells) + 1:
-                m = comp == c
-                ring = ndimage.binary_dilation(m) & ~m & inside
-                neigh = grid[ring]
+            small = np.flatnonzero(sizes[1:] < min_cells) + 1
+            objects = ndimage.find_objects(comp) if len(small) else []
+            for c in small:
+                # the region's box and one cell around it hold its whole ring
+                rs, cs = objects[c - 1]
+                win = (slice(max(rs.start - 1, 0), rs.stop + 1), slice(max(cs.start - 1, 0), cs.stop + 1))
+                m = comp[win] == c
+                ring = ndimage.binary_dilation(m) & ~m & inside[win]
+                neigh = grid[win][ring]
                 neigh = neigh[neigh != lab]
                 if len(neigh):
-                    out[m] = np.bincount(neigh).argmax()
+                    out[win][m] = np.bincount(neigh).argmax()
                     changed = True
         grid = out
         if not changed:
