@@ -252,19 +252,21 @@ class Viewer:
             self._load_points()
             if compute_rmse:
                 self._start_rmse()  # (forks before the server starts its threads)
-        self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
-        srv = self.server
-        srv.scene.set_up_direction("+z")
-        _plain_lighting(srv.scene)
-        d = float(max(self.extent[0], self.extent[1], 10.0))
-        centre = self.extent / 2
-        cam = srv.initial_camera
-        cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
-        cam.look_at = (centre[0], centre[1], 0.0)
-        self._build_gui()
-        self._draw_buildings()
-        if self.session is not None:
-            self._draw_points()
+        # the RMSEs may arrive while the GUI and scene are built: they wait for the lock
+        with self.lock:
+            self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
+            srv = self.server
+            srv.scene.set_up_direction("+z")
+            _plain_lighting(srv.scene)
+            d = float(max(self.extent[0], self.extent[1], 10.0))
+            centre = self.extent / 2
+            cam = srv.initial_camera
+            cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
+            cam.look_at = (centre[0], centre[1], 0.0)
+            self._build_gui()
+            self._draw_buildings()
+            if self.session is not None:
+                self._draw_points()
         return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
 
     def stop(self):
