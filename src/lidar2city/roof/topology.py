@@ -111,13 +111,20 @@ def _merge_small_regions(grid, inside, min_cells):
             if n == 0:
                 continue
             sizes = np.bincount(comp.ravel())
-            for c in np.flatnonzero(sizes[1:] < min_cells) + 1:
-                m = comp == c
-                ring = ndimage.binary_dilation(m) & ~m & inside
-                neigh = grid[ring]
+            small = np.flatnonzero(sizes[1:] < min_cells) + 1
+            if not len(small):
+                continue
+            boxes = ndimage.find_objects(comp)
+            for c in small:
+                # the component's box and one cell around it: all its dilation reaches
+                win = tuple(slice(max(s.start - 1, 0), min(s.stop + 1, size))
+                            for s, size in zip(boxes[c - 1], grid.shape, strict=True))
+                m = comp[win] == c
+                ring = ndimage.binary_dilation(m) & ~m & inside[win]
+                neigh = grid[win][ring]
                 neigh = neigh[neigh != lab]
                 if len(neigh):
-                    out[m] = np.bincount(neigh).argmax()
+                    out[win][m] = np.bincount(neigh).argmax()
                     changed = True
         grid = out
         if not changed:
