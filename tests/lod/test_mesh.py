@@ -44,3 +44,14 @@ def test_batched_triangulation_equals_face_by_face():
     assert np.array_equal(tris, np.concatenate(want))
     assert np.array_equal(face, np.repeat(np.arange(len(faces)), [len(t) for t in want]))
     assert len(want[-3]) == 0 and len(want[-2]) == 2
+
+
+def test_vertex_ids_exact_last_match_then_nearest():
+    """CDT corners map back to the last of equal vertices, else to the first nearest one."""
+    from lidar2city.lod.mesh import _vertex_ids
+
+    p2 = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [-0.0, 0.0], [0.0, 1.0]])
+    ids = np.array([10, 11, 12, 13, 14])
+    q = np.array([[0.0, 0.0], [1.0, 1.0], [0.9, 0.1], [0.5, 1.0], [0.0, 1.0]])
+    # (0, 0) twice (as 0.0 and -0.0): the later one; (0.5, 1) is as near 12 as 14: the first
+    assert _vertex_ids(p2, ids, q).tolist() == [13, 12, 11, 12, 14]

@@ -148,3 +148,23 @@ def test_bad_topology_option():
 
     with pytest.raises(ConfigError, match="lod22.topology"):
         Lod22Config(topology="magic")
+
+
+def test_components_match_scipy_numbering():
+    """Same-label cell components come numbered as scipy's connected_components numbers them."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from lidar2city.roof.arrangement import _components
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(1, 30))
+        adj = {}
+        for i, j in rng.integers(0, n, (2 * n, 2)):
+            if i < j:
+                adj[(int(i), int(j))] = 1.0
+        labels = rng.integers(-1, 3, n)
+        same = np.array([e for e in adj if labels[e[0]] == labels[e[1]]], dtype=np.int64).reshape(-1, 2)
+        g = coo_matrix((np.ones(len(same)), (same[:, 0], same[:, 1])), shape=(n, n))
+        assert np.array_equal(_components(n, adj, labels), connected_components(g, directed=False)[1])

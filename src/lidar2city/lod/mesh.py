@@ -134,24 +134,36 @@ def triangulate_polygon(vertices: np.ndarray, rings) -> np.ndarray:
     if len(tris) == 0:
         return np.zeros((0, 3), dtype=np.int64)
     coords = shapely.get_coordinates(tris).reshape(len(tris), -1, 2)[:, :3]
-    lookup = {(float(a), float(b)): int(i) for (a, b), i in zip(p2, allidx, strict=True)}
-    out = np.empty((len(tris), 3), dtype=np.int64)
-    keep = np.ones(len(tris), dtype=bool)
-    for t in range(len(tris)):
-        for j in range(3):
-            idx = lookup.get((float(coords[t, j, 0]), float(coords[t, j, 1])))
-            if idx is None:  # make_valid moved a vertex: fall back to the nearest one
-                d = np.sum((p2 - coords[t, j]) ** 2, axis=1)
-                idx = int(allidx[np.argmin(d)])
-            out[t, j] = idx
-        if len(set(out[t])) < 3:
-            keep[t] = False
+    out = _vertex_ids(p2, allidx, coords.reshape(-1, 2)).reshape(len(tris), 3)
+    keep = (out[:, 0] != out[:, 1]) & (out[:, 1] != out[:, 2]) & (out[:, 0] != out[:, 2])
     out = out[keep]
     c = coords[keep]
     signed = ((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
               - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
     flip = signed < 0
     out[flip] = out[flip][:, ::-1]
+    return out
+
+
+def _vertex_ids(p2, ids, q):
+    """``ids`` of the points of ``p2`` (n, 2) equal to each query point of ``q`` (m, 2).
+
+    Exact coordinate matches (the last of equal points when several are); a query
+    point matching none (make_valid moved it) takes its nearest point (the first
+    of equally near ones).
+    """
+    key = np.empty(len(p2), dtype=np.complex128)  # complex numbers sort as (x, y) pairs
+    key.real, key.imag = p2[:, 0], p2[:, 1]
+    qk = np.empty(len(q), dtype=np.complex128)
+    qk.real, qk.imag = q[:, 0], q[:, 1]
+    order = np.argsort(key, kind="stable")
+    pos = np.searchsorted(key[order], qk, side="right") - 1
+    hit = order[np.maximum(pos, 0)]
+    found = (pos >= 0) & (key[hit] == qk)
+    out = np.asarray(ids, dtype=np.int64)[hit]
+    for m in np.flatnonzero(~found):
+        d = np.sum((p2 - q[m]) ** 2, axis=1)
+        out[m] = ids[np.argmin(d)]
     return out
 
 

@@ -83,13 +83,27 @@ def _adjacency(cells):
 
 
 def _components(n, adj, labels):
-    """Connected components of same-label cells (array of component ids)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    """Connected components of same-label cells (array of component ids).
 
-    pairs = np.array([(i, j) for i, j in adj if labels[i] == labels[j]], dtype=np.int64).reshape(-1, 2)
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return connected_components(g, directed=False)[1]
+    Components are numbered in the order of their smallest cell index (as scipy's
+    connected_components numbers them); a union-find over the few hundred cells of
+    a roof, without building a sparse matrix per call.
+    """
+    parent = list(range(n))
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for i, j in adj:
+        if labels[i] == labels[j]:
+            a, b = find(i), find(j)
+            if a != b:  # the smaller index roots the component
+                parent[max(a, b)] = min(a, b)
+    roots = np.array([find(a) for a in range(n)], dtype=np.int64)
+    return np.unique(roots, return_inverse=True)[1].ravel()
 
 
 def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):

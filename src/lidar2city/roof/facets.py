@@ -188,11 +188,25 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
     return out, next_label
 
 
-def _refit(xyz, labels, n_labels, trim):
+def _refit(xyz, labels, n_labels, trim, cache=None):
+    """Trimmed least-squares plane and RMS of every facet, ``(planes (K, 3), rms (K,))``.
+
+    ``cache``: an optional dict kept across the calls of one segmentation (same
+    ``xyz`` and ``trim``); a facet whose point set was fitted before (merges and
+    renumbering leave most facets unchanged) takes that fit, which is the same
+    arithmetic on the same points.
+    """
     planes = np.zeros((n_labels, 3))
     rms = np.zeros(n_labels)
+    # point indices of every facet, ascending, from one stable sort
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
     for lab in range(n_labels):
-        sel = np.flatnonzero(labels == lab)
+        sel = order[bounds[lab]:bounds[lab + 1]]
+        key = sel.tobytes() if cache is not None else None
+        if key is not None and key in cache:
+            planes[lab], rms[lab] = cache[key]
+            continue
         pts = xyz[sel]
         p = fit_plane(pts)
         for _ in range(2):
@@ -208,6 +222,8 @@ def _refit(xyz, labels, n_labels, trim):
         planes[lab] = p
         r = (pts[:, 2] - pts[:, :2] @ p[:2] - p[2]) / np.sqrt(1 + p[0] ** 2 + p[1] ** 2)
         rms[lab] = np.sqrt(np.mean(r * r))
+        if key is not None:
+            cache[key] = (planes[lab].copy(), rms[lab])
     return planes, rms
 
 
@@ -433,19 +449,20 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
         min_points = max(int(round(min_area * density)), 6)
     usable = normals[:, 2] >= np.cos(np.radians(wall_slope))
     order = np.argsort(flat, kind="stable")
+    fits: dict = {}  # facet fits by point set, shared by the refits below
     labels, n_labels = _grow(local, nbrs[:, 1:], normals, order, usable,
                              dist_tol, np.cos(np.radians(angle_tol)), int(min_points))
     if n_labels == 0:
         return labels, np.zeros((0, 3))
-    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     cos_merge = np.cos(np.radians(merge_angle))
     labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge, coplanar=False)
-    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     labels, n_labels = _absorb_small(local, labels, planes, nbrs[:, 1:], dist_tol, 3 * int(min_points))
-    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     # small facets that no neighbour absorbs: those on one plane apart from each other join
     labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
-    planes, _ = _refit(local, labels, n_labels, dist_tol)
+    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     # unassigned points join the nearest-fitting adjacent facet when close to its plane
     un = np.flatnonzero(labels < 0)
     if len(un) and n_labels:
@@ -460,14 +477,14 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
         best = d.argmin(axis=1)
         take = d[np.arange(len(un)), best] <= dist_tol
         labels[un[take]] = best[take]
-        planes, _ = _refit(local, labels, n_labels, dist_tol)
+        planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     n_before = len(planes)
     labels, planes = _leftover_facets(local, labels, planes, nbrs[:, 1:], usable, dist_tol,
                                       int(min_points))
     if len(planes) > n_before:
         # leftover clusters on the plane of a facet (or of each other) join it
         labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
-        planes, _ = _refit(local, labels, n_labels, dist_tol)
+        planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
     # back to the caller's frame: z = a (x - cx) + b (y - cy) + c + cz
     out = planes.copy()
     out[:, 2] = planes[:, 2] + center[2] - planes[:, 0] * center[0] - planes[:, 1] * center[1]

@@ -67,7 +67,7 @@ def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
             pa, pb = planes[labels[i]], planes[labels[j]]
             # DH: mean |h1 - h2| over points sampled along the shared edge
             t = (np.arange(samples * max(int(inter.length), 1)) + 0.5) / (samples * max(int(inter.length), 1))
-            pts = np.asarray([inter.interpolate(s, normalized=True).coords[0] for s in t])
+            pts = shapely.get_coordinates(shapely.line_interpolate_point(inter, t, normalized=True))
             dh = float(np.mean(np.abs((pa[0] - pb[0]) * pts[:, 0] + (pa[1] - pb[1]) * pts[:, 1] + pa[2] - pb[2])))
             line = _plane_line(pa, pb)
             kind = "step"
