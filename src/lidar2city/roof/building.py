@@ -15,7 +15,7 @@ from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import partition_solid
+from .solid import partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -206,11 +206,14 @@ def _nonmanifold_points(solid):
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
-    longest-shared neighbour's plane, until the shell is 2-manifold.
+    longest-shared neighbour's plane, until the shell is 2-manifold. When that does not
+    converge within ``max_rounds``, every face keeps its plane and the saddle vertices
+    are cut out of the partition instead (:func:`lidar2city.roof.solid.split_saddles`).
 
     Returns ``(solid, relabelled)``, the number of faces that took another plane."""
     import shapely
 
+    labels0 = face_labels
     face_labels = np.array(face_labels, copy=True)
     for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
@@ -228,7 +231,21 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         if not neigh:
             return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height), max_rounds
+    solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+    if len(_nonmanifold_points(solid)):
+        # taking planes did not converge (one face's new plane makes the next saddle): keep
+        # every plane and cut the saddle vertices out of the partition instead
+        own = planes[np.asarray(labels0)]
+        cut = partition_solid(faces, own, ground_z, min_height=min_height)
+        for _ in range(3):
+            bad = _nonmanifold_points(cut)
+            if not len(bad):
+                break
+            faces = split_saddles(faces, bad)
+            cut = partition_solid(faces, own, ground_z, min_height=min_height)
+        if not len(_nonmanifold_points(cut)):
+            return cut, 0
+    return solid, max_rounds
 
 
 def _parts(footprint):
