@@ -69,25 +69,26 @@ def test_courtyard_and_below_floor():
         partition_solid([box(0, 0, 5, 5)], np.array([[1.0, 0, -2.0]]), 0.0)
 
 
-def _nonmanifold(solid):
+def _cut_saddle(faces, planes):
+    """The one saddle at (5, 5) found, cut out, and the cut partition's solid checked valid."""
     from lidar2city.roof.building import _nonmanifold_points
+    from lidar2city.roof.solid import split_saddles
+    from lidar2city.validate.solid import check_solid
 
-    return _nonmanifold_points(solid)
+    bad = _nonmanifold_points(partition_solid(faces, planes, 0.0))
+    assert len(bad) and np.allclose(bad, [[5, 5]])
+    cut = split_saddles(faces, bad)
+    s = partition_solid(cut, planes, 0.0)
+    assert not len(_nonmanifold_points(s)) and not shell_errors(s)[0] and not check_solid(s)
+    return cut, s
 
 
 def test_saddle_vertex_is_cut_out():
     # four roof parts meeting at one vertex, high and low alternating around it (the
     # ISPRS CSite4 station roof has dozens): four walls share one vertical edge
-    from lidar2city.roof.solid import split_saddles
-    from lidar2city.validate.solid import check_solid
-
     faces = [box(0, 0, 5, 5), box(5, 0, 10, 5), box(5, 5, 10, 10), box(0, 5, 5, 10)]
     planes = np.array([[0, 0, 6.0], [0, 0, 3.0], [0, 0, 6.0], [0, 0, 4.0]])
-    bad = _nonmanifold(partition_solid(faces, planes, 0.0))
-    assert len(bad) and np.allclose(bad, [[5, 5]])
-    cut = split_saddles(faces, bad)
-    s = partition_solid(cut, planes, 0.0)
-    assert not len(_nonmanifold(s)) and not shell_errors(s)[0] and not check_solid(s)
+    cut, s = _cut_saddle(faces, planes)
     # the largest (first of equals) took the patch; nothing moved farther than 5 cm
     assert cut[0].area > 25
     assert sum(f.area for f in cut) == pytest.approx(100)
@@ -98,16 +99,9 @@ def test_saddle_vertex_is_cut_out():
 def test_saddle_on_the_outline_is_notched():
     # two parts touching only at one vertex, the outside on one side and a courtyard on the
     # other, joined around the courtyard by two strips
-    from lidar2city.roof.solid import split_saddles
-    from lidar2city.validate.solid import check_solid
-
     faces = [box(0, 0, 5, 5), box(5, 5, 10, 10), box(-3, 0, 0, 13), box(0, 10, 10, 13)]
     planes = np.array([[0, 0, 6.0], [0, 0, 4.0], [0, 0, 5.0], [0, 0, 5.0]])
-    bad = _nonmanifold(partition_solid(faces, planes, 0.0))
-    assert len(bad) and np.allclose(bad, [[5, 5]])
-    cut = split_saddles(faces, bad)
-    s = partition_solid(cut, planes, 0.0)
-    assert not len(_nonmanifold(s)) and not shell_errors(s)[0] and not check_solid(s)
+    cut, _ = _cut_saddle(faces, planes)
     assert cut[0].area + cut[1].area == pytest.approx(50 - 0.05**2, abs=1e-6)
     assert cut[0].distance(cut[1]) > 0.05
     assert cut[2].equals(faces[2]) and cut[3].equals(faces[3])
