@@ -243,9 +243,18 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
                 break
             faces = split_saddles(faces, bad)
             cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        if not len(_nonmanifold_points(cut)):
+        if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
             return cut, 0
     return solid, max_rounds
+
+
+def _valid_cut(solid, precision=1e-3) -> bool:
+    """The solid valid as computed and with its vertices on the output grid (a notch or
+    patch is a few centimetres: it must not make faces intersect once rounded)."""
+    from ..datamodel import Solid
+
+    rounded = Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
+    return not check_solid(solid) and not check_solid(rounded)
 
 
 def _parts(footprint):
