@@ -1,23 +1,31 @@
 """reconstruct on 1 and 2 Dask workers over a synthetic multi-tile area: speed, memory, bytes.
 
-Usage: ``PYTHONPATH=src python benchmarks/bench_engine.py [--sizes 2,4,8] [--workers 1,2]``
+Usage: ``PYTHONPATH=src python benchmarks/bench_engine.py [--sizes 2,4,8,12] [--workers 1,2]
+[--lod 1.2 ...]``
 
 The demo town generator (:func:`lidar2city.synthetic.make_town`, 200 x 150 m,
 4 points/m², a different seed per tile) is laid out as n x n tiles (2 x 2 = 4,
 4 x 4 = 16 and 8 x 8 = 64 tiles, ~15 buildings each), every tile its own LAZ
-file, the footprints of all in one GeoPackage. Each area is reconstructed
-(LoD1.2 + LoD1.3, blocks of 200 m, to a streamed CityJSONSeq) in a fresh
-process with ``--workers 1`` (in process) and, on the largest area, with
-``--workers 2`` (a local Dask cluster). Printed per run: buildings, wall
+file, the footprints of all in one GeoPackage; 12 x 12 = 144 tiles (~2,200
+buildings) is the area the speed-up is measured on, large enough for the
+cluster's start-up to be a small share. Each area is reconstructed
+(reconstruct's default LoDs, i.e. LoD1.2, unless ``--lod`` is given; blocks
+of 200 m; to a streamed CityJSONSeq) in a fresh process with ``--workers 1``
+(in process) and, on the largest area, with ``--workers 2`` (a local Dask
+cluster). Printed per run: buildings, wall
 seconds, buildings per second, the peak resident memory of the process that
 ran the blocks (``ru_maxrss`` read in the worker after each block; with 1
 worker that process is also the client, which holds the results not yet
 written),
 seconds per building, and the MD5 of the output (the same for every worker
 count) and the CPU seconds used by the run and all the processes it started
-(Dask workers included). Then the speed-up of 2 workers over 1, and the load
-average of the machine at the time (the speed-up is depressed when other jobs
-use the cores; the CPU seconds are not).
+(Dask workers included); for a cluster also the seconds to start it, the CPU
+of each worker on its blocks and in all (start-up and imports included) and
+the CPU of the client process (scheduler, nannies, planning, writing). Then
+the speed-up of 2 workers over 1, the ratio of their CPU seconds (the
+speed-up a quiet machine can give is at most workers / that ratio), and the
+load average of the machine at the time (the speed-up is depressed when
+other jobs use the cores; the CPU seconds much less).
 """
 
 from __future__ import annotations
@@ -34,19 +42,21 @@ from pathlib import Path
 
 TILE = (200.0, 150.0)
 BLOCK = 200.0
-LODS = ("1.2", "1.3")
 
 CHILD = r"""
-import json, sys, time
+import json, os, sys, time
 from lidar2city.tools.reconstruct import reconstruct
 
 def main():
     a = json.loads(sys.argv[1])
     t0 = time.perf_counter()
-    s = reconstruct(a["tiles"], a["out"], footprints=a["fp"], lods=tuple(a["lods"]),
+    s = reconstruct(a["tiles"], a["out"], footprints=a["fp"], lods=a["lods"] or None,
                     block_size=a["block"], workers=a["workers"])
+    t = os.times()
     print(json.dumps({"seconds": time.perf_counter() - t0, "total": s.total, "done": s.done,
-                      "failed": s.failed, "blocks": s.blocks, "worker_mb": s.worker_peak_mb}))
+                      "failed": s.failed, "blocks": s.blocks, "worker_mb": s.worker_peak_mb,
+                      "client_cpu": t.user + t.system, "blocks_cpu": s.worker_cpu,
+                      "process_cpu": s.process_cpu, "startup": s.startup_seconds}))
 
 if __name__ == "__main__":
     main()
@@ -94,8 +104,8 @@ def make_area(folder: Path, n: int):
     return tiles, str(fp)
 
 
-def run(tiles, fp, out, workers):
-    args = json.dumps({"tiles": tiles, "fp": fp, "out": str(out), "lods": LODS, "block": BLOCK,
+def run(tiles, fp, out, workers, lods):
+    args = json.dumps({"tiles": tiles, "fp": fp, "out": str(out), "lods": lods, "block": BLOCK,
                        "workers": workers})
     with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:
         f.write(CHILD)
@@ -117,8 +127,10 @@ def run(tiles, fp, out, workers):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sizes", default="2,4,8")
+    ap.add_argument("--sizes", default="2,4,8,12")
     ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--lod", action="append", default=[],
+                    help="LoDs to build (repeat); default reconstruct's own (LoD1.2)")
     a = ap.parse_args()
     sizes = [int(v) for v in a.sizes.split(",")]
     workers = [int(v) for v in a.workers.split(",")]
@@ -131,14 +143,25 @@ def main():
             d.mkdir()
             tiles, fp = make_area(d, n)
             for w in (workers if n == max(sizes) else [1]):
-                r = run(tiles, fp, d / f"out_w{w}.city.jsonl", w)
+                r = run(tiles, fp, d / f"out_w{w}.city.jsonl", w, a.lod)
                 rows[(n, w)] = r
-                print(f"{n * n:3d} tiles, {w} worker(s): {r['total']} buildings ({r['failed']} "
+                print(f"{n * n:3d} tiles, LoD {'+'.join(a.lod) or '1.2 (default)'}, "
+                      f"{w} worker(s): {r['total']} buildings ({r['failed']} "
                       f"failed), {r['blocks']} blocks, {r['seconds']:.1f} s, "
                       f"{r['total'] / r['seconds']:.1f} buildings/s, "
                       f"{1000 * r['seconds'] / r['total']:.1f} ms/building, CPU {r['cpu']:.1f} s "
                       f"({1000 * r['cpu'] / r['total']:.0f} CPU-ms/building), "
                       f"peak worker memory {r['worker_mb']:.0f} MB, md5 {r['md5']}", flush=True)
+                if r["process_cpu"]:
+                    blocks = " / ".join(f"{v:.1f}" for v in r["blocks_cpu"].values())
+                    procs = " / ".join(f"{v:.1f}" for v in r["process_cpu"].values())
+                    print(f"    cluster start-up {r['startup']:.1f} s; CPU per worker on its "
+                          f"blocks {blocks} s, whole process {procs} s; client process "
+                          f"{r['client_cpu']:.1f} s", flush=True)
+                else:
+                    print(f"    CPU on the blocks {sum(r['blocks_cpu'].values()):.1f} s, "
+                          f"the rest (planning, writing) {r['cpu'] - sum(r['blocks_cpu'].values()):.1f} s",
+                          flush=True)
     n = max(sizes)
     if (n, 1) in rows:
         base = rows[(n, 1)]

@@ -16,8 +16,10 @@ Prints, against issue 13's targets:
   time / laspy floor (target <= 9) and peak RSS (target <= 200 MB);
 * LoD1.3 median RMSE of that output, scored as benchmarks/bench_lod1.py does
   (target <= 0.46 m);
-* ``reconstruct`` without footprints (traced from the points): time and peak
-  RSS (targets <= 10 s, <= 300 MB), one run;
+* ``reconstruct`` without footprints (traced from the points): time, CPU
+  seconds and their ratios to a laspy floor run just before, and peak RSS
+  (targets <= 10 s, <= 300 MB), one run; then the LoD2.2 and LoD1.2 RMSE of
+  that output against the tile's points;
 * the MD5 of the LoD1.2 + LoD2.2 output, to check that a change kept the bytes.
 """
 
@@ -119,11 +121,19 @@ def main():
 
     if not args.no_traced:
         a = run(floor, env)
+        traced = tmp / "traced.city.json"
         t, m, c = run(base + ["--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
-                              "-o", str(tmp / "traced.city.json")], env)
+                              "-o", str(traced)], env)
         print(f"reconstruct without footprints (traced), LoD1.2+1.3+2.2: {t:.1f} s, {c:.1f} CPU s "
-              f"({t / a[0]:.0f}x the laspy floor of {a[0]:.2f} s), peak RSS {m:.0f} MB "
+              f"(time / laspy floor {t / a[0]:.0f}x, CPU / floor CPU {c / a[2]:.0f}x, floor "
+              f"{a[0]:.2f} s, {a[2]:.2f} CPU s, same run), peak RSS {m:.0f} MB "
               f"[targets <= 10 s, <= 300 MB]")
+        _, s22 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="2.2")
+        _, s12 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="1.2")
+        print(f"  traced: {s22['buildings']} buildings; LoD2.2 RMSE median {s22['rmse_median']:.3f} m, "
+              f"mean {s22['rmse_mean']:.3f} m, p90 {s22['rmse_p90']:.3f} m; LoD1.2 RMSE median "
+              f"{s12['rmse_median']:.3f} m, mean {s12['rmse_mean']:.3f} m; "
+              f"valid {s22['valid']}/{s22['buildings']}")
 
 
 if __name__ == "__main__":

@@ -74,3 +74,24 @@ def test_tiles_with_different_crss_and_neighbour_options_are_one_line_errors(run
     assert r.exit_code == 1 and "drop --neighbour" in r.output
     r = runner.invoke(cli, ["ground", str(tiles / "nothing*.laz"), "-o", str(tmp_path / "o")])
     assert r.exit_code == 1 and "no tile matches" in r.output
+
+
+def test_footprints_on_a_folder_of_raw_tiles_trace_each_building_once(runner, tiles, tmp_path):
+    """The folder is traced block by block (raw points classified in each block's box);
+    a building across the tiles is one footprint, as from the whole area at once."""
+    from lidar2city.io.vector import read_footprints
+
+    out = tmp_path / "fp.gpkg"
+    r = runner.invoke(cli, ["footprints", str(tiles), "-o", str(out), "--block-size", "50"])
+    assert r.exit_code == 0, r.output
+    fps, _ = read_footprints(out)
+    assert len(fps) >= 1 and f"{len(fps)} footprints" in r.output
+    whole = tmp_path / "whole.gpkg"
+    r = runner.invoke(cli, ["footprints", *sorted(str(p) for p in tiles.iterdir()), "-o",
+                            str(whole)])
+    assert r.exit_code == 0, r.output
+    assert len(read_footprints(whole)[0]) == len(fps)
+    r = runner.invoke(cli, ["footprints", str(tiles / "a.laz"), "-o", str(tmp_path / "x.gpkg"),
+                            "--workers", "2"])
+    assert r.exit_code == 1 and "folder or glob of tiles" in r.output
+    assert r.output.count("\n") == 1

@@ -329,3 +329,61 @@ def test_delft_snake_footprints(data):
     assert area_metrics(pred, refs)["quality"] > 0.85
     assert axis_alignment(pred)["aligned_share"] > 0.78
     assert sum(f.status == "ok" for f in fps) >= 0.9 * len(fps)
+
+
+def _with_roof(xyz, cls, height):
+    """``xyz`` with the building points' z set by ``height(x, y)``."""
+    out = xyz.copy()
+    b = cls == 6
+    out[b, 2] = height(out[b, 0], out[b, 1])
+    return out
+
+
+def test_row_houses_of_different_heights_are_split_at_the_steps():
+    row = shapely.box(10, 20, 49, 30)  # three 13 m houses: 8 m, 11 m, 8 m high
+    xyz, cls = scan([row], seed=3)
+    xyz = _with_roof(xyz, cls, lambda x, y: np.where((x >= 23) & (x < 36), 11.0, 8.0))
+    fps = extract_footprints(xyz, cls)
+    assert len(fps) == 3
+    polys = sorted((f.polygon for f in fps), key=lambda p: p.centroid.x)
+    for p, x0 in zip(polys, (10, 23, 36), strict=True):
+        assert iou(p, shapely.box(x0, 20, x0 + 13, 30)) > 0.9
+    # disjoint parts that still cover the block
+    assert sum(p.area for p in polys) == pytest.approx(shapely.union_all(polys).area, rel=1e-9)
+    assert shapely.union_all(polys).area == pytest.approx(row.area, rel=0.05)
+    # split_step = 0 keeps the block whole
+    assert len(extract_footprints(xyz, cls, split_step=0)) == 1
+    assert len(extract_footprints(xyz[:, :2], cls)) == 1
+
+
+def test_pitched_roof_and_chimney_are_not_split():
+    house = shapely.box(15, 15, 40, 35)
+    xyz, cls = scan([house], seed=4)
+
+    def gable(x, y):  # 45-degree gable (ridge along x at y = 25) and a 1 m chimney 3 m high
+        z = 14.0 - np.abs(y - 25.0)
+        return np.where((np.abs(x - 20.0) < 0.5) & (np.abs(y - 28.0) < 0.5), z + 3.0, z)
+
+    fps = extract_footprints(_with_roof(xyz, cls, gable), cls)
+    assert len(fps) == 1
+    assert iou(fps[0].polygon, house) > 0.95
+
+
+def test_split_at_steps_on_a_grid():
+    from lidar2city.footprints.grid import split_at_steps
+
+    labels = np.zeros((6, 12), dtype=np.int32)
+    labels[1:5, 1:11] = 1
+    h = np.full(labels.shape, np.nan)
+    h[1:5, 1:6] = 5.0
+    h[1:5, 6:11] = 9.0
+    h[2, 3] = np.nan  # no point in that cell: takes its neighbours' height
+    h[3, 8] = 12.0    # a one-cell spike joins its part
+    out = split_at_steps(labels, h, 1.0, step=2.0, min_area=4.0)
+    assert set(np.unique(out)) == {0, 1, 2}
+    assert (out[1:5, 1:6] == 1).all() and (out[1:5, 6:11] == 2).all()
+    assert (out[labels == 0] == 0).all()
+    # parts smaller than min_area leave the region whole
+    assert set(np.unique(split_at_steps(labels, h, 1.0, step=2.0, min_area=30.0))) == {0, 1}
+    with pytest.raises(InputError):
+        split_at_steps(labels, h[:, :5], 1.0)

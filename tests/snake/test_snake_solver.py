@@ -255,3 +255,17 @@ def test_min_over_large_tables_agree_with_broadcasting():
         total = arrays[0] + arrays[1] + arrays[2] + arrays[3]
         assert np.array_equal(arg, total.argmin(axis=axis))
         assert np.array_equal(best, total.min(axis=axis))
+
+
+def test_reduction_work_estimates_before_any_table():
+    from lidar2city.snake.solver import reduction_work
+
+    ring = [(i, (i + 1) % 6) for i in range(6)]
+    # a cycle: series reductions over tables of at most three vertices of 5 states
+    w = reduction_work([5] * 6, ring)
+    assert 0 < w <= 6 * 5 ** 3
+    # fixed vertices (one state) make it cheaper; a dense graph is refused outright
+    assert reduction_work([1, 5, 5, 1, 5, 5], ring) < w
+    grid = [(r * 8 + c, r * 8 + c + 1) for r in range(8) for c in range(7)] + \
+           [(r * 8 + c, r * 8 + c + 8) for r in range(7) for c in range(8)]
+    assert reduction_work([49] * 64, grid) == float("inf")

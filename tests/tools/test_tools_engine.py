@@ -10,6 +10,7 @@ import sys
 import time
 from collections import Counter
 
+import numpy as np
 import pytest
 
 from lidar2city.errors import InputError
@@ -288,3 +289,75 @@ def test_a_cluster_takes_runs_of_consecutive_items_covering_all_once(n, workers)
     assert all(b == c for (_, b), (c, _) in zip(runs[:-1], runs[1:]))
     assert len(runs) == min(n, engine.RUNS_PER_WORKER * workers)
     assert max(b - a for a, b in runs) - min(b - a for a, b in runs) <= 1
+
+
+@pytest.mark.parametrize("costs", [[1] * 10 + [5] * 38, [0, 0, 0, 0, 100], [3, 1, 2]])
+def test_runs_of_equal_cost_cover_every_item_once_in_order(costs):
+    n = len(costs)
+    runs = engine.runs_of(n, 2, costs)
+    assert runs[0][0] == 0 and runs[-1][1] == n and all(a < b for a, b in runs)
+    assert all(b == c for (_, b), (c, _) in zip(runs[:-1], runs[1:]))
+    assert len(runs) == min(n, engine.RUNS_PER_WORKER * 2)
+    if costs[0] == 1:  # 200 in four shares of 50: cut where each share is reached
+        assert runs == [(0, 18), (18, 28), (28, 38), (38, 48)]
+
+
+def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
+    """After each block of a run the shared cache holds, of each tile, only the points
+    inside the boxes of the run's later blocks; nothing once the run is over."""
+    from lidar2city.tools.reconstruct import plan_reconstruct, run_blocks
+
+    plan = plan_reconstruct([area / "town.laz"], tmp_path / "x.city.json",
+                            footprints=area / "fp.gpkg", lods=("1.2",), block_size=BLOCK)
+    specs = plan.specs
+    assert len(specs) >= 3
+    seen = []
+    real = task.run_block
+
+    def watching(spec, options):
+        out = real(spec, options)
+        seen.append(spec.index)
+        return out
+
+    def check(k):
+        later = [s.world_box for s in specs[k + 1:] if s.world_box is not None]
+        for world, _ in task._cache.tiles.values():
+            x, y = world[:, 0], world[:, 1]
+            inside = np.zeros(len(world), dtype=bool)
+            for x0, y0, x1, y1 in later:
+                inside |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+            assert inside.all()  # every kept point is read by a later block
+
+    class Watched(engine.InProcess):
+        def map(self, fn, items, *args, run_hook=None, costs=None):
+            def hook(run):
+                keep = run_hook(run)
+
+                def after(k):
+                    keep(k)
+                    check(k)
+                return after
+            return super().map(fn, items, *args, run_hook=hook, costs=costs)
+
+    task_run = task.run_block
+    try:
+        task.run_block = watching
+        outs = list(run_blocks(Watched(), plan))
+    finally:
+        task.run_block = task_run
+    assert len(outs) == len(specs) and seen == list(range(len(specs)))
+    assert not task._cache.tiles and task._cache.later is None
+
+
+def test_footprints_on_tiles_give_the_same_bytes_on_one_and_two_workers(area, tmp_path):
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.tools.footprints import footprints_on_tiles
+
+    one, two = tmp_path / "w1.gpkg", tmp_path / "w2.gpkg"
+    s1 = footprints_on_tiles([area / "town.laz"], one, block_size=BLOCK)
+    s2 = footprints_on_tiles([area / "town.laz"], two, block_size=BLOCK, workers=2)
+    assert one.read_bytes() == two.read_bytes()
+    assert s1["blocks"] >= 3 and s1["buildings"] == s2["buildings"] >= 5
+    assert not s1["failed_blocks"] and not task._cache.tiles
+    fps, _ = read_footprints(one)
+    assert fps.ids == [f"b{i + 1:05d}" for i in range(s1["buildings"])]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["check_output", "crs_option", "engine_options", "neighbours_options", "output_option",
-           "progress", "progress_callback", "run_on_tiles"]
+__all__ = ["check_output", "crs_option", "engine_options", "EngineProgress", "neighbours_options",
+           "output_option", "progress", "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -76,10 +76,9 @@ def run_on_tiles(job, input, output, *, neighbours, workers, scheduler, extra=No
     from ..tools.tiles import plan_tiles, run_tiles
 
     tasks = plan_tiles(input, output, crs=crs, buffer=buffer, suffix=suffix, extra=extra)
-    with progress(length=len(tasks), label="tiles") as bar:
+    with EngineProgress("tiles") as bar:
         summary = run_tiles(job, tasks, output, workers=workers, scheduler=scheduler,
-                            progress=lambda d, t: bar.update(1), buffer=buffer, crs=crs,
-                            **options)
+                            progress=bar.blocks, buffer=buffer, crs=crs, **options)
     for line in summary.lines():
         click.echo(line, err=True)
     if summary.failed:
@@ -126,3 +125,52 @@ def progress_callback(bar):
         state["done"] = done
 
     return callback
+
+
+class EngineProgress:
+    """Bars over the tasks of a run (blocks or tiles) and what they make (buildings,
+    footprints), drawn with rich on a terminal only; nothing otherwise (pipes, CI
+    logs, ``quiet``), where the command prints its one-line summary at the end.
+
+    ``blocks(done, total)`` after each task; ``items(done, total)`` with
+    ``total`` None while the number is not known (traced footprints).
+    """
+
+    def __init__(self, tasks="blocks", items=None, *, quiet=False):
+        import sys
+
+        self.labels = (tasks, items)
+        self.live = not quiet and sys.stderr.isatty()
+        self._bar = None
+        self._ids = {}
+
+    def __enter__(self):
+        if self.live:
+            from rich.console import Console
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+
+            self._bar = Progress(TextColumn("{task.description:>10}"), BarColumn(),
+                                 MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                                 console=Console(stderr=True), transient=False)
+            self._bar.start()
+        return self
+
+    def __exit__(self, *exc):
+        if self._bar is not None:
+            self._bar.stop()
+        return False
+
+    def _set(self, which, done, total):
+        if self._bar is None:
+            return
+        if which not in self._ids:
+            self._ids[which] = self._bar.add_task(self.labels[which], total=total)
+        self._bar.update(self._ids[which], completed=done, total=total)
+
+    def blocks(self, done, total):
+        self._set(0, done, total)
+
+    def items(self, done, total):
+        if self.labels[1] is not None:
+            self._set(1, done, total)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import check_output, crs_option, output_option
+from ._options import check_output, crs_option, engine_options, output_option
 
 #: outline regularisers of point-cloud footprints (``lidar2city.footprints.REGULARIZERS``)
 REGULARIZER_NAMES = ("none", "snake", "fit")
@@ -14,13 +14,14 @@ DSM_REGULARIZER_NAMES = ("fit", "none", "active-contour")
 _CHOICES = tuple(dict.fromkeys(REGULARIZER_NAMES + DSM_REGULARIZER_NAMES))
 
 #: options that only make sense for one kind of input (option name -> parameter)
-_POINT_ONLY = {"--cell": "cell", "--edge-offset": "edge_offset", "--crs": "crs"}
+_POINT_ONLY = {"--cell": "cell", "--edge-offset": "edge_offset", "--crs": "crs",
+               "--block-size": "block_size"}
 _DSM_ONLY = {"--dtm": "dtm", "--ortho": "ortho", "--dtm-out": "dtm_out", "--figure": "figure",
              "--weights": "weights"}
 
 
 @click.command("footprints")
-@click.argument("inputs", nargs=-1, required=False, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=False, type=click.Path())
 @output_option()
 @click.option("--dsm", type=click.Path(dir_okay=False), default=None,
               help="Segment the buildings from this DSM raster instead of point clouds.")
@@ -54,18 +55,25 @@ _DSM_ONLY = {"--dtm": "dtm", "--ortho": "ortho", "--dtm-out": "dtm_out", "--figu
 @click.option("--edge-offset", type=float, default=None,
               show_default="0, or footprints.edge_offset of --config",
               help="Outline offset (m); negative shrinks (roof overhang).")
+@click.option("--block-size", type=click.FloatRange(min=50.0), default=None,
+              show_default="1000",
+              help="With a folder or glob of tiles: side (m) of the blocks traced one by one.")
+@engine_options
 def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weights, crs,
-            config_path, cell, min_area, edge_offset):
+            config_path, cell, min_area, edge_offset, block_size, workers, scheduler):
     """Building footprints into a GeoPackage, from classified LAS/LAZ tiles INPUTS or a DSM.
 
     \b
     lidar2city footprints TILE.laz [TILE.laz...] -o OUT.gpkg [--regularize none|snake|fit]
+    lidar2city footprints TILES/ -o OUT.gpkg [--workers N | --scheduler ADDRESS]
     lidar2city footprints --dsm DSM.tif [--dtm DTM.tif] [--ortho RGB.tif] -o OUT.gpkg
                           [--regularize fit|none] [--dtm-out DTM.tif] [--figure PNG]
 
     Point clouds: one polygon per building block (holes for courtyards), in the
     input CRS, with area (m2), dominant direction (deg), vertex count, mean
-    deviation (m), point count and the snake's reduction counts.
+    deviation (m), point count and the snake's reduction counts. A folder or
+    quoted glob of tiles is traced block by block (--block-size), on N local
+    processes (--workers) or a Dask cluster (--scheduler), with the same bytes.
 
     DSM: buildings segmented from the DSM (nDSM above the DTM, vegetation by
     colour with --ortho), each outline the simplest regular polygon that fits
@@ -75,7 +83,7 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
     from ..errors import InputError
 
     values = {"cell": cell, "edge_offset": edge_offset, "crs": crs, "dtm": dtm, "ortho": ortho,
-              "dtm_out": dtm_out, "figure": figure, "weights": weights}
+              "dtm_out": dtm_out, "figure": figure, "weights": weights, "block_size": block_size}
     if dsm is None:
         if not inputs:
             raise InputError("give point-cloud INPUTS or --dsm DSM.tif (see lidar2city footprints "
@@ -83,8 +91,11 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
         given = [o for o, k in _DSM_ONLY.items() if values[k] is not None]
         if given:
             raise InputError(f"{given[0]} needs --dsm (it does not apply to point clouds)")
-        _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset)
+        _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset,
+                block_size=block_size, workers=workers, scheduler=scheduler)
         return
+    if workers != 1 or scheduler is not None:
+        raise InputError("--workers and --scheduler apply to a folder or glob of tiles")
     if inputs:
         raise InputError("give either point-cloud INPUTS or --dsm, not both")
     given = [o for o, k in _POINT_ONLY.items() if values[k] is not None]
@@ -107,19 +118,44 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
          regularize=regularize, config_path=config_path, min_area=min_area)
 
 
-def _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset):
-    from ..tools.footprints import footprints_job, load_footprints_config
-    from ._options import progress, progress_callback
+def _points(inputs, output, regularize, crs, config_path, cell, min_area, edge_offset, *,
+            block_size, workers, scheduler):
+    from ..errors import InputError
+    from ..io.tiles import is_tile_set
+    from ..tools.footprints import footprints_job, footprints_on_tiles, load_footprints_config
+    from ._options import EngineProgress, progress, progress_callback
 
     cfg = load_footprints_config(config_path, regularize=regularize, cell=cell,
                                  min_area=min_area, edge_offset=edge_offset)
-    with progress(length=1, label="footprints") as bar:
-        callback = progress_callback(bar)
+    if any(is_tile_set(p) for p in inputs):  # block by block, on the engine
+        if workers != 1 and scheduler is not None:
+            raise InputError("give either --workers (a local cluster) or --scheduler, not both")
+        with EngineProgress("blocks", "footprints") as bar:
+            def on_block(done, total, found):
+                bar.blocks(done, total)
+                bar.items(found, None)
 
-        summary = footprints_job(list(inputs), output, crs=crs, config=cfg, callback=callback)
+            summary = footprints_on_tiles(list(inputs), output, crs=crs, config=cfg,
+                                          block_size=block_size or 1000.0, workers=workers,
+                                          scheduler=scheduler, progress=on_block)
+    else:
+        for opt, v in (("--workers", workers != 1), ("--scheduler", scheduler),
+                       ("--block-size", block_size)):
+            if v:
+                raise InputError(f"{opt} applies to a folder or glob of tiles")
+        with progress(length=1, label="footprints") as bar:
+            callback = progress_callback(bar)
+
+            summary = footprints_job(list(inputs), output, crs=crs, config=cfg,
+                                     callback=callback)
     click.echo(f"{summary['buildings']} footprints, {summary['area']:.0f} m2 "
                f"-> {summary['output']}"
                + (f" ({summary['unregularised']} unregularised)" if summary["unregularised"] else ""))
+    failed = summary.get("failed_blocks")
+    if failed:
+        click.echo(f"  {len(failed)} block(s) failed twice, no footprint traced there: "
+                   + ", ".join(f"cell {c}" for c in failed), err=True)
+        raise click.exceptions.Exit(1)
 
 
 def _dsm(dsm, output, *, dtm, ortho, dtm_out, figure, regularize, config_path, min_area):

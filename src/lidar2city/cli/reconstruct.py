@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, engine_options, output_option, progress, progress_callback
+from ._options import (EngineProgress, crs_option, engine_options, output_option, progress,
+                       progress_callback)
 
 
 @click.command("reconstruct")
@@ -104,41 +105,15 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     if workers != 1 and scheduler is not None:
         raise InputError("give either --workers (a local cluster) or --scheduler, not both")
-    # a bar over buildings when their number is known (footprints given, with the blocks
-    # done beside it), else over blocks (with the buildings traced so far)
-    bar_state = {"bar": None}
-
-    def open_bar(total, label):
-        if bar_state["bar"] is None:
-            bar_state["bar"] = progress(length=total, label=label, quiet=quiet,
-                                        item_show_func=lambda s: s).__enter__()
-        return bar_state["bar"]
-
-    def on_building(done, total, result):
-        if total is not None:
-            open_bar(total, "buildings").update(1)
-
-    def on_block(done, total):
-        if footprints is None:
-            open_bar(total, "blocks").update(1, current_item=f"{on_block.buildings} buildings")
-        elif bar_state["bar"] is not None:  # buildings counted, blocks shown beside
-            bar_state["bar"].update(0, current_item=f"block {done}/{total}")
-
-    def count(done, total, result):
-        on_block.buildings = done
-        on_building(done, total, result)
-
-    on_block.buildings = 0
-    try:
+    # bars over blocks and buildings on a terminal (buildings without a total when traced)
+    with EngineProgress("blocks", "buildings", quiet=quiet) as bar:
         summary = reconstruct(list(inputs), output, footprints=footprints, lods=lods or None,
                               crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
-                              progress=count, block_progress=on_block, method=method,
+                              progress=lambda done, total, result: bar.items(done, total),
+                              block_progress=bar.blocks, method=method,
                               primitives=primitives_file, check_images=check_images,
                               block_size=block_size, workers=workers, scheduler=scheduler,
                               resume=resume, edits=edits)
-    finally:
-        if bar_state["bar"] is not None:
-            bar_state["bar"].__exit__(None, None, None)
     if not quiet:
         for line in summary.lines():
             click.echo(line, err=True)

@@ -8,7 +8,10 @@ building points unless given):
    cells farther than ``void_distance = s`` from any point (with the default cell:
    every cell without a point) counting as not building;
 2. regions ``field >= 0.5``, 8-connected; holes under ``min_hole_area`` filled,
-   regions under ``min_area`` dropped;
+   regions under ``min_area`` dropped; each region split where the roof jumps
+   by more than ``split_step`` (:func:`..grid.split_at_steps`: row houses of
+   different heights become one footprint each, parts under
+   ``split_min_area`` join their neighbour);
 3. the 0.5 iso-line of the field around each region (marching squares, sub-cell);
 4. an optional ``edge_offset`` (negative shrinks: LiDAR sees roof edges, which
    overhang the walls that cadastral footprints such as the Dutch BGT draw; on
@@ -19,9 +22,11 @@ building points unless given):
    through the traced outline (:func:`..trace.simplify_polygon`);
 6. a regulariser from :data:`..regularizers.REGULARIZERS`.
 
-Row houses sharing walls form one block: points alone do not show party walls.
-The per-area quality does not depend on it; per-object matching against a
-cadastre that splits the block does.
+Row houses of one height sharing walls form one block: points alone do not show
+party walls where the roof does not step. The per-area quality does not depend
+on it; per-object matching against a cadastre that splits the block does.
+Adjacent parts of one region are made disjoint after regularisation (the
+larger keeps the shared edge).
 """
 
 from __future__ import annotations
@@ -34,8 +39,9 @@ import numpy as np
 
 from ..config import field as cfield
 from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
-from .grid import Grid, building_fraction, building_regions, point_spacing
-from .regularizers import REGULARIZERS
+from .grid import (Grid, building_fraction, building_regions, cell_heights, point_spacing,
+                   split_at_steps)
+from .regularizers import REGULARIZERS, vertex_count
 from .trace import simplify_polygon, trace_regions
 
 logger = logging.getLogger(__name__)
@@ -55,6 +61,10 @@ class FootprintsConfig:
         None, "Cells farther (m) from any point count as not building; default the spacing.")
     min_area: float = cfield(4.0, "Smallest building kept (m2).")
     min_hole_area: float = cfield(4.0, "Smallest courtyard kept as a hole (m2).")
+    split_step: float = cfield(
+        2.0, "Roof height jump (m) that splits a block into buildings; 0 disables.")
+    split_min_area: float = cfield(
+        10.0, "Smallest part (m2) of a split block kept as a building of its own.")
     edge_offset: float = cfield(
         0.0, "Outline offset (m) after tracing; negative shrinks (roof overhang over the walls).")
     simplify: float | None = cfield(
@@ -75,7 +85,7 @@ class FootprintsConfig:
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise ConfigError(f"footprints.{name}: must be > 0, got {v}")
-        for name in ("min_area", "min_hole_area"):
+        for name in ("min_area", "min_hole_area", "split_step", "split_min_area"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"footprints.{name}: must be >= 0, got {getattr(self, name)}")
         if self.simplify is not None and self.simplify < 0:
@@ -131,7 +141,8 @@ MAX_GRID_CELLS = 1e8
 def extract_footprints(xyz, classification, *, building_class: int = 6, cell: float | None = None,
                        sigma: float | None = None, void_distance: float | None = None,
                        min_area: float = 4.0,
-                       min_hole_area: float = 4.0, edge_offset: float = 0.0,
+                       min_hole_area: float = 4.0, split_step: float = 2.0,
+                       split_min_area: float = 10.0, edge_offset: float = 0.0,
                        simplify: float | None = None, regularize: str = "none",
                        snake_cell: float | None = None, snake_window: int = 3,
                        snake_threshold: float | None = None, callback=None) -> list[Footprint]:
@@ -152,6 +163,11 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         (see the module docstring).
     min_area, min_hole_area : float
         Smallest building and smallest courtyard kept (m2).
+    split_step, split_min_area : float
+        A region is split where its roof jumps by more than ``split_step`` (m),
+        into parts of at least ``split_min_area`` (m2)
+        (:func:`~lidar2city.footprints.grid.split_at_steps`); ``split_step = 0``
+        or 2-D points keep one footprint per connected region.
     edge_offset : float
         Offset (m) of the traced outline; negative shrinks.
     regularize : {"none", "snake", "fit"}
@@ -194,7 +210,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         raise InputError(f"regularize must be one of {', '.join(REGULARIZERS)}, got {regularize!r}")
     FootprintsConfig(building_class=building_class, cell=cell, sigma=sigma,
                      void_distance=void_distance, min_area=min_area,
-                     min_hole_area=min_hole_area, edge_offset=edge_offset, simplify=simplify,
+                     min_hole_area=min_hole_area, split_step=split_step,
+                     split_min_area=split_min_area, edge_offset=edge_offset, simplify=simplify,
                      regularize=regularize, snake_cell=snake_cell, snake_window=snake_window,
                      snake_threshold=snake_threshold)
     if not np.isfinite(xyz).all():
@@ -222,7 +239,14 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
               & (oxy[:, 1] < grid.y0 + grid.shape[0] * grid.cell))
     fld = building_fraction(grid, bxy, oxy[inside], sigma=L["sigma"],
                             void_distance=L["void_distance"])
-    labels, _ = building_regions(fld, L["cell"], min_area=min_area, min_hole_area=min_hole_area)
+    regions, _ = building_regions(fld, L["cell"], min_area=min_area, min_hole_area=min_hole_area)
+    labels = regions
+    if split_step > 0 and xyz.shape[1] == 3:
+        labels = split_at_steps(regions, cell_heights(grid, xyz[is_b]), L["cell"],
+                                step=split_step, min_area=max(split_min_area, min_area))
+    # the connected region of each part: parts of one region share edges
+    region_of = np.zeros(int(labels.max()) + 1, dtype=np.int64)
+    region_of[labels[labels > 0]] = regions[labels > 0]
     traced = trace_regions(fld, labels, grid, min_hole_area=min_hole_area)
     bi, bj = grid.index(bxy)
     point_counts = np.bincount(labels[bi, bj], minlength=int(labels.max()) + 1)
@@ -231,6 +255,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     threshold = (snake_threshold if snake_threshold is not None
                  else 2.0 * snake_window * L["snake_cell"])
     out: list[Footprint] = []
+    regs: list[int] = []
     for n_done, (label, poly) in enumerate(traced, start=1):
         parts = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,
                        min_area)
@@ -258,9 +283,43 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                    for t in ("I", "II", "III", "IV")},
             }
             out.append(Footprint(reg, info["status"], info["reason"], attrs))
+            regs.append(region_of[label])
         if callback is not None:
             callback(n_done, len(traced))
-    return out
+    return _disjoint(out, regs, min_area)
+
+
+def _disjoint(footprints, regions, min_area):
+    """The footprints with the overlaps between parts of one region removed: each
+    part loses what the larger parts of its region cover (its largest polygon is
+    kept; a part left under ``min_area`` is dropped)."""
+    import shapely
+
+    regions = np.asarray(regions, dtype=np.int64)
+    if len(np.unique(regions)) == len(regions):
+        return footprints
+    drop = set()
+    out = list(footprints)
+    for r in np.unique(regions):
+        members = np.flatnonzero(regions == r)
+        if len(members) < 2:
+            continue
+        members = sorted(members, key=lambda i: (-out[i].polygon.area, i))
+        taken = None
+        for i in members:
+            poly = out[i].polygon
+            if taken is not None and poly.intersects(taken):
+                cut = _parts(shapely.difference(poly, taken), 0.0)
+                cut = max(cut, key=lambda g: g.area) if cut else None
+                if cut is None or cut.area < max(min_area, 1e-9):
+                    drop.add(i)
+                    continue
+                poly = shapely.Polygon(cut.exterior, list(cut.interiors))
+                out[i] = Footprint(poly, out[i].status, out[i].reason,
+                                   {**out[i].attributes, "area": float(poly.area),
+                                    "n_vertices": vertex_count(poly)})
+            taken = poly if taken is None else shapely.union(taken, poly)
+    return [f for i, f in enumerate(out) if i not in drop]
 
 
 def _contains(polygon, xy):

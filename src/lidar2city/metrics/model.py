@@ -129,7 +129,7 @@ def _brute(points, tris, chunk_pairs=262_144):
 
 
 def point_mesh_distance(points, triangles, *, cell: float | None = None,
-                        brute_force_pairs: int = 4_000_000) -> np.ndarray:
+                        brute_force_pairs: int = 100_000) -> np.ndarray:
     """Exact 3-D distance of each point to the nearest of a set of triangles.
 
     Parameters
@@ -138,11 +138,14 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
     triangles : ndarray, shape (T, 3, 3)
         Triangle corners (e.g. :func:`lidar2city.lod.mesh.solid_triangles`).
     cell : float, optional
-        Grid cell (metres) of the 2-D prefilter; default from the triangle
-        sizes. Each point is compared with the triangles whose bounding box
-        meets the 3 x 3 cells around it; a point whose nearest distance found
-        there exceeds ``cell`` (so a closer triangle could lie outside) is
-        searched again over all triangles.
+        Grid cell (metres) of the 2-D prefilter; default about 64 points a
+        cell (at least 0.5 m). Each point is compared with the triangles whose
+        plan (an STRtree of their 2-D convex hulls) crosses the 3 x 3 cells
+        around it; a point whose nearest distance ``d`` found there exceeds
+        ``cell`` (so a closer triangle could lie outside) is searched again
+        over the triangles crossing the cells within ``d`` of it. The cost
+        grows with the number of points times the triangles near each, not
+        with all pairs.
     brute_force_pairs : int
         Below ``N * T`` pairs, every pair is evaluated (faster than indexing).
 
@@ -166,49 +169,55 @@ def point_mesh_distance(points, triangles, *, cell: float | None = None,
         return np.full(n, np.inf)
     if n * t <= brute_force_pairs:
         return _brute(points, tris)
-    lo = tris.min(axis=1)
-    hi = tris.max(axis=1)
-    if cell is None:
-        ext = float(np.median(np.max(hi[:, :2] - lo[:, :2], axis=1)))
+    if cell is None:  # about 64 points per cell
         span = np.ptp(points[:, :2], axis=0)
-        per_cell = np.sqrt(max(float(span[0] * span[1]), 1e-6) * 256.0 / n)
-        cell = float(max(2.0 * ext, per_cell, 0.5))
-    origin = np.minimum(lo[:, :2].min(axis=0), points[:, :2].min(axis=0)) - cell
-    top = np.maximum(hi[:, :2].max(axis=0), points[:, :2].max(axis=0)) + cell
-    nx, ny = (np.floor((top - origin) / cell).astype(np.int64) + 1)
-    # triangle -> cells covered by its bbox (CSR sorted by cell key)
-    i0 = np.floor((lo[:, :2] - origin) / cell).astype(np.int64)
-    i1 = np.floor((hi[:, :2] - origin) / cell).astype(np.int64)
-    spans = (i1 - i0 + 1)
-    counts = spans[:, 0] * spans[:, 1]
-    tri_id = np.repeat(np.arange(t), counts)
-    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    cx = i0[tri_id, 0] + local % spans[tri_id, 0]
-    cy = i0[tri_id, 1] + local // spans[tri_id, 0]
-    key = cx * ny + cy
-    order = np.argsort(key, kind="stable")
-    key, tri_id = key[order], tri_id[order]
-    # points grouped by cell; each group against the triangles of its 3 x 3 block
+        cell = float(max(np.sqrt(max(float(span[0] * span[1]), 1e-6) * 64.0 / n), 0.5))
+    import shapely
+
+    # each triangle's plan (its convex hull: a segment for a wall) in an STRtree, so that a
+    # block of cells gets the triangles that really cross it, not every long thin triangle
+    # whose bounding box covers it
+    plan = shapely.convex_hull(shapely.multipoints(tris[:, :, :2]))
+    tree = shapely.STRtree(plan)
+    origin = points[:, :2].min(axis=0)
     pc = np.floor((points[:, :2] - origin) / cell).astype(np.int64)
+    ny = int(pc[:, 1].max()) + 1
     pkey = pc[:, 0] * ny + pc[:, 1]
-    porder = np.argsort(pkey, kind="stable")
-    uk, gstart = np.unique(pkey[porder], return_index=True)
-    gstop = np.r_[gstart[1:], n]
-    offs = np.array([dx * ny + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
     best = np.full(n, np.inf)
-    for k, a0, a1 in zip(uk, gstart, gstop, strict=True):
-        nb = k + offs
-        st = np.searchsorted(key, nb, side="left")
-        sp = np.searchsorted(key, nb, side="right")
-        if not np.any(sp > st):
-            continue
-        cand = np.unique(np.concatenate([tri_id[x:y] for x, y in zip(st, sp, strict=True)]))
-        idx = porder[a0:a1]
-        best[idx] = _brute(points[idx], tris[cand]) ** 2
-    best = np.sqrt(best)
+
+    def search(idx_groups, radii):
+        """Nearest distances of each group of points (one cell) over the triangles crossing
+        the cells within ``radius`` of theirs."""
+        if not idx_groups:
+            return
+        c = np.array([pc[g[0]] for g in idx_groups], dtype=np.float64)
+        r = np.asarray(radii, dtype=np.float64)[:, None]
+        boxes = shapely.box(*(origin + (c - r) * cell).T, *(origin + (c + r + 1) * cell).T)
+        ib, it = tree.query(boxes, predicate="intersects")
+        starts = np.searchsorted(ib, np.arange(len(idx_groups) + 1))
+        for k, g in enumerate(idx_groups):
+            cand = it[starts[k]:starts[k + 1]]
+            if len(cand):
+                best[g] = _brute(points[g], tris[np.sort(cand)])
+
+    porder = np.argsort(pkey, kind="stable")
+    _, gstart = np.unique(pkey[porder], return_index=True)
+    groups = np.split(porder, gstart[1:])
+    search(groups, [1] * len(groups))
+    # a closer triangle lies within ``best`` of the point: it crosses the cells within
+    # ceil(best / cell) around it; search those (every triangle when nothing was found)
     far = best > cell
-    if far.any():
-        best[far] = _brute(points[far], tris)
+    if not far.any():
+        return best
+    lost = far & ~np.isfinite(best)
+    if lost.any():
+        best[lost] = _brute(points[lost], tris)
+    far &= ~lost
+    fidx = np.flatnonzero(far)
+    forder = np.argsort(pkey[fidx], kind="stable")
+    _, fstart = np.unique(pkey[fidx][forder], return_index=True)
+    fgroups = np.split(fidx[forder], fstart[1:])
+    search(fgroups, [int(np.ceil(best[g].max() / cell)) for g in fgroups])
     return best
 
 

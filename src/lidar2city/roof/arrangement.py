@@ -541,12 +541,12 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     stopped short of its junction; a polyline that meets nothing keeps its end.
     """
     import shapely
-    from shapely.geometry import LineString, MultiLineString
+    from shapely.geometry import LineString
 
     segments = [np.array(s, dtype=float) for s in segments]
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
-    everything = MultiLineString(rings + [s for s in segments if len(s) >= 2])
-    shapely.prepare(everything)
+    lines = np.asarray([LineString(c) for c in rings + [s for s in segments if len(s) >= 2]],
+                       dtype=object)
     rays, where = [], []
     for k, s in enumerate(segments):
         if len(s) < 2 or np.allclose(s[0], s[-1]):
@@ -562,12 +562,18 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     out = [s.copy() for s in segments]
     if not rays:
         return out
-    hits = shapely.intersection(np.asarray(rays, dtype=object), everything)
-    for hit, (k, i, d) in zip(hits, where, strict=True):
-        if hit.is_empty:
-            continue
-        c = shapely.get_coordinates(hit)
-        t = (c - segments[k][i]) @ d
+    # each ray against the lines whose boxes it meets (an index, not every line)
+    rays = np.asarray(rays, dtype=object)
+    ir, il = shapely.STRtree(lines).query(rays, predicate="intersects")
+    hits = shapely.intersection(rays[ir], lines[il])
+    coords, counts = shapely.get_coordinates(hits), shapely.get_num_coordinates(hits)
+    owner = np.repeat(ir, counts)  # sorted: the query returns the rays in order
+    if not len(owner):
+        return out
+    starts = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+    for a, b in zip(starts, np.r_[starts[1:], len(owner)], strict=True):
+        k, i, d = where[owner[a]]
+        t = (coords[a:b] - segments[k][i]) @ d
         out[k][i] = segments[k][i] + d * (t.min() + eps)
     return out
 
@@ -583,9 +589,14 @@ def _cell_labels(cells, xyz, planes, cap):
     first = np.unique(ip, return_index=True)[1]
     ip, ic = ip[first], ic[first]
     counts = np.bincount(ic, minlength=n).astype(float)
-    res = np.abs(xyz[ip, 2:3] - (xyz[ip, 0:1] * planes[:, 0] + xyz[ip, 1:2] * planes[:, 1] + planes[:, 2]))
     cost = np.zeros((n, len(planes)))
-    np.add.at(cost, ic, np.minimum(res, cap))
+    # points by chunks: a block of many houses has ~1e4-1e5 points and ~1e2 planes
+    # (the same sums, added in the same order)
+    for s in range(0, len(ip), 8192):
+        p, c = ip[s:s + 8192], ic[s:s + 8192]
+        res = np.abs(xyz[p, 2:3] - (xyz[p, 0:1] * planes[:, 0] + xyz[p, 1:2] * planes[:, 1]
+                                     + planes[:, 2]))
+        np.add.at(cost, c, np.minimum(res, cap))
     labels = np.where(counts > 0, np.argmin(cost, axis=1), -1)
     return labels, counts
 
@@ -719,23 +730,24 @@ def collapse_short_edges(faces, footprint, *, min_length):
         poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
         return None if poly.area <= 1e-9 else poly
 
-    unmoved = [rebuild_face(fi, {}) for fi in range(len(rings))]
+    # the faces as of the accepted moves; a cluster rebuilds and checks only the faces
+    # using its vertices (the others keep their edges), so each check is local
+    current = [rebuild_face(fi, {}) for fi in range(len(rings))]
+    tol = 1e-6 * max(total, 1)
 
-    def rebuild(mp):
-        # only the faces with a moved vertex change; the others are built once
-        moved = set().union(*(faces_of.get(k, ()) for k in mp))
-        out, idx = [], []
-        for fi in range(len(rings)):
-            poly = rebuild_face(fi, mp) if fi in moved else unmoved[fi]
-            if poly is None:
-                continue
-            out.append(poly)
-            idx.append(fi)
-        return out, idx
-
-    def ok(out):
-        return (all(f.is_valid for f in out) and abs(sum(f.area for f in out) - total) < 1e-6 * max(total, 1)
-                and abs(shapely.union_all(out).area - total) < 1e-6 * max(total, 1))
+    def local_ok(old, new):
+        # the moved faces stay valid and tile the same region as before (the rest of
+        # the partition is untouched, so the whole still tiles the footprint)
+        if not all(f.is_valid for f in new):
+            return False
+        a_old = sum(f.area for f in old)
+        if abs(sum(f.area for f in new) - a_old) >= tol:
+            return False
+        u_new = shapely.union_all(new) if new else shapely.Polygon()
+        if abs(u_new.area - a_old) >= tol:
+            return False
+        u_old = shapely.union_all(old) if old else shapely.Polygon()
+        return shapely.symmetric_difference(u_new, u_old).area < tol
 
     for members in sorted(clusters.values()):
         pts = np.array([xy_of[k] for k in members])
@@ -745,10 +757,15 @@ def collapse_short_edges(faces, footprint, *, min_length):
             continue
         target = xy_of[fixed[0]] if fixed else (pts[on][0] if on.any() else pts.mean(axis=0))
         trial = {**mapping, **{k: target for k in members}}
-        out, _ = rebuild(trial)
-        if ok(out):
+        touched = sorted(set().union(*(faces_of.get(k, ()) for k in members)))
+        rebuilt = {fi: rebuild_face(fi, trial) for fi in touched}
+        if local_ok([current[fi] for fi in touched if current[fi] is not None],
+                    [f for f in rebuilt.values() if f is not None]):
             mapping = trial
+            for fi, f in rebuilt.items():
+                current[fi] = f
     if not mapping:
         return list(faces), np.arange(len(faces))
-    out, idx = rebuild(mapping)
+    idx = [fi for fi in range(len(rings)) if current[fi] is not None]
+    out = [current[fi] for fi in idx]
     return [shapely.normalize(f) for f in out], np.asarray(idx, dtype=np.int64)

@@ -203,14 +203,17 @@ def _nonmanifold_points(solid):
     return np.unique(np.round(solid.vertices[[e[0] for e in bad], :2], 6), axis=0)
 
 
-def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8):
+def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8,
+                    repair=True):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
     longest-shared neighbour's plane, until the shell is 2-manifold. When that does not
     converge within ``max_rounds``, every face keeps its plane and the saddle vertices
     are cut out of the partition instead (:func:`lidar2city.roof.solid.split_saddles`).
 
-    Returns ``(solid, relabelled)``, the number of faces that took another plane."""
+    Returns ``(solid, relabelled)``, the number of faces that took another plane. With
+    ``repair=False`` a shell with a saddle is returned at once with ``relabelled = 1``
+    (the caller has another partition to try: each repair round rebuilds the solid)."""
     import shapely
 
     labels0 = face_labels
@@ -220,6 +223,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         bad = _nonmanifold_points(solid)
         if not len(bad):
             return solid, r
+        if not repair:
+            return solid, 1
         p = bad[0]
         at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
@@ -415,25 +420,37 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
-    for faces, face_labels in variants:
+    for k, (faces, face_labels) in enumerate(variants):
         # collapsing short edges can pinch faces at different heights into a saddle; the
         # uncollapsed partition is used then rather than a face taking a neighbour's plane
+        # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2)
+        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
+                                            repair=k == len(variants) - 1)
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info
 
 
-def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
+#: the largest exact roof snake solve (table elements, about 1 CPU second per 1e8): the
+#: roof graph of a block of many houses is too wide for it and keeps its simplified faces
+SNAKE_MAX_WORK = 1e8
+
+
+def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2,
+                  max_work=SNAKE_MAX_WORK):
     """The 2-D snake over the whole roof topology graph at once (seed step 5).
 
     The inner vertices of the partition move to the global minimum of
     E = C_Dir E_Dir + C_Dis E_Dis (:func:`lidar2city.regularize.snake.adjust_planar_graph`);
     the footprint outline stays fixed (it is the given boundary). The deviation
     energy is measured against the raw label-grid boundaries. When the moved
-    graph is no longer a partition of the footprint the faces are kept as they were.
+    graph is no longer a partition of the footprint, or when the exact solve
+    would touch more than ``max_work`` table elements
+    (:func:`lidar2city.snake.solver.reduction_work`, checked before any energy
+    table is built: a large block's roof graph is too wide for it), the faces
+    are kept as they were (``snake_fallback``).
 
     Returns ``(faces, info)`` with the solver's reduction counts in ``info``.
     """
@@ -441,6 +458,7 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     from shapely.geometry import Polygon
 
     from ..regularize.snake import adjust_planar_graph
+    from ..snake.solver import reduction_work
     from .refine import _remove_spikes
     from .solid import _key
 
@@ -466,6 +484,12 @@ def _snake_adjust(faces, footprint, raw_chains, *, cell, direction, window=2):
     e = np.array(sorted(edges), dtype=np.int64)
     e = e[~(fixed[e[:, 0]] & fixed[e[:, 1]])]
     segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in raw_chains if len(c) > 1])
+    # the exact solve grows with the graph's width (tables over several vertices of
+    # (2w+1)^2 states): a roof graph too wide for it keeps its simplified faces
+    work = reduction_work(np.where(fixed, 1, (2 * window + 1) ** 2), e)
+    if work > max_work:
+        logger.debug("roof snake skipped: ~%.3g table elements (limit %.3g)", work, max_work)
+        return faces, {"snake_fallback": True}
     new, info = adjust_planar_graph(xy, e, original_segments=segs, cell=cell, window=window,
                                     direction=direction, fixed=fixed)
     face_ids = [[keys[_key(p)] for ring in [f.exterior, *f.interiors]

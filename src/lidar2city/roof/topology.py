@@ -82,11 +82,14 @@ def label_grid(footprint, xy, labels, *, cell=0.5, min_cells=4) -> LabelGrid:
         n_lab = int(labels[ok].max()) + 1
         cj = np.clip(((xy[ok, 0] - x0) // cell).astype(np.int64), 0, w - 1)
         ci = np.clip(((xy[ok, 1] - y0) // cell).astype(np.int64), 0, h - 1)
-        votes = np.bincount((ci * w + cj) * n_lab + labels[ok], minlength=h * w * n_lab)
-        votes = votes.reshape(h * w, n_lab)
-        has = votes.sum(axis=1) > 0
+        # the most common label of each cell (ties: the smallest), from the (cell, label)
+        # pairs present: memory grows with the points, not with cells x labels
+        pair, count = np.unique((ci * w + cj) * n_lab + labels[ok], return_counts=True)
+        cell_of, lab = np.divmod(pair, n_lab)
+        order = np.lexsort((lab, -count, cell_of))
+        first = order[np.r_[True, cell_of[order][1:] != cell_of[order][:-1]]]
         flat = np.full(h * w, -1, dtype=np.int64)
-        flat[has] = votes[has].argmax(axis=1)
+        flat[cell_of[first]] = lab[first]
         grid = flat.reshape(h, w)
     grid[~inside] = -1
     known = grid >= 0
@@ -111,13 +114,18 @@ def _merge_small_regions(grid, inside, min_cells):
             if n == 0:
                 continue
             sizes = np.bincount(comp.ravel())
-            for c in np.flatnonzero(sizes[1:] < min_cells) + 1:
-                m = comp == c
-                ring = ndimage.binary_dilation(m) & ~m & inside
-                neigh = grid[ring]
+            small = np.flatnonzero(sizes[1:] < min_cells) + 1
+            objects = ndimage.find_objects(comp) if len(small) else []
+            for c in small:
+                # the region's box and one cell around it hold its whole ring
+                rs, cs = objects[c - 1]
+                win = (slice(max(rs.start - 1, 0), rs.stop + 1), slice(max(cs.start - 1, 0), cs.stop + 1))
+                m = comp[win] == c
+                ring = ndimage.binary_dilation(m) & ~m & inside[win]
+                neigh = grid[win][ring]
                 neigh = neigh[neigh != lab]
                 if len(neigh):
-                    out[m] = np.bincount(neigh).argmax()
+                    out[win][m] = np.bincount(neigh).argmax()
                     changed = True
         grid = out
         if not changed:

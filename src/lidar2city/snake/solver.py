@@ -53,7 +53,7 @@ import numpy as np
 
 from ..errors import FitError, InputError
 
-__all__ = ["SnakeSolution", "minimize_energy", "graph_energy"]
+__all__ = ["SnakeSolution", "minimize_energy", "graph_energy", "reduction_work"]
 
 logger = logging.getLogger(__name__)
 
@@ -487,6 +487,46 @@ class _Reducer:
         for v, scope, arg in reversed(self.ops):
             states[v] = arg[tuple(states[x] for x in scope)]
         return states
+
+
+def reduction_work(dims, edges) -> float:
+    """Table elements an exact solve of a graph would touch, estimated on its structure
+    alone (no energy table is built): reductions I–III, else the min-weight
+    elimination, as the solver's planner simulates them.
+
+    It lets a caller skip a solve that would take too long before computing its
+    energy tables; the solver's type IV choices only lower the work (each is
+    taken when its simulated work is smaller). ``inf`` when a table would exceed
+    the solver's limit (it would raise :class:`~lidar2city.errors.FitError`).
+
+    Parameters
+    ----------
+    dims : sequence of int, shape (n,)
+        States per vertex (1 for a fixed vertex).
+    edges : array of int, shape (m, 2)
+
+    Returns
+    -------
+    float
+    """
+    dims = np.asarray(dims, dtype=np.int64)
+    st = _Structure(dims, len(dims))
+    for v in range(len(dims)):
+        st.add(frozenset((v,)))
+    for u, v in np.asarray(edges, dtype=np.int64).reshape(-1, 2):
+        if u != v:
+            st.add(frozenset((int(u), int(v))))
+    st.push(range(len(dims)))
+    work = 0
+    while st.active:
+        v = st.pop_reducible()
+        if v is None:
+            v = st.min_weight()
+        new, w = st.eliminate(v)
+        if _prod(dims, new) > _MAX_TABLE:
+            return np.inf
+        work += w
+    return float(work)
 
 
 def minimize_energy(

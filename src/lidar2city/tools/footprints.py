@@ -12,7 +12,8 @@ from ..errors import InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["footprints_job", "load_footprints_config", "FIELDS"]
+__all__ = ["footprints_job", "footprints_on_tiles", "load_footprints_config", "FIELDS",
+           "TRACE_BUFFER"]
 
 #: Output fields per building, in order.
 FIELDS = ("id", "area", "direction", "n_vertices", "mean_deviation", "n_points",
@@ -114,4 +115,121 @@ def footprints_job(inputs, output, *, crs=None, config=None, callback=None) -> d
         "reductions": {t: int(sum(f.attributes[f"type_{t.lower()}"] for f in fps))
                        for t in ("I", "II", "III", "IV")},
         "output": str(output),
+    }
+
+
+#: metres read around a block's cell when tracing on tiles: a building whose
+#: centre lies in the cell is traced whole up to twice this across (as ``reconstruct``)
+TRACE_BUFFER = 150.0
+
+
+def footprints_on_tiles(inputs, output, *, crs=None, config=None, block_size=1000.0,
+                        workers=1, scheduler=None, progress=None) -> dict:
+    """Footprints of a folder (or glob) of tiles, block by block on an executor, into one file.
+
+    The area is cut into the cells of a ``block_size`` grid on the CRS origin
+    (:func:`lidar2city.tools.blocks.traced_blocks`, the planner of
+    ``reconstruct``); each block reads its cell plus :data:`TRACE_BUFFER`
+    metres from the tiles that meet it, traces the footprints there
+    (:func:`lidar2city.tools.task.trace_block`) and keeps those whose centre
+    lies in its cell, so a building across tiles or blocks is traced once and
+    whole. Blocks run in this process (``workers=1``), on a local Dask cluster
+    or on ``scheduler``'s; the footprints are numbered and written in block
+    order, so the file is the same bytes whatever the executor.
+
+    Parameters
+    ----------
+    inputs : path or sequence of paths
+        Tiles: files, folders or glob patterns (:func:`lidar2city.io.tiles.tile_paths`).
+    output : path
+        Vector file (``.gpkg``); layer ``footprints`` with :data:`FIELDS`.
+    crs, config
+        As :func:`footprints_job`.
+    block_size : float
+        Side (m) of the blocks.
+    workers, scheduler
+        Where the blocks run (:func:`lidar2city.tools.engine.make_executor`).
+    progress : callable, optional
+        ``progress(blocks done, blocks, footprints so far)`` after each block.
+
+    Returns
+    -------
+    dict
+        As :func:`footprints_job`, with ``blocks`` and ``failed_blocks`` (the
+        cells of blocks that failed twice: the run goes on without them).
+
+    Raises
+    ------
+    InputError
+        No footprint found; bad options (a scheduler that does not answer).
+    CRSError
+        Tiles with different CRSs.
+    """
+    from ..footprints import FootprintsConfig
+    from ..io.las import TileReader, scan_tiles
+    from ..io.tiles import tile_paths
+    from . import task
+    from .blocks import Frame, traced_blocks
+    from .engine import make_executor
+
+    if not block_size > 0:
+        raise InputError(f"block_size must be positive, got {block_size}")
+    cfg = config if config is not None else FootprintsConfig()
+    tiles = scan_tiles(tile_paths(inputs), crs=crs)
+    reader = TileReader(tiles)
+    if reader.crs is None:
+        logger.warning("the input has no CRS: the output will have none (pass --crs)")
+    frame = Frame.of(reader)
+    specs = traced_blocks(tiles, frame, reader.world_bounds(), block_size, TRACE_BUFFER)
+    done, found, failed = {}, 0, []
+    with make_executor(workers, scheduler) as executor:
+        logger.info("%d blocks on %s", len(specs), executor.describe())
+        for i, out in executor.map(task.trace_block, specs, cfg, float(block_size),
+                                   run_hook=task.tile_keeper):
+            if isinstance(out, BaseException):  # the run goes on; the block is reported
+                msg = str(out).splitlines()[0] if str(out) else ""
+                logger.error("block %d (cell %s) failed twice: %s%s; no footprint traced there",
+                             i, specs[i].cell, type(out).__name__, f": {msg}" if msg else "")
+                failed.append(specs[i].cell)
+                out = task.TracedBlock(i, [], [])
+            done[i] = out
+            found += len(out.polygons)
+            if progress is not None:
+                progress(len(done), len(specs), found)
+    blocks = [done[i] for i in range(len(specs))]
+    polygons = [p for b in blocks for p in b.polygons]
+    rows = [f for b in blocks for f in b.fields]
+    if not polygons:
+        raise InputError("no building footprint found (all regions below min_area?)")
+    import shapely
+
+    fields = {"id": [f"b{i + 1:05d}" for i in range(len(polygons))],
+              **{k: [r[k] for r in rows] for k in FIELDS[1:]}}
+    spacings = [b.spacing for b in blocks if b.polygons]
+    from .. import __version__
+    from ..io.vector import VectorLayer, write_layers
+
+    meta = {"lidar2city_version": __version__,
+            "lidar2city_config": json.dumps({"footprints": dataclasses.asdict(cfg)}),
+            "lidar2city_footprints_resolved": json.dumps(
+                {"block_size": float(block_size), "blocks": len(specs),
+                 "point_spacing": [round(min(spacings), 4), round(max(spacings), 4)]})}
+    from .reconstruct import fixed_gpkg_date
+
+    with fixed_gpkg_date():
+        write_layers(output, [VectorLayer("footprints",
+                                          [shapely.MultiPolygon([p]) for p in polygons],
+                                          fields, "MultiPolygon")],
+                     origin=frame.origin, crs=frame.crs, xy_unit=frame.xy_unit,
+                     z_unit=frame.z_unit, metadata=meta)
+    return {
+        "buildings": len(polygons),
+        "area": float(sum(r["area"] for r in rows)),
+        "unregularised": sum(r["status"] != "ok" for r in rows),
+        "points": reader.count,
+        "reductions": {t: int(sum(r[f"type_{t.lower()}"] for r in rows))
+                       for t in ("I", "II", "III", "IV")},
+        "output": str(output),
+        "blocks": len(specs),
+        "failed_blocks": failed,
     }

@@ -22,6 +22,8 @@ The job, for any number of tiles and buildings, in four parts:
 
 from __future__ import annotations
 
+import contextlib
+
 import logging
 import time
 from collections import Counter
@@ -83,6 +85,9 @@ class ReconstructSummary:
     blocks: int = 0
     resumed: int = 0
     worker_peak_mb: float = 0.0
+    worker_cpu: dict = field(default_factory=dict)
+    process_cpu: dict = field(default_factory=dict)
+    startup_seconds: float = 0.0
 
     def lines(self) -> list[str]:
         out = [f"{self.done} of {self.total} buildings reconstructed (LoD {', '.join(self.lods)}), "
@@ -562,21 +567,27 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
         layers.append(VectorLayer(f"lod{lod.replace('.', '')}", geoms,
                                   {"id": [str(r.id) for r in rows]}, "MultiPolygon Z"))
     meta = {"lidar2city_configuration": json.dumps(configuration or {})}
-    import pyogrio
-
-    # GDAL stamps every GeoPackage table with the time of writing: a fixed stamp
-    # makes the same results the same bytes
-    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
-    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
-    try:
+    with fixed_gpkg_date():
         write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
                      z_unit=cloud.z_unit, metadata=meta)
-    finally:
-        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
 
 
 #: the time stamp written in GeoPackage outputs (``gpkg_contents.last_change``)
 GPKG_DATE = "2000-01-01T00:00:00.000Z"
+
+
+@contextlib.contextmanager
+def fixed_gpkg_date():
+    """GDAL stamps every GeoPackage table with the time of writing: inside this
+    context the stamp is :data:`GPKG_DATE`, so the same results are the same bytes."""
+    import pyogrio
+
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
 
 
 #: how LoD2.2 roofs are made: the roof-topology framework or fitted primitives
@@ -682,13 +693,15 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
                     float(block_size), None if check_images is None else str(check_images)]})
     journal = Journal.open(output, key, len(plan.specs), resume=resume)
-    n_blocks, state = len(plan.specs), {"blocks": 0, "buildings": 0, "mb": 0.0}
+    n_blocks, state, cpu = len(plan.specs), {"blocks": 0, "buildings": 0, "mb": 0.0}, {}
     ordered, sink = InOrder(plan), _sink(output, plan)
     tally = _Tally(output, plan)
 
     def take(out):
         state["blocks"] += 1
         state["mb"] = max(state["mb"], out.worker_mb)
+        if out.worker:  # not a block failed twice, nor one taken from the journal
+            cpu[out.worker] = cpu.get(out.worker, 0.0) + out.cpu
         for r in out.results:
             state["buildings"] += 1
             if progress is not None:
@@ -705,6 +718,7 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             out = journal.load(i) if i < n_blocks else None
             if out is not None:
                 done.add(i)
+                out.worker = ""  # its CPU belongs to the run that made it
                 take(out)
         if done:
             logger.info("resuming: %d of %d blocks already done", len(done), n_blocks)
@@ -718,6 +732,8 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
                     if not out.failed and k < len(pending):
                         journal.save(out.index, out)
                     take(out)
+                state["startup"], state["process_cpu"] = (executor.startup_seconds,
+                                                          executor.process_cpu())
         ordered.check()
         sink.close()
     except BaseException:
@@ -729,6 +745,9 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     summary = tally.summary
     summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
     summary.worker_peak_mb = state["mb"]
+    summary.worker_cpu = dict(sorted(cpu.items()))
+    summary.startup_seconds = state.get("startup", 0.0)
+    summary.process_cpu = state.get("process_cpu", {})
     summary.seconds = time.perf_counter() - t0
     return summary
 
@@ -989,7 +1008,10 @@ def run_blocks(executor, plan, specs=None):
     from . import task
 
     specs = plan.specs if specs is None else specs
-    for i, out in executor.map(task.run_block, specs, plan.options):
+    # runs of equal numbers of buildings (traced blocks: of equal numbers of blocks)
+    costs = [max(s.size, 1) for s in specs]
+    for i, out in executor.map(task.run_block, specs, plan.options, run_hook=task.tile_keeper,
+                               costs=costs):
         yield _failed_block(specs[i], out) if isinstance(out, BaseException) else out
 
 

@@ -7,15 +7,19 @@ none were given, and builds every building of the block with
 :func:`reconstruct_block` (the per-building step). The same spec and options
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
-in which blocks finish.
+in which blocks finish. :func:`trace_block` is the task of ``footprints`` on a
+folder of tiles (the same blocks, traced). Decoded tiles are shared by the
+blocks a process runs in turn and kept only while its next blocks read them
+(:func:`tile_keeper`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import socket
 import threading
-from collections import OrderedDict
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +30,8 @@ from ..io.las import TileReader
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block"]
+__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block",
+           "tile_keeper", "TracedBlock", "trace_block"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,7 +82,8 @@ class BlockOutput:
     ``points`` says whether the block held building points at all (a run where
     no block does is an error); ``failed``: the task failed twice and every
     building carries that reason; ``worker_mb`` the peak resident memory of
-    the process that ran it (a measure of the run, never written).
+    the process that ran it, ``cpu`` the CPU seconds that process spent on the
+    block and ``worker`` which process it was (measures of the run, never written).
     """
 
     index: int
@@ -86,54 +92,162 @@ class BlockOutput:
     points: bool = False
     failed: bool = False
     worker_mb: float = 0.0
+    cpu: float = 0.0
+    worker: str = ""
 
 
-# decoded tiles kept per process across blocks, least recently used first out: a
-# block reads its buildings plus a margin, so it meets up to 3 x 3 tiles and a run
-# of neighbouring blocks (:mod:`lidar2city.tools.engine` gives a worker runs of
-# consecutive blocks) reuses them. At least ``_TILE_CACHE_SIZE`` tiles are kept,
-# more while they hold no more than ``_TILE_CACHE_POINTS`` points in all, so a
-# worker's memory is bounded whatever the area (about 40 bytes a point)
-_TILE_CACHE_SIZE = 4
-_TILE_CACHE_POINTS = 3_000_000
-_tiles: OrderedDict = OrderedDict()
-_tiles_lock = threading.Lock()
+class _TileCache:
+    """Decoded tiles shared by the blocks a process runs in turn, kept only while
+    a later block of the same run still reads them.
+
+    A run of consecutive blocks (:mod:`lidar2city.tools.engine` gives a process
+    runs of neighbouring blocks) first tells the cache its blocks
+    (:func:`tile_keeper`); after each block, a tile that no later block of the
+    run reads is dropped, and one that later blocks read is cut down to the
+    points inside their boxes (the only points they will take from it). A tile
+    is decoded about once per run, and a process holds the tiles of the block it runs
+    plus the parts of them its next blocks read, soonest needed first, up to
+    :data:`KEEP_BLOCKS` blocks' worth of points: memory does not grow with the
+    area. Outside a run every tile is dropped after its block.
+    """
+
+    def __init__(self):
+        self.tiles = {}
+        self.lock = threading.Lock()
+        self.later = None  # path -> [(position in the run, world box)] while a run is on
+        self.decoded = 0
+        self.largest = 0  # points of the largest block read in the run
+
+    def read(self, n: int) -> None:
+        """Note a block's read of ``n`` points."""
+        self.largest = max(self.largest, int(n))
+
+    def get(self, tile, decode):
+        """The decoded ``tile`` (``decode()`` when it is not kept), keyed by its file's
+        path, size and modification time."""
+        st = os.stat(tile.path)
+        key = (tile.path, st.st_size, st.st_mtime_ns)
+        with self.lock:
+            hit = self.tiles.get(key)
+        if hit is None:
+            hit = decode()
+            with self.lock:
+                self.tiles[key] = hit
+                self.decoded += 1
+        return hit
+
+    def start(self, specs) -> None:
+        """A run of ``specs`` begins: index which of its blocks read which tile."""
+        later = {}
+        for k, spec in enumerate(specs):
+            if spec.world_box is not None:
+                for t in spec.tiles:
+                    later.setdefault(t.path, []).append((k, spec.world_box))
+        with self.lock:
+            self.later = later
+
+    def keep_after(self, k: int) -> None:
+        """Keep of each tile only what the run's blocks after ``k`` read from it,
+        soonest needed first, up to :data:`KEEP_BLOCKS` times the largest block
+        read so far (what the next block reads is always kept)."""
+        with self.lock:
+            later = self.later or {}
+            kept = []
+            for key in list(self.tiles):
+                boxes = [(j, b) for j, b in later.get(key[0], ()) if j > k]
+                world, attrs = self.tiles.pop(key)
+                if not boxes:
+                    continue
+                x, y = world[:, 0], world[:, 1]
+                inside = np.zeros(len(world), dtype=bool)
+                for _, (x0, y0, x1, y1) in boxes:  # the comparisons of TileReader.box
+                    inside |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+                if not inside.all():
+                    world, attrs = world[inside], {n: v[inside] for n, v in attrs.items()}
+                kept.append((boxes[0][0], key, (world, attrs)))
+            # farthest next use out first (Belady) when over the budget
+            kept.sort(key=lambda item: (item[0], item[1]))
+            budget, total = KEEP_BLOCKS * self.largest, 0
+            for first, key, hit in kept:
+                total += len(hit[0])
+                if first == k + 1 or total <= budget:
+                    self.tiles[key] = hit
+
+    def stop(self) -> None:
+        """The run is over: drop every tile."""
+        with self.lock:
+            self.tiles.clear()
+            self.later = None
+            self.largest = 0
+
+    def points(self) -> int:
+        with self.lock:
+            return sum(len(world) for world, _ in self.tiles.values())
 
 
-def _cached_points() -> int:
-    return sum(len(world) for world, _ in _tiles.values())
+#: the tile points a process keeps between blocks: at most this many times its
+#: largest block read (besides what the next block reads)
+KEEP_BLOCKS = 3
+_cache = _TileCache()
+
+
+def tile_keeper(specs):
+    """The run hook of :meth:`lidar2city.tools.engine.InProcess.map` for blocks:
+    ``keep(k)`` after the ``k``-th block of the run keeps only the tile points
+    the run's next blocks read (``keep(len(specs))`` at the end drops all)."""
+    _cache.start(specs)
+
+    def keep(k):
+        if k >= len(specs) - 1:
+            _cache.stop()
+        else:
+            _cache.keep_after(k)
+
+    return keep
 
 
 class _SharedTileReader(TileReader):
-    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a process."""
+    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a run."""
 
     def _tile(self, k):
-        t = self.tiles[k]
-        st = os.stat(t.path)
-        key = (t.path, st.st_size, st.st_mtime_ns)
-        with _tiles_lock:
-            hit = _tiles.get(key)
-            if hit is not None:
-                _tiles.move_to_end(key)
-                return hit
-        hit = super()._tile(k)
-        self._tiles.clear()
-        with _tiles_lock:
-            _tiles[key] = hit
-            while len(_tiles) > _TILE_CACHE_SIZE and _cached_points() > _TILE_CACHE_POINTS:
-                _tiles.popitem(last=False)
-        return hit
+        def decode():
+            hit = super(_SharedTileReader, self)._tile(k)
+            self._tiles.clear()  # held by the shared cache only
+            return hit
+
+        return _cache.get(self.tiles[k], decode)
+
+def _read_box(spec):
+    """The points of the spec's world box (shared decoded tiles), or None when empty."""
+    if spec.world_box is None or not spec.tiles:
+        return None
+    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin))
+    cloud = reader.box(*spec.world_box)
+    _cache.read(len(cloud))
+    return cloud if len(cloud) else None
+
+
+def _measured(task, spec, *args):
+    """``task(spec, *args)`` with its process's peak memory, CPU seconds and name set
+    on the output; outside a run (:func:`tile_keeper`) no decoded tile is kept."""
+    t0 = time.process_time()
+    try:
+        out = task(spec, *args)
+    finally:
+        if _cache.later is None:  # not in a run: nothing to keep
+            _cache.stop()
+    out.worker_mb = _peak_mb()
+    out.cpu = time.process_time() - t0
+    out.worker = f"{socket.gethostname()}:{os.getpid()}"
+    return out
 
 
 def _block_cloud(spec, options):
     """``(cloud, classes)`` of the spec's world box, or ``(None, None)`` without building points."""
     from .reconstruct import point_roles
 
-    if spec.world_box is None or not spec.tiles:
-        return None, None
-    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin))
-    cloud = reader.box(*spec.world_box)
-    if len(cloud) == 0:
+    cloud = _read_box(spec)
+    if cloud is None:
         return None, None
     try:
         _, _, classes = point_roles(cloud, options.config, classified=options.classified)
@@ -174,9 +288,7 @@ def block_footprints(spec):
 
 def run_block(spec, options: BlockOptions) -> BlockOutput:
     """Every building of one block (the task a worker runs); see :func:`_run_block`."""
-    out = _run_block(spec, options)
-    out.worker_mb = _peak_mb()
-    return out
+    return _measured(_run_block, spec, options)
 
 
 def _peak_mb() -> float:
@@ -269,3 +381,62 @@ def _unmodelled(fid, reason):
     from ..datamodel import BuildingResult
 
     return BuildingResult(str(fid), status="failed", reason=reason)
+
+
+@dataclass(eq=False)
+class TracedBlock:
+    """The footprints a block traced (``footprints``), those centred in its cell,
+    in the tracing's order: ``polygons`` (local, the run's frame) and one dict
+    of fields each; ``spacing`` the block's building point spacing (m)."""
+
+    index: int
+    polygons: list
+    fields: list
+    spacing: float = 0.0
+    worker_mb: float = 0.0
+    cpu: float = 0.0
+    worker: str = ""
+
+
+def trace_block(spec, config, block_size: float) -> TracedBlock:
+    """The task of ``lidar2city footprints`` on a folder of tiles: the footprints
+    (:func:`lidar2city.footprints.extract_footprints` with the ``[footprints]``
+    stage ``config``) traced in the spec's box whose centre lies in its cell of
+    the ``block_size`` grid.
+
+    The points are read as for ``reconstruct`` (shared tiles, canonical order);
+    points without any of the building class are classified in the box first.
+    """
+    return _measured(_trace_block, spec, config, block_size)
+
+
+def _trace_block(spec, config, block_size):
+    import dataclasses
+
+    from ..footprints import extract_footprints, point_spacing
+    from .blocks import block_keys
+
+    out = TracedBlock(spec.index, [], [])
+    cloud = _read_box(spec)
+    if cloud is None:
+        return out
+    cls = cloud.get("classification")
+    if cls is None or not np.any(cls == config.building_class):
+        from .classify import classify_cloud
+
+        cls = np.asarray(classify_cloud(cloud))
+    building = cloud.xyz[cls == config.building_class, :2]
+    if not len(building):
+        return out
+    found = extract_footprints(cloud.xyz, cls, **dataclasses.asdict(config))
+    if not found:
+        return out
+    out.spacing = float(point_spacing(building))
+    b = np.array([f.polygon.bounds for f in found], dtype=np.float64).reshape(-1, 4)
+    centre = np.column_stack([(b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2])
+    keys = block_keys(centre, spec.frame, block_size)
+    for f, key in zip(found, keys, strict=True):
+        if (int(key[0]), int(key[1])) == tuple(spec.cell):
+            out.polygons.append(f.polygon)
+            out.fields.append({**f.attributes, "status": f.status, "reason": f.reason})
+    return out
