@@ -67,3 +67,53 @@ def test_courtyard_and_below_floor():
     assert not bad and vol == pytest.approx((400 - 16) * 4)
     with pytest.raises(FitError, match="below the floor"):
         partition_solid([box(0, 0, 5, 5)], np.array([[1.0, 0, -2.0]]), 0.0)
+
+
+def _cut_saddle(faces, planes):
+    """The one saddle at (5, 5) found, cut out, and the cut partition's solid checked valid."""
+    from lidar2city.roof.building import _nonmanifold_points
+    from lidar2city.roof.solid import split_saddles
+    from lidar2city.validate.solid import check_solid
+
+    bad = _nonmanifold_points(partition_solid(faces, planes, 0.0))
+    assert len(bad) and np.allclose(bad, [[5, 5]])
+    cut = split_saddles(faces, bad)
+    s = partition_solid(cut, planes, 0.0)
+    assert not len(_nonmanifold_points(s)) and not shell_errors(s)[0] and not check_solid(s)
+    return cut, s
+
+
+def test_saddle_vertex_is_cut_out():
+    # four roof parts meeting at one vertex, high and low alternating around it (the
+    # ISPRS CSite4 station roof has dozens): four walls share one vertical edge
+    faces = [box(0, 0, 5, 5), box(5, 0, 10, 5), box(5, 5, 10, 10), box(0, 5, 5, 10)]
+    planes = np.array([[0, 0, 6.0], [0, 0, 3.0], [0, 0, 6.0], [0, 0, 4.0]])
+    cut, s = _cut_saddle(faces, planes)
+    # the largest (first of equals) took the patch; nothing moved farther than 5 cm
+    assert cut[0].area > 25
+    assert sum(f.area for f in cut) == pytest.approx(100)
+    assert all(f.symmetric_difference(g).area < 0.01 for f, g in zip(cut, faces, strict=True))
+    assert shell_errors(s)[1] == pytest.approx(25 * (6 + 3 + 6 + 4), abs=0.02)
+
+
+def test_saddle_on_the_outline_is_notched():
+    # two parts touching only at one vertex, the outside on one side and a courtyard on the
+    # other, joined around the courtyard by two strips
+    faces = [box(0, 0, 5, 5), box(5, 5, 10, 10), box(-3, 0, 0, 13), box(0, 10, 10, 13)]
+    planes = np.array([[0, 0, 6.0], [0, 0, 4.0], [0, 0, 5.0], [0, 0, 5.0]])
+    cut, _ = _cut_saddle(faces, planes)
+    assert cut[0].area + cut[1].area == pytest.approx(50 - 0.05**2, abs=1e-6)
+    assert cut[0].distance(cut[1]) > 0.05
+    assert cut[2].equals(faces[2]) and cut[3].equals(faces[3])
+
+
+def test_manifold_solid_keeps_planes_when_relabelling_gives_up():
+    from lidar2city.roof.building import _manifold_solid
+    from lidar2city.validate.solid import check_solid
+
+    faces = [box(0, 0, 5, 5), box(5, 0, 10, 5), box(5, 5, 10, 10), box(0, 5, 5, 10)]
+    planes = np.array([[0, 0, 6.0], [0, 0, 3.0], [0, 0, 6.0], [0, 0, 4.0]])
+    s, relabelled = _manifold_solid(faces, np.arange(4), planes, 0.0, 0.1, max_rounds=0)
+    assert relabelled == 0 and not check_solid(s)
+    roofs = sorted({round(float(z), 3) for z in s.vertices[:, 2]} - {0.0})
+    assert roofs == [3.0, 4.0, 6.0]

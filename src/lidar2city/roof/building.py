@@ -15,7 +15,7 @@ from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import partition_solid
+from .solid import partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -207,13 +207,16 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
                     repair=True):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
-    longest-shared neighbour's plane, until the shell is 2-manifold.
+    longest-shared neighbour's plane, until the shell is 2-manifold. When that does not
+    converge within ``max_rounds``, every face keeps its plane and the saddle vertices
+    are cut out of the partition instead (:func:`lidar2city.roof.solid.split_saddles`).
 
     Returns ``(solid, relabelled)``, the number of faces that took another plane. With
     ``repair=False`` a shell with a saddle is returned at once with ``relabelled = 1``
     (the caller has another partition to try: each repair round rebuilds the solid)."""
     import shapely
 
+    labels0 = face_labels
     face_labels = np.array(face_labels, copy=True)
     for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
@@ -233,7 +236,30 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         if not neigh:
             return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    return partition_solid(faces, planes[face_labels], ground_z, min_height=min_height), max_rounds
+    solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+    if len(_nonmanifold_points(solid)):
+        # taking planes did not converge (one face's new plane makes the next saddle): keep
+        # every plane and cut the saddle vertices out of the partition instead
+        own = planes[np.asarray(labels0)]
+        cut = partition_solid(faces, own, ground_z, min_height=min_height)
+        for _ in range(3):
+            bad = _nonmanifold_points(cut)
+            if not len(bad):
+                break
+            faces = split_saddles(faces, bad)
+            cut = partition_solid(faces, own, ground_z, min_height=min_height)
+        if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+            return cut, 0
+    return solid, max_rounds
+
+
+def _valid_cut(solid, precision=1e-3) -> bool:
+    """The solid valid as computed and with its vertices on the output grid (a notch or
+    patch is a few centimetres: it must not make faces intersect once rounded)."""
+    from ..datamodel import Solid
+
+    rounded = Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
+    return not check_solid(solid) and not check_solid(rounded)
 
 
 def _parts(footprint):

@@ -16,7 +16,7 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["partition_solid", "split_crossings"]
+__all__ = ["partition_solid", "split_crossings", "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
 
@@ -171,6 +171,65 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
                     at[i + k] = [x]
             i += m
     return _insert_at(rings, at)
+
+
+def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
+    """Replace each saddle vertex by a tiny patch of one face, so that only three faces meet.
+
+    Where four or more faces (the outside counting as one, at ground height)
+    meet at a vertex with heights alternating around it (high, low, high,
+    low), every wall between them rises along the same vertical edge: the
+    shell is not 2-manifold there, whatever the planes. Cut a small square
+    (half-diagonal ``radius``, less near other vertices) around the vertex out
+    of every face touching it and give it to the largest of them, or, on the
+    footprint's outline, to none (a notch): each vertex left on the square's
+    outline then touches at most three faces (two neighbours and the patch or
+    the outside), and around three faces the heights cannot alternate. Roof
+    planes are unchanged; the geometry moves by less than ``radius``.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+        A partition (vertices on the ``grid``).
+    points : ndarray, shape (M, 2)
+        The saddle vertices.
+    radius : float
+        Largest half-diagonal (m) of the square cut out.
+    grid : float
+        The changed faces are snapped to this grid (m), as the partition is.
+
+    Returns
+    -------
+    list of shapely Polygon
+        The faces, in the same order; a saddle where the cut would break a face
+        into pieces or leave the square smaller than two grid steps is left as it is.
+    """
+    import shapely
+
+    faces = list(faces)
+    for p in np.asarray(points, dtype=np.float64).reshape(-1, 2):
+        pt = shapely.Point(p)
+        at = [i for i, f in enumerate(faces) if f.distance(pt) < 1e-6]
+        if len(at) < 2:
+            continue
+        xy = shapely.get_coordinates([faces[i] for i in at])
+        d = np.hypot(*(xy - p).T)
+        d = d[d > 1e-6]
+        r = min(radius, float(d.min()) / 3) if len(d) else radius
+        r = np.floor(r / grid) * grid
+        if r < 2 * grid:
+            continue
+        square = pt.buffer(r, quad_segs=1)
+        pieces = [faces[i].intersection(square) for i in at]
+        new = {i: shapely.set_precision(faces[i].difference(square), grid) for i in at}
+        if sum(g.area for g in pieces) > 0.99 * square.area:
+            keep = max(at, key=lambda i: (faces[i].area, -i))
+            new[keep] = shapely.set_precision(shapely.union(faces[keep], shapely.union_all(pieces)), grid)
+        # else the vertex is on the outline: the square is left out of every face (a notch)
+        if all(g.geom_type == "Polygon" and not g.is_empty for g in new.values()):
+            for i, g in new.items():
+                faces[i] = g
+    return faces
 
 
 def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
