@@ -302,6 +302,22 @@ def test_runs_of_equal_cost_cover_every_item_once_in_order(costs):
         assert runs == [(0, 18), (18, 28), (28, 38), (38, 48)]
 
 
+@pytest.mark.parametrize("costs,cap", [([20] * 500, 1000), ([1] * 5000, 1000), ([50] * 100, 120),
+                                       ([3000, 1, 1, 1], 1000)])
+def test_a_run_holds_at_most_max_cost_whatever_the_area(costs, cap):
+    """A task returns its run's results together: runs are capped, so a worker holds a
+    bounded share whatever the area (more runs than RUNS_PER_WORKER x workers)."""
+    n = len(costs)
+    runs = engine.runs_of(n, 2, costs, max_cost=cap)
+    assert runs[0][0] == 0 and runs[-1][1] == n
+    assert all(b == c for (_, b), (c, _) in zip(runs[:-1], runs[1:]))
+    biggest = max(costs)
+    assert all(sum(costs[a:b]) <= cap + biggest for a, b in runs)
+    assert len(runs) >= min(n, -(-sum(costs) // cap))
+    # without costs an item counts 1
+    assert max(b - a for a, b in engine.runs_of(5000, 2)) <= engine.RUN_MAX_COST
+
+
 def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
     """After each block of a run the shared cache holds, of each tile, only the points
     inside the boxes of the run's later blocks; nothing once the run is over."""

@@ -26,7 +26,7 @@ from ..errors import DependencyError, InputError
 logger = logging.getLogger(__name__)
 
 __all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "RETRIES", "CONNECT_TIMEOUT",
-           "RUNS_PER_WORKER"]
+           "RUNS_PER_WORKER", "RUN_MAX_COST"]
 
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
@@ -202,6 +202,15 @@ class DaskExecutor:
 #: both its sides decode the tiles they share)
 RUNS_PER_WORKER = 2
 
+#: the most work one cluster task takes (in ``costs`` units: buildings for
+#: blocks of footprints, else items): a task returns its items' results
+#: together when it ends, so without a cap a worker would hold the results of
+#: 1 / (RUNS_PER_WORKER x workers) of the whole area, unbounded for a country.
+#: 1000 buildings of LoD2.2 are a few tens of MB; a run of them still spans
+#: tens of blocks, so each tile is decoded about once (a run boundary costs
+#: one extra decoding of the tiles its two sides share)
+RUN_MAX_COST = 1000
+
 #: Dask settings of a local cluster: no statistical profiler (it samples every
 #: thread's stack every 10 ms) and the periodic checks of the event loop, the
 #: system and the memory every second or more instead of every 20 / 100 / 500 ms:
@@ -215,7 +224,7 @@ QUIET_CLUSTER = {
 }
 
 
-def runs_of(n: int, workers: int, costs=None) -> list:
+def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> list:
     """``(start, stop)`` of the runs of consecutive items the cluster's tasks take.
 
     Items given in a spatial order (the planner's blocks, row by row) share
@@ -223,15 +232,23 @@ def runs_of(n: int, workers: int, costs=None) -> list:
     takes a run of consecutive items decodes each tile about once, where items
     dealt one by one to alternate workers make every worker decode every tile.
     About ``RUNS_PER_WORKER`` runs per worker, of equal length, or of equal
-    total ``costs`` (one non-negative number per item, e.g. its buildings) when given.
+    total ``costs`` (one non-negative number per item, e.g. its buildings) when given;
+    more runs when that would give a run more than ``max_cost`` (default
+    :data:`RUN_MAX_COST`; an item costs 1 without ``costs``), so that what a
+    task holds is bounded whatever the area (a single item may cost more).
     """
-    count = max(1, min(n, RUNS_PER_WORKER * max(1, int(workers or 1))))
+    import numpy as np
+
+    max_cost = RUN_MAX_COST if max_cost is None else max_cost
+    total = (np.arange(1, n + 1, dtype=np.float64) if costs is None
+             else np.cumsum(np.asarray(costs, dtype=np.float64).reshape(n)))
+    want = RUNS_PER_WORKER * max(1, int(workers or 1))
+    if n and total[-1] > 0:
+        want = max(want, int(np.ceil(total[-1] / max_cost)))
+    count = max(1, min(n, want))
     if costs is None:
         cuts = [n * k // count for k in range(count + 1)]
     else:
-        import numpy as np
-
-        total = np.cumsum(np.asarray(costs, dtype=np.float64).reshape(n))
         cuts = [0]
         for k in range(1, count):
             # the first item past the k-th share, leaving one item at least per run
