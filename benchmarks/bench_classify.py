@@ -170,6 +170,7 @@ def nebraska_misses(data: Path, png=None):
         print(f"  {name:<21} local residual median {np.nanmedian(res[m]):.3f} m "
               f"(rough above {smooth_res:.3f}): rough {np.mean(rough[m]):.2f}, "
               f"ref. vegetation within 0.3 m {np.mean(d_veg[m] < 0.3):.2f}")
+    seed, dark = _nebraska_causes(xyz, ref, a["intensity"], out, res)
     if png is None:
         return
     import matplotlib
@@ -178,7 +179,9 @@ def nebraska_misses(data: Path, png=None):
     import matplotlib.pyplot as plt
 
     other = ~(hit | miss | false)
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6), gridspec_kw={"width_ratios": [1.4, 1, 1]})
+    fig, axes = plt.subplots(2, 3, figsize=(16, 9.2), gridspec_kw={"width_ratios": [1.4, 1, 1]})
+    lower = axes[1]
+    axes = axes[0]
     groups = ((other & (ref == 2), "ground", "tan", 0.5),
               (other & veg, "ref. vegetation", "yellowgreen", 0.8),
               (hit, "building found", "red", 1.5), (miss, "building missed", "blue", 2.5),
@@ -198,14 +201,123 @@ def nebraska_misses(data: Path, png=None):
         ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
         ax.set_xlabel(f"{'xy'[u]} (m)")
         ax.set_ylabel("height (m)")
-    for ax in axes:
+    # what the reference building points are: bright roof planes vs points as
+    # dark as the leaves (intensity under the 5th percentile of the roof planes')
+    kinds = ((other & veg, "ref. vegetation", "yellowgreen", 0.8),
+             (bld & seed, "ref. building on a roof plane found", "red", 1.5),
+             (bld & ~seed & dark, "ref. building off the roof planes, dark", "purple", 2.5),
+             (bld & ~seed & ~dark, "ref. building off the roof planes, bright", "black", 2.5))
+    for m, label, colour, size in kinds:
+        order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
+        lower[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
+    lower[0].legend(fontsize=7, markerscale=4, loc="upper left")
+    lower[0].set_title("reference building points: roof planes and dark points", fontsize=9)
+    for ax, (axis, lo, hi) in zip(lower[1:], ((1, 1.0, 2.0), (0, 14.0, 15.0)), strict=True):
+        sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
+        u = 1 - axis
+        for m, _label, colour, size in kinds:
+            mm = m & sl
+            ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
+        ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
+        ax.set_xlabel(f"{'xy'[u]} (m)")
+        ax.set_ylabel("height (m)")
+    for ax in (*axes, *lower):
         ax.set_aspect("equal")
-    fig.suptitle("Nebraska sample: reference building points missed (blue) and where they are",
+    fig.suptitle("Nebraska sample: reference building points missed (blue) and where they are "
+                 "(top); which are roof planes and which are as dark as the leaves (bottom)",
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=80)
     plt.close(fig)
     print(f"  figure written to {png}")
+
+
+def _nebraska_causes(xyz, ref, intensity, out, res):
+    """Per-cause breakdown of the Nebraska sample's reference building points.
+
+    Every point goes to the first of: under 2 m above the terrain; on a roof
+    plane found (a seed region); inside the building outline (the grid of
+    closed roof seeds) at most 1 m above the roof; inside it more than 1 m
+    above the roof; in the edge ring (0.5 m) around the outline; beyond. Per
+    cause: the reference building points found / missed, the reference
+    vegetation called building there, and two physical tests of what the
+    points are: "see-through" (a non-ground point at least 2 m lower lies
+    within 0.3 m horizontally: the pulses went on through them, so they are
+    no opaque roof) and the intensity (median; the roof planes' points are
+    bright, leaves and twigs dark). Then the scores of the two consistent
+    ways to treat the see-through, dark points near roofs.
+    """
+    from scipy.spatial import cKDTree
+
+    cls, hag, oi = out["classes"], out["hag"], out["obj_idx"]
+
+    def on_all(key):
+        v = np.zeros(len(xyz), bool)
+        v[oi] = out[key]
+        return v
+
+    seed, in_bld, in_zone, above = (on_all(k) for k in ("seed", "in_building", "in_zone",
+                                                          "above_roof"))
+    valid = ref != 7
+    bld, pb = ref == 6, cls == 6
+    veg = np.isin(ref, (3, 4, 5))
+    obj = valid & (ref != 2)
+    tree = cKDTree(xyz[obj, :2])
+    z_obj = xyz[obj, 2]
+    see_through = np.zeros(len(xyz), bool)
+    for i in np.flatnonzero((bld | pb | veg) & valid & (hag >= 2.0)):
+        nb = tree.query_ball_point(xyz[i, :2], 0.3)
+        see_through[i] = bool(np.any(z_obj[nb] < xyz[i, 2] - 2.0))
+    intensity = np.asarray(intensity, dtype=np.float64)
+    # "dark": below the 5th percentile of the intensity of the roof planes found
+    dark = intensity < np.percentile(intensity[seed], 5)
+    low = hag < 2.0
+    causes = (("under 2 m above the terrain", low),
+              ("on a roof plane found (seed)", ~low & seed),
+              ("in the outline, <= 1 m above the roof", ~low & ~seed & in_bld & ~above),
+              ("in the outline, > 1 m above the roof", ~low & ~seed & in_bld & above),
+              ("in the 0.5 m ring round the outline", ~low & ~seed & in_zone & ~in_bld),
+              ("beyond the outline", ~low & ~seed & ~in_zone))
+    print("  reference building points by cause (first that applies; see-through: a non-ground "
+          "point >= 2 m lower within 0.3 m):")
+    print(f"    {'cause':<40} {'ref bld':>7} {'found':>6} {'missed':>6} {'false':>6} "
+          f"{'see-through':>11} {'dark':>5} {'intensity':>9} {'residual':>8}")
+    for name, m in causes:
+        mb = m & bld
+        print(f"    {name:<40} {int(mb.sum()):7d} {int((mb & pb).sum()):6d} "
+              f"{int((mb & ~pb).sum()):6d} {int((m & pb & ~bld & valid).sum()):6d} "
+              f"{np.mean(see_through[mb]) if mb.any() else 0:11.2f} "
+              f"{np.mean(dark[mb]) if mb.any() else 0:5.2f} "
+              f"{np.median(intensity[mb]) if mb.any() else 0:9.0f} "
+              f"{np.nanmedian(res[mb]) if mb.any() else 0:8.3f}")
+    hv = (ref == 5) & (hag >= 2.0)
+    print(f"    {'(reference high vegetation)':<40} {int(hv.sum()):7d} {'':>6} {'':>6} "
+          f"{int((hv & pb).sum()):6d} {np.mean(see_through[hv]):11.2f} {np.mean(dark[hv]):5.2f} "
+          f"{np.median(intensity[hv]):9.0f} {np.nanmedian(res[hv]):8.3f}")
+
+    def score(pred):
+        tp = int((pred & bld).sum())
+        fp = int((pred & ~bld & valid).sum())
+        p, r = tp / max(tp + fp, 1), tp / max(int(bld.sum()), 1)
+        return f"precision {p:.3f}, recall {r:.3f}, F1 {2 * p * r / max(p + r, 1e-12):.3f}"
+
+    canopy = ~seed & see_through & dark
+    print(f"  ours: {score(pb)}; see-through and dark (intensity under the 5th percentile of "
+          f"the roof planes', {int(np.percentile(intensity[seed], 5))}): {int((canopy & bld).sum())} "
+          f"reference building points, {int((canopy & veg).sum())} reference vegetation")
+    print(f"  the same classes but see-through dark points never building: {score(pb & ~canopy)}; "
+          f"every point of the outline and its ring from {0.5:g} m up building: "
+          f"{score(pb | (in_zone & (hag >= 0.5) & valid))}")
+    # does any simple distance rule tell the reference's building canopy from its vegetation?
+    d, _ = cKDTree(xyz[seed, :2]).query(xyz[:, :2])
+    rest = ~seed & (hag >= 2.0) & valid
+    bands = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, np.inf)
+    print("  points above 2 m off the roof planes, by horizontal distance to the nearest "
+          "roof-plane point (reference building / vegetation): " + ", ".join(
+              f"{lo:g}-{hi:g} m {int((rest & bld & (d >= lo) & (d < hi)).sum())}"
+              f"/{int((rest & veg & (d >= lo) & (d < hi)).sum())}"
+              for lo, hi in zip(bands[:-1], bands[1:], strict=True)))
+    return seed, dark
 
 
 def density_sweep(data: Path):
