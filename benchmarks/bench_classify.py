@@ -20,7 +20,8 @@ shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
 25 pts/m2) with building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
 ``--nebraska-png PATH`` draws where the Nebraska sample's building points are
-missed (docs/classify_nebraska_misses.png; the breakdown is always printed);
+missed and which are as dark as the leaves (docs/classify_nebraska_misses.png;
+the breakdown by cause, with see-through and intensity tests, is always printed);
 ``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
 footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
 
@@ -186,41 +187,34 @@ def nebraska_misses(data: Path, png=None):
               (other & veg, "ref. vegetation", "yellowgreen", 0.8),
               (hit, "building found", "red", 1.5), (miss, "building missed", "blue", 2.5),
               (false, "vegetation called building", "orange", 2.5))
-    for m, label, colour, size in groups:
-        order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
-        axes[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
-    axes[0].set_title("top view (highest on top)", fontsize=9)
-    axes[0].legend(fontsize=7, markerscale=4, loc="upper left")
     z0 = xyz[:, 2].min()
-    for ax, (axis, lo, hi) in zip(axes[1:], ((0, 0.5, 1.5), (1, 5.0, 6.0)), strict=True):
-        sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
-        u = 1 - axis
+
+    def draw(row, groups, slices, title):
+        """Top view (highest on top) and two vertical slices of the point groups."""
         for m, label, colour, size in groups:
-            mm = m & sl
-            ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
-        ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
-        ax.set_xlabel(f"{'xy'[u]} (m)")
-        ax.set_ylabel("height (m)")
+            order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
+            row[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
+        row[0].set_title(title, fontsize=9)
+        row[0].legend(fontsize=7, markerscale=4, loc="upper left")
+        for ax, (axis, lo, hi) in zip(row[1:], slices, strict=True):
+            sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
+            u = 1 - axis
+            for m, _label, colour, size in groups:
+                mm = m & sl
+                ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
+            ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
+            ax.set_xlabel(f"{'xy'[u]} (m)")
+            ax.set_ylabel("height (m)")
+
+    draw(axes, groups, ((0, 0.5, 1.5), (1, 5.0, 6.0)), "top view (highest on top)")
     # what the reference building points are: bright roof planes vs points as
     # dark as the leaves (intensity under the 5th percentile of the roof planes')
     kinds = ((other & veg, "ref. vegetation", "yellowgreen", 0.8),
              (bld & seed, "ref. building on a roof plane found", "red", 1.5),
              (bld & ~seed & dark, "ref. building off the roof planes, dark", "purple", 2.5),
              (bld & ~seed & ~dark, "ref. building off the roof planes, bright", "black", 2.5))
-    for m, label, colour, size in kinds:
-        order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
-        lower[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
-    lower[0].legend(fontsize=7, markerscale=4, loc="upper left")
-    lower[0].set_title("reference building points: roof planes and dark points", fontsize=9)
-    for ax, (axis, lo, hi) in zip(lower[1:], ((1, 1.0, 2.0), (0, 14.0, 15.0)), strict=True):
-        sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
-        u = 1 - axis
-        for m, _label, colour, size in kinds:
-            mm = m & sl
-            ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
-        ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
-        ax.set_xlabel(f"{'xy'[u]} (m)")
-        ax.set_ylabel("height (m)")
+    draw(lower, kinds, ((1, 1.0, 2.0), (0, 14.0, 15.0)),
+         "reference building points: roof planes and dark points")
     for ax in (*axes, *lower):
         ax.set_aspect("equal")
     fig.suptitle("Nebraska sample: reference building points missed (blue) and where they are "

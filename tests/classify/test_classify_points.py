@@ -201,6 +201,58 @@ def test_ramp_reaching_the_ground_is_no_building():
     assert (classify_points(xyz, ground)[~ground] == 6).all()
 
 
+def _steep_face_on_facade(rng, step=0.25):
+    """Ground, and a 12 m long mono-pitch roof face at 60 degrees rising 7 m from
+    a 5 m facade, joined by a rounded eave (radius 0.6 m) so that region growing
+    chains the facade and the roof face into one region. Returns xyz, ground mask,
+    roof-face mask."""
+    r, top, rise, length = 0.6, 5.0, 7.0, 12.0
+    ys = np.arange(step / 2, length, step)
+    # eave arc in the x-z plane: from the facade's top (0, top), vertical,
+    # round a centre (r, top) to where the surface rises at 60 degrees
+    phi = np.linspace(0.0, np.radians(30.0), 4)
+    ax, az = r - r * np.cos(phi), top + r * np.sin(phi)
+    x_end, z_end = ax[-1], az[-1]
+    run = rise / np.tan(np.radians(60.0))
+    g = _grid(-10, 20, -10, 22, step, rng)
+    g = g[~((g[:, 0] > 0) & (g[:, 0] < x_end + run) & (g[:, 1] > 0) & (g[:, 1] < length))]
+    ground = np.column_stack([g, rng.normal(0, 0.02, len(g))])
+    xy = _grid(x_end, x_end + run, 0, length, step, rng)
+    face = np.column_stack([xy, z_end + (xy[:, 0] - x_end) * np.tan(np.radians(60.0))])
+    gy, gi = np.meshgrid(ys, np.arange(len(phi)))
+    eave = np.column_stack([ax[gi.ravel()], gy.ravel(), az[gi.ravel()]])
+    wy, wz = np.meshgrid(ys, np.arange(0.3, top, step))
+    facade = np.column_stack([np.zeros(wy.size), wy.ravel(), wz.ravel()])
+    bld = np.concatenate([face, eave, facade])
+    bld += rng.normal(0, 0.02, bld.shape)
+    xyz = np.concatenate([ground, bld])
+    gmask = np.arange(len(xyz)) < len(ground)
+    face_mask = np.zeros(len(xyz), bool)
+    face_mask[len(ground):len(ground) + len(face)] = True
+    return xyz, gmask, face_mask
+
+
+def test_steep_roof_face_chained_to_its_facade_is_building():
+    """A 60-degree roof face grown into one region with the facade below fits no
+    plane; its best-fit plane is steeper than max_facet_slope (70 degrees), so the
+    region's steepness is read from its points' local normals: a roof, not a wall."""
+    xyz, ground, face = _steep_face_on_facade(np.random.default_rng(21))
+    out = _classify(xyz, ground)
+    regions, obj = out["regions"], out["obj_idx"]
+    lab = out["labels"][np.searchsorted(obj, np.flatnonzero(face))]
+    main = np.bincount(lab[lab >= 0]).argmax()
+    # the premise: face and facade are one region whose plane is too steep for a roof
+    assert np.mean(lab == main) > 0.9
+    on_facade = out["labels"][np.searchsorted(obj, np.flatnonzero(~ground & ~face))] == main
+    assert on_facade.mean() > 0.5
+    assert regions.normal[main, 2] < np.cos(np.radians(70.0))
+    assert (out["classes"][face] == 6).mean() > 0.95
+    # a lone wall (the facade without its roof) is still no building
+    wall = ~face
+    cls = classify_points(xyz[wall], ground[wall])
+    assert not np.any(cls == 6)
+
+
 def test_long_narrow_deck_is_no_building():
     """A flat 5 m x 50 m deck 6 m up with no ground contact (a footbridge over a river)
     is a linear structure; an 8 m x 40 m flat roof (a long row of houses) is a building."""

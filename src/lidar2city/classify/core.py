@@ -22,7 +22,9 @@ Rabbani et al. 2006; Vosselman 2009):
    kNN edges joining locally coplanar points (:mod:`.regions`). Roof facets
    become large planar regions; vegetation breaks into small incoherent ones.
    Regions that are large, fit a plane, are not steep and are mostly made of
-   single / last returns are roof seeds — unless their points' mean local
+   single / last returns are roof seeds (a region that fits no plane, such as
+   a steep roof face grown into its facade, is as steep as its surface over
+   its footprint, not as its best-fit plane) — unless their points' mean local
    residual is more than ``max_region_roughness`` of the planarity threshold
    (feature spacing up to 0.5 m): a smooth crown grows a large region of
    points that barely pass it, a roof's points lie well inside it.
@@ -101,7 +103,7 @@ class ClassifyConfig:
     min_facet_area: float = field(3.0, "Smallest area (m2) of a planar region seeding a building (at least 8 spacings squared).")
     max_facet_rms: float = field(0.08, "Largest RMS residual (m) of a seed region's fitted plane (unless the region is large).")
     large_region_area: float = field(10.0, "Regions at least this large (m2) seed buildings whatever their plane fit (roof facets chained over ridges).")
-    max_facet_slope: float = field(70.0, "Steepest seed region (degrees); steeper ones are walls, not roofs.")
+    max_facet_slope: float = field(70.0, "Steepest seed region (degrees): its plane's slope, or when it fits no plane (a roof face grown into its facade) the mean slope of its surface over its footprint; steeper ones are walls, not roofs.")
     max_ground_contact: float = field(0.05, "Largest fraction of a seed region's points within 0.5 m of the terrain (planes reaching the ground are ramps and bridge decks).")
     max_linearity: float = field(0.85, "Largest mean linearity of a seed region's neighbourhoods (power lines are linear).")
     max_region_roughness: float = field(0.5, "Largest mean local residual of a seed region's points, as a fraction of max_residual (smooth crowns gather points that barely pass it; roofs lie well inside); 1 disables.")
@@ -243,6 +245,26 @@ def _disk(radius_cells: float) -> np.ndarray:
     r = int(np.ceil(radius_cells))
     yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
     return (xx * xx + yy * yy) <= radius_cells * radius_cells + 1e-9
+
+
+def _footprint_nz(p, lab, nz, n_regions, cell) -> np.ndarray:
+    """Mean vertical component of the local normals over each region's footprint.
+
+    Seen from above a wall is a line of cells and a roof face covers its area:
+    each occupied ``cell`` (m) of a region counts once, with the least steep
+    local normal among its points, so a facade chained to its roof face does not
+    make the face pass for a wall however densely the facade is sampled.
+    """
+    ij = np.floor(p[:, :2] / cell).astype(np.int64)
+    ij -= ij.min(axis=0)
+    ni, nj = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+    key = (lab * ni + ij[:, 0]) * nj + ij[:, 1]
+    cells, inv = np.unique(key, return_inverse=True)
+    best = np.full(len(cells), -np.inf)
+    np.maximum.at(best, inv, nz)
+    owner = cells // (ni * nj)
+    count = np.bincount(owner, minlength=n_regions)
+    return np.bincount(owner, best, minlength=n_regions) / np.maximum(count, 1)
 
 
 def _drop_seed_clusters(seed, pi, pj, multi, shape, cell, *, min_area, max_multi):
@@ -470,8 +492,14 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
         mean_res = np.bincount(lab[inr], residual[inr], minlength=r) / size / max_residual
         # one plane, or a large smooth surface (facets chained over ridges)
         fits = (regions.rms <= c.max_facet_rms) | (regions.area >= c.large_region_area)
+        # how steep a region is: its plane's slope when it fits one; else its
+        # surface's slope over its footprint (a steep roof face chained to the
+        # facade below fits no plane, and the best-fit plane between the two
+        # is steeper than the roof: it would pass for a wall)
+        slope_nz = np.where(regions.rms <= c.max_facet_rms, regions.normal[:, 2],
+                            _footprint_nz(p[inr], lab[inr], shape.normal[nn][inr, 2], r, cell))
         seed_region = ((regions.area >= min_facet_area) & fits
-                       & (regions.normal[:, 2] >= np.cos(np.radians(c.max_facet_slope)))
+                       & (slope_nz >= np.cos(np.radians(c.max_facet_slope)))
                        & (multi_frac <= c.max_multi_return) & (green_frac <= 0.5)
                        & (mean_h >= c.min_height) & (low_frac <= c.max_ground_contact)
                        & (mean_lin <= c.max_linearity)
