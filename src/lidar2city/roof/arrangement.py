@@ -736,7 +736,8 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     faces : list of shapely Polygon
     face_labels : ndarray of int
     kinds : list of str
-        The kind of each boundary polyline used.
+        The kind of each boundary polyline used: ``"intersection"``, ``"step"`` or
+        ``"rim"`` (a rim's inner step line).
     planes : ndarray (K', 3)
         ``planes`` and after them one level plane per rim found.
     """
@@ -760,7 +761,7 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     new = [rim for rim in found if rim[4] < 0]
     for rim in found:
         segs.append(rim[2])
-        kinds.append("step")
+        kinds.append("rim")
     if new:
         labels = labels.copy()
         for k, rim in enumerate(new):

@@ -338,7 +338,10 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                                    flat_slope=cfg.flat_slope)
         # the arrangement with raised rims along the outline, without them, then the grid
         methods = ("rims", "arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
+        info = {}
         for method in methods:
+            if method == "arrangement" and not info.get("rims", 1):
+                continue  # no rim was found: the same partition as the first try
             try:
                 solid, faces, face_labels, planes_k, info = _part_solid(
                     method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg)
@@ -404,9 +407,10 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     """
     info = {}
     if method in ("rims", "arrangement"):
-        faces, face_labels, _, planes = arrangement_partition(
+        faces, face_labels, kinds, planes = arrangement_partition(
             poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
             max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims")
+        info["rims"] = kinds.count("rim")
     else:
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
         faces, face_labels = part.faces, part.face_labels
