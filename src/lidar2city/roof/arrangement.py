@@ -648,15 +648,13 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     d_out = shapely.distance(footprint.boundary, shapely.points(xy))
     for ring in shapely.get_rings(footprint):
         c = np.asarray(ring.coords)
-        # orientation of the ring: the inward normal is on the side the footprint is
         for a, b in zip(c[:-1], c[1:], strict=True):
             L = float(np.hypot(*(b - a)))
             if L < 6 * cell:
                 continue
             u = (b - a) / L
-            nrm = np.array([-u[1], u[0]])
-            mid = (a + b) / 2
-            if not footprint.contains(shapely.Point(mid + nrm * min(cell, L) * 0.1)):
+            nrm = np.array([-u[1], u[0]])  # made to point into the footprint
+            if not footprint.contains(shapely.Point((a + b) / 2 + 0.1 * cell * nrm)):
                 nrm = -nrm
             rel = xy - a
             t, d = rel @ u, rel @ nrm
@@ -778,7 +776,8 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     if rim.any():
         # a rim's plane labels only the cells of its strip (within its width of its line's
         # outline section): elsewhere a new rim plane gives way to the best of the others,
-        # and a rim facet's cells are held to the smallest face as any other
+        # and the cells of a rim facet found by the segmentation are held to the smallest
+        # face as any other
         zone = shapely.union_all([shapely.LineString(line).buffer(width + cell / 2, cap_style="flat")
                                   for _, _, line, width, _ in found])
         far = rim & ~shapely.within(shapely.point_on_surface(np.asarray(cells, dtype=object)), zone)
