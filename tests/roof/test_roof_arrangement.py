@@ -168,3 +168,46 @@ def test_components_match_scipy_numbering():
         same = np.array([e for e in adj if labels[e[0]] == labels[e[1]]], dtype=np.int64).reshape(-1, 2)
         g = coo_matrix((np.ones(len(same)), (same[:, 0], same[:, 1])), shape=(n, n))
         assert np.array_equal(_components(n, adj, labels), connected_components(g, directed=False)[1])
+
+
+def _parapet_roof(neighbour=False, spacing=0.35, seed=0):
+    """A 10 m x 10 m flat roof at 6 m with a 0.3 m rim at 7 m along its north edge (points
+    labelled 0 on the roof, unlabelled on the rim); with ``neighbour``, a roof at 7 m
+    continuing north of the outline (a taller neighbour reaching over it)."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(spacing / 2, 10, spacing)
+    x, y = (a.ravel() for a in np.meshgrid(g, np.arange(spacing / 2, 10.5, spacing)))
+    z = np.where(y > 9.7, 7.0, 6.0) + rng.normal(0, 0.03, len(x))
+    keep = y < (10.5 if neighbour else 10.0)
+    xyz = np.column_stack([x, y, z])[keep]
+    labels = np.where(xyz[:, 1] > 9.7, -1, 0)
+    return xyz, labels, np.array([[0.0, 0.0, 6.0]])
+
+
+def test_rim_strips_finds_a_parapet_not_a_neighbours_roof():
+    from lidar2city.roof.arrangement import rim_strips
+
+    xyz, labels, planes = _parapet_roof()
+    rims = rim_strips(SQ, xyz, labels, planes, cell=0.35)
+    assert len(rims) == 1
+    z0, members, line, width, own = rims[0]
+    assert z0 == pytest.approx(7.0, abs=0.05) and own == -1
+    assert np.all(xyz[members, 1] > 9.7)
+    assert np.allclose(line[:, 1], 10 - width) and 0.17 <= width <= 0.6
+    # the same points continuing outside at the rim's height: a neighbour's roof, not a rim
+    xyz, labels, planes = _parapet_roof(neighbour=True)
+    labels[xyz[:, 1] > 10] = -1
+    assert rim_strips(SQ, xyz, labels, planes, cell=0.35) == []
+    # a roof rising to the edge is no rim: its top points are on its plane
+    xyz, labels, _ = _parapet_roof()
+    xyz[:, 2] = 6.0 + 0.5 * xyz[:, 1]
+    assert rim_strips(SQ, xyz, np.zeros(len(xyz), dtype=int), np.array([[0.0, 0.5, 6.0]]), cell=0.35) == []
+
+
+def test_parapet_rim_becomes_a_face():
+    xyz, _, _ = _parapet_roof()
+    res = reconstruct_lod22(SQ, xyz, 0.0)
+    assert not check_solid(res.solids[0])
+    tops = [np.asarray(s.rings[0]) for s in res.solids[0].surfaces if s.semantic == "RoofSurface"]
+    z = [res.solids[0].vertices[r][:, 2].mean() for r in tops]
+    assert min(z) == pytest.approx(6.0, abs=0.05) and max(z) == pytest.approx(7.0, abs=0.05)

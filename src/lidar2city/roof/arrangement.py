@@ -44,7 +44,7 @@ import numpy as np
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
 
-__all__ = ["arrangement_cells", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "arrangement_partition"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "arrangement_partition"]
 
 
 def arrangement_cells(footprint, segments):
@@ -615,8 +615,98 @@ def _cell_labels(cells, xyz, planes, cap):
     return labels, counts
 
 
+def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.1, min_points=6,
+               outside=0.5):
+    """Raised rims along the outline (parapet tops): level runs of points above the roof inside.
+
+    A rim is too narrow for the label grid and the faces (narrower than a cell,
+    it would join the roof inside it), and its points are often unlabelled (their
+    normals lean to the walls on both sides) or labelled with a plane at the
+    same height elsewhere. Per outline edge, the points inside the footprint
+    within 1.5 ``cell`` of it are taken at their most common height (within
+    ``level_tol``); a run of at least ``min_points`` of them, no gap longer than
+    3 cells and at least 6 cells long, is a rim when it stands ``t_step`` above
+    the plane of the roof just inside it (evaluated under the rim: a roof
+    sloping up to the edge is no rim), and when the points just outside the
+    edge (up to ``outside`` m) do not continue at its height (that is a taller
+    neighbour's roof reaching over the outline, not ours).
+
+    Returns
+    -------
+    list of (z, members, line, width, label)
+        The rim's height, the indices of its points, its inner step line (2, 2)
+        (the edge section offset inwards by the rim's width), that width (m), and
+        the rim's own facet when the segmentation found it (else -1).
+    """
+    import shapely
+    from scipy.spatial import cKDTree
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    xy = xyz[:, :2]
+    inside = shapely.contains_xy(footprint, xy[:, 0], xy[:, 1])
+    rims = []
+    d_out = shapely.distance(footprint.boundary, shapely.points(xy))
+    for ring in shapely.get_rings(footprint):
+        c = np.asarray(ring.coords)
+        for a, b in zip(c[:-1], c[1:], strict=True):
+            L = float(np.hypot(*(b - a)))
+            if L < 6 * cell:
+                continue
+            u = (b - a) / L
+            nrm = np.array([-u[1], u[0]])  # made to point into the footprint
+            if not footprint.contains(shapely.Point((a + b) / 2 + 0.1 * cell * nrm)):
+                nrm = -nrm
+            rel = xy - a
+            t, d = rel @ u, rel @ nrm
+            along = (t > -cell) & (t < L + cell)
+            cand = np.flatnonzero(inside & along & (d > -1e-9) & (d < 1.5 * cell))
+            inner = np.flatnonzero(inside & along & (labels >= 0) & (d >= 1.5 * cell) & (d < 4.5 * cell))
+            if len(cand) < min_points or not len(inner):
+                continue
+            # only points standing t_step above the plane of the nearest roof point inside
+            near = inner[cKDTree(xy[inner]).query(xy[cand])[1]]
+            pl = planes[labels[near]]
+            cand = cand[xyz[cand, 2] - np.einsum("ij,ij->i", xy[cand], pl[:, :2]) - pl[:, 2] >= t_step]
+            if len(cand) < min_points:
+                continue
+            z = xyz[cand, 2]
+            support = (np.abs(z[:, None] - z[None, :]) <= level_tol).sum(axis=1)
+            z0 = float(np.median(z[np.abs(z - z[np.lexsort((-z, -support))[0]]) <= level_tol]))
+            members = cand[np.abs(z - z0) <= level_tol]
+            members = members[np.argsort(t[members], kind="stable")]
+            gaps = np.flatnonzero(np.diff(t[members]) > 3 * cell)
+            for run in np.split(members, gaps + 1):
+                if len(run) < min_points or t[run[-1]] - t[run[0]] < 6 * cell:
+                    continue
+                lo, hi = t[run[0]], t[run[-1]]
+                width = float(np.clip(np.max(d[run]) + cell / 4, cell / 2, 3 * cell))
+                zone = along & (t >= lo) & (t <= hi)
+                inner = zone & inside & (labels >= 0) & (d > width + cell) & (d < width + 4 * cell)
+                if inner.sum() < min_points:
+                    continue
+                inner_label = np.bincount(labels[inner]).argmax()
+                pl = planes[inner_label]
+                if np.median(xyz[run, 2] - xy[run] @ pl[:2] - pl[2]) < t_step:
+                    continue
+                # the segmentation's own rim facet: most of the run on one facet other than the
+                # roof inside, that facet's points along the outline
+                own = labels[run]
+                own = int(np.bincount(own[own >= 0]).argmax()) if (own >= 0).sum() > len(run) / 2 else -1
+                if own >= 0 and (own == inner_label
+                                 or np.mean(d_out[labels == own] < width + 1.5 * cell) < 0.8):
+                    own = -1
+                out = zone & ~inside & (d < -outside / 2) & (d > -outside)
+                if out.sum() and np.mean(np.abs(xyz[out, 2] - z0) <= 2 * level_tol) >= 0.3:
+                    continue
+                lo = 0.0 if lo < 3 * cell else lo - cell
+                hi = L if hi > L - 3 * cell else hi + cell
+                line = np.array([a + lo * u + width * nrm, a + hi * u + width * nrm])
+                rims.append((z0, run, line, width, own))
+    return rims
+
+
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
-                          max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None):
+                          max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters
@@ -635,14 +725,22 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         Smallest face (m2); default 4 cells.
     cap : float, optional
         Residual cap (m) of the cell labelling; default ``1.5 * t_step``.
+    rims : bool
+        Recover raised rims along the outline (parapet tops, :func:`rim_strips`) as
+        narrow level faces of their own, kept however narrow.
 
     Returns
     -------
     faces : list of shapely Polygon
     face_labels : ndarray of int
     kinds : list of str
-        The kind of each boundary polyline used.
+        The kind of each boundary polyline used: ``"intersection"``, ``"step"`` or
+        ``"rim"`` (a rim's inner step line).
+    planes : ndarray (K', 3)
+        ``planes`` and after them one level plane per rim found.
     """
+    import shapely
+
     planes = np.asarray(planes, dtype=np.float64)
     min_face_area = 4 * cell * cell if min_face_area is None else min_face_area
     cap = 1.5 * t_step if cap is None else cap
@@ -653,18 +751,60 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
                                  t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
                                  points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap)
+    n_planes = len(planes)
+    found = rim_strips(footprint, xyz, labels, planes, cell=cell, t_step=t_step) if rims and n_planes else []
+    # every rim's inner line is a step (the label grid cannot hold a strip narrower than a
+    # cell); a rim without a facet of its own gets a level plane, its points labelled with it
+    exempt = sorted({rim[4] for rim in found if rim[4] >= 0})
+    new = [rim for rim in found if rim[4] < 0]
+    for rim in found:
+        segs.append(rim[2])
+        kinds.append("rim")
+    if new:
+        labels = labels.copy()
+        for k, rim in enumerate(new):
+            labels[rim[1]] = n_planes + k
+        planes = np.vstack([planes, [[0.0, 0.0, rim[0]] for rim in new]])
+        exempt += list(range(n_planes, len(planes)))
     x0, y0, x1, y1 = footprint.bounds
     segs = extend_to_hits(segs, footprint, max_ext=float(np.hypot(x1 - x0, y1 - y0)))
     cells = arrangement_cells(footprint, segs)
-    if len(planes) == 0 or not cells:
-        return [footprint], np.zeros(1, dtype=np.int64), kinds
+    if n_planes == 0 or not cells:
+        return [footprint], np.zeros(1, dtype=np.int64), kinds, planes
     cell_lab, counts = _cell_labels(cells, xyz, planes, cap)
-    faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
-                                        min_width=cell)
+    rim = np.isin(cell_lab, exempt)
+    if rim.any():
+        # a rim's plane labels only the cells of its strip (within its width of its line's
+        # outline section): elsewhere a new rim plane gives way to the best of the others,
+        # and the cells of a rim facet found by the segmentation are held to the smallest
+        # face as any other
+        zone = shapely.union_all([shapely.LineString(line).buffer(width + cell / 2, cap_style="flat")
+                                  for _, _, line, width, _ in found])
+        far = rim & ~shapely.within(shapely.point_on_surface(np.asarray(cells, dtype=object)), zone)
+        idx = np.flatnonzero(far & (cell_lab >= n_planes))
+        if len(idx):
+            relab, _ = _cell_labels([cells[i] for i in idx], xyz, planes[:n_planes], cap)
+            cell_lab[idx] = relab
+        rim &= ~far
+    if rim.any():
+        # rims are narrow by nature: first empty cells join a neighbour and same-plane cells
+        # dissolve, then only the faces off the rims are held to the smallest area and width
+        merged, merged_labels = dissolve_cells(cells, cell_lab, weights=counts)
+        on = np.isin(merged_labels, exempt)
+        _, merged_counts = _cell_labels(merged, xyz, planes, cap)
+        keep = np.flatnonzero(~on)
+        faces, face_labels = dissolve_cells([merged[i] for i in keep], merged_labels[keep],
+                                            min_area=min_face_area, weights=merged_counts[keep],
+                                            min_width=cell)
+        faces = faces + [merged[i] for i in np.flatnonzero(on)]
+        face_labels = np.concatenate([face_labels, merged_labels[on]])
+    else:
+        faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
+                                            min_width=cell)
     if not faces or (face_labels < 0).any():
         return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
-            labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds
-    return faces, face_labels, kinds
+            labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds, planes
+    return faces, face_labels, kinds, planes
 
 
 def collapse_short_edges(faces, footprint, *, min_length):
@@ -673,8 +813,9 @@ def collapse_short_edges(faces, footprint, *, min_length):
     The ends of short edges are clustered; a cluster moves to the footprint
     corner in it, else to its one outline vertex, else to its mean (clusters
     holding two footprint corners or two outline vertices stay). Each cluster is
-    applied only when every face stays valid and the faces still tile the
-    footprint; a face that shrinks to nothing disappears.
+    applied only when every face stays valid, no face shrinks to nothing (a
+    narrow rim or a small dormer the partition kept stays) and the faces still
+    tile the footprint.
 
     Parameters
     ----------
@@ -773,6 +914,8 @@ def collapse_short_edges(faces, footprint, *, min_length):
         trial = {**mapping, **{k: target for k in members}}
         touched = sorted(set().union(*(faces_of.get(k, ()) for k in members)))
         rebuilt = {fi: rebuild_face(fi, trial) for fi in touched}
+        if any(f is None and current[fi] is not None for fi, f in rebuilt.items()):
+            continue  # a face the partition kept (a rim, a dormer) is not collapsed away
         if local_ok([current[fi] for fi in touched if current[fi] is not None],
                     [f for f in rebuilt.values() if f is not None]):
             mapping = trial

@@ -336,8 +336,12 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         d = _direction(poly) if direction is None else direction
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
-        methods = ("arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
+        # the arrangement with raised rims along the outline, without them, then the grid
+        methods = ("rims", "arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
+        info = {}
         for method in methods:
+            if method == "arrangement" and not info.get("rims", 1):
+                continue  # no rim was found: the same partition as the first try
             try:
                 solid, faces, face_labels, planes_k, info = _part_solid(
                     method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg)
@@ -402,10 +406,11 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     a roof stays below the floor.
     """
     info = {}
-    if method == "arrangement":
-        faces, face_labels, _ = arrangement_partition(
+    if method in ("rims", "arrangement"):
+        faces, face_labels, kinds, planes = arrangement_partition(
             poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
-            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle)
+            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims")
+        info["rims"] = kinds.count("rim")
     else:
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
         faces, face_labels = part.faces, part.face_labels
@@ -416,7 +421,7 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
     variants = [(faces, face_labels)]
-    if method == "arrangement" and cfg.min_edge > 0:
+    if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
