@@ -44,7 +44,7 @@ import numpy as np
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "arrangement_partition"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition"]
 
 
 def arrangement_cells(footprint, segments):
@@ -375,6 +375,192 @@ def _step_polyline(chain, *, tol, direction, snap_angle, closed):
     return np.vstack([start, *pts, end]) if pts else np.vstack([start, end])
 
 
+def _refit_lines(polys, raws, *, max_shift):
+    """Open polylines (k, 2) whose straight pieces keep their directions and move along
+    their normals to the median of the raw chain vertices (m, 2) nearest to them (away
+    from the pieces' ends); pieces on one line (collinear, of any chains) move together.
+    Consecutive pieces meet at their lines' intersection, and the ends are the raw
+    chains' ends projected on the first and last lines.
+
+    The snake's grid quantises positions, and its deviation energy (an integral along
+    the edge) shortens a free end; this takes the offsets and the ends back to the
+    data, as :func:`lidar2city.regularize.snake.regularize_polygon` does with
+    ``refine``, keeping the snake's directions and collinearities. A line keeps its
+    offset when the median is more than ``max_shift`` (m) away. None stays None.
+    """
+    geo, offsets = [], {}
+    for poly, raw in zip(polys, raws, strict=True):
+        if poly is None:
+            geo.append(None)
+            continue
+        a, b = poly[:-1], poly[1:]
+        d = b - a
+        length = np.hypot(d[:, 0], d[:, 1])
+        t = d / length[:, None]
+        n = np.stack([-t[:, 1], t[:, 0]], axis=1)
+        n[(n[:, 0] < -1e-12) | ((np.abs(n[:, 0]) <= 1e-12) & (n[:, 1] < 0))] *= -1
+        c = np.einsum("kc,kc->k", n, a)
+        keys = [(round(float(np.arctan2(v[1], v[0])), 6), round(float(w), 4)) for v, w in zip(n, c, strict=True)]
+        s = np.einsum("nkc,kc->nk", raw[:, None, :] - a[None], t) / length
+        foot = a[None] + np.clip(s, 0, 1)[..., None] * d[None]
+        near = np.argmin(np.hypot(*(raw[:, None, :] - foot).transpose(2, 0, 1)), axis=1)
+        rows = np.arange(len(raw))
+        inner = (s[rows, near] > 0.1) & (s[rows, near] < 0.9)
+        proj = np.einsum("nc,nc->n", raw, n[near])
+        for k, key in enumerate(keys):
+            offsets.setdefault(key, (c[k], []))[1].append(proj[inner & (near == k)])
+        geo.append((n, keys))
+    shift = {}
+    for key, (c0, parts) in offsets.items():
+        proj = np.concatenate(parts)
+        shift[key] = float(np.median(proj)) if len(proj) >= 2 and abs(np.median(proj) - c0) <= max_shift \
+            else float(c0)
+    out = []
+    for poly, raw, g in zip(polys, raws, geo, strict=True):
+        if g is None:
+            out.append(None)
+            continue
+        n, keys = g
+        c = np.array([shift[k] for k in keys])
+        pts = [raw[0] + (c[0] - n[0] @ raw[0]) * n[0]]
+        for i in range(len(c) - 1):
+            det = n[i, 0] * n[i + 1, 1] - n[i, 1] * n[i + 1, 0]
+            if abs(det) < 1e-6:
+                break
+            pts.append(np.array([(c[i] * n[i + 1, 1] - c[i + 1] * n[i, 1]) / det,
+                                 (n[i, 0] * c[i + 1] - n[i + 1, 0] * c[i]) / det]))
+        else:
+            pts.append(raw[-1] + (c[-1] - n[-1] @ raw[-1]) * n[-1])
+            out.append(np.asarray(pts))
+            continue
+        out.append(poly)
+    return out
+
+
+def _straight(pts, closed):
+    """Vertices (k, 2) without repeats and without collinear interior vertices."""
+    pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
+    if closed and len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) <= 1e-9:
+        pts = pts[:-1]
+    while len(pts) > 2:
+        prev = np.roll(pts, 1, axis=0) if closed else np.vstack([pts[:1], pts[:-1]])
+        nxt = np.roll(pts, -1, axis=0) if closed else np.vstack([pts[1:], pts[-1:]])
+        u, v = pts - prev, nxt - pts
+        cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+        flat = cross <= 1e-9 * np.maximum(np.hypot(*u.T) * np.hypot(*v.T), 1e-12)
+        if not closed:
+            flat[[0, -1]] = False
+        if not flat.any():
+            break
+        pts = np.delete(pts, int(np.argmax(flat)), axis=0)
+    return pts
+
+
+def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, tol=None,
+                t_adjust=None, c_short=None, max_work=1e8):
+    """Step chains regularised together by the exact 2-D snake (seed step 5).
+
+    Each raw step chain (the label grid's staircase between two facets at different
+    heights) is simplified by Douglas-Peucker (tolerance one cell); the simplified
+    chains, joined where they share a junction, form one planar graph whose
+    vertices move to the global minimum of ``E = C_Dir E_Dir + C_Dis E_Dis (+ E_Short)``
+    (:func:`lidar2city.regularize.snake.adjust_planar_graph`: the direction energy
+    pulls an edge whose smaller extent is within ``t_adjust`` onto the building axes,
+    the deviation energy keeps it on the raw chains, minimised exactly by graph
+    reduction). The intersection edges and the outline are not in the graph: they
+    stay where they are, and the step lines are extended to them afterwards
+    (:func:`extend_to_hits`). Each straight piece of the result then moves along its
+    normal to the median of its raw vertices (the snake's grid quantises offsets).
+
+    Parameters
+    ----------
+    chains : list of ndarray (m, 2)
+        Raw step chains (label grid corners, local metres).
+    closed : list of bool
+        Whether each chain is a closed loop (an island facet).
+    cell : float
+        Label grid cell (m).
+    direction : float
+        Building direction (rad).
+    window, snake_cell : int, float
+        Snake half-window (candidates ``(2w+1)^2`` per vertex) and grid step as a
+        fraction of ``cell``.
+    t_adjust : float, optional
+        ``T`` (m) of the direction energy; default ``1.5 * cell`` (the step
+        chains' fitting tolerance: the staircase of a wall on an axis stays within it).
+    max_work : float
+        The largest exact solve (table elements, :func:`lidar2city.snake.solver.reduction_work`);
+        beyond it no chain is changed.
+
+    Returns
+    -------
+    list of (ndarray (k, 2) or None)
+        The snake's polyline per chain (closed ones repeat their first vertex), or
+        None where it gave none (too few vertices, collapsed, or the solve skipped).
+    """
+    from ..regularize.snake import adjust_planar_graph
+    from ..snake.solver import reduction_work
+
+    tol = 1.5 * cell if tol is None else tol
+    h = snake_cell * cell
+    out = [None] * len(chains)
+    xy, ids, segs, ends = [], [], [], {}
+    for raw, cl in zip(chains, closed, strict=True):
+        raw = np.asarray(raw, dtype=float)
+        raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+        # the fewest straight pieces within tol, their directions as the data give them
+        # (no snapping: the direction energy decides which become parallel to the axes)
+        s = _step_polyline(raw, tol=tol, direction=direction, snap_angle=0.0, closed=cl) \
+            if len(raw) >= 2 else None
+        if s is None:
+            s = _dp(raw, tol) if len(raw) >= 2 else raw
+        if cl:
+            s = s[:-1] if len(s) > 1 and np.allclose(s[0], s[-1]) else s
+        if len(s) < (3 if cl else 2):
+            ids.append(None)
+            continue
+        row = list(range(len(xy), len(xy) + len(s)))
+        xy += list(s)
+        if not cl:
+            # chains ending at the same junction (a grid corner) share one vertex there
+            for end, v in ((raw[0], row[0]), (raw[-1], row[-1])):
+                ends.setdefault((round(float(end[0]), 6), round(float(end[1]), 6)), []).append(v)
+        ids.append(row)
+        segs.append(np.stack([raw[:-1], raw[1:]], axis=1))
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    alias = np.arange(len(xy))
+    for group in ends.values():
+        if len(group) > 1:
+            xy[group[0]] = xy[group].mean(axis=0)
+            alias[group] = group[0]
+    ids = [None if row is None else [int(alias[v]) for v in row] for row in ids]
+    edges = sorted({(min(a, b), max(a, b)) for row, cl in zip(ids, closed, strict=True)
+                    if row is not None for a, b in zip(row, row[1:] + row[:1] if cl else row[1:])
+                    if a != b})
+    if not edges:
+        return out
+    e = np.array(edges, dtype=np.int64)
+    if reduction_work(np.full(len(xy), (2 * window + 1) ** 2), e) > max_work:
+        return out
+    new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
+                                 window=window, direction=direction,
+                                 t_adjust=3 * cell if t_adjust is None else t_adjust,
+                                 c_short=tol * tol if c_short is None else c_short, short_length=tol)
+    for i, row in enumerate(ids):
+        if row is None:
+            continue
+        pts = _straight(new[row + row[:1] if closed[i] else row], closed[i])
+        if len(pts) < (3 if closed[i] else 2):
+            continue
+        out[i] = np.vstack([pts, pts[:1]]) if closed[i] else pts
+    opened = [i for i in range(len(out)) if out[i] is not None and not closed[i]]
+    refit = _refit_lines([out[i] for i in opened], [np.asarray(chains[i], dtype=float) for i in opened],
+                         max_shift=cell)
+    for i, poly in zip(opened, refit, strict=True):
+        out[i] = poly
+    return out
+
+
 def _extend(poly, ext):
     """An open polyline with both end segments lengthened by ``ext``."""
     poly = np.array(poly, dtype=float)
@@ -455,7 +641,7 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
 
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
                    snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
-                   tol_gain=0.05):
+                   tol_gain=0.05, step_snake=False, snake_window=3, snake_cell=0.5):
     """Straight boundary polylines replacing the label grid's chains.
 
     Parameters
@@ -483,6 +669,10 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         edge only when that line explains the nearby points of both facets about as
         well as the chain does (mean capped residual, at most ``cap`` m per point,
         grows by at most ``tol_gain`` m); else it is a step.
+    step_snake : bool
+        Step chains through the exact 2-D snake together (:func:`snake_steps`, with
+        ``snake_window`` and ``snake_cell``) instead of split-and-merge pieces snapped
+        by angle; a chain the snake gives no polyline for keeps its pieces.
 
     Returns
     -------
@@ -491,7 +681,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         ``"intersection"`` or ``"step"`` per polyline.
     """
     ext = cell if overshoot is None else overshoot
-    segs, kinds = [], []
+    segs, kinds, steps = [], [], []
     for c, (a, b) in zip(chains, pairs, strict=True):
         if a < 0 or b < 0 or len(c) < 2:
             continue
@@ -517,6 +707,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                         poly = _step_polyline(sub, tol=step_tol * cell, direction=direction,
                                               snap_angle=2 * snap_angle, closed=False)
                         if poly is not None:
+                            steps.append((len(segs), sub, False))
                             segs.append(_extend(poly, ext))
                             kinds.append("step")
                         continue
@@ -542,8 +733,15 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             poly = _dp(c, cell)
             if closed and len(poly) < 4:
                 poly = c
+        steps.append((len(segs), c, closed))
         segs.append(poly if closed else _extend(poly, ext))
         kinds.append("step")
+    if step_snake and steps:
+        snaked = snake_steps([c for _, c, _ in steps], [cl for _, _, cl in steps], cell=cell,
+                             direction=direction, window=snake_window, snake_cell=snake_cell)
+        for (i, _, cl), poly in zip(steps, snaked, strict=True):
+            if poly is not None:
+                segs[i] = poly if cl else _extend(poly, ext)
     return segs, kinds
 
 
@@ -706,7 +904,8 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
 
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
-                          max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True):
+                          max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True,
+                          step_snake=False, snake_window=3, snake_cell=0.5):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters
@@ -728,6 +927,9 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     rims : bool
         Recover raised rims along the outline (parapet tops, :func:`rim_strips`) as
         narrow level faces of their own, kept however narrow.
+    step_snake : bool
+        Step edges from the exact 2-D snake (:func:`snake_steps`, half-window
+        ``snake_window``, grid step ``snake_cell`` cells).
 
     Returns
     -------
@@ -750,7 +952,9 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
 
     segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
                                  t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
-                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap)
+                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
+                                 step_snake=step_snake, snake_window=snake_window,
+                                 snake_cell=snake_cell)
     n_planes = len(planes)
     found = rim_strips(footprint, xyz, labels, planes, cell=cell, t_step=t_step) if rims and n_planes else []
     # every rim's inner line is a step (the label grid cannot hold a strip narrower than a

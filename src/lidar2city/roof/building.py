@@ -53,6 +53,9 @@ class Lod22Config:
     topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
                           "intersection lines and direction-snapped step lines, noded and labelled) "
                           "or 'grid' (label-grid chains simplified, then the snake).")
+    step_snake: bool = field(False, "With topology 'arrangement': step edges (walls between faces "
+                             "at different heights) from the exact 2-D snake over all step "
+                             "chains at once, instead of straight pieces snapped by angle.")
 
     def __post_init__(self):
         for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
@@ -409,7 +412,8 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     if method in ("rims", "arrangement"):
         faces, face_labels, kinds, planes = arrangement_partition(
             poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
-            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims")
+            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims",
+            step_snake=cfg.step_snake, snake_window=cfg.snake_window, snake_cell=cfg.snake_cell)
         info["rims"] = kinds.count("rim")
     else:
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
