@@ -12,6 +12,7 @@ from lidar2city.roof.arrangement import (
     dissolve_cells,
     drop_collinear,
     extend_to_hits,
+    snake_steps,
 )
 from lidar2city.roof.building import Lod22Config, reconstruct_lod22
 from lidar2city.synthetic_roofs import roof_sample
@@ -211,3 +212,54 @@ def test_parapet_rim_becomes_a_face():
     tops = [np.asarray(s.rings[0]) for s in res.solids[0].surfaces if s.semantic == "RoofSurface"]
     z = [res.solids[0].vertices[r][:, 2].mean() for r in tops]
     assert min(z) == pytest.approx(6.0, abs=0.05) and max(z) == pytest.approx(7.0, abs=0.05)
+
+
+def _rot(xy, deg):
+    a = np.radians(deg)
+    return np.asarray(xy, dtype=float) @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+
+
+# the label grid's staircase (cell 0.5) of a 2.5 m wall at v = 2.25 along the building's
+# u axis: the grid puts it at v = 2.0 on one half and 2.5 on the other, so its own line
+# leans by ~13 deg, past the 10 deg angle snap
+STAIR = [[0, 2.0], [0.5, 2.0], [1.0, 2.0], [1.0, 2.5], [1.5, 2.5], [2.0, 2.5], [2.5, 2.5]]
+LEVELS = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, 6.0]])
+
+
+@pytest.mark.parametrize("deg", [0.0, 20.0])
+def test_step_snake_makes_a_short_wall_straight_on_the_axis(deg):
+    chain = _rot(STAIR, deg)
+    segs, kinds = chain_segments([chain], [(0, 1)], LEVELS, cell=0.5, direction=np.radians(deg),
+                                 snap_angle=10.0, step_snake=True)
+    assert kinds == ["step"]
+    uv = _rot(segs[0], -deg)
+    assert len(uv) == 2  # one straight piece
+    assert abs(uv[1, 1] - uv[0, 1]) < 1e-6  # parallel to the building direction
+    assert abs(uv[0, 1] - 2.25) <= 0.3  # on the wall, within about half a cell
+    assert uv[:, 0].min() <= 0.0 and uv[:, 0].max() >= 2.5  # spans the chain
+
+
+def test_step_snake_joins_chains_at_their_junction():
+    # two walls meeting at a corner of the grid (an L between three levels): one graph
+    a = np.array([[0, 2.0], [1.0, 2.0], [1.0, 2.5], [3.0, 2.5], [3.0, 2.0], [4.0, 2.0]])
+    b = np.array([[4.0, 2.0], [4.0, 3.0], [4.5, 3.0], [4.5, 5.0], [4.0, 5.0], [4.0, 6.0]])
+    out = snake_steps([a, b], [False, False], cell=0.5, direction=0.0)
+    for poly, axis in zip(out, (1, 0), strict=True):
+        assert poly is not None and len(poly) == 2
+        assert abs(poly[1, axis] - poly[0, axis]) < 1e-6  # on the building axes
+
+
+def test_step_snake_skips_a_solve_beyond_its_work_limit():
+    out = snake_steps([np.array(STAIR, dtype=float)], [False], cell=0.5, direction=0.0, max_work=1.0)
+    assert out == [None]  # the caller keeps its split-and-merge pieces
+
+
+def test_step_snake_roofs_valid_and_deterministic():
+    s = roof_sample("stepped", density=8, seed=1)
+    cfg = Lod22Config(step_snake=True)
+    a = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=cfg)
+    b = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=cfg)
+    assert all(not check_solid(x) for x in a.solids)
+    assert np.array_equal(a.solids[0].vertices, b.solids[0].vertices)
+    sc = wireframe_scores(roof_wireframe(a.solids), s.wireframe, tolerance=0.5)
+    assert sc["corner_f1"] >= 0.9

@@ -39,10 +39,15 @@ intersection and step edges). The arrangement-and-labelling idea follows
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
+from ..errors import AlgorithmError, InputError
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition"]
 
@@ -439,10 +444,12 @@ def _refit_lines(polys, raws, *, max_shift):
 
 def _straight(pts, closed):
     """Vertices (k, 2) without repeats and without collinear interior vertices."""
-    pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
-    if closed and len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) <= 1e-9:
-        pts = pts[:-1]
-    while len(pts) > 2:
+    while len(pts) > 1:
+        pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
+        if closed and len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) <= 1e-9:
+            pts = pts[:-1]
+        if len(pts) <= 2:
+            break
         prev = np.roll(pts, 1, axis=0) if closed else np.vstack([pts[:1], pts[:-1]])
         nxt = np.roll(pts, -1, axis=0) if closed else np.vstack([pts[1:], pts[-1:]])
         u, v = pts - prev, nxt - pts
@@ -461,8 +468,10 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     """Step chains regularised together by the exact 2-D snake (seed step 5).
 
     Each raw step chain (the label grid's staircase between two facets at different
-    heights) is simplified by Douglas-Peucker (tolerance one cell); the simplified
-    chains, joined where they share a junction, form one planar graph whose
+    heights) is simplified to the fewest straight pieces within ``tol`` (split where
+    Douglas-Peucker would, merged where neighbours fit one line; their directions as
+    the data give them, not snapped); the simplified chains, joined where they
+    share a junction (a chain's end on the same grid corner), form one planar graph whose
     vertices move to the global minimum of ``E = C_Dir E_Dir + C_Dis E_Dis (+ E_Short)``
     (:func:`lidar2city.regularize.snake.adjust_planar_graph`: the direction energy
     pulls an edge whose smaller extent is within ``t_adjust`` onto the building axes,
@@ -485,9 +494,16 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     window, snake_cell : int, float
         Snake half-window (candidates ``(2w+1)^2`` per vertex) and grid step as a
         fraction of ``cell``.
+    tol : float, optional
+        Simplification tolerance (m) of the chains before the snake, and the length
+        below which an edge is a jog (``E_Short``, weight ``tol**2``); default
+        ``1.5 * cell`` (the label grid's staircase of a straight wall stays within it).
     t_adjust : float, optional
-        ``T`` (m) of the direction energy; default ``1.5 * cell`` (the step
-        chains' fitting tolerance: the staircase of a wall on an axis stays within it).
+        ``T`` (m) of the direction energy; default ``2 * cell``: the label grid puts
+        a wall's ends up to a cell off on either side, so an edge whose smaller extent
+        is within two cells may be a wall on the building's axes.
+    c_short : float, optional
+        Weight of ``E_Short`` (m2); default ``tol**2``.
     max_work : float
         The largest exact solve (table elements, :func:`lidar2city.snake.solver.reduction_work`);
         beyond it no chain is changed.
@@ -544,7 +560,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         return out
     new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
                                  window=window, direction=direction,
-                                 t_adjust=3 * cell if t_adjust is None else t_adjust,
+                                 t_adjust=2 * cell if t_adjust is None else t_adjust,
                                  c_short=tol * tol if c_short is None else c_short, short_length=tol)
     for i, row in enumerate(ids):
         if row is None:
@@ -737,8 +753,14 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         segs.append(poly if closed else _extend(poly, ext))
         kinds.append("step")
     if step_snake and steps:
-        snaked = snake_steps([c for _, c, _ in steps], [cl for _, _, cl in steps], cell=cell,
-                             direction=direction, window=snake_window, snake_cell=snake_cell)
+        try:
+            snaked = snake_steps([c for _, c, _ in steps], [cl for _, _, cl in steps], cell=cell,
+                                 direction=direction, window=snake_window, snake_cell=snake_cell)
+        except (AlgorithmError, InputError) as exc:
+            # a solve the snake refuses (a table over its limit, a degenerate graph):
+            # the step chains keep their split-and-merge pieces
+            logger.debug("step snake skipped (%s)", exc)
+            snaked = [None] * len(steps)
         for (i, _, cl), poly in zip(steps, snaked, strict=True):
             if poly is not None:
                 segs[i] = poly if cl else _extend(poly, ext)

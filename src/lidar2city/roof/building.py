@@ -53,9 +53,9 @@ class Lod22Config:
     topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
                           "intersection lines and direction-snapped step lines, noded and labelled) "
                           "or 'grid' (label-grid chains simplified, then the snake).")
-    step_snake: bool = field(False, "With topology 'arrangement': step edges (walls between faces "
+    step_snake: bool = field(True, "With topology 'arrangement': step edges (walls between faces "
                              "at different heights) from the exact 2-D snake over all step "
-                             "chains at once, instead of straight pieces snapped by angle.")
+                             "chains at once; false: straight pieces snapped to the axes by angle.")
 
     def __post_init__(self):
         for name in ("dist_tol", "angle_tol", "min_facet_area", "elevation_error", "max_shift"):
