@@ -15,7 +15,7 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import InputError
 
-__all__ = ["clean_polygon", "prism_solid", "lod12_solid", "lod12_solids"]
+__all__ = ["clean_polygon", "prism_solid", "prism_is_valid", "lod12_solid", "lod12_solids"]
 
 
 def _ring_coords(ring, grid: float) -> np.ndarray:
@@ -187,6 +187,87 @@ def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -
         quads = np.column_stack([r, nxt, nxt + k, r + k])
         walls.extend(Surface([q], "WallSurface") for q in quads)
     return Solid(vertices, [ground, roof, *walls])
+
+
+def prism_is_valid(solid, *, tolerance: float = 0.001) -> bool:
+    """Whether ``solid`` is a prism as :func:`prism_solid` builds it, over rings that make it
+    valid by construction (so :func:`lidar2city.validate.solid.check_solid` finds nothing).
+
+    A prism's shell is closed, 2-manifold and outward-oriented by its layout, its
+    faces are planar (horizontal caps, vertical rectangles), so it is valid exactly
+    when its footprint is: the vertex layout and the surfaces are checked to be
+    :func:`prism_solid`'s, the footprint rings to form a valid polygon (exterior
+    counter-clockwise, holes clockwise), and the polygon's minimum clearance (the
+    smallest move of a vertex that would make it invalid) to exceed the
+    validator's tolerances with a margin: ``2 * tolerance`` (so no two vertices
+    snap together) plus ``1e-4`` times the coordinates' magnitude and the longest
+    edge (so no two walls pass the validator's coplanarity test, whose angle
+    threshold is ~4.5e-5 rad, and overlap). A prism this cannot vouch for (False)
+    may still be valid: check it with ``check_solid``.
+
+    Parameters
+    ----------
+    solid : Solid
+    tolerance : float
+        The validator's snap and overlap tolerance (m; val3dity: 0.001).
+
+    Returns
+    -------
+    bool
+        True only when ``check_solid(solid)`` (default tolerances up to
+        ``tolerance``) returns no issue.
+
+    Examples
+    --------
+    >>> from shapely.geometry import box
+    >>> prism_is_valid(prism_solid(box(0, 0, 2, 1), 0.0, 3.0))
+    True
+    """
+    import shapely
+
+    v = np.asarray(solid.vertices, dtype=np.float64)
+    surfaces = solid.surfaces
+    n = len(v)
+    k = n // 2
+    if v.ndim != 2 or v.shape[1] != 3 or n < 6 or n % 2 or len(surfaces) != 2 + k \
+            or not np.isfinite(v).all():
+        return False
+    ground, roof, walls = surfaces[0], surfaces[1], surfaces[2:]
+    if ground.semantic != "GroundSurface" or roof.semantic != "RoofSurface" \
+            or len(ground.rings) != len(roof.rings) or not roof.rings:
+        return False
+    g, r = v[0, 2], v[k, 2]
+    if not (r - g >= 2.0 * tolerance and np.all(v[:k, 2] == g) and np.all(v[k:, 2] == r)
+            and np.array_equal(v[:k, :2], v[k:, :2])):
+        return False
+    lens = [len(ring) for ring in roof.rings]
+    if min(lens) < 3 or sum(lens) != k:
+        return False
+    starts = np.cumsum([0] + lens)[:-1]
+    quads = []
+    for s0, m, top, bottom in zip(starts, lens, roof.rings, ground.rings, strict=True):
+        ids = np.arange(s0, s0 + m)
+        if not (np.array_equal(np.asarray(top), ids + k)
+                and np.array_equal(np.asarray(bottom), ids[::-1])):
+            return False
+        nxt = np.roll(ids, -1)
+        quads.append(np.column_stack([ids, nxt, nxt + k, ids + k]))
+    if any(w.semantic != "WallSurface" or len(w.rings) != 1 or len(w.rings[0]) != 4
+           for w in walls):
+        return False
+    if not np.array_equal(np.array([w.rings[0] for w in walls]), np.concatenate(quads)):
+        return False
+    xy = v[:k, :2]
+    rings = [shapely.LinearRing(xy[s0:s0 + m]) for s0, m in zip(starts, lens, strict=True)]
+    ccw = shapely.is_ccw(rings)
+    if not ccw[0] or ccw[1:].any():
+        return False
+    poly = shapely.Polygon(rings[0], rings[1:])
+    if not poly.is_valid:
+        return False
+    longest = max(float(np.hypot(*(xy[q[:, 1]] - xy[q[:, 0]]).T).max()) for q in quads)
+    margin = 2.0 * tolerance + 1e-4 * (float(np.abs(v).max()) + longest)
+    return bool(shapely.minimum_clearance(poly) >= margin)
 
 
 def lod12_solids(footprint, ground_z: float, roof_z: float, *, grid: float = 0.0) -> list[Solid]:

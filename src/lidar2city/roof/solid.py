@@ -16,9 +16,18 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["partition_solid", "split_crossings", "split_saddles"]
+__all__ = ["on_grid", "partition_solid", "split_crossings", "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
+
+
+def on_grid(solid, precision):
+    """``solid`` with its vertices rounded to multiples of ``precision`` metres (the output's
+    CityJSON quantisation), so that the solid validated is the one written; ``solid``
+    itself when ``precision`` is 0 or None."""
+    if not precision:
+        return solid
+    return Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
 
 
 def _key(p):
