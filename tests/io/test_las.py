@@ -94,3 +94,21 @@ def test_canonical_order_is_the_seven_key_lexsort():
         attrs = [rng.integers(0, 3, n).astype(np.uint8), rng.integers(0, 9, n).astype(np.uint16)]
         want = np.lexsort(attrs[::-1] + cols[::-1])
         assert np.array_equal(_canonical_order(cols, attrs), want)
+
+
+@pytest.mark.parametrize("late", [0, 20_000, 99_999])
+def test_has_classes_finds_a_class_wherever_it_first_appears(tmp_path, late):
+    """The class scan reads growing chunks: a class first met deep in the file (past the
+    first small chunks) is found, and one that is absent is not."""
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.io.las import TileReader, scan_tiles, write_points
+
+    n = 100_000
+    xyz = np.random.default_rng(0).uniform(0, 100, (n, 3))
+    cls = np.full(n, 2, dtype=np.uint8)
+    cls[late:] = 6
+    out = tmp_path / "t.laz"
+    write_points(out, PointCloud(xyz, attributes={"classification": cls}))
+    reader = TileReader(scan_tiles([out], crs="EPSG:28992"))
+    assert reader.has_classes([6])
+    assert not reader.has_classes([17])

@@ -244,8 +244,9 @@ class TileReader:
         return np.array([mins[0], mins[1], maxs[0], maxs[1]])
 
     def has_classes(self, classes) -> bool:
-        """Whether any point of the tiles carries one of ``classes`` (read in chunks,
-        stopping at the first hit)."""
+        """Whether any point of the tiles carries one of ``classes`` (read in chunks of
+        growing size, from a few thousand points, stopping at the first hit: a
+        classified tile is known after decoding a sliver of it)."""
         import laspy
 
         for t in self.tiles:
@@ -254,9 +255,15 @@ class TileReader:
             with _reading(t.path), laspy.open(t.path) as f:
                 if "classification" not in f.header.point_format.dimension_names:
                     continue
-                for chunk in f.chunk_iterator(READ_CHUNK):
+                size, left = 16_384, int(f.header.point_count)
+                while left > 0:
+                    chunk = f.read_points(min(size, left))
+                    if len(chunk) == 0:
+                        break
+                    left -= len(chunk)
                     if np.isin(np.asarray(chunk.classification), classes).any():
                         return True
+                    size = min(4 * size, READ_CHUNK)
         return False
 
     def _tile(self, k):
