@@ -310,3 +310,42 @@ def test_prism_is_valid_accepts_plain_prisms_and_rejects_the_rest():
     assert not prism_is_valid(Solid(moved, good.surfaces))
     assert not prism_is_valid(Solid(good.vertices, good.surfaces[::-1]))
     assert not prism_is_valid(prism_solid(ell, 0.0, 0.0015))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(3, 10), st.booleans(), st.integers(1, 3))
+def test_prism_distance_equals_the_mesh_distance(seed, n, hole, parts):
+    """Distances of points (inside and outside the plan, above, below and between the
+    caps) to one or several prisms, from their rings, equal the distances to their
+    triangulated faces."""
+    from lidar2city.lod.mesh import solid_triangles
+    from lidar2city.lod.prism import prism_distance
+    from lidar2city.metrics.model import point_mesh_distance
+
+    rng = np.random.default_rng(seed)
+    solids = []
+    for j in range(parts):
+        shell = _star(rng, n, False) + [25.0 * j, 0.0]
+        holes = [shell.mean(axis=0) + np.array([[1, 0], [0, 1], [-1, 0], [0, -1.0]])[::-1]] \
+            if hole else []
+        for p in clean_polygon(Polygon(shell, holes), grid=0.001):
+            g = float(rng.uniform(-1, 1))
+            solids.append(prism_solid(p, g, g + float(rng.uniform(0.5, 12)), grid=0.001))
+    if not solids:
+        return
+    lo = np.min([s.vertices.min(axis=0) for s in solids], axis=0) - 3
+    hi = np.max([s.vertices.max(axis=0) for s in solids], axis=0) + 3
+    pts = rng.uniform(lo, hi, (400, 3))
+    d = prism_distance(pts, solids)
+    np.testing.assert_allclose(d, point_mesh_distance(pts, solid_triangles(solids)), atol=1e-9)
+
+
+def test_prism_distance_declines_other_solids():
+    from lidar2city.datamodel import Solid
+    from lidar2city.lod.prism import prism_distance
+
+    s = prism_solid(box(0, 0, 2, 1), 0.0, 3.0)
+    assert prism_distance(np.array([[1.0, 0.5, 4.0]]), [s]) == pytest.approx([1.0])
+    tilted = s.vertices.copy()
+    tilted[-1, 2] += 0.5
+    assert prism_distance(np.zeros((1, 3)), [s, Solid(tilted, s.surfaces)]) is None
