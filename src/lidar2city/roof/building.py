@@ -324,14 +324,15 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     parts = _parts(footprint)
     skipped = 0
     for poly in parts:
-        near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
+        grown = poly.buffer(cfg.overhang)
+        near = shapely.contains_xy(grown, xyz[:, 0], xyz[:, 1])
         pts = xyz[near]
         if len(pts) < 3:
             raise FitError(f"too few points on the roof ({len(pts)})")
         centred = pts[:, :2] - pts[:, :2].mean(axis=0)
         if np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(len(pts)) < 0.01:
             raise FitError(f"the {len(pts)} roof points lie on one line: no roof surface between them")
-        spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+        spacing = _spacing(pts[:, :2], grown.area)
         cell = cfg.cell or float(np.clip(spacing, 0.25, 1.0))
         if poly.area < cell * cell:
             if len(parts) > 1:
