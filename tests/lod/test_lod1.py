@@ -349,3 +349,24 @@ def test_prism_distance_declines_other_solids():
     tilted = s.vertices.copy()
     tilted[-1, 2] += 0.5
     assert prism_distance(np.zeros((1, 3)), [s, Solid(tilted, s.surfaces)]) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(3, 12), st.sampled_from([0.25, 0.5, 1.0]))
+def test_touched_cells_are_the_cells_whose_interior_meets_the_footprint(seed, n, cell):
+    import shapely
+
+    from lidar2city.lod.lod13 import _cell_boxes, _touched_cells
+
+    rng = np.random.default_rng(seed)
+    poly = Polygon(np.round(_star(rng, n, False), 1))  # vertices on cell corners too
+    if not poly.is_valid:
+        return
+    x0, y0, x1, y1 = poly.bounds
+    x0, y0 = np.floor(x0 / cell) * cell - cell, np.floor(y0 / cell) * cell - cell
+    cols, rows = int(np.ceil((x1 - x0) / cell)) + 1, int(np.ceil((y1 - y0) / cell)) + 1
+    y_top = y0 + rows * cell
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
+    want = shapely.intersects(poly, boxes) & ~shapely.touches(poly, boxes)
+    assert np.array_equal(_touched_cells(poly, x0, y_top, cell, rows, cols).ravel(), want)

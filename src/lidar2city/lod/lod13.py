@@ -141,10 +141,15 @@ def _touched_cells(footprint, x0, y_top, cell, rows, cols):
     import shapely
 
     r, c = np.divmod(np.arange(rows * cols), cols)
-    boxes = _cell_boxes(r, c, x0, y_top, cell)
     shapely.prepare(footprint)
-    hit = shapely.intersects(footprint, boxes)
-    hit[hit] &= ~shapely.touches(footprint, boxes[hit])
+    # a cell whose centre is in the footprint's interior meets it there; only the others
+    # (along the outline) need the test on the cell's square
+    hit = shapely.contains_xy(footprint, x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell)
+    rest = np.flatnonzero(~hit)
+    boxes = _cell_boxes(r[rest], c[rest], x0, y_top, cell)
+    meets = shapely.intersects(footprint, boxes)
+    meets[meets] &= ~shapely.touches(footprint, boxes[meets])
+    hit[rest] = meets
     return hit.reshape(rows, cols)
 
 
