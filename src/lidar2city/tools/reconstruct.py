@@ -378,7 +378,13 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             res.reason = f"invalid footprint: {notes[i] or 'empty geometry'}"
         else:
             x0, y0, x1, y1 = g.bounds
-            bi = bgrid.query(x0, y0, x1, y1)
+            if lod22 is not None:  # the roof's points (overhang included) hold the prism's
+                m = lod22.overhang
+                near = bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)
+                p = bxyz[near]
+                bi = near[(p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)]
+            else:
+                bi = bgrid.query(x0, y0, x1, y1)
             gi = ggrid.query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
             def fallback(x0=x0, y0=y0, x1=x1, y1=y1):
                 # the area's ground level: ground points within 50 m
@@ -390,9 +396,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback)
             if lod22 is not None and res.ok:
-                m = lod22.overhang
-                add_lod22(res, g, bxyz[bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)], lod22,
-                          precision=cfg.precision)
+                add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision)
         if notes[i]:
             res.attributes["footprint_note"] = notes[i]
         results[i] = res
