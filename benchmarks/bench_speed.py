@@ -1,6 +1,6 @@
 """Speed and memory of ``reconstruct`` on the Delft tile, against the laspy read floor.
 
-Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced]
+Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced] [--keep-env]
 (default $LIDAR2CITY_DATA or ../shared/data; 3 runs)
 
 Every figure is a whole process as a user runs it, measured from outside
@@ -67,10 +67,19 @@ def main():
     ap.add_argument("data", nargs="?")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--no-traced", action="store_true", help="skip the no-footprints run")
+    ap.add_argument("--keep-env", action="store_true",
+                    help="run with the environment as it is (PYTHONDONTWRITEBYTECODE kept: "
+                         "without a __pycache__, lidar2city compiles in every run)")
     args = ap.parse_args()
     d = data_dir(args.data) / "delft"
     laz, fps = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    # the warm-up runs below cache the bytecode, as an installed package has it (laspy's,
+    # the floor's, was compiled when it was installed): with PYTHONDONTWRITEBYTECODE set,
+    # every run would compile lidar2city's ~50 modules again (~0.2 CPU s); --keep-env
+    # runs with the environment as it is
+    if not args.keep_env:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
     tmp = Path(tempfile.mkdtemp())
     py = sys.executable
     floor = [py, "-c", f"import laspy; laspy.read({str(laz)!r})"]

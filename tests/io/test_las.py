@@ -94,3 +94,42 @@ def test_canonical_order_is_the_seven_key_lexsort():
         attrs = [rng.integers(0, 3, n).astype(np.uint8), rng.integers(0, 9, n).astype(np.uint16)]
         want = np.lexsort(attrs[::-1] + cols[::-1])
         assert np.array_equal(_canonical_order(cols, attrs), want)
+
+
+def test_canonical_order_on_a_coordinate_grid_is_the_lexsort():
+    """Coordinates snapped to a file's grid sort by their integer steps: np.lexsort's
+    order, ties included, and a column off the grid falls back to its ranks."""
+    from lidar2city.io.las import _canonical_order
+
+    rng = np.random.default_rng(4)
+    scales = (0.001, 0.01, 0.00025)
+    for dup in (False, True):
+        n = 3000
+        span = 5 if dup else 10**6
+        cols = [np.round(rng.integers(-span, span, n) * s + 85000.0 * (d == 0), 12)
+                for d, s in enumerate(scales)]
+        cols = [np.round(c / s) * s for c, s in zip(cols, scales)]  # as _read_world snaps
+        attrs = [rng.integers(0, 3, n).astype(np.uint8)]
+        want = np.lexsort(attrs[::-1] + cols[::-1])
+        assert np.array_equal(_canonical_order(cols, attrs, scales=scales), want)
+        off = [cols[0] + 1e-7 * rng.random(n), cols[1], cols[2]]  # x no longer on its grid
+        want = np.lexsort(attrs[::-1] + off[::-1])
+        assert np.array_equal(_canonical_order(off, attrs, scales=scales), want)
+
+
+@pytest.mark.parametrize("late", [0, 20_000, 99_999])
+def test_has_classes_finds_a_class_wherever_it_first_appears(tmp_path, late):
+    """The class scan reads growing chunks: a class first met deep in the file (past the
+    first small chunks) is found, and one that is absent is not."""
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.io.las import TileReader, scan_tiles, write_points
+
+    n = 100_000
+    xyz = np.random.default_rng(0).uniform(0, 100, (n, 3))
+    cls = np.full(n, 2, dtype=np.uint8)
+    cls[late:] = 6
+    out = tmp_path / "t.laz"
+    write_points(out, PointCloud(xyz, attributes={"classification": cls}))
+    reader = TileReader(scan_tiles([out], crs="EPSG:28992"))
+    assert reader.has_classes([6])
+    assert not reader.has_classes([17])

@@ -246,3 +246,127 @@ def test_touching_rings_give_a_valid_lod1_building():
     lod12 = r.solids["1.2"]
     for s in [*(lod12 if isinstance(lod12, list) else [lod12]), *r.parts.get("1.3", [])]:
         assert check_solid(s) == []
+
+
+def _star(rng, n, spike):
+    """A random star-shaped ring; ``spike`` makes one vertex a needle (a near-degenerate
+    wall pair) and puts collinear and near-duplicate vertices beside it."""
+    ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+    rad = rng.uniform(3, 20, n)
+    pts = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
+    if spike:
+        i = int(rng.integers(n))
+        j = (i + 1) % n
+        mid = (pts[i] + pts[j]) / 2
+        out = mid + rng.uniform(5, 40) * mid / np.linalg.norm(mid)
+        w = 10.0 ** rng.uniform(-5, -1)  # needle half-width
+        t = np.array([-mid[1], mid[0]]) / np.linalg.norm(mid)
+        extra = [mid - w * t, out, mid + w * t, mid + w * t + 10.0 ** rng.uniform(-4, -2) * t]
+        pts = np.insert(pts, j if j else n, extra, axis=0)
+    return pts
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(3, 12), st.booleans(), st.booleans(),
+       st.sampled_from([0.0, 1e3, 1e5]), st.sampled_from([0.0, 0.001]))
+def test_prism_is_valid_only_vouches_for_prisms_the_validator_accepts(seed, n, spike, hole,
+                                                                      offset, grid):
+    from lidar2city.lod.prism import prism_is_valid
+
+    rng = np.random.default_rng(seed)
+    shell = _star(rng, n, spike) + offset
+    holes = []
+    if hole:
+        c = shell.mean(axis=0) + rng.uniform(-2, 2, 2)
+        r = rng.uniform(0.2, 3.0)
+        holes = [c + r * np.array([[1, 0], [0, 1], [-1, 0], [0, -1.0]])[::-1]]
+    poly = Polygon(shell, holes)
+    h = float(rng.choice([0.001, 0.002, 0.5, 10.0]))
+    for p in clean_polygon(poly, grid=grid) or [Polygon(shell)]:
+        if not p.is_valid or p.area <= 0:
+            continue
+        s = prism_solid(p, 2.0, 2.0 + h, grid=grid)
+        if prism_is_valid(s):
+            assert check_solid(s) == []
+
+
+def test_prism_is_valid_accepts_plain_prisms_and_rejects_the_rest():
+    from lidar2city.datamodel import Solid
+    from lidar2city.lod.prism import prism_is_valid
+
+    ell = Polygon([(0, 0), (10, 0), (10, 4), (4, 4), (4, 9), (0, 9)])
+    with_hole = Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(2, 2), (2, 4), (4, 4), (4, 2)]])
+    for p in (box(0, 0, 2, 1), ell, with_hole):
+        s = prism_solid(p, 0.0, 3.0, grid=0.001)
+        assert prism_is_valid(s) and check_solid(s) == []
+    # a needle 0.1 mm wide: walls the validator sees as overlapping, not vouched for
+    needle = Polygon([(0, 0), (10, 0), (10, 5), (5, 5), (5, 30), (4.9999, 5), (0, 5)])
+    s = prism_solid(needle, 0.0, 3.0)
+    assert not prism_is_valid(s) and check_solid(s) != []
+    # not a prism's layout (a cap moved, surfaces reordered, too low): not vouched for
+    good = prism_solid(ell, 0.0, 3.0)
+    moved = good.vertices.copy()
+    moved[len(moved) // 2, 2] += 0.5
+    assert not prism_is_valid(Solid(moved, good.surfaces))
+    assert not prism_is_valid(Solid(good.vertices, good.surfaces[::-1]))
+    assert not prism_is_valid(prism_solid(ell, 0.0, 0.0015))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(3, 10), st.booleans(), st.integers(1, 3))
+def test_prism_distance_equals_the_mesh_distance(seed, n, hole, parts):
+    """Distances of points (inside and outside the plan, above, below and between the
+    caps) to one or several prisms, from their rings, equal the distances to their
+    triangulated faces."""
+    from lidar2city.lod.mesh import solid_triangles
+    from lidar2city.lod.prism import prism_distance
+    from lidar2city.metrics.model import point_mesh_distance
+
+    rng = np.random.default_rng(seed)
+    solids = []
+    for j in range(parts):
+        shell = _star(rng, n, False) + [25.0 * j, 0.0]
+        holes = [shell.mean(axis=0) + np.array([[1, 0], [0, 1], [-1, 0], [0, -1.0]])[::-1]] \
+            if hole else []
+        for p in clean_polygon(Polygon(shell, holes), grid=0.001):
+            g = float(rng.uniform(-1, 1))
+            solids.append(prism_solid(p, g, g + float(rng.uniform(0.5, 12)), grid=0.001))
+    if not solids:
+        return
+    lo = np.min([s.vertices.min(axis=0) for s in solids], axis=0) - 3
+    hi = np.max([s.vertices.max(axis=0) for s in solids], axis=0) + 3
+    pts = rng.uniform(lo, hi, (400, 3))
+    d = prism_distance(pts, solids)
+    np.testing.assert_allclose(d, point_mesh_distance(pts, solid_triangles(solids)), atol=1e-9)
+
+
+def test_prism_distance_declines_other_solids():
+    from lidar2city.datamodel import Solid
+    from lidar2city.lod.prism import prism_distance
+
+    s = prism_solid(box(0, 0, 2, 1), 0.0, 3.0)
+    assert prism_distance(np.array([[1.0, 0.5, 4.0]]), [s]) == pytest.approx([1.0])
+    tilted = s.vertices.copy()
+    tilted[-1, 2] += 0.5
+    assert prism_distance(np.zeros((1, 3)), [s, Solid(tilted, s.surfaces)]) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(3, 12), st.sampled_from([0.25, 0.5, 1.0]))
+def test_touched_cells_are_the_cells_whose_interior_meets_the_footprint(seed, n, cell):
+    import shapely
+
+    from lidar2city.lod.lod13 import _cell_boxes, _touched_cells
+
+    rng = np.random.default_rng(seed)
+    poly = Polygon(np.round(_star(rng, n, False), 1))  # vertices on cell corners too
+    if not poly.is_valid:
+        return
+    x0, y0, x1, y1 = poly.bounds
+    x0, y0 = np.floor(x0 / cell) * cell - cell, np.floor(y0 / cell) * cell - cell
+    cols, rows = int(np.ceil((x1 - x0) / cell)) + 1, int(np.ceil((y1 - y0) / cell)) + 1
+    y_top = y0 + rows * cell
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
+    want = shapely.intersects(poly, boxes) & ~shapely.touches(poly, boxes)
+    assert np.array_equal(_touched_cells(poly, x0, y_top, cell, rows, cols).ravel(), want)

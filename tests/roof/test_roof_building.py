@@ -108,3 +108,31 @@ def test_eave_corners_land_on_truth(town, models):
             assert len(at), (b.id, cx, cy)
             true_z = np.min(planes[:, 0] * cx + planes[:, 1] * cy + planes[:, 2])
             assert abs(at[:, 2].max() - true_z) < 0.15, (b.id, b.roof_type)
+
+
+def test_solids_are_validated_once_as_written():
+    """With ``precision`` the solids come back on the output grid with the validator's
+    issues of exactly those solids, and set_lod22 stores them without checking again."""
+    from lidar2city.datamodel import BuildingResult
+    from lidar2city.roof.solid import on_grid
+    from lidar2city.synthetic_roofs import roof_sample
+    from lidar2city.tools.reconstruct import set_lod22
+    from lidar2city.validate.solid import check_solid
+
+    s = roof_sample("hip", density=8, seed=0)
+    plain = reconstruct_lod22(s.footprint, s.xyz, s.ground_z)
+    res = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, precision=0.001)
+    assert plain.issues is None and len(res.issues) == len(res.solids) == len(plain.solids)
+    for a, b, found in zip(plain.solids, res.solids, res.issues, strict=True):
+        assert np.array_equal(on_grid(a, 0.001).vertices, b.vertices)
+        assert [str(i) for i in found] == [str(i) for i in check_solid(b)] == []
+    r = BuildingResult("b")
+    set_lod22(r, res.solids, res.attributes, checked=res.issues)
+    assert r.solids["2.2"] is res.solids[0] and "lod22_fallback" not in r.attributes
+    # issues found by the caller make the LoD1.2 prism stand in, with why
+    from lidar2city.validate.solid import Issue
+
+    r = BuildingResult("b")
+    r.solids["1.2"] = "prism"
+    set_lod22(r, res.solids, res.attributes, checked=[[Issue(306, 1, "crossing")]])
+    assert r.solids["2.2"] == "prism" and "306" in r.attributes["lod22_fallback"]

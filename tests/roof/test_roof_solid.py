@@ -117,3 +117,22 @@ def test_manifold_solid_keeps_planes_when_relabelling_gives_up():
     assert relabelled == 0 and not check_solid(s)
     roofs = sorted({round(float(z), 3) for z in s.vertices[:, 2]} - {0.0})
     assert roofs == [3.0, 4.0, 6.0]
+
+
+def test_level_sets_are_the_group_means_of_each_vertex():
+    """All vertices' height levels at once equal sorting, splitting and averaging each
+    vertex's heights on its own (bit for bit, long groups included)."""
+    from lidar2city.roof.solid import _level_sets
+
+    rng = np.random.default_rng(5)
+    levels = {}
+    for k in range(300):
+        n = int(rng.integers(1, 14))
+        base = rng.choice([0.0, 3.0, 7.5], n) + rng.normal(0, 0.003, n)
+        levels[(k, -k)] = list(base) + ([1.0] * 9 if k % 50 == 0 else [])
+    got = _level_sets(levels, 5e-3)
+    assert list(got) == list(levels)
+    for k, zs in levels.items():
+        zs = np.sort(np.asarray(zs))
+        want = [g.mean() for g in np.split(zs, np.flatnonzero(np.diff(zs) > 5e-3) + 1)]
+        assert np.array_equal(got[k], np.array(want))

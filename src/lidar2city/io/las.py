@@ -158,13 +158,15 @@ def read_points(paths, *, crs=None, require_crs=False) -> PointCloud:
 
 @dataclass(frozen=True, eq=False)
 class TileInfo:
-    """A tile's header: path, bounds (CRS units), point count and CRS."""
+    """A tile's header: path, bounds (CRS units), point count, CRS and coordinate
+    resolution (``scales``, CRS units per integer step; None when unknown)."""
 
     path: str
     mins: np.ndarray
     maxs: np.ndarray
     count: int
     crs: object
+    scales: tuple | None = None
 
 
 def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
@@ -188,7 +190,8 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = forced if forced is not None else _read_crs(f, p)
-        out.append(TileInfo(str(p), mins, maxs, count, tile_crs))
+            scales = tuple(float(v) for v in h.scales)
+        out.append(TileInfo(str(p), mins, maxs, count, tile_crs, scales))
     if not out:
         raise EmptyInputError("no input file given")
     if len({t.crs.to_wkt() if t.crs is not None else None for t in out}) > 1:
@@ -244,8 +247,9 @@ class TileReader:
         return np.array([mins[0], mins[1], maxs[0], maxs[1]])
 
     def has_classes(self, classes) -> bool:
-        """Whether any point of the tiles carries one of ``classes`` (read in chunks,
-        stopping at the first hit)."""
+        """Whether any point of the tiles carries one of ``classes`` (read in chunks of
+        growing size, from a few thousand points, stopping at the first hit: a
+        classified tile is known after decoding a sliver of it)."""
         import laspy
 
         for t in self.tiles:
@@ -254,9 +258,15 @@ class TileReader:
             with _reading(t.path), laspy.open(t.path) as f:
                 if "classification" not in f.header.point_format.dimension_names:
                     continue
-                for chunk in f.chunk_iterator(READ_CHUNK):
+                size, left = 16_384, int(f.header.point_count)
+                while left > 0:
+                    chunk = f.read_points(min(size, left))
+                    if len(chunk) == 0:
+                        break
+                    left -= len(chunk)
                     if np.isin(np.asarray(chunk.classification), classes).any():
                         return True
+                    size = min(4 * size, READ_CHUNK)
         return False
 
     def _tile(self, k):
@@ -272,11 +282,12 @@ class TileReader:
 
     def box(self, xmin, ymin, xmax, ymax) -> PointCloud:
         """The points with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (world CRS units)."""
-        parts, attrs = [], []
+        parts, attrs, scales = [], [], set()
         for k, t in enumerate(self.tiles):
             if not t.count or t.maxs[0] < xmin or t.mins[0] > xmax or t.maxs[1] < ymin \
                     or t.mins[1] > ymax:
                 continue
+            scales.add(t.scales)
             world, a = self._tile(k)
             inside = ((world[:, 0] >= xmin) & (world[:, 0] <= xmax)
                       & (world[:, 1] >= ymin) & (world[:, 1] <= ymax))
@@ -290,7 +301,10 @@ class TileReader:
         # canonical order: the same points give the same cloud whatever the tiling
         cols = [np.concatenate([w[i, d] for w, i in parts]) if parts else np.zeros(0)
                 for d in range(3)]
-        order = _canonical_order(cols, [values[n] for n in keys])
+        # the tiles' points lie on their coordinate grid (:func:`_read_world` snaps them):
+        # one shared grid gives integer sort keys directly
+        grid = scales.pop() if len(scales) == 1 else None
+        order = _canonical_order(cols, [values[n] for n in keys], scales=grid)
         values = {n: v[order] for n, v in values.items()}
         # local coordinates, column by column: (world - origin) * scale, as from_world
         scale = (self.xy_unit, self.xy_unit, self.z_unit)
@@ -304,19 +318,30 @@ class TileReader:
         return PointCloud(local, self.origin.copy(), self.crs, self.xy_unit, self.z_unit, values)
 
 
-def _canonical_order(cols, attrs):
+def _canonical_order(cols, attrs, *, scales=None):
     """``np.lexsort(attrs[::-1] + cols[::-1])``: the points by x, then y, z, then ``attrs``.
 
     Sorting on seven keys costs ~0.1 s per million points per key; points rarely
     share all three coordinates, so they are sorted once on one integer key
     made of the ranks of x, y and z, and the full sort is only run when two
     points coincide (or the ranks do not fit in one key). Same order either way.
+    ``scales``: when every coordinate of column ``d`` is an integer multiple of
+    ``scales[d]`` (points snapped to a file's grid), that integer is its rank
+    (same order, no sort per column).
     """
     n = len(cols[0])
     if n < 2:
         return np.lexsort(attrs[::-1] + cols[::-1])
     ranks, sizes = [], []
-    for c in cols:
+    for d, c in enumerate(cols):
+        if scales is not None and scales[d] > 0:
+            steps = np.rint(c / scales[d])
+            if np.abs(steps).max() < 2.0 ** 52 and np.array_equal(steps * scales[d], c):
+                r = steps.astype(np.int64)
+                r -= r.min()
+                ranks.append(r)
+                sizes.append(int(r.max()) + 1)
+                continue
         u, inv = np.unique(c, return_inverse=True)
         ranks.append(inv.reshape(-1).astype(np.int64))
         sizes.append(len(u))

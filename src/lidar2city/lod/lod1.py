@@ -20,7 +20,7 @@ from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
-from .prism import clean_polygon, prism_solid
+from .prism import clean_polygon, prism_distance, prism_is_valid, prism_solid
 
 logger = logging.getLogger(__name__)
 
@@ -179,7 +179,7 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         n = len(inside)
         result.attributes["point_count"] = n
         result.attributes["point_density"] = round(n / area, 3) if area > 0 else 0.0
-        from ..metrics.model import footprint_coverage, model_rmse
+        from ..metrics.model import footprint_coverage
 
         result.attributes["no_data_fraction"] = round(
             1.0 - footprint_coverage(fp, inside[:, :2], cell=cfg.coverage_cell), 4)
@@ -208,7 +208,7 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         if "1.2" in cfg.lods:
             solids = [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
             result.solids["1.2"] = solids[0] if len(solids) == 1 else solids
-            result.attributes["rmse_lod12"] = round(model_rmse(inside, solids), 4)
+            result.attributes["rmse_lod12"] = round(_rmse(inside, solids), 4)
             if cfg.validate:
                 codes12 = _codes(solids)
                 issues += codes12
@@ -221,7 +221,7 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
                 result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"]
                 issues += codes12
             else:
-                result.attributes["rmse_lod13"] = round(model_rmse(inside, parts), 4)
+                result.attributes["rmse_lod13"] = round(_rmse(inside, parts), 4)
                 if cfg.validate:
                     issues += _codes(parts)
         if cfg.validate:
@@ -251,12 +251,24 @@ def _same_solids(a, b) -> bool:
     return True
 
 
+def _rmse(points, solids) -> float:
+    """RMSE of the 3-D distances of ``points`` to the prisms' faces (as
+    :func:`lidar2city.metrics.model.model_rmse`, from the footprint rings)."""
+    from ..metrics.model import model_rmse, rmse
+
+    d = prism_distance(points, solids)
+    return model_rmse(points, solids) if d is None else rmse(d)
+
+
 def _codes(solids) -> list[int]:
+    """val3dity codes of prisms: none for those valid by construction (their footprint
+    proves it, :func:`prism_is_valid`), the full check for the others."""
     from ..validate.solid import solid_error_codes
 
     out: list[int] = []
     for s in solids:
-        out += solid_error_codes(s)
+        if not prism_is_valid(s):
+            out += solid_error_codes(s)
     return out
 
 

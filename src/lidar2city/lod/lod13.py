@@ -115,7 +115,12 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         lo = np.floor(pos).astype(np.int64)
         hi = np.minimum(lo + 1, len(z) - 1)
         height[k[starts]] = z[lo] + (z[hi] - z[lo]) * (pos - lo)
-        edges = np.unique(np.sort(np.column_stack([la[diff], lb[diff]]), axis=1), axis=0)
+        # distinct neighbour pairs (low label, high label) in lexicographic order: one
+        # integer key each (a row-wise unique is several times slower)
+        m = int(lab.max()) + 1
+        lo_l = np.minimum(la[diff], lb[diff]).astype(np.int64)
+        key = np.unique(lo_l * m + np.maximum(la[diff], lb[diff]))
+        edges = np.column_stack([key // m, key % m])
         gaps = np.abs(height[edges[:, 0]] - height[edges[:, 1]])
         best = int(np.argmin(gaps))  # first of the smallest: deterministic
         if gaps[best] >= step:
@@ -136,10 +141,15 @@ def _touched_cells(footprint, x0, y_top, cell, rows, cols):
     import shapely
 
     r, c = np.divmod(np.arange(rows * cols), cols)
-    boxes = _cell_boxes(r, c, x0, y_top, cell)
     shapely.prepare(footprint)
-    hit = shapely.intersects(footprint, boxes)
-    hit[hit] &= ~shapely.touches(footprint, boxes[hit])
+    # a cell whose centre is in the footprint's interior meets it there; only the others
+    # (along the outline) need the test on the cell's square
+    hit = shapely.contains_xy(footprint, x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell)
+    rest = np.flatnonzero(~hit)
+    boxes = _cell_boxes(r[rest], c[rest], x0, y_top, cell)
+    meets = shapely.intersects(footprint, boxes)
+    meets[meets] &= ~shapely.touches(footprint, boxes[meets])
+    hit[rest] = meets
     return hit.reshape(rows, cols)
 
 
@@ -169,6 +179,14 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
         Raster georeferencing (local metres, north up).
     """
     from affine import Affine
+
+    labels, x0, y_top = _height_labels(footprint, xyz, cell=cell, step=step, min_area=min_area)
+    return labels, Affine(cell, 0.0, x0, 0.0, -cell, y_top)  # north up, rows from the top
+
+
+def _height_labels(footprint, xyz, *, cell, step, min_area):
+    """:func:`height_regions` with the raster's upper-left corner ``(x0, y_top)`` instead of
+    its transform (no affine import on the reconstruct path)."""
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -178,7 +196,6 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
     cols = int(np.ceil((x1 - x0) / cell)) + 1
     rows = int(np.ceil((y1 - y0) / cell)) + 1
     y_top = y0 + rows * cell
-    transform = Affine(cell, 0.0, x0, 0.0, -cell, y_top)  # north up, rows from the top
     mask = _touched_cells(footprint, x0, y_top, cell, rows, cols)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     c = np.clip(np.floor((xyz[:, 0] - x0) / cell).astype(np.int64), 0, cols - 1)
@@ -186,7 +203,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
     h = _cell_medians(r * cols + c, xyz[:, 2], rows * cols).reshape(rows, cols)
     have = np.isfinite(h)
     if not have.any():
-        return np.where(mask, 0, -1), transform
+        return np.where(mask, 0, -1), x0, y_top
     # empty cells take the height of the nearest cell with points
     _, (ir, ic) = ndimage.distance_transform_edt(~have, return_indices=True)
     h = h[ir, ic]
@@ -204,7 +221,7 @@ def height_regions(footprint, xyz, *, cell: float = 0.5, step: float = 2.0,
     _, inv = np.unique(lab[mask], return_inverse=True)
     out = np.full(lab.shape, -1, dtype=np.int64)
     out[mask] = inv
-    return out, transform
+    return out, x0, y_top
 
 
 def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 2.0, min_area: float = 5.0,
@@ -231,14 +248,14 @@ def height_parts(footprint, xyz, *, cell: float = 0.5, step: float = 2.0, min_ar
     """
     import shapely
 
-    labels, transform = height_regions(footprint, xyz, cell=cell, step=step, min_area=min_area)
+    labels, x0, y_top = _height_labels(footprint, xyz, cell=cell, step=step, min_area=min_area)
     k = int(labels.max()) + 1
     if k <= 1:
         return [footprint]
     # each region: the union of its cells (they tile it: a coverage union)
     r, c = np.nonzero(labels >= 0)
     lab = labels[r, c]
-    boxes = _cell_boxes(r, c, transform.c, transform.f, cell)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
     regions = [shapely.coverage_union_all(boxes[lab == v]) for v in range(k)]
     regions = list(shapely.coverage_simplify(np.array(regions, dtype=object), 0.75 * cell,
                                              simplify_boundary=False))

@@ -15,7 +15,8 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import InputError
 
-__all__ = ["clean_polygon", "prism_solid", "lod12_solid", "lod12_solids"]
+__all__ = ["clean_polygon", "prism_solid", "prism_is_valid", "prism_distance", "lod12_solid",
+           "lod12_solids"]
 
 
 def _ring_coords(ring, grid: float) -> np.ndarray:
@@ -187,6 +188,169 @@ def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -
         quads = np.column_stack([r, nxt, nxt + k, r + k])
         walls.extend(Surface([q], "WallSurface") for q in quads)
     return Solid(vertices, [ground, roof, *walls])
+
+
+def _prism_layout(solid):
+    """``(vertices, k, ring starts, ring lengths, wall quads)`` of a solid laid out exactly
+    as :func:`prism_solid` builds it (ground ring vertices ``0..k-1`` at one height, the
+    same ``k..2k-1`` above at another, caps and one quad wall per ring edge), else None."""
+    v = np.asarray(solid.vertices, dtype=np.float64)
+    surfaces = solid.surfaces
+    n = len(v)
+    k = n // 2
+    if v.ndim != 2 or v.shape[1] != 3 or n < 6 or n % 2 or len(surfaces) != 2 + k \
+            or not np.isfinite(v).all():
+        return None
+    ground, roof, walls = surfaces[0], surfaces[1], surfaces[2:]
+    if ground.semantic != "GroundSurface" or roof.semantic != "RoofSurface" \
+            or len(ground.rings) != len(roof.rings) or not roof.rings:
+        return None
+    g, r = v[0, 2], v[k, 2]
+    if not (r > g and np.all(v[:k, 2] == g) and np.all(v[k:, 2] == r)
+            and np.array_equal(v[:k, :2], v[k:, :2])):
+        return None
+    lens = [len(ring) for ring in roof.rings]
+    if min(lens) < 3 or sum(lens) != k:
+        return None
+    starts = np.cumsum([0] + lens)[:-1]
+    quads = []
+    for s0, m, top, bottom in zip(starts, lens, roof.rings, ground.rings, strict=True):
+        ids = np.arange(s0, s0 + m)
+        if not (np.array_equal(np.asarray(top), ids + k)
+                and np.array_equal(np.asarray(bottom), ids[::-1])):
+            return None
+        nxt = np.roll(ids, -1)
+        quads.append(np.column_stack([ids, nxt, nxt + k, ids + k]))
+    if any(w.semantic != "WallSurface" or len(w.rings) != 1 or len(w.rings[0]) != 4
+           for w in walls):
+        return None
+    if not np.array_equal(np.array([w.rings[0] for w in walls]), np.concatenate(quads)):
+        return None
+    return v, k, starts, lens, quads
+
+
+def prism_distance(points, solids, *, chunk_pairs: int = 1 << 20):
+    """3-D distance of points to the boundary of prisms, from their footprint rings.
+
+    For a prism over polygon ``A`` from height ``g`` to ``r``, a point whose plan
+    position is inside ``A`` is nearest to the roof, the floor, or (between the
+    two heights) the wall at its plan distance to ``A``'s rings; a point outside
+    is ``sqrt(d_plan^2 + d_z^2)`` away, ``d_z`` its height's distance to
+    ``[g, r]``. The minimum over the prisms is the distance to their union of
+    faces, as :func:`lidar2city.metrics.model.point_mesh_distance` finds it on
+    their triangles (equal up to rounding), without triangulating.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3)
+    solids : list of Solid
+        Prisms laid out as :func:`prism_solid` builds them.
+    chunk_pairs : int
+        Point-edge pairs evaluated at a time (bounds the temporaries).
+
+    Returns
+    -------
+    ndarray, shape (N,) or None
+        None when a solid is not such a prism (measure it on its mesh then).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    a_list, b_list, owner, g, r = [], [], [], [], []
+    for j, s in enumerate(solids):
+        layout = _prism_layout(s)
+        if layout is None:
+            return None
+        v, k, starts, lens, _ = layout
+        for s0, m in zip(starts, lens, strict=True):
+            ids = np.arange(s0, s0 + m)
+            a_list.append(v[ids, :2])
+            b_list.append(v[np.roll(ids, -1), :2])
+            owner.append(np.full(m, j))
+        g.append(v[0, 2])
+        r.append(v[k, 2])
+    if not solids or len(pts) == 0:
+        return np.full(len(pts), np.inf) if not solids else np.zeros(0)
+    a, b, owner = np.concatenate(a_list), np.concatenate(b_list), np.concatenate(owner)
+    g, r = np.array(g), np.array(r)
+    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])  # edges grouped by prism
+    ab = b - a
+    ll = np.einsum("ij,ij->i", ab, ab)
+    ll_safe = np.where(ll > 0, ll, 1.0)
+    # ray casting along +x: edges crossing the point's row, right of it
+    dy = np.where(ab[:, 1] != 0, ab[:, 1], 1.0)
+    out = np.empty(len(pts))
+    step = max(1, chunk_pairs // len(a))
+    for s0 in range(0, len(pts), step):
+        p = pts[s0:s0 + step]
+        px, py, z = p[:, :1], p[:, 1:2], p[:, 2:]
+        dx, dyp = px - a[:, 0], py - a[:, 1]
+        t = np.clip((dx * ab[:, 0] + dyp * ab[:, 1]) / ll_safe, 0.0, 1.0)
+        ex, ey = dx - t * ab[:, 0], dyp - t * ab[:, 1]
+        plan2 = np.minimum.reduceat(ex * ex + ey * ey, first, axis=1)      # (n, J)
+        crosses = ((a[:, 1] > py) != (b[:, 1] > py)) & (
+            px < a[:, 0] + (py - a[:, 1]) * ab[:, 0] / dy)
+        inside = np.add.reduceat(crosses.astype(np.int64), first, axis=1) % 2 == 1
+        cap2 = np.minimum(np.abs(z - r), np.abs(z - g)) ** 2
+        between = (z >= g) & (z <= r)
+        d_in = np.where(between, np.minimum(cap2, plan2), cap2)
+        dz = np.maximum(np.maximum(g - z, z - r), 0.0)
+        d_out = plan2 + dz * dz
+        out[s0:s0 + len(p)] = np.sqrt(np.where(inside, d_in, d_out).min(axis=1))
+    return out
+
+
+def prism_is_valid(solid, *, tolerance: float = 0.001) -> bool:
+    """Whether ``solid`` is a prism as :func:`prism_solid` builds it, over rings that make it
+    valid by construction (so :func:`lidar2city.validate.solid.check_solid` finds nothing).
+
+    A prism's shell is closed, 2-manifold and outward-oriented by its layout, its
+    faces are planar (horizontal caps, vertical rectangles), so it is valid exactly
+    when its footprint is: the vertex layout and the surfaces are checked to be
+    :func:`prism_solid`'s, the footprint rings to form a valid polygon (exterior
+    counter-clockwise, holes clockwise), and the polygon's minimum clearance (the
+    smallest move of a vertex that would make it invalid) to exceed the
+    validator's tolerances with a margin: ``2 * tolerance`` (so no two vertices
+    snap together) plus ``1e-4`` times the coordinates' magnitude and the longest
+    edge (so no two walls pass the validator's coplanarity test, whose angle
+    threshold is ~4.5e-5 rad, and overlap). A prism this cannot vouch for (False)
+    may still be valid: check it with ``check_solid``.
+
+    Parameters
+    ----------
+    solid : Solid
+    tolerance : float
+        The validator's snap and overlap tolerance (m; val3dity: 0.001).
+
+    Returns
+    -------
+    bool
+        True only when ``check_solid(solid)`` (default tolerances up to
+        ``tolerance``) returns no issue.
+
+    Examples
+    --------
+    >>> from shapely.geometry import box
+    >>> prism_is_valid(prism_solid(box(0, 0, 2, 1), 0.0, 3.0))
+    True
+    """
+    import shapely
+
+    layout = _prism_layout(solid)
+    if layout is None:
+        return False
+    v, k, starts, lens, quads = layout
+    if not v[k, 2] - v[0, 2] >= 2.0 * tolerance:
+        return False
+    xy = v[:k, :2]
+    rings = [shapely.LinearRing(xy[s0:s0 + m]) for s0, m in zip(starts, lens, strict=True)]
+    ccw = shapely.is_ccw(rings)
+    if not ccw[0] or ccw[1:].any():
+        return False
+    poly = shapely.Polygon(rings[0], rings[1:])
+    if not poly.is_valid:
+        return False
+    longest = max(float(np.hypot(*(xy[q[:, 1]] - xy[q[:, 0]]).T).max()) for q in quads)
+    margin = 2.0 * tolerance + 1e-4 * (float(np.abs(v).max()) + longest)
+    return bool(shapely.minimum_clearance(poly) >= margin)
 
 
 def lod12_solids(footprint, ground_z: float, roof_z: float, *, grid: float = 0.0) -> list[Solid]:

@@ -15,7 +15,7 @@ from .arrangement import arrangement_partition, collapse_short_edges
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import partition_solid, split_saddles
+from .solid import on_grid, partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -70,10 +70,15 @@ class Lod22Config:
 
 @dataclass(eq=False)
 class Lod22Result:
-    """Solids (one per footprint part) and per-building attributes."""
+    """Solids (one per footprint part) and per-building attributes.
+
+    ``issues``: when the solids were validated as they are (on the output grid), the
+    :func:`~lidar2city.validate.solid.check_solid` issues of each one; None when not.
+    """
 
     solids: list
     attributes: dict
+    issues: list | None = None
 
 
 def _spacing(xy, area):
@@ -270,7 +275,7 @@ def _parts(footprint):
 
 
 def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config | None = None,
-                      direction=None) -> Lod22Result:
+                      direction=None, precision: float | None = None) -> Lod22Result:
     """LoD2.2 solids of one building from its footprint and building points.
 
     Parameters
@@ -285,6 +290,13 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     config : Lod22Config
     direction : float, optional
         Building direction (rad); default estimated from the footprint.
+    precision : float, optional
+        Output vertex grid (m), e.g. 0.001 for CityJSON's millimetres. When given,
+        the solids returned have their vertices on it, and each was validated as
+        returned (``Lod22Result.issues``), which also decides whether the
+        arrangement partition's solid is kept or the label grid's tried: the solid
+        validated is the one written, once. None validates the solids as computed
+        and leaves ``issues`` None.
 
     Returns
     -------
@@ -309,20 +321,21 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     cfg = config or Lod22Config()
     t0 = time.perf_counter()
     xyz = np.asarray(building_xyz, dtype=np.float64)
-    solids, attrs = [], {}
+    solids, attrs, issues = [], {}, []
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes, roof_faces, directions = [], [], [], []
     parts = _parts(footprint)
     skipped = 0
     for poly in parts:
-        near = shapely.contains_xy(poly.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])
+        grown = poly.buffer(cfg.overhang)
+        near = shapely.contains_xy(grown, xyz[:, 0], xyz[:, 1])
         pts = xyz[near]
         if len(pts) < 3:
             raise FitError(f"too few points on the roof ({len(pts)})")
         centred = pts[:, :2] - pts[:, :2].mean(axis=0)
         if np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(len(pts)) < 0.01:
             raise FitError(f"the {len(pts)} roof points lie on one line: no roof surface between them")
-        spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+        spacing = _spacing(pts[:, :2], grown.area)
         cell = cfg.cell or float(np.clip(spacing, 0.25, 1.0))
         if poly.area < cell * cell:
             if len(parts) > 1:
@@ -353,10 +366,17 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                     raise
                 logger.debug("%s roof topology failed (%s); trying the next", method, exc)
                 continue
-            if method == methods[-1] or (_closed_shell(solid) and not check_solid(solid)):
+            written = on_grid(solid, precision)
+            if method == methods[-1]:
+                found = check_solid(written) if precision else None
                 break
+            if _closed_shell(solid):
+                found = check_solid(written)
+                if not found:
+                    break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
         solids.append(solid)
+        issues.append(found)
         n_int += info["intersection"]
         n_step += info["step"]
         moved += info["moved"]
@@ -386,6 +406,8 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         snake_fallback=snake_fallbacks,
         lod22_time=round(time.perf_counter() - t0, 4),
     )
+    if precision:
+        return Lod22Result([on_grid(s, precision) for s in solids], attrs, issues)
     return Lod22Result(solids, attrs)
 
 

@@ -16,9 +16,18 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["partition_solid", "split_crossings", "split_saddles"]
+__all__ = ["on_grid", "partition_solid", "split_crossings", "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
+
+
+def on_grid(solid, precision):
+    """``solid`` with its vertices rounded to multiples of ``precision`` metres (the output's
+    CityJSON quantisation), so that the solid validated is the one written; ``solid``
+    itself when ``precision`` is 0 or None."""
+    if not precision:
+        return solid
+    return Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
 
 
 def _key(p):
@@ -64,11 +73,13 @@ def conform(rings_per_face, *, tol=1e-3):
     import shapely
 
     rings = [r for rs in rings_per_face for r in rs]
-    pts = np.unique(np.concatenate(rings), axis=0)
+    allp = np.concatenate(rings)
+    allp = allp[np.lexsort((allp[:, 1], allp[:, 0]))]
+    pts = allp[np.r_[True, np.any(allp[1:] != allp[:-1], axis=1)]]  # np.unique(axis=0)
     tree = shapely.STRtree(shapely.points(pts))
     # every directed edge p -> q of every ring, in ring order
     P = np.concatenate(rings)
-    Q = np.concatenate([np.roll(r, -1, axis=0) for r in rings])
+    Q = np.concatenate([np.concatenate([r[1:], r[:1]]) for r in rings])
     lo, hi = np.minimum(P, Q) - tol, np.maximum(P, Q) + tol
     # candidates: points in the edge's box grown by tol (a superset of its tol-buffer),
     # then the exact test below
@@ -284,11 +295,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     for rs, ks_face in zip(rings, keys, strict=True):
         for r, ks in zip(rs, ks_face, strict=True):
             xy_of.update(zip(ks, r))
-    level_sets = {}
-    for k, zs in levels.items():
-        zs = np.sort(np.asarray(zs))
-        groups = np.split(zs, np.flatnonzero(np.diff(zs) > level_tol) + 1)
-        level_sets[k] = np.array([g.mean() for g in groups])
+    level_sets = _level_sets(levels, level_tol)
 
     verts: list = []
     index: dict = {}
@@ -371,6 +378,29 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         floors.append(Surface([np.asarray(r) for r in ids], "GroundSurface"))
     surfaces[:0] = floors
     return Solid(np.asarray(verts), surfaces)
+
+
+def _level_sets(levels: dict, tol: float) -> dict:
+    """Per vertex key, its heights sorted and grouped where consecutive ones differ by more
+    than ``tol``, each group replaced by its mean: all vertices at once (sorted by key,
+    then height), bit for bit as ``np.mean`` of each group."""
+    keys = list(levels)
+    if not keys:
+        return {}
+    counts = np.fromiter((len(levels[k]) for k in keys), dtype=np.int64, count=len(keys))
+    owner = np.repeat(np.arange(len(keys)), counts)
+    z = np.fromiter((v for k in keys for v in levels[k]), dtype=np.float64, count=int(counts.sum()))
+    order = np.lexsort((z, owner))
+    z, owner = z[order], owner[order]
+    new = np.r_[True, (owner[1:] != owner[:-1]) | (np.diff(z) > tol)]
+    starts = np.flatnonzero(new)
+    sizes = np.diff(np.r_[starts, len(z)])
+    means = np.empty(len(starts))
+    for m in np.unique(sizes):  # groups of one size as rows: a row sum is np.mean's sum
+        sel = np.flatnonzero(sizes == m)
+        means[sel] = z[starts[sel, None] + np.arange(m)].sum(axis=1) / m
+    per_key = np.searchsorted(owner[starts], np.arange(len(keys) + 1))
+    return {k: means[per_key[i]:per_key[i + 1]] for i, k in enumerate(keys)}
 
 
 def _dedupe(ring):

@@ -378,7 +378,13 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             res.reason = f"invalid footprint: {notes[i] or 'empty geometry'}"
         else:
             x0, y0, x1, y1 = g.bounds
-            bi = bgrid.query(x0, y0, x1, y1)
+            if lod22 is not None:  # the roof's points (overhang included) hold the prism's
+                m = lod22.overhang
+                near = bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)
+                p = bxyz[near]
+                bi = near[(p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)]
+            else:
+                bi = bgrid.query(x0, y0, x1, y1)
             gi = ggrid.query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
             def fallback(x0=x0, y0=y0, x1=x1, y1=y1):
                 # the area's ground level: ground points within 50 m
@@ -390,9 +396,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback)
             if lod22 is not None and res.ok:
-                m = lod22.overhang
-                add_lod22(res, g, bxyz[bgrid.query(x0 - m, y0 - m, x1 + m, y1 + m)], lod22,
-                          precision=cfg.precision)
+                add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision)
         if notes[i]:
             res.attributes["footprint_note"] = notes[i]
         results[i] = res
@@ -413,26 +417,31 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
 
     ground_z = result.attributes.get("ground_height")
     try:
-        out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config)
+        out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config,
+                                precision=precision)
     except AlgorithmError as exc:
         set_lod22(result, None, {}, str(exc))
         return
-    set_lod22(result, out.solids, out.attributes, precision=precision)
+    set_lod22(result, out.solids, out.attributes, precision=precision, checked=out.issues)
 
 
-def set_lod22(result, solids, attributes, reason="", *, precision=0.001) -> None:
+def set_lod22(result, solids, attributes, reason="", *, precision=0.001, checked=None) -> None:
     """Store LoD2.2 ``solids`` in ``result`` once they validate; else the LoD1.2 prism, with why.
 
     The vertices are first put on the output's ``precision`` grid (the CityJSON
-    quantisation), so the solid validated is the one written.
+    quantisation), so the solid validated is the one written. ``checked``: the
+    :func:`~lidar2city.validate.solid.check_solid` issues of each solid when the
+    caller already validated them on that grid (they are then stored as they are).
     """
-    from ..datamodel import Solid
+    from ..roof.solid import on_grid
     from ..validate.solid import check_solid
 
-    if solids and precision:
-        solids = [Solid(np.round(s.vertices / precision) * precision, s.surfaces) for s in solids]
-    if solids:
+    if solids and checked is not None and all(c is not None for c in checked):
+        issues = [i for c in checked for i in c]
+    elif solids:
+        solids = [on_grid(s, precision) for s in solids]
         issues = [i for s in solids for i in check_solid(s)]
+    if solids:
         if not issues:
             result.solids["2.2"] = solids[0] if len(solids) == 1 else list(solids)
             result.attributes.update(attributes)
