@@ -672,9 +672,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     so each becomes one region, separated from neighbouring buildings of
     another height and from tree crowns, whose rough surfaces break into
     fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped,
-    except fragments of at least ``merge_area`` that touch a kept region: they
-    join the one they share the longest edge with (a dormer, a roof step, a
-    low annex behind a step above ``max_step``). Regions then grow by
+    except fragments of at least ``merge_area`` (and ``min_pixels``) that
+    touch a kept region: they join the one they share the longest edge with
+    (a dormer, a roof step, a low annex behind a step above ``max_step``).
+    Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM) except rough blobs wider than 2 m (3 x 3 plane-fit residual
     above ``expand_roughness``: tree crowns touching a roof; only on rasters
@@ -737,7 +738,9 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         mean_rough = np.where(den > 0, num / np.maximum(den, 1), 0.0)
         keep &= mean_rough <= roughness_threshold
     if merge_area > 0:
-        lab = _merge_fragments(lab, keep, sizes >= max(1, int(np.ceil(merge_area / cell**2))))
+        # a fragment needs min_pixels too: on coarse rasters a few pixels are trees and cars
+        merge_px = max(1, int(min_pixels), int(np.ceil(merge_area / cell**2)))
+        lab = _merge_fragments(lab, keep, sizes >= merge_px)
     else:
         lab = np.where(keep[lab], lab, 0)
     if expand > 0:
