@@ -211,3 +211,8 @@ def test_small_fragments_touching_a_roof_are_merged_lone_ones_dropped():
     assert house > 0 and (on[16:22, 40:46] == house).all()   # the annex joins the house
     assert (off[16:22, 40:46] == 0).all()
     assert (on[30:33, 40:43] == 0).all() and (on[45:51, 50:56] == 0).all()
+    # at 2 m the same areas are a few pixels: below min_pixels nothing is merged
+    coarse, _ = roof_regions(nd[::4, ::4] + 1.0, nd[::4, ::4], **{**kw, "cell": 2.0})
+    assert coarse[6, 6] > 0 and (coarse[4:6, 10:12] == 0).all()
+    with pytest.raises(InputError):
+        roof_regions(nd + 1.0, nd, merge_area=-1.0, **kw)

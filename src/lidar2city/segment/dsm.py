@@ -472,8 +472,8 @@ class RoofRegionsConfig:
                                          "on rasters coarser than 1 m)")
     merge_area: float = field(5.0, "smooth fragments smaller than min_area but at least this "
                                    "large (m2) are merged into the region they share the "
-                                   "longest edge with (dormers, roof steps, low annexes); "
-                                   "0: they are dropped")
+                                   "longest edge with (dormers, roof steps, low annexes) "
+                                   "if they also hold min_pixels; 0: they are dropped")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -709,8 +709,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     cell = _check_cell(cell)
     if dsm.shape != ndsm.shape:
         raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
-    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0:
-        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels >= 0")
+    if (max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0
+            or merge_area < 0):
+        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels, "
+                         "merge_area >= 0")
     if not 0 <= edge_fraction < 1:
         raise InputError(f"edge_fraction must be in [0, 1), got {edge_fraction}")
     if saddle_depth < 0:
