@@ -21,8 +21,9 @@ candidate with the lowest ``error / region area + weight x complexity`` wins,
 the complexity being the number of edges (non-regular and composite) or the
 degrees of freedom 4 / 5 / 6 (rectangle / right trapezoid / trapezoid) plus
 ``oblique_leg`` per leg that is not square to the bases (an edge off the
-building's two main axes), with a lower weight for regular shapes. Courtyards (holes of the region) are fitted the
-same way and cut out of the outline.
+building's two main axes), with a lower weight for regular shapes.
+Courtyards (holes of the region) are fitted the same way and cut out of the
+outline.
 
 Coordinates inside are pixel corner coordinates (x = column, y = row, the pixel
 (r, c) covering [c, c+1] x [r, r+1]); :func:`fit_building_outline` returns
