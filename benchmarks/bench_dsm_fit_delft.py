@@ -1,6 +1,8 @@
 """Polygon fitting on the Delft 0.5 m DSM against the 132 BGT footprints (issue 16).
 
-Usage: ``PYTHONPATH=src python benchmarks/bench_dsm_fit_delft.py [DATA_DIR] [--dsm-from-laz]``
+Usage: ``PYTHONPATH=src python benchmarks/bench_dsm_fit_delft.py [DATA_DIR] [--dsm-from-laz]
+[--set stage.field=value ...]`` (``--set`` overrides a DSM stage option, e.g.
+``--set dsm_roofs.min_area=5``, to compare settings).
 
 Inputs: ``delft/dsm_50cm.tif`` and ``dtm_50cm.tif`` (or, with
 ``--dsm-from-laz``, the DSM and DTM made by ``lidar2city rasterize`` from
@@ -80,6 +82,20 @@ def main(argv):
     from lidar2city.tools.active_contour import reference_mask, scoring_domain
     from lidar2city.tools.dsm import footprints_from_dsm, outlines_from_labels
 
+    from lidar2city.tools.dsm import load_dsm_config
+
+    overrides, rest = {}, []
+    it = iter(argv)
+    for a in it:
+        if a == "--set":
+            k, v = next(it).split("=", 1)
+            overrides[k] = float(v)
+        else:
+            rest.append(a)
+    argv = rest
+    config = load_dsm_config(None, **overrides) if overrides else None
+    if overrides:
+        print(f"options: {overrides}")
     args = [a for a in argv if not a.startswith("--")]
     root = Path(args[0]) if args else Path(__file__).resolve().parents[2] / "shared" / "data"
     if not (root / "delft").exists():
@@ -116,7 +132,7 @@ def main(argv):
 
         out = Path(tmp) / "fp.gpkg"
         t0 = time.perf_counter()
-        summary = footprints_from_dsm(dsm, dtm=dtm, output=out)
+        summary = footprints_from_dsm(dsm, dtm=dtm, output=out, config=config)
         el = time.perf_counter() - t0
         _, _, w2, f2 = pyogrio.raw.read(str(out))
         geoms = shapely.from_wkb(w2)
@@ -134,7 +150,7 @@ def main(argv):
         print(f"  error budget: {error_budget(pm, refm, dom)}")
 
         raw = Path(tmp) / "raw.gpkg"
-        footprints_from_dsm(dsm, dtm=dtm, output=raw, regularize="none")
+        footprints_from_dsm(dsm, dtm=dtm, output=raw, regularize="none", config=config)
         _, _, w3, _ = pyogrio.raw.read(str(raw))
         g3 = shapely.from_wkb(w3)
         g3 = g3[~shapely.is_empty(g3) & ~shapely.is_missing(g3)]

@@ -207,3 +207,24 @@ def test_small_noisy_buildings_select_their_shape():
             hits[kind] += got == kind
     assert hits["rectangle"] == n
     assert hits["right_trapezoid"] >= 0.7 * n
+
+
+def test_oblique_legs_are_charged():
+    """A leg off the main axes costs ``oblique_leg`` extra degrees of freedom."""
+    # a rectangle with one leg 12 degrees off square: a right trapezoid by a small margin
+    v = np.array([[20, 20], [60, 20], [60 - 24 * np.tan(np.deg2rad(12.0)), 44], [20, 44.0]])
+    mask = rasterise(v)
+    _, kind0, info0 = select_outline(mask, oblique_leg=0.0)
+    assert kind0 == "right_trapezoid"
+    assert info0["candidates"]["right_trapezoid"][2] == 5
+    assert select_outline(mask)[1] == "right_trapezoid"  # the default charge keeps it
+    _, kind1, info1 = select_outline(mask, oblique_leg=3.0)
+    assert kind1 == "rectangle"
+    c = info1["candidates"]
+    assert c["right_trapezoid"][2] == pytest.approx(8.0)
+    assert c["trapezoid"][2] == pytest.approx(12.0)
+    # the leg is kept where it removes enough overlap error (30 degrees off square)
+    v2 = np.array([[20, 20], [60, 20], [60 - 24 * np.tan(np.deg2rad(30.0)), 44], [20, 44.0]])
+    assert select_outline(rasterise(v2))[1] == "right_trapezoid"
+    with pytest.raises(InputError):
+        select_outline(mask, oblique_leg=-1.0)

@@ -194,3 +194,25 @@ def test_expand_roughness_keeps_touching_tree_crown_out_but_joins_eaves():
     assert (on[tree] > 0).mean() < 0.05                # the crown stays out
     assert (on[eave] == best).mean() > 0.8             # the thin strip is joined
     assert (off[tree] > 0).mean() > 0.1                # without the cue it is grown into
+
+
+def test_small_fragments_touching_a_roof_are_merged_lone_ones_dropped():
+    nd = np.zeros((60, 70))
+    nd[10:40, 10:40] = 6.0            # the house, 15 m x 15 m at 0.5 m
+    nd[16:22, 40:46] = 3.0            # a 9 m2 annex behind a 3 m step
+    nd[30:33, 40:43] = 4.5            # a 2.25 m2 fragment, below merge_area
+    nd[45:51, 50:56] = 3.0            # a lone 9 m2 shed
+    kw = dict(cell=0.5, min_area=10.0, expand=0.0, edge_inset=0.0, saddle_depth=0.0,
+              expand_roughness=0.0)
+    on, n_on = roof_regions(nd + 1.0, nd, merge_area=5.0, **kw)
+    off, n_off = roof_regions(nd + 1.0, nd, merge_area=0.0, **kw)
+    assert n_on == n_off == 1
+    house = on[20, 20]
+    assert house > 0 and (on[16:22, 40:46] == house).all()   # the annex joins the house
+    assert (off[16:22, 40:46] == 0).all()
+    assert (on[30:33, 40:43] == 0).all() and (on[45:51, 50:56] == 0).all()
+    # at 2 m the same areas are a few pixels: below min_pixels nothing is merged
+    coarse, _ = roof_regions(nd[::4, ::4] + 1.0, nd[::4, ::4], **{**kw, "cell": 2.0})
+    assert coarse[6, 6] > 0 and (coarse[4:6, 10:12] == 0).all()
+    with pytest.raises(InputError):
+        roof_regions(nd + 1.0, nd, merge_area=-1.0, **kw)

@@ -114,3 +114,26 @@ def test_log_scale_genes_and_validation():
     assert all(0.01 - 1e-12 <= v <= 10 + 1e-9 for v in w.values())
     assert w == tune_weights(dsm, dsm, ref, cell=1.0, population=4, generations=1, seed=1,
                              scale="log")[0]
+
+
+def test_first_generation_holds_the_configured_and_the_keep_the_start_weights(monkeypatch):
+    import lidar2city.tune.ga as ga
+    from lidar2city.contour.outlines import LOG_WEIGHT_BOUNDS, WEIGHT_NAMES, ActiveContourConfig
+
+    seen = {}
+
+    def fake(fitness, n_genes, *, initial, bounds, **kw):
+        seen["initial"], seen["bounds"] = initial, bounds
+        return ga.GAResult(np.asarray(initial[1], float), 0.0, [{"best_cost": 0.0}])
+
+    monkeypatch.setattr(ga, "genetic_minimize", fake)
+    dsm = np.zeros((30, 30))
+    dsm[8:22, 8:22] = 6.0
+    cfg = ActiveContourConfig().with_weights({"alpha": 0.1, "beta": 1.0, "gamma": 1.0,
+                                              "mu": 10.0, "epsilon": 1.0, "anchor": 1.0})
+    w, _ = ga.tune_weights(dsm, dsm, dsm > 3, cell=1.0, config=cfg, scale="log")
+    lo, hi = LOG_WEIGHT_BOUNDS
+    assert seen["initial"][0] == pytest.approx([-1.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    hold = seen["initial"][1]
+    assert hold == [hi if k == "anchor" else lo for k in WEIGHT_NAMES]
+    assert w["anchor"] == pytest.approx(10.0) and w["mu"] == pytest.approx(0.01)

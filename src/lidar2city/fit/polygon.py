@@ -19,9 +19,11 @@ the region plus the area in the region but not inside it — computed exactly on
 the region's pixel polygon (the area-weighted version of the pixel count). The
 candidate with the lowest ``error / region area + weight x complexity`` wins,
 the complexity being the number of edges (non-regular and composite) or the
-degrees of freedom 4 / 5 / 6 (rectangle / right trapezoid / trapezoid), with a
-lower weight for regular shapes. Courtyards (holes of the region) are fitted the
-same way and cut out of the outline.
+degrees of freedom 4 / 5 / 6 (rectangle / right trapezoid / trapezoid) plus
+``oblique_leg`` per leg that is not square to the bases (an edge off the
+building's two main axes), with a lower weight for regular shapes.
+Courtyards (holes of the region) are fitted the same way and cut out of the
+outline.
 
 Coordinates inside are pixel corner coordinates (x = column, y = row, the pixel
 (r, c) covering [c, c+1] x [r, r+1]); :func:`fit_building_outline` returns
@@ -85,6 +87,10 @@ class PolygonFitConfig:
     min_rotation_deg: float = field(0.25, "smallest rotation step (degrees)")
     max_polygon_vertices: int = field(60, "non-regular polygons with more vertices are not "
                                           "evaluated")
+    oblique_leg: float = field(0.5, "extra complexity (degrees of freedom) charged per oblique "
+                                    "leg of a trapezoid: a leg off the main axes must remove "
+                                    "more overlap error than a degree of freedom to be kept "
+                                    "(most buildings are right-angled; 0: the plain dof count)")
     min_courtyard_area: float = field(16.0, "holes of at least this area (m2) are kept as "
                                             "courtyards")
 
@@ -688,10 +694,12 @@ def _n_edges(poly):
 def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
                    shapes=("rectangle", "right_trapezoid", "trapezoid", "composite", "polygon"),
                    step=0.8, max_iterations=30, max_rotation_deg=4.0, min_rotation_deg=0.25,
-                   max_polygon_vertices=60):
+                   max_polygon_vertices=60, oblique_leg=0.5):
     """Fit every candidate shape to a (hole-free) region and pick the cheapest.
 
-    Cost = overlap error / region area + weight x complexity (see module doc).
+    Cost = overlap error / region area + weight x complexity (see module doc);
+    a right trapezoid's complexity is ``5 + oblique_leg``, a trapezoid's
+    ``6 + 2 oblique_leg``.
 
     Returns
     -------
@@ -707,8 +715,8 @@ def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
     unknown = set(shapes) - set(SHAPE_TYPES)
     if unknown:
         raise InputError(f"unknown shape types {sorted(unknown)}; known: {', '.join(SHAPE_TYPES)}")
-    if regular_weight < 0 or polygon_weight < 0:
-        raise InputError("complexity weights must be >= 0")
+    if regular_weight < 0 or polygon_weight < 0 or oblique_leg < 0:
+        raise InputError("complexity weights and oblique_leg must be >= 0")
     mask = np.asarray(mask, dtype=bool)
     rings = region_contours(mask)
     boundary = rings[0]
@@ -737,7 +745,7 @@ def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
         except FitError as exc:
             logger.debug("%s fit failed: %s", kind, exc)
             continue
-        dof = SHAPE_TYPES[kind]
+        dof = SHAPE_TYPES[kind] + oblique_leg * (SHAPE_TYPES[kind] - SHAPE_TYPES["rectangle"])
         cands[kind] = (e / area + regular_weight * dof, shapely.Polygon(verts), e, dof)
     if "composite" in shapes:
         thetas = [None]
@@ -832,7 +840,7 @@ def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, *
     kw = dict(regular_weight=cfg.regular_weight, polygon_weight=cfg.polygon_weight,
               shapes=tuple(cfg.shapes), step=cfg.step, max_iterations=cfg.max_iterations,
               max_rotation_deg=cfg.max_rotation_deg, min_rotation_deg=cfg.min_rotation_deg,
-              max_polygon_vertices=cfg.max_polygon_vertices)
+              max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=cfg.oblique_leg)
     poly, kind, info = select_outline(filled, **kw)
     holes = filled & ~sub
     hl, nh = ndimage.label(holes)

@@ -470,6 +470,10 @@ class RoofRegionsConfig:
                                          "exceeds this (m): tree crowns touching a roof stay "
                                          "out, thin rough eaves are joined; 0 disables (off "
                                          "on rasters coarser than 1 m)")
+    merge_area: float = field(5.0, "smooth fragments smaller than min_area but at least this "
+                                   "large (m2) are merged into the region they share the "
+                                   "longest edge with (dormers, roof steps, low annexes) "
+                                   "if they also hold min_pixels; 0: they are dropped")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -624,10 +628,42 @@ def inset_regions(labels, *, cell, inset):
     return np.where((dist - 0.5) * float(cell) > float(inset) + 1e-9, lab, 0)
 
 
+def _merge_fragments(lab, keep, candidate, rounds=3):
+    """Labels with the ``candidate`` components that touch a kept one merged into it.
+
+    A fragment joins the kept (or already merged) region with which it shares
+    the most 4-neighbour pixel edges; fragments touching none are dropped.
+    """
+    owner = np.where(keep, np.arange(len(keep)), 0)
+    todo = candidate & ~keep
+    todo[0] = False
+    for _ in range(rounds):
+        if not todo.any():
+            break
+        cur = owner[lab]
+        pairs = []
+        for a, b in ((lab[:, :-1], cur[:, 1:]), (lab[:, 1:], cur[:, :-1]),
+                     (lab[:-1, :], cur[1:, :]), (lab[1:, :], cur[:-1, :])):
+            ok = todo[a] & (b > 0)
+            pairs.append(np.column_stack([a[ok], b[ok]]))
+        pairs = np.concatenate(pairs)
+        if len(pairs) == 0:
+            break
+        uniq, counts = np.unique(pairs, axis=0, return_counts=True)
+        # per fragment the neighbour with the longest shared edge (ties: smallest id)
+        order = np.lexsort((uniq[:, 1], -counts, uniq[:, 0]))
+        uniq = uniq[order]
+        first = np.ones(len(uniq), bool)
+        first[1:] = uniq[1:, 0] != uniq[:-1, 0]
+        owner[uniq[first, 0]] = uniq[first, 1]
+        todo[uniq[first, 0]] = False
+    return owner[lab]
+
+
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
-                 expand_roughness=0.2):
+                 expand_roughness=0.2, merge_area=5.0):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -635,7 +671,11 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     heights differ by at most ``max_step`` join. Roofs are piecewise smooth,
     so each becomes one region, separated from neighbouring buildings of
     another height and from tree crowns, whose rough surfaces break into
-    fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped. Regions then grow by
+    fragments smaller than ``min_area`` (and ``min_pixels``) and are dropped,
+    except fragments of at least ``merge_area`` (and ``min_pixels``) that
+    touch a kept region: they join the one they share the longest edge with
+    (a dormer, a roof step, a low annex behind a step above ``max_step``).
+    Regions then grow by
     ``expand`` into the remaining elevated pixels (the blurred eaves of a
     smoothed DSM) except rough blobs wider than 2 m (3 x 3 plane-fit residual
     above ``expand_roughness``: tree crowns touching a roof; only on rasters
@@ -669,8 +709,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     cell = _check_cell(cell)
     if dsm.shape != ndsm.shape:
         raise InputError(f"DSM {dsm.shape} and nDSM {ndsm.shape} differ in shape")
-    if max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0:
-        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels >= 0")
+    if (max_step <= 0 or min_area < 0 or expand < 0 or max_hole_area < 0 or min_pixels < 0
+            or merge_area < 0):
+        raise InputError("max_step must be > 0; min_area, expand, max_hole_area, min_pixels, "
+                         "merge_area >= 0")
     if not 0 <= edge_fraction < 1:
         raise InputError(f"edge_fraction must be in [0, 1), got {edge_fraction}")
     if saddle_depth < 0:
@@ -697,7 +739,12 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         den = np.bincount(lab[interior], minlength=len(sizes))
         mean_rough = np.where(den > 0, num / np.maximum(den, 1), 0.0)
         keep &= mean_rough <= roughness_threshold
-    lab = np.where(keep[lab], lab, 0)
+    if merge_area > 0:
+        # a fragment needs min_pixels too: on coarse rasters a few pixels are trees and cars
+        merge_px = max(1, int(min_pixels), int(np.ceil(merge_area / cell**2)))
+        lab = _merge_fragments(lab, keep, sizes >= merge_px)
+    else:
+        lab = np.where(keep[lab], lab, 0)
     if expand > 0:
         grown = expand_labels(lab, distance=expand / cell)
         target = elevated

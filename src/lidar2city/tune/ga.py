@@ -339,6 +339,10 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     The cost of a weight vector is the share of wrongly classified pixels,
     ``(FP + FN) / N``, of the rasterised snake outlines against
     ``reference_mask`` over ``domain`` (eq. 4 of the method's paper).
+    The first generation holds the configured weights and the weights that
+    keep the initial contours (the anchor at its upper bound, the other
+    energies at their lower one): where the snake cannot improve on a good
+    start (roof regions on a 0.5 m DSM), the search starts from the start.
 
     Parameters
     ----------
@@ -403,13 +407,17 @@ def tune_weights(dsm, ndsm, reference_mask, *, ortho=None, cell=1.0, domain=None
     if scale == "log":
         start = np.log10(np.maximum(start, 10.0 ** bounds[0]))
     start = np.clip(start, *bounds).tolist()
+    # the second chromosome keeps the initial contours: the anchor at its largest
+    # weight, every other energy at its smallest
+    hold = [bounds[1] if k == "anchor" else bounds[0] for k in WEIGHT_NAMES]
     result = genetic_minimize(
         weights_cost, len(WEIGHT_NAMES), bounds=bounds, population=population,
         generations=generations, cxpb=cxpb, mutpb=mutpb, seed=seed, n_jobs=n_jobs,
-        initial=[start], initializer=_init_worker,
+        initial=[start, hold], initializer=_init_worker,
         initargs=(scene, frame, ref, dom, cfg, objective, scale), callback=callback)
     weights = {k: float(v) for k, v in
                zip(WEIGHT_NAMES, genes_to_weights(result.best, scale), strict=True)}
-    # (the configured weights are in the first generation: tuned is never worse on these pixels)
+    # (the configured weights and the hold-the-start ones are in the first generation: with
+    # elitism the tuned weights are never worse than either on these pixels)
     logger.info("tuned weights %s: cost %.5f (%s)", weights, result.best_cost, result.stopped)
     return weights, result.history
