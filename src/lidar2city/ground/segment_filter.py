@@ -159,8 +159,9 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     Measured against ``smrf_refined`` by ``benchmarks/bench_ground_segments.py``
     (the seven ISPRS samples, leave-one-sample-out and the synthetic
     terrains). Like ``smrf_refined`` it reflects the surface across the tile
-    edges, so a building at the edge of a tile much smaller than the opening
-    window is reflected into a pit: process tiles with a buffer.
+    edges, which turns objects near an edge into pits; when that leaves less
+    than half the terrain cells plain SMRF leaves (a tile not much larger than
+    a building in it), the surface is not extended.
 
     References
     ----------
@@ -200,6 +201,17 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
                                           exclude=out, extend=extend)
     base = float(np.min(pts[:, 2]))
     zmin = min_surface(pts, spec, base=base, dtype=np.float32)
+    filled = ~np.isnan(zmin)
+    terrain_share = float((filled & ~objects).sum() / filled.sum())
+    if extend > 0 and terrain_share < 0.5:
+        # the reflection turns objects near the edges into pits; on a tile not much
+        # larger than them that can make the whole tile object: keep SMRF's own edges
+        # when they leave more than twice as much terrain
+        plain = smrf_surface(xyz, cell=cell, slope=slope, window=window, exclude=out)
+        if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
+            logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
+                         100 * terrain_share)
+            surface, objects, _ = plain
     block = max(1, int(np.floor(point_spacing(pts[:, :2]) / cell + 0.5)))
     kept = terrain_segments(zmin, objects, jump=jump * max(cell * block, 1.0), raised=raised,
                             min_cells=min_cells, block=block)
