@@ -11,8 +11,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ._grid import inpaint, min_surface
-from .outliers import _check_positive, _check_xyz, low_outliers
-from .smrf_filter import _near_surface, smrf_surface
+from .smrf_filter import _checked_outliers, _near_surface, smrf_surface
 
 logger = logging.getLogger(__name__)
 
@@ -180,21 +179,15 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     """
     from ..classify.features import point_spacing  # lazy: classify imports ground
 
-    xyz = _check_xyz(xyz)
-    _check_positive(cell=cell, slope=slope, window=window, threshold=threshold, jump=jump,
-                    outlier_radius=outlier_radius, outlier_depth=outlier_depth)
-    if not scalar >= 0:
-        raise InputError(f"scalar must be >= 0, got {scalar!r}")
-    if not 0 < raised <= 1:
+    if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
         raise InputError(f"raised must be in (0, 1], got {raised!r}")
     if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
         raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
+    xyz, out = _checked_outliers(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
+                                 threshold=threshold, outlier_radius=outlier_radius,
+                                 outlier_depth=outlier_depth, jump=jump)
     n = len(xyz)
-    if n == 0:
-        return np.zeros(0, dtype=bool)
-    out = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
-           if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
-    if out.all():
+    if n == 0 or out.all():
         return np.zeros(n, dtype=bool)
     pts = xyz[~out]
     surface, objects, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
