@@ -5,9 +5,6 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ._grid import inpaint, min_surface
@@ -37,6 +34,43 @@ def _block_lowest(zmin, objects, block):
     oc = np.take_along_axis(ob, low, 2)[..., 0]
     empty = np.isinf(zc)
     return np.where(empty, np.float32(np.nan), zc), oc & ~empty
+
+
+def _fill_from_neighbours(grid):
+    """``grid`` with each NaN cell given the lowest value of the 4-neighbour cells filled one
+    ring before it (a breadth-first fill from the filled cells: walls stay steps)."""
+    z = grid.copy()
+    empty = np.isnan(z)
+    while empty.any():
+        padded = np.pad(np.where(empty, np.inf, z), 1, constant_values=np.inf)
+        lowest = np.minimum.reduce([padded[:-2, 1:-1], padded[2:, 1:-1],
+                                    padded[1:-1, :-2], padded[1:-1, 2:]])
+        now = empty & np.isfinite(lowest)
+        if not now.any():
+            break
+        z[now] = lowest[now]
+        empty &= ~now
+    return z
+
+
+def _components(n, a, b):
+    """Connected-component label (the smallest node index of its component) of nodes
+    ``0..n-1`` joined by the edges ``a[i] - b[i]``: min-label propagation with pointer
+    jumping, pure numpy."""
+    label = np.arange(n)
+    while True:
+        low = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, label[a], low)
+        np.minimum.at(new, label[b], low)
+        while True:  # pointer jumping: every node to its root
+            jumped = new[new]
+            if np.array_equal(jumped, new):
+                break
+            new = jumped
+        if np.array_equal(new, label):
+            return label
+        label = new
 
 
 def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
@@ -89,8 +123,7 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
     empty = np.isnan(zmin)
     if empty.all() or not objects.any():
         return objects.copy()
-    nearest = distance_transform_edt(empty, return_distances=False, return_indices=True)
-    z = zmin[tuple(nearest)].ravel()
+    z = _fill_from_neighbours(zmin).ravel()
     filled = ~empty.ravel()
     idx = np.arange(z.size).reshape(zmin.shape)
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
@@ -99,9 +132,7 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
     obj = objects.ravel()
     n = z.size
     join = (np.abs(dz) < jump) & obj[a] & obj[b]
-    graph = coo_matrix((np.ones(int(join.sum()), dtype=np.int8), (a[join], b[join])),
-                       shape=(n, n))
-    _, label = connected_components(graph, directed=False)
+    label = _components(n, a[join], b[join])
     edges, high = np.zeros(n), np.zeros(n)
     for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
         m = obj[side] & ~obj[other] & filled[a] & filled[b]
