@@ -79,11 +79,11 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
 
     The object cells are cut into smooth segments: 4-neighbour cells whose
     lowest points differ by less than ``jump`` are joined (empty cells take
-    the height of the nearest filled cell, so walls stay steps). A segment of
-    at least ``min_cells`` filled cells that is raised by ``jump`` or more
-    above the neighbouring terrain cells along less than a fraction
-    ``raised`` of their common boundary (edges between two filled cells) is
-    terrain: a building or a tree stands above the terrain all round, a
+    the lowest height of the filled cells next to them, ring by ring, so walls
+    stay steps). A segment of at least ``min_cells`` filled cells that is
+    raised by ``jump`` or more above the neighbouring terrain cells along less
+    than a fraction ``raised`` of their common boundary (edges between two
+    filled cells) is terrain: a building or a tree stands above the terrain all round, a
     terrace top, an embankment or ground between buildings on a slope joins
     the terrain smoothly along much of its boundary.
 
@@ -157,8 +157,9 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
        terrain smoothly (terrace tops, embankments, ground between buildings
        on a slope, which an opening cuts like buildings), on segmentation
        cells of about the measured point spacing (``block`` = spacing / cell,
-       rounded, at least 1), with ``jump`` scaled by that cell size when it
-       exceeds 1 m.
+       rounded, at least 1; the spacing is ``1 / sqrt(density)`` over the
+       occupied cells of a grid of about 5 m), with ``jump`` scaled by that
+       cell size when it exceeds 1 m.
     4. The provisional surface is the minimum surface of the remaining
        terrain cells, inpainted, and points within ``threshold + scalar *
        slope`` of it are ground (Pingel et al. 2013, eq. 3).
@@ -208,8 +209,6 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     >>> bool(ground[~box].all()), bool(ground[box].any())
     (True, False)
     """
-    from ..classify.features import point_spacing  # lazy: classify imports ground
-
     if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
         raise InputError(f"raised must be in (0, 1], got {raised!r}")
     if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
@@ -236,7 +235,12 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
             surface, objects, _ = plain
-    block = max(1, int(np.floor(point_spacing(pts[:, :2]) / cell + 0.5)))
+    # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
+    coarse = max(1, int(round(5.0 / cell)))
+    occupied = np.count_nonzero(filled) if coarse == 1 else np.count_nonzero(
+        ~np.isnan(_block_lowest(zmin, objects, coarse)[0]))
+    spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
+    block = max(1, int(np.floor(spacing / cell + 0.5)))
     kept = terrain_segments(zmin, objects, jump=jump * max(cell * block, 1.0), raised=raised,
                             min_cells=min_cells, block=block)
     given = objects & ~kept & ~np.isnan(zmin)
