@@ -311,9 +311,9 @@ def test_any_small_cloud_gives_a_mask(n, extent, seed, method):
 def test_isprs_mean_total_error_target(data):
     """Mean total error over the ISPRS samples, one parameter set (the defaults).
 
-    Measured: smrf_segments 3.36 % (kappa 89.9 %, max 7.68 %), smrf_refined
+    Measured: smrf_segments 3.34 % (kappa 89.9 %, max 7.25 %), smrf_refined
     3.54 % (kappa 89.4 %), SMRF 3.56 % (kappa 89.3 %), PMF 4.57 %.
-    Leave-one-sample-out (bench_ground.py --loo): smrf_segments 3.65 %,
+    Leave-one-sample-out (bench_ground.py --loo): smrf_segments 3.57 %,
     smrf_refined 3.67 %, SMRF 3.88 %.
     """
     import laspy
