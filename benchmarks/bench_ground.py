@@ -13,7 +13,8 @@ error of each method on the synthetic terrains of
 process against plainly reading and writing the same file with laspy (best
 of ``--repeat`` runs each) and prints the ratio.
 
-``--loo`` adds the leave-one-sample-out check of SMRF and smrf_refined: for
+``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
+smrf_segments (the same grid for the three): for
 each ISPRS sample, the parameter set of a coarse grid (:data:`LOO_GRID`) that
 minimises the mean total error over the six other samples plus the
 synthetic terrains (their mean counted as one more sample) is scored on the
@@ -48,6 +49,8 @@ LOO_GRID = {
              "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
     "smrf_refined": {"slope": (0.1, 0.15, 0.2), "window": (16.0, 24.0, 32.0),
                      "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
+    "smrf_segments": {"slope": (0.1, 0.15, 0.2), "window": (16.0, 24.0, 32.0),
+                      "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
 }
 
 
@@ -162,7 +165,7 @@ def best_time(cmd, env, repeat):
     return min(times)
 
 
-def speed(site, repeat, methods=("smrf", "smrf_refined")):
+def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments")):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / ("out" + site.suffix))

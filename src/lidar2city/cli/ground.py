@@ -6,7 +6,7 @@ import click
 
 from ._options import crs_option, engine_options, neighbours_options, run_on_tiles
 
-METHODS = ("pmf", "smrf", "smrf_refined")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
+METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
 
 @click.command("ground")

@@ -5,7 +5,9 @@ default), ``"smrf_refined"`` (SMRF with the surface continued across the
 tile edges by point reflection, optional surface-based cleanup: lower
 leave-one-sample-out error on the ISPRS samples, but a building at the edge
 of a small tile is reflected into a pit that can take all the ground away,
-so it is not the default) and ``"pmf"`` (Zhang et al. 2003). All set low
+so it is not the default), ``"smrf_segments"`` (that surface with the
+object segments that join the terrain smoothly - terrace tops, embankments -
+given back; the same edge caveat) and ``"pmf"`` (Zhang et al. 2003). All set low
 outliers aside first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
 into a gap-free terrain model and :func:`height_above_ground` reads it back
 at points.
@@ -25,6 +27,7 @@ from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
+from .segment_filter import smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
 
 __all__ = [
@@ -34,6 +37,8 @@ __all__ = [
     "smrf",
     "smrf_surface",
     "smrf_refined",
+    "smrf_segments",
+    "terrain_segments",
     "pmf",
     "pmf_windows",
     "low_outliers",
@@ -43,10 +48,11 @@ __all__ = [
 ]
 
 #: method name -> ground filter ``f(xyz, **params) -> bool mask``.
-GROUND_METHODS = {"smrf": smrf, "smrf_refined": smrf_refined, "pmf": pmf}
+GROUND_METHODS = {"smrf": smrf, "smrf_refined": smrf_refined, "smrf_segments": smrf_segments,
+                  "pmf": pmf}
 
 #: per-method default of the shared ``slope`` option.
-_SLOPE_DEFAULTS = {"smrf": 0.15, "smrf_refined": 0.15, "pmf": 0.3}
+_SLOPE_DEFAULTS = {"smrf": 0.15, "smrf_refined": 0.15, "smrf_segments": 0.15, "pmf": 0.3}
 
 
 def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
@@ -81,19 +87,26 @@ def ground_mask(xyz, *, method: str = "smrf", **params) -> np.ndarray:
 class GroundConfig:
     """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
 
-    method: Literal["smrf", "smrf_refined", "pmf"] = field(
+    method: Literal["smrf", "smrf_refined", "smrf_segments", "pmf"] = field(
         "smrf", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
-        "optional surface cleanup) or pmf (Zhang 2003)")
+        "optional surface cleanup), smrf_segments (SMRF + edge extension, terrain-like object "
+        "segments given back) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
-    slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for smrf and smrf_refined, 0.3 for pmf")
+    slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for "
+                                      "smrf, smrf_refined and smrf_segments, 0.3 for pmf")
     window: float = field(24.0, "smrf: largest opening radius (m); wider objects survive")
     scalar: float = field(1.25, "smrf: extra tolerance (m) per unit of terrain slope")
     threshold: float = field(0.5, "smrf: height tolerance (m) around the provisional terrain")
-    extend: float = field(10.0, "smrf_refined: metres of surface continued beyond the tile edges "
-                                "(point reflection) so slopes rising to an edge are kept")
+    extend: float = field(10.0, "smrf_refined, smrf_segments: metres of surface continued beyond "
+                                "the tile edges (point reflection) so slopes rising to an edge are kept")
     rounds: int = field(0, "smrf_refined: surface-based cleanup rounds")
     refine_threshold: float = field(0.3, "smrf_refined: height tolerance (m) around the terrain "
                                           "re-interpolated from the ground points")
+    jump: float = field(0.6, "smrf_segments: height step (m) between two smooth segments "
+                            "(per metre of segmentation cell above 1 m)")
+    raised: float = field(0.6, "smrf_segments: an object segment raised above the terrain along "
+                               "less than this share of its boundary is given back")
+    min_cells: int = field(4, "smrf_segments: fewest cells of a segment given back")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -108,7 +121,7 @@ class GroundConfig:
                               f"{', '.join(sorted(GROUND_METHODS))}")
         for name in ("cell", "window", "threshold", "max_window", "initial_distance",
                      "max_distance", "refine_threshold", "outlier_radius", "outlier_depth",
-                     "dtm_cell"):
+                     "dtm_cell", "jump"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"ground.{name}: must be > 0, got {getattr(self, name)!r}")
         if self.slope is not None and not self.slope > 0:
@@ -117,6 +130,10 @@ class GroundConfig:
             raise ConfigError(f"ground.extend: must be >= 0, got {self.extend!r}")
         if not (isinstance(self.rounds, int) and self.rounds >= 0):
             raise ConfigError(f"ground.rounds: must be an integer >= 0, got {self.rounds!r}")
+        if not 0 < self.raised <= 1:
+            raise ConfigError(f"ground.raised: must be in (0, 1], got {self.raised!r}")
+        if not (isinstance(self.min_cells, int) and self.min_cells >= 1):
+            raise ConfigError(f"ground.min_cells: must be an integer >= 1, got {self.min_cells!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 

@@ -187,9 +187,9 @@ def _near_surface(xyz, surface, spec, *, threshold, scalar):
     return np.abs(xyz[:, 2] - ref) <= tol
 
 
-def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
-          extend=0.0, **extra):
-    """SMRF's ground mask and low-outlier mask; ``extend`` as in :func:`smrf_surface`.
+def _checked_outliers(xyz, *, cell, slope, window, scalar, threshold, outlier_radius,
+                      outlier_depth, **extra):
+    """Validated ``xyz`` and its low-outlier mask, for the SMRF-based filters.
 
     ``extra`` holds further positive parameters of the caller to validate with these.
     """
@@ -199,11 +199,22 @@ def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlie
     if not scalar >= 0:
         raise InputError(f"scalar must be >= 0, got {scalar!r}")
     n = len(xyz)
-    if n == 0:
-        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
     outliers = (low_outliers(xyz, radius=outlier_radius, depth=outlier_depth)
-                if np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
-    if outliers.all():
+                if n and np.isfinite(outlier_depth) else np.zeros(n, dtype=bool))
+    return xyz, outliers
+
+
+def _smrf(xyz, *, cell, slope, window, scalar, threshold, outlier_radius, outlier_depth,
+          extend=0.0, **extra):
+    """SMRF's ground mask and low-outlier mask; ``extend`` as in :func:`smrf_surface`.
+
+    ``extra`` holds further positive parameters of the caller to validate with these.
+    """
+    xyz, outliers = _checked_outliers(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
+                                      threshold=threshold, outlier_radius=outlier_radius,
+                                      outlier_depth=outlier_depth, **extra)
+    n = len(xyz)
+    if n == 0 or outliers.all():
         return np.zeros(n, dtype=bool), outliers
     surface, _, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
                                     exclude=outliers, extend=extend)

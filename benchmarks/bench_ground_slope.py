@@ -1,0 +1,129 @@
+"""How far one SMRF parameter set is from the best per sample, and what a perfect surface repair gives.
+
+Usage::
+
+    python benchmarks/bench_ground_slope.py [--data DIR]
+
+Issue 18 asks for a leave-one-sample-out total error of at most 3 % on the
+seven shared ISPRS samples. This script measures two bounds of the SMRF
+family (``smrf_refined`` and ``smrf_segments``) on ``DIR/isprs/reference``:
+
+* **slope chosen per sample with hindsight**: the total error % of each
+  sample for SMRF's ``slope`` in :data:`SLOPES` (every other parameter at
+  its default), the best slope of each sample and the mean of those bests.
+  No single parameter set, and so no leave-one-out choice, can beat that
+  mean along this axis; the samples disagree on the direction (flat urban
+  samp31 and rural samp51 want 0.1, samp61's steep-sided embankments want
+  0.3-0.4), which is what the leave-one-out check punishes.
+* **restoration oracle**: SMRF's (``smrf_refined``'s) object cells whose
+  lowest point is reference ground given back to the terrain before the
+  surface is inpainted and the final test run (a perfect version of any
+  "give back terrain-like object cells" step such as ``smrf_segments``), and, second, also the terrain cells whose lowest point is a
+  reference object taken out (a perfect surface on SMRF's grid).
+
+A few tens of seconds.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_ground import arg_parser, load, reference_paths  # noqa: E402
+from lidar2city.ground import (  # noqa: E402
+    GroundConfig,
+    low_outliers,
+    smrf_refined,
+    smrf_segments,
+    smrf_surface,
+)
+from lidar2city.ground._grid import cell_of, inpaint, min_surface  # noqa: E402
+from lidar2city.ground.smrf_filter import _near_surface  # noqa: E402
+from lidar2city.metrics.ground import ground_errors  # noqa: E402
+
+REFINED = GroundConfig(method="smrf_refined").method_params()
+SEGMENTS = GroundConfig(method="smrf_segments").method_params()
+SLOPES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.4)
+
+
+def slope_table(samples, name, fn):
+    """Print total error % per sample and slope of ``fn(xyz, slope=s)``; return the rows."""
+    print(f"\n{name}: total error % by SMRF slope (other parameters at their defaults)")
+    print(f"{'sample':<8} " + " ".join(f"{s:>6g}" for s in SLOPES) + f" {'best':>6} {'at':>5}")
+    rows = []
+    for n, (xyz, ref) in samples.items():
+        row = [100 * ground_errors(fn(xyz, slope=s), ref)["total"] for s in SLOPES]
+        rows.append(row)
+        i = int(np.argmin(row))
+        print(f"{n:<8} " + " ".join(f"{v:>6.2f}" for v in row)
+              + f" {row[i]:>6.2f} {SLOPES[i]:>5g}", flush=True)
+    rows = np.array(rows)
+    means = rows.mean(axis=0)
+    print(f"{'mean':<8} " + " ".join(f"{v:>6.2f}" for v in means))
+    print(f"{name}: best single slope {SLOPES[int(np.argmin(means))]:g} mean "
+          f"{means.min():.2f} %; slope chosen per sample with hindsight mean "
+          f"{rows.min(axis=1).mean():.2f} % (max {rows.min(axis=1).max():.2f} %)")
+    return rows
+
+
+def lowest_labels(pts, ref, spec):
+    """Reference label of the lowest point of each cell (-1 where empty), shape ``spec.shape``."""
+    r, c = cell_of(pts[:, :2], spec)
+    flat = r * spec.shape[1] + c
+    order = np.lexsort((pts[:, 2], flat))
+    first = np.r_[True, flat[order][1:] != flat[order][:-1]]
+    lab = np.full(spec.shape[0] * spec.shape[1], -1)
+    lab[flat[order][first]] = ref[order][first]
+    return lab.reshape(spec.shape)
+
+
+def oracle(xyz, ref, *, remove_missed):
+    """smrf_refined with its object cells corrected by the reference (see the module doc)."""
+    p = REFINED
+    out = low_outliers(xyz, radius=p["outlier_radius"], depth=p["outlier_depth"])
+    pts, rf = xyz[~out], ref[~out]
+    _, objects, spec = smrf_surface(xyz, cell=p["cell"], slope=p["slope"], window=p["window"],
+                                    exclude=out, extend=p["extend"])
+    base = float(pts[:, 2].min())
+    zmin = min_surface(pts, spec, base=base, dtype=np.float32)
+    lab = lowest_labels(pts, rf, spec)
+    kept = objects & (lab != 1)
+    if remove_missed:
+        kept |= lab == 0
+    surface = inpaint(np.where(kept | np.isnan(zmin), np.float32(np.nan), zmin))
+    ground = _near_surface(xyz, surface.astype(np.float64) + base, spec,
+                           threshold=p["threshold"], scalar=p["scalar"])
+    return ground & ~out
+
+
+def main():
+    args = arg_parser(__doc__).parse_args()
+    samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
+    slope_table(samples, "smrf_refined", lambda xyz, slope: smrf_refined(
+        xyz, **dict(REFINED, slope=slope)))
+    slope_table(samples, "smrf_segments", lambda xyz, slope: smrf_segments(
+        xyz, **dict(SEGMENTS, slope=slope)))
+    print("\nrestoration oracle: total error % (type I / type II) of smrf_refined with its "
+          "object cells corrected by the reference")
+    print(f"{'sample':<8} {'refined':>18} {'give back ground':>18} {'+ take out objects':>19}")
+    rows = []
+    for n, (xyz, ref) in samples.items():
+        es = [ground_errors(m, ref) for m in (smrf_refined(xyz, **REFINED),
+                                              oracle(xyz, ref, remove_missed=False),
+                                              oracle(xyz, ref, remove_missed=True))]
+        rows.append([e["total"] for e in es])
+        cells = [f"{100 * e['total']:.2f} ({100 * e['type_i']:.1f}/{100 * e['type_ii']:.1f})"
+                 for e in es]
+        print(f"{n:<8} " + " ".join(f"{c:>18}" for c in cells), flush=True)
+    m = 100 * np.mean(rows, axis=0)
+    print(f"{'mean':<8} {m[0]:>18.2f} {m[1]:>18.2f} {m[2]:>18.2f}")
+
+
+if __name__ == "__main__":
+    main()
