@@ -150,10 +150,10 @@ def test_pmf_windows_follow_zhang():
 
 def test_config_defaults_and_params():
     cfg = GroundConfig()
-    assert cfg.method == "smrf"
+    assert cfg.method == "smrf_segments"
     p = GroundConfig(method="smrf_refined").method_params()
     assert p["slope"] == 0.15 and "max_window" not in p and p["extend"] == 10.0
-    p = cfg.method_params()
+    p = GroundConfig(method="smrf").method_params()
     assert p["slope"] == 0.15 and "extend" not in p and "rounds" not in p
     p = GroundConfig(method="pmf").method_params()
     assert p["slope"] == 0.3 and "window" not in p

@@ -88,7 +88,7 @@ class GroundConfig:
     """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
 
     method: Literal["smrf", "smrf_refined", "smrf_segments", "pmf"] = field(
-        "smrf", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
+        "smrf_segments", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
         "optional surface cleanup), smrf_segments (SMRF + edge extension, terrain-like object "
         "segments given back) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
