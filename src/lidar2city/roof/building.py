@@ -189,18 +189,27 @@ def _absorb_slivers(faces, labels, *, min_width=0.01):
     return faces, np.asarray(labels, dtype=np.int64)
 
 
+def _ring_edges(solid):
+    """``(a, b)``: every edge a -> b of every ring of the solid's surfaces (vertex ids)."""
+    rings = [r for s in solid.surfaces for r in s.rings if len(r)]
+    if not rings:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    sizes = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
+    a = np.concatenate(rings).astype(np.int64, copy=False)
+    ends = np.cumsum(sizes)
+    nxt = np.arange(1, len(a) + 1)
+    nxt[ends - 1] = ends - sizes  # a ring's last vertex -> its first
+    return a, a[nxt]
+
+
 def _nonmanifold_points(solid):
     """2-D positions of vertical edges shared by more than two surfaces (saddle vertices)."""
-    from collections import Counter
-
-    count = Counter()
-    for surf in solid.surfaces:
-        for ring in surf.rings:
-            r = list(ring)
-            for a, b in zip(r, r[1:] + r[:1], strict=True):
-                count[(min(a, b), max(a, b))] += 1
-    bad = [e for e, n in count.items() if n > 2]
-    return np.unique(np.round(solid.vertices[[e[0] for e in bad], :2], 6), axis=0)
+    a, b = _ring_edges(solid)
+    if not len(a):
+        return np.zeros((0, 2))
+    n = max(len(solid.vertices), int(a.max()) + 1)
+    edges, count = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_counts=True)
+    return np.unique(np.round(solid.vertices[edges[count > 2] // n, :2], 6), axis=0)
 
 
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8,
@@ -218,6 +227,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
 
     labels0 = face_labels
     face_labels = np.array(face_labels, copy=True)
+    face_array = np.asarray(faces, dtype=object)
+    boundaries = shapely.boundary(face_array)
     for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
         bad = _nonmanifold_points(solid)
@@ -226,13 +237,14 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         if not repair:
             return solid, 1
         p = bad[0]
-        at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
+        at = np.flatnonzero(shapely.distance(face_array, shapely.Point(p)) < 1e-6).tolist()
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
         mid = [i for i, zz in zip(at, z, strict=True) if z.min() + 1e-3 < zz < z.max() - 1e-3]
         victim = min(mid or at, key=lambda i: faces[i].area)
-        neigh = [(faces[victim].boundary.intersection(faces[j].boundary).length, j)
-                 for j in range(len(faces)) if j != victim and face_labels[j] != face_labels[victim]]
-        neigh = [t for t in neigh if t[0] > 0]
+        others = np.flatnonzero((np.arange(len(faces)) != victim)
+                                & (face_labels != face_labels[victim]))
+        shared = shapely.length(shapely.intersection(boundaries[victim], boundaries[others]))
+        neigh = [(float(L), int(j)) for L, j in zip(shared, others, strict=True) if L > 0]
         if not neigh:
             return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
@@ -385,9 +397,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
 def _closed_shell(solid) -> bool:
     """Every edge of the solid used exactly twice, in opposite directions (a closed,
     2-manifold, consistently oriented shell: the cheap part of a val3dity check)."""
-    rings = [np.asarray(r) for s in solid.surfaces for r in s.rings]
-    a = np.concatenate(rings)
-    b = np.concatenate([np.roll(r, -1) for r in rings])
+    a, b = _ring_edges(solid)
     keep = a != b
     a, b = a[keep], b[keep]
     directed = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)[1]
