@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -229,9 +230,12 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
     face_labels = np.array(face_labels, copy=True)
     face_array = np.asarray(faces, dtype=object)
     boundaries = shapely.boundary(face_array)
+    own_solid = None
     for r in range(max_rounds):
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
         bad = _nonmanifold_points(solid)
+        if r == 0:
+            own_solid = solid  # every face on its own plane: where the saddle cut starts
         if not len(bad):
             return solid, r
         if not repair:
@@ -253,7 +257,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         # taking planes did not converge (one face's new plane makes the next saddle): keep
         # every plane and cut the saddle vertices out of the partition instead
         own = planes[np.asarray(labels0)]
-        cut = partition_solid(faces, own, ground_z, min_height=min_height)
+        cut = own_solid if own_solid is not None else \
+            partition_solid(faces, own, ground_z, min_height=min_height)
         for _ in range(3):
             bad = _nonmanifold_points(cut)
             if not len(bad):
@@ -271,7 +276,19 @@ def _valid_cut(solid, precision=1e-3) -> bool:
     from ..datamodel import Solid
 
     rounded = Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
-    return not check_solid(solid) and not check_solid(rounded)
+    return not _check(solid) and not check_solid(rounded)
+
+
+_CHECKED = weakref.WeakKeyDictionary()
+
+
+def _check(solid) -> list:
+    """:func:`check_solid` of a solid, once per solid object (a cut solid is validated
+    by :func:`_valid_cut` and again when its roof topology is chosen)."""
+    issues = _CHECKED.get(solid)
+    if issues is None:
+        issues = _CHECKED[solid] = check_solid(solid)
+    return issues
 
 
 def _parts(footprint):
@@ -358,7 +375,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                     raise
                 logger.debug("%s roof topology failed (%s); trying the next", method, exc)
                 continue
-            if method == methods[-1] or (_closed_shell(solid) and not check_solid(solid)):
+            if method == methods[-1] or (_closed_shell(solid) and not _check(solid)):
                 break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
         solids.append(solid)
