@@ -230,12 +230,22 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
     face_labels = np.array(face_labels, copy=True)
     face_array = np.asarray(faces, dtype=object)
     boundaries = shapely.boundary(face_array)
-    own_solid = None
-    for r in range(max_rounds):
+    # the relabelling is a function of the labels: once a labelling comes back, the
+    # rounds left repeat that cycle, and the labelling after max_rounds is known
+    seen: dict = {}  # labels -> round
+    solids: list = []  # the solid of each round's labels
+    for r in range(max_rounds + 1):
+        key = face_labels.tobytes()
+        if key in seen:
+            i = seen[key]
+            solid = solids[i + (max_rounds - i) % (r - i)]
+            break
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+        if r == max_rounds:
+            break
+        seen[key] = r
+        solids.append(solid)
         bad = _nonmanifold_points(solid)
-        if r == 0:
-            own_solid = solid  # every face on its own plane: where the saddle cut starts
         if not len(bad):
             return solid, r
         if not repair:
@@ -252,13 +262,11 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         if not neigh:
             return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
     if len(_nonmanifold_points(solid)):
         # taking planes did not converge (one face's new plane makes the next saddle): keep
         # every plane and cut the saddle vertices out of the partition instead
         own = planes[np.asarray(labels0)]
-        cut = own_solid if own_solid is not None else \
-            partition_solid(faces, own, ground_z, min_height=min_height)
+        cut = solids[0] if solids else partition_solid(faces, own, ground_z, min_height=min_height)
         for _ in range(3):
             bad = _nonmanifold_points(cut)
             if not len(bad):
