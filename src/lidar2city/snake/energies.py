@@ -255,14 +255,19 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
         ])
     t = np.linspace(0.0, 1.0, n)
     h, w = dt.shape
-    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster.
-    ix = np.floor(p0[:, None, None, 0] + 0.5 + t * d[..., None, 0]).astype(np.intp)
-    iy = np.floor(p0[:, None, None, 1] + 0.5 + t * d[..., None, 1]).astype(np.intp)
+    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster (in
+    # place on two float buffers: integer-valued floats are exact, one cast at the end)
+    ix = np.multiply(t, d[..., None, 0])
+    ix += p0[:, None, None, 0] + 0.5
+    np.floor(ix, out=ix)
     np.clip(ix, 0, h - 1, out=ix)
+    iy = np.multiply(t, d[..., None, 1])
+    iy += p0[:, None, None, 1] + 0.5
+    np.floor(iy, out=iy)
     np.clip(iy, 0, w - 1, out=iy)
     ix *= w
     ix += iy
-    dist = dt.ravel()[ix]  # (d_u, d_v, n), raster cells
+    dist = dt.ravel()[ix.astype(np.intp)]  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
     wts = np.full(n, 1.0 / (n - 1))
     wts[[0, -1]] *= 0.5
