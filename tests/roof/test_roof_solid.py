@@ -124,8 +124,8 @@ def _manifold_by_rounds(faces, labels, planes, ground_z, min_height, max_rounds)
     shortcut), then the saddle cut; also says whether a labelling came back."""
     import shapely
 
-    from lidar2city.roof.building import _nonmanifold_points, _valid_cut
-    from lidar2city.roof.solid import partition_solid, split_saddles
+    from lidar2city.roof.building import _nonmanifold_points, _saddle_cut
+    from lidar2city.roof.solid import partition_solid
 
     labels0, labels = labels, np.array(labels, copy=True)
     seen, cycled = set(), False
@@ -149,15 +149,8 @@ def _manifold_by_rounds(faces, labels, planes, ground_z, min_height, max_rounds)
         labels[victim] = labels[max(neigh)[1]]
     solid = partition_solid(faces, planes[labels], ground_z, min_height=min_height)
     if len(_nonmanifold_points(solid)):
-        own = planes[np.asarray(labels0)]
-        cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        for _ in range(3):
-            bad = _nonmanifold_points(cut)
-            if not len(bad):
-                break
-            faces = split_saddles(faces, bad)
-            cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+        cut = _saddle_cut(faces, planes[np.asarray(labels0)], ground_z, min_height)
+        if cut is not None:
             return cut, 0, cycled
     return solid, max_rounds, cycled
 

@@ -265,17 +265,28 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
     if len(_nonmanifold_points(solid)):
         # taking planes did not converge (one face's new plane makes the next saddle): keep
         # every plane and cut the saddle vertices out of the partition instead
-        own = planes[np.asarray(labels0)]
-        cut = solids[0] if solids else partition_solid(faces, own, ground_z, min_height=min_height)
-        for _ in range(3):
-            bad = _nonmanifold_points(cut)
-            if not len(bad):
-                break
-            faces = split_saddles(faces, bad)
-            cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+        cut = _saddle_cut(faces, planes[np.asarray(labels0)], ground_z, min_height,
+                          solids[0] if solids else None)
+        if cut is not None:
             return cut, 0
     return solid, max_rounds
+
+
+def _saddle_cut(faces, own, ground_z, min_height, solid=None):
+    """The solid of the partition with every face on its own plane (``own``, per face;
+    ``solid`` when already built) and its saddle vertices cut out
+    (:func:`lidar2city.roof.solid.split_saddles`, up to three rounds), or None when a
+    saddle stays or the cut solid does not validate."""
+    cut = solid if solid is not None else partition_solid(faces, own, ground_z, min_height=min_height)
+    for _ in range(3):
+        bad = _nonmanifold_points(cut)
+        if not len(bad):
+            break
+        faces = split_saddles(faces, bad)
+        cut = partition_solid(faces, own, ground_z, min_height=min_height)
+    if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+        return cut
+    return None
 
 
 def _valid_cut(solid, precision=1e-3) -> bool:
