@@ -1,6 +1,6 @@
 """Speed and memory of ``reconstruct`` on the Delft tile, against the laspy read floor.
 
-Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced] [--keep-env]
+Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced | --traced-only] [--keep-env]
 (default $LIDAR2CITY_DATA or ../shared/data; 3 runs)
 
 Every figure is a whole process as a user runs it, measured from outside
@@ -66,7 +66,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", nargs="?")
     ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--no-traced", action="store_true", help="skip the no-footprints run")
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--no-traced", action="store_true", help="skip the no-footprints run")
+    mode.add_argument("--traced-only", action="store_true",
+                      help="only the no-footprints run (--runs of them, each after a floor run)")
     ap.add_argument("--keep-env", action="store_true",
                     help="run with the environment as it is (PYTHONDONTWRITEBYTECODE kept: "
                          "without a __pycache__, lidar2city compiles in every run)")
@@ -89,6 +92,9 @@ def main():
                    "-o", str(out)]
 
     run(floor, env)  # warm the file cache and the bytecode
+    if args.traced_only:
+        traced_runs(base, floor, env, tmp, laz, max(1, args.runs))
+        return
     run(full, env)
     floors, fulls, ratios = [], [], []
     for _ in range(max(1, args.runs)):
@@ -129,20 +135,35 @@ def main():
     print(f"LoD1.2+2.2 output MD5 {hashlib.md5(o22.read_bytes()).hexdigest()}")
 
     if not args.no_traced:
+        traced_runs(base, floor, env, tmp, laz, 1)
+
+
+def traced_runs(base, floor, env, tmp, laz, runs):
+    """The no-footprints reconstruct ``runs`` times, each after a laspy floor run (the
+    median of each figure printed when more than one), then the RMSE of its output."""
+    sys.path.insert(0, str(ROOT / "src"))
+    from lidar2city.tools.evaluate_model import evaluate_model
+
+    traced = tmp / "traced.city.json"
+    rows = []
+    for _ in range(runs):
         a = run(floor, env)
-        traced = tmp / "traced.city.json"
-        t, m, c = run(base + ["--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
-                              "-o", str(traced)], env)
-        print(f"reconstruct without footprints (traced), LoD1.2+1.3+2.2: {t:.1f} s, {c:.1f} CPU s "
-              f"(time / laspy floor {t / a[0]:.0f}x, CPU / floor CPU {c / a[2]:.0f}x, floor "
-              f"{a[0]:.2f} s, {a[2]:.2f} CPU s, same run), peak RSS {m:.0f} MB "
-              f"[targets <= 10 s, <= 300 MB]")
-        _, s22 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="2.2")
-        _, s12 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="1.2")
-        print(f"  traced: {s22['buildings']} buildings; LoD2.2 RMSE median {s22['rmse_median']:.3f} m, "
-              f"mean {s22['rmse_mean']:.3f} m, p90 {s22['rmse_p90']:.3f} m; LoD1.2 RMSE median "
-              f"{s12['rmse_median']:.3f} m, mean {s12['rmse_mean']:.3f} m; "
-              f"valid {s22['valid']}/{s22['buildings']}")
+        b = run(base + ["--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(traced)], env)
+        rows.append((*b, a[0], a[2]))
+    t, m, c, f_t, f_c = (statistics.median(col) for col in zip(*rows, strict=True))
+    m = max(r[1] for r in rows)
+    runs_note = "" if runs == 1 else (f"; median of {runs} runs, CPU s each: "
+                                      + ", ".join(f"{r[2]:.1f}" for r in rows))
+    print(f"reconstruct without footprints (traced), LoD1.2+1.3+2.2: {t:.1f} s, {c:.1f} CPU s "
+          f"(time / laspy floor {t / f_t:.0f}x, CPU / floor CPU {c / f_c:.0f}x, floor "
+          f"{f_t:.2f} s, {f_c:.2f} CPU s, same run{runs_note}), peak RSS {m:.0f} MB "
+          f"[targets <= 10 s, <= 300 MB]; output MD5 {hashlib.md5(traced.read_bytes()).hexdigest()}")
+    _, s22 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="2.2")
+    _, s12 = evaluate_model(traced, [laz], crs="EPSG:7415", lod="1.2")
+    print(f"  traced: {s22['buildings']} buildings; LoD2.2 RMSE median {s22['rmse_median']:.3f} m, "
+          f"mean {s22['rmse_mean']:.3f} m, p90 {s22['rmse_p90']:.3f} m; LoD1.2 RMSE median "
+          f"{s12['rmse_median']:.3f} m, mean {s12['rmse_mean']:.3f} m; "
+          f"valid {s22['valid']}/{s22['buildings']}")
 
 
 if __name__ == "__main__":

@@ -119,20 +119,62 @@ def test_manifold_solid_keeps_planes_when_relabelling_gives_up():
     assert roofs == [3.0, 4.0, 6.0]
 
 
-def test_level_sets_are_the_group_means_of_each_vertex():
-    """All vertices' height levels at once equal sorting, splitting and averaging each
-    vertex's heights on its own (bit for bit, long groups included)."""
-    from lidar2city.roof.solid import _level_sets
+def _manifold_by_rounds(faces, labels, planes, ground_z, min_height, max_rounds):
+    """Reference: one rebuilt solid per relabelling round, every round (no cycle
+    shortcut), then the saddle cut; also says whether a labelling came back."""
+    import shapely
 
-    rng = np.random.default_rng(5)
-    levels = {}
-    for k in range(300):
-        n = int(rng.integers(1, 14))
-        base = rng.choice([0.0, 3.0, 7.5], n) + rng.normal(0, 0.003, n)
-        levels[(k, -k)] = list(base) + ([1.0] * 9 if k % 50 == 0 else [])
-    got = _level_sets(levels, 5e-3)
-    assert list(got) == list(levels)
-    for k, zs in levels.items():
-        zs = np.sort(np.asarray(zs))
-        want = [g.mean() for g in np.split(zs, np.flatnonzero(np.diff(zs) > 5e-3) + 1)]
-        assert np.array_equal(got[k], np.array(want))
+    from lidar2city.roof.building import _nonmanifold_points, _saddle_cut
+    from lidar2city.roof.solid import partition_solid
+
+    labels0, labels = labels, np.array(labels, copy=True)
+    seen, cycled = set(), False
+    for r in range(max_rounds):
+        cycled |= labels.tobytes() in seen
+        seen.add(labels.tobytes())
+        solid = partition_solid(faces, planes[labels], ground_z, min_height=min_height)
+        bad = _nonmanifold_points(solid)
+        if not len(bad):
+            return solid, r, cycled
+        p = bad[0]
+        at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
+        z = np.array([planes[labels[i]] @ (p[0], p[1], 1.0) for i in at])
+        mid = [i for i, zz in zip(at, z, strict=True) if z.min() + 1e-3 < zz < z.max() - 1e-3]
+        victim = min(mid or at, key=lambda i: faces[i].area)
+        neigh = [(faces[victim].boundary.intersection(faces[j].boundary).length, j)
+                 for j in range(len(faces)) if j != victim and labels[j] != labels[victim]]
+        neigh = [t for t in neigh if t[0] > 0]
+        if not neigh:
+            return solid, r, cycled
+        labels[victim] = labels[max(neigh)[1]]
+    solid = partition_solid(faces, planes[labels], ground_z, min_height=min_height)
+    if len(_nonmanifold_points(solid)):
+        cut = _saddle_cut(faces, planes[np.asarray(labels0)], ground_z, min_height)
+        if cut is not None:
+            return cut, 0, cycled
+    return solid, max_rounds, cycled
+
+
+def test_manifold_solid_rounds_match_rebuilding_every_round():
+    """Reading a relabelling cycle off the rounds already built gives the solid of
+    rebuilding every round (random grids of flat roofs at alternating heights)."""
+    from lidar2city.roof.building import _manifold_solid
+
+    rng = np.random.default_rng(3)
+    cycles = 0
+    for _ in range(40):
+        n = int(rng.integers(2, 5))
+        xs = np.cumsum(np.r_[0, rng.uniform(2, 6, n)])
+        ys = np.cumsum(np.r_[0, rng.uniform(2, 6, n)])
+        faces = [box(x0, y0, x1, y1) for x0, x1 in zip(xs, xs[1:]) for y0, y1 in zip(ys, ys[1:])]
+        planes = np.column_stack([np.zeros((len(faces), 2)), rng.choice([3.0, 4.0, 5.0, 6.0], len(faces))])
+        for rounds in (1, 3, 8):
+            ref, ref_r, cycled = _manifold_by_rounds(faces, np.arange(len(faces)), planes, 0.0, 0.1, rounds)
+            got, got_r = _manifold_solid(faces, np.arange(len(faces)), planes, 0.0, 0.1, max_rounds=rounds)
+            cycles += cycled
+            assert got_r == ref_r
+            assert np.array_equal(got.vertices, ref.vertices)
+            assert [s.semantic for s in got.surfaces] == [s.semantic for s in ref.surfaces]
+            assert all(np.array_equal(a, b) for s, t in zip(got.surfaces, ref.surfaces, strict=True)
+                       for a, b in zip(s.rings, t.rings, strict=True))
+    assert cycles > 0  # some relabellings came back: the shortcut was taken

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -197,18 +198,27 @@ def _absorb_slivers(faces, labels, *, min_width=0.01):
     return faces, np.asarray(labels, dtype=np.int64)
 
 
+def _ring_edges(solid):
+    """``(a, b)``: every edge a -> b of every ring of the solid's surfaces (vertex ids)."""
+    rings = [r for s in solid.surfaces for r in s.rings if len(r)]
+    if not rings:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    sizes = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
+    a = np.concatenate(rings).astype(np.int64, copy=False)
+    ends = np.cumsum(sizes)
+    nxt = np.arange(1, len(a) + 1)
+    nxt[ends - 1] = ends - sizes  # a ring's last vertex -> its first
+    return a, a[nxt]
+
+
 def _nonmanifold_points(solid):
     """2-D positions of vertical edges shared by more than two surfaces (saddle vertices)."""
-    from collections import Counter
-
-    count = Counter()
-    for surf in solid.surfaces:
-        for ring in surf.rings:
-            r = list(ring)
-            for a, b in zip(r, r[1:] + r[:1], strict=True):
-                count[(min(a, b), max(a, b))] += 1
-    bad = [e for e, n in count.items() if n > 2]
-    return np.unique(np.round(solid.vertices[[e[0] for e in bad], :2], 6), axis=0)
+    a, b = _ring_edges(solid)
+    if not len(a):
+        return np.zeros((0, 2))
+    n = max(len(solid.vertices), int(a.max()) + 1)
+    edges, count = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_counts=True)
+    return np.unique(np.round(solid.vertices[edges[count > 2] // n, :2], 6), axis=0)
 
 
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8,
@@ -226,39 +236,65 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
 
     labels0 = face_labels
     face_labels = np.array(face_labels, copy=True)
-    for r in range(max_rounds):
+    face_array = np.asarray(faces, dtype=object)
+    boundaries = shapely.boundary(face_array)
+    # the relabelling is a function of the labels: once a labelling comes back, the
+    # rounds left repeat that cycle, and the labelling after max_rounds is known
+    seen: dict = {}  # labels -> round
+    solids: list = []  # the solid of each round's labels
+    for r in range(max_rounds + 1):
+        key = face_labels.tobytes()
+        if key in seen:
+            i = seen[key]
+            solid = solids[i + (max_rounds - i) % (r - i)]
+            break
         solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+        if r == max_rounds:
+            break
+        seen[key] = r
+        solids.append(solid)
         bad = _nonmanifold_points(solid)
         if not len(bad):
             return solid, r
         if not repair:
             return solid, 1
         p = bad[0]
-        at = [i for i, f in enumerate(faces) if f.distance(shapely.Point(p)) < 1e-6]
+        at = np.flatnonzero(shapely.distance(face_array, shapely.Point(p)) < 1e-6).tolist()
         z = np.array([planes[face_labels[i]] @ (p[0], p[1], 1.0) for i in at])
         mid = [i for i, zz in zip(at, z, strict=True) if z.min() + 1e-3 < zz < z.max() - 1e-3]
         victim = min(mid or at, key=lambda i: faces[i].area)
-        neigh = [(faces[victim].boundary.intersection(faces[j].boundary).length, j)
-                 for j in range(len(faces)) if j != victim and face_labels[j] != face_labels[victim]]
-        neigh = [t for t in neigh if t[0] > 0]
+        others = np.flatnonzero((np.arange(len(faces)) != victim)
+                                & (face_labels != face_labels[victim]))
+        shared = shapely.length(shapely.intersection(boundaries[victim], boundaries[others]))
+        neigh = [(float(L), int(j)) for L, j in zip(shared, others, strict=True) if L > 0]
         if not neigh:
             return solid, r
         face_labels[victim] = face_labels[max(neigh)[1]]
-    solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
     if len(_nonmanifold_points(solid)):
         # taking planes did not converge (one face's new plane makes the next saddle): keep
         # every plane and cut the saddle vertices out of the partition instead
-        own = planes[np.asarray(labels0)]
-        cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        for _ in range(3):
-            bad = _nonmanifold_points(cut)
-            if not len(bad):
-                break
-            faces = split_saddles(faces, bad)
-            cut = partition_solid(faces, own, ground_z, min_height=min_height)
-        if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+        cut = _saddle_cut(faces, planes[np.asarray(labels0)], ground_z, min_height,
+                          solids[0] if solids else None)
+        if cut is not None:
             return cut, 0
     return solid, max_rounds
+
+
+def _saddle_cut(faces, own, ground_z, min_height, solid=None):
+    """The solid of the partition with every face on its own plane (``own``, per face;
+    ``solid`` when already built) and its saddle vertices cut out
+    (:func:`lidar2city.roof.solid.split_saddles`, up to three rounds), or None when a
+    saddle stays or the cut solid does not validate."""
+    cut = solid if solid is not None else partition_solid(faces, own, ground_z, min_height=min_height)
+    for _ in range(3):
+        bad = _nonmanifold_points(cut)
+        if not len(bad):
+            break
+        faces = split_saddles(faces, bad)
+        cut = partition_solid(faces, own, ground_z, min_height=min_height)
+    if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
+        return cut
+    return None
 
 
 def _valid_cut(solid, precision=1e-3) -> bool:
@@ -267,7 +303,19 @@ def _valid_cut(solid, precision=1e-3) -> bool:
     from ..datamodel import Solid
 
     rounded = Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
-    return not check_solid(solid) and not check_solid(rounded)
+    return not _check(solid) and not check_solid(rounded)
+
+
+_CHECKED = weakref.WeakKeyDictionary()
+
+
+def _check(solid) -> list:
+    """:func:`check_solid` of a solid, once per solid object (a cut solid is validated
+    by :func:`_valid_cut` and again when its roof topology is chosen)."""
+    issues = _CHECKED.get(solid)
+    if issues is None:
+        issues = _CHECKED[solid] = check_solid(solid)
+    return issues
 
 
 def _parts(footprint):
@@ -414,9 +462,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
 def _closed_shell(solid) -> bool:
     """Every edge of the solid used exactly twice, in opposite directions (a closed,
     2-manifold, consistently oriented shell: the cheap part of a val3dity check)."""
-    rings = [np.asarray(r) for s in solid.surfaces for r in s.rings]
-    a = np.concatenate(rings)
-    b = np.concatenate([np.roll(r, -1) for r in rings])
+    a, b = _ring_edges(solid)
     keep = a != b
     a, b = a[keep], b[keep]
     directed = np.unique(np.column_stack([a, b]), axis=0, return_counts=True)[1]

@@ -281,11 +281,22 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         # level strips at different heights fit one tilted plane, but neither carries the other;
         # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
         ok = np.zeros(len(far), dtype=bool)
+        # each facet's points (ascending, as a mask selects them), median height and level
+        # spread, once per facet rather than once per candidate pair
+        order = np.argsort(labels, kind="stable")
+        bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
+        facet: dict = {}
+
+        def points_of(k):
+            if k not in facet:
+                p = xyz[order[bounds[k]:bounds[k + 1]]]
+                zk = np.median(p[:, 2])
+                facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
+            return facet[k]
+
         for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
-            pi, pj = xyz[labels == i], xyz[labels == j]
-            zi, zj = np.median(pi[:, 2]), np.median(pj[:, 2])
-            level = (abs(zi - zj) <= dist_tol / 2 and np.sqrt(np.mean((pi[:, 2] - zi) ** 2)) <= dist_tol / 2
-                     and np.sqrt(np.mean((pj[:, 2] - zj) ** 2)) <= dist_tol / 2)
+            (pi, zi, si), (pj, zj, sj) = points_of(i), points_of(j)
+            level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
             ok[m] = level or min(np.median(_point_plane_dist(pi, planes[j:j + 1])),
                                  np.median(_point_plane_dist(pj, planes[i:i + 1]))) <= dist_tol / 2
         far, rms = far[ok], rms[ok]
@@ -299,20 +310,25 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
             a = parent[a]
         return a
 
+    # the points of each merged group (ascending), kept with its root
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
+    group = {k: order[bounds[k]:bounds[k + 1]] for k in range(n_labels)}
     for idx in np.argsort(-cos, kind="stable"):
         if cos[idx] < cos_merge and idx < n_touch:
             continue
         a, b = find(pairs[idx, 0]), find(pairs[idx, 1])
         if a == b:
             continue
-        root = np.array([find(x) for x in range(n_labels)])
-        members = np.flatnonzero((labels >= 0) & np.isin(root[labels.clip(0)], [a, b]))
+        members = np.sort(np.concatenate([group[a], group[b]]))
         p = fit_plane(xyz[members])
         if p is None:
             continue
         r = _point_plane_dist(xyz[members], p[None])[:, 0]
         if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and np.quantile(r, 0.95) <= dist_tol:
             parent[b] = a
+            group[a] = members
+            del group[b]
     roots = np.array([find(x) for x in range(n_labels)])
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)

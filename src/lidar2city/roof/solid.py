@@ -146,42 +146,44 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
         Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
     """
     rings = conform([_rings(f) for f in faces])
-    keys = [[_ring_keys(r) for r in rs] for rs in rings]
-    owner = _edge_owner(rings, keys)
+    flat = [r for rs in rings for r in rs]
+    sizes = np.array([len(r) for r in flat], dtype=np.int64)
+    fv = np.repeat(np.repeat(np.arange(len(rings)), [len(rs) for rs in rings]), sizes)
+    xy = np.concatenate(flat)[:, :2]
+    m = len(xy)
+    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    nxt = np.arange(1, m + 1)
+    nxt[np.cumsum(sizes) - 1] = start[np.cumsum(sizes) - 1]  # each ring's last vertex -> its first
+    _, kid = np.unique(np.rint(xy * _KEY).astype(np.int64), axis=0, return_inverse=True)
+    kid = kid.ravel()
+    nk = int(kid.max()) + 1
+    code = kid * nk + kid[nxt]  # directed edge p -> q
+    twin = kid[nxt] * nk + kid
+    # the face owning each directed edge: the last ring running it (as a dict filled in order)
+    uc, inv = np.unique(code, return_inverse=True)
+    last = np.full(len(uc), -1, dtype=np.int64)
+    np.maximum.at(last, inv.ravel(), np.arange(m))
+    pos = np.minimum(np.searchsorted(uc, twin), len(uc) - 1)
+    g = np.where(uc[pos] == twin, fv[last[pos]], -1)
+    zf = planes[fv, 0] * xy[:, 0] + planes[fv, 1] * xy[:, 1] + planes[fv, 2]
+    gg = np.maximum(g, 0)
+    p, q = xy, xy[nxt]
+    dp = zf - (planes[gg, 0] * p[:, 0] + planes[gg, 1] * p[:, 1] + planes[gg, 2])
+    dq = zf[nxt] - (planes[gg, 0] * q[:, 0] + planes[gg, 1] * q[:, 1] + planes[gg, 2])
+    cross = (g >= fv) & (((dp > tol) & (dq < -tol)) | ((dp < -tol) & (dq > tol)))
     inserts = {}
-    for fi, rs in enumerate(rings):
-        for r, ks in zip(rs, keys[fi], strict=True):
-            zf = planes[fi, 0] * r[:, 0] + planes[fi, 1] * r[:, 1] + planes[fi, 2]
-            m = len(r)
-            for k in range(m):
-                kp, kq = ks[k], ks[(k + 1) % m]
-                g = owner.get((kq, kp))
-                if g is None or g < fi:
-                    continue
-                p, q = r[k], r[(k + 1) % m]
-                dp = zf[k] - _z(planes[g], p)
-                dq = zf[(k + 1) % m] - _z(planes[g], q)
-                if (dp > tol and dq < -tol) or (dp < -tol and dq > tol):
-                    t = dp / (dp - dq)
-                    x = p + t * (q - p)
-                    if min(np.hypot(*(x - p)), np.hypot(*(x - q))) < min_gap:
-                        continue  # the levels at that end merge instead
-                    x = np.round(x / grid) * grid  # on the output grid, as the faces are
-                    inserts[(kp, kq)] = x
-                    inserts[(kq, kp)] = x
+    for i in np.flatnonzero(cross).tolist():  # in ring order: a later edge's point wins
+        t = dp[i] / (dp[i] - dq[i])
+        x = p[i] + t * (q[i] - p[i])
+        if min(np.hypot(*(x - p[i])), np.hypot(*(x - q[i]))) < min_gap:
+            continue  # the levels at that end merge instead
+        x = np.round(x / grid) * grid  # on the output grid, as the faces are
+        inserts[int(code[i])] = x
+        inserts[int(twin[i])] = x
     if not inserts:
         return rings
-    at = {}
-    i = 0
-    for ks_face in keys:
-        for ks in ks_face:
-            m = len(ks)
-            for k in range(m):
-                x = inserts.get((ks[k], ks[(k + 1) % m]))
-                if x is not None:
-                    at[i + k] = [x]
-            i += m
-    return _insert_at(rings, at)
+    hit = np.flatnonzero(np.isin(code, np.fromiter(inserts, dtype=np.int64, count=len(inserts))))
+    return _insert_at(rings, {i: [inserts[int(code[i])]] for i in hit.tolist()})
 
 
 def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
@@ -268,139 +270,149 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     ------
     FitError
         When a roof plane goes below the floor.
+
+    Notes
+    -----
+    Array form: the heights of every partition vertex are grouped into levels
+    at once, every lookup of a height's level is one ``argmin`` over a padded
+    (vertex, level) table, and vertex ids are numbered in the order the
+    surfaces first use them (roofs, then walls in edge order, then the floor).
     """
     planes = np.asarray(planes, dtype=np.float64)
     rings = split_crossings(faces, planes, tol=level_tol)
-    # heights of every face at its vertices
     keys = [[_ring_keys(r) for r in rs] for rs in rings]
-    levels: dict = {}
-    zs_face = []
-    for fi, rs in enumerate(rings):
-        zs_face.append([])
-        for r, ks in zip(rs, keys[fi], strict=True):
-            z = planes[fi, 0] * r[:, 0] + planes[fi, 1] * r[:, 1] + planes[fi, 2]
-            if np.any(z < ground_z + min_height):
-                raise FitError(f"roof plane {fi} goes below the floor ({z.min():.2f} < {ground_z:.2f} + {min_height})")
-            zs_face[fi].append(z)
-            for k, zz in zip(ks, z, strict=True):
-                levels.setdefault(k, []).append(zz)
+    flat_rings = [r for rs in rings for r in rs]
+    sizes = np.array([len(r) for r in flat_rings], dtype=np.int64)
+    ring_face = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
+    xy = np.concatenate(flat_rings)[:, :2]
+    vface = np.repeat(ring_face, sizes)
+    # heights of every face at its vertices
+    z = planes[vface, 0] * xy[:, 0] + planes[vface, 1] * xy[:, 1] + planes[vface, 2]
+    low = z < ground_z + min_height
+    if low.any():
+        first = int(np.flatnonzero(low)[0])
+        ri = int(np.searchsorted(np.cumsum(sizes), first, side="right"))
+        s0 = int(sizes[:ri].sum())
+        fi = int(ring_face[ri])
+        raise FitError(f"roof plane {fi} goes below the floor "
+                       f"({z[s0:s0 + sizes[ri]].min():.2f} < {ground_z:.2f} + {min_height})")
+    # vertex keys -> ids 0.. in order of first appearance; coordinates of the last one
+    kid_of: dict = {}
+    flat_keys = [k for ks_face in keys for ks in ks_face for k in ks]
+    kid = np.fromiter((kid_of.setdefault(k, len(kid_of)) for k in flat_keys), dtype=np.int64,
+                      count=len(flat_keys))
+    nk = len(kid_of)
+    last = np.full(nk, -1, dtype=np.int64)
+    np.maximum.at(last, kid, np.arange(len(kid)))
+    kxy = xy[last]
     # directed edges and which face uses them
     owner = _edge_owner(rings, keys)
     outer_edges = [e for e in owner if (e[1], e[0]) not in owner]
-    for e in outer_edges:
-        levels[e[0]].append(ground_z)
-        levels[e[1]].append(ground_z)
-    # unify levels per vertex
-    xy_of = {}
-    for rs, ks_face in zip(rings, keys, strict=True):
-        for r, ks in zip(rs, ks_face, strict=True):
-            xy_of.update(zip(ks, r))
-    level_sets = _level_sets(levels, level_tol)
+    outer_kids = np.array([kid_of[k] for e in outer_edges for k in e], dtype=np.int64)
+    # unify levels per vertex: sorted heights split where they step by more than level_tol
+    lev_k = np.concatenate([kid, outer_kids])
+    lev_z = np.concatenate([z, np.full(len(outer_kids), float(ground_z))])
+    order = np.lexsort((lev_z, lev_k))
+    lev_k, lev_z = lev_k[order], lev_z[order]
+    start = np.ones(len(lev_k), dtype=bool)
+    start[1:] = (lev_k[1:] != lev_k[:-1]) | (np.diff(lev_z) > level_tol)
+    starts = np.flatnonzero(start)
+    counts = np.diff(np.append(starts, len(lev_k)))
+    # each group's mean as np.mean takes it: summed left to right below 8 values,
+    # numpy's pairwise sum from 8 on (rare: a vertex with that many heights)
+    sums = lev_z[starts].copy()
+    for j in range(1, min(int(counts.max()), 8)):
+        more = counts > j
+        sums[more] += lev_z[starts[more] + j]
+    means = sums / counts
+    for g in np.flatnonzero(counts >= 8):
+        means[g] = lev_z[starts[g]:starts[g] + counts[g]].mean()
+    g_k = lev_k[starts]
+    n_lev = np.bincount(g_k, minlength=nk)
+    first_g = np.concatenate([[0], np.cumsum(n_lev)[:-1]])
+    table = np.full((nk, int(n_lev.max())), np.inf)
+    table[g_k, np.arange(len(g_k)) - first_g[g_k]] = means
 
-    verts: list = []
-    index: dict = {}
-    level_lists = {k: v.tolist() for k, v in level_sets.items()}
+    def level_index(k, zz):
+        """Index of the level at each vertex k nearest to zz (the first of equals)."""
+        return np.argmin(np.abs(table[k] - np.asarray(zz)[:, None]), axis=1)
 
-    def level_index(k, z):
-        """Index of the level at vertex k nearest to z (the first of equals)."""
-        zs = level_lists[k]
-        if len(zs) == 1:
-            return 0
-        best, bj = abs(zs[0] - z), 0
-        for j in range(1, len(zs)):
-            d = abs(zs[j] - z)
-            if d < best:
-                best, bj = d, j
-        return bj
-
-    def vid_at(k, zi):
-        key = (k, zi)
-        i = index.get(key)
-        if i is None:
-            i = index[key] = len(verts)
-            p = xy_of[k]
-            verts.append((p[0], p[1], level_lists[k][zi]))
-        return i
-
-    def vid(k, z):
-        zi = level_index(k, z)
-        return vid_at(k, zi), zi
-
-    surfaces = []
-    # roofs
-    for fi, rs in enumerate(rings):
-        ids = []
-        for ks, z in zip(keys[fi], zs_face[fi], strict=True):
-            ids.append(np.asarray([vid(k, zz)[0] for k, zz in zip(ks, z, strict=True)]))
-        surfaces.append(Surface(ids, "RoofSurface"))
-
-    def stack(k, lo, hi):
-        """Vertex ids at vertex k from level index lo to hi inclusive (ascending or descending)."""
-        step = 1 if hi >= lo else -1
-        return [vid_at(k, j) for j in range(lo, hi + step, step)]
-
+    # vertex requests (key id, level index) in the order the surfaces use them
+    roof_lev = level_index(kid, z)
+    requests = [kid * table.shape[1] + roof_lev]
     # walls: each directed edge (p -> q) of face f whose other side is lower (or outside)
-    for (kp, kq), fi in owner.items():
-        other = owner.get((kq, kp))
-        p, q = xy_of[kp], xy_of[kq]
-        zf_p, zf_q = level_index(kp, _z(planes[fi], p)), level_index(kq, _z(planes[fi], q))
-        if other is None:
-            zo_p, zo_q = level_index(kp, ground_z), level_index(kq, ground_z)
-        else:
-            zo_p = level_index(kp, _z(planes[other], p))
-            zo_q = level_index(kq, _z(planes[other], q))
-        # the wall belongs to the higher side (crossings were split away)
-        if zf_p < zo_p or zf_q < zo_q or (zf_p == zo_p and zf_q == zo_q):
-            continue
-        # seen from the lower side, the wall runs p(top) -> ... ; build: bottom p->q, up q, top q->p, down p
-        ring = stack(kq, zo_q, zf_q)  # up along q
-        ring += stack(kp, zf_p, zo_p)  # down along p
-        # the face's edge p -> q runs counter-clockwise around f (f on the left); the wall's
-        # outward normal points to the right of p -> q (towards the lower side): order
-        # q(bottom..top), p(top..bottom) is counter-clockwise seen from there.
+    e_kp = np.array([kid_of[e[0]] for e in owner], dtype=np.int64)
+    e_kq = np.array([kid_of[e[1]] for e in owner], dtype=np.int64)
+    e_f = np.fromiter(owner.values(), dtype=np.int64, count=len(owner))
+    e_o = np.array([owner.get((e[1], e[0]), -1) for e in owner], dtype=np.int64)
+    p, q = kxy[e_kp], kxy[e_kq]
+
+    def plane_z(f, pts):
+        return planes[f, 0] * pts[:, 0] + planes[f, 1] * pts[:, 1] + planes[f, 2]
+
+    zf_p, zf_q = level_index(e_kp, plane_z(e_f, p)), level_index(e_kq, plane_z(e_f, q))
+    outside = e_o < 0
+    o = np.where(outside, 0, e_o)
+    zo_p = level_index(e_kp, np.where(outside, ground_z, plane_z(o, p)))
+    zo_q = level_index(e_kq, np.where(outside, ground_z, plane_z(o, q)))
+    # the wall belongs to the higher side (crossings were split away)
+    wall = ~((zf_p < zo_p) | (zf_q < zo_q) | ((zf_p == zo_p) & (zf_q == zo_q)))
+    width = table.shape[1]
+    wall_rings = []
+    for kp, kq, fp_, fq_, op_, oq_ in zip(*(a[wall].tolist() for a in (e_kp, e_kq, zf_p, zf_q,
+                                                                         zo_p, zo_q)), strict=True):
+        # seen from the lower side: up along q (bottom..top), down along p (top..bottom),
+        # counter-clockwise seen from outside (the face is on the left of p -> q)
+        ring = ([kq * width + j for j in range(oq_, fq_ + 1)]
+                + [kp * width + j for j in range(fp_, op_ - 1, -1)])
+        requests.append(np.asarray(ring, dtype=np.int64))  # its vertices exist even if it is dropped
         ring = _dedupe(ring)
         if len(ring) >= 3:
-            surfaces.append(Surface([np.asarray(ring)], "WallSurface"))
+            wall_rings.append(np.asarray(ring, dtype=np.int64))
     # floor: the polygons the outer edges enclose (pinched outlines give several), facing down
     import shapely
-    from shapely.geometry import LineString
     from shapely.geometry.polygon import orient
 
-    lines = [LineString([xy_of[kp], xy_of[kq]]) for kp, kq in outer_edges]
-    inside = shapely.union_all([shapely.Polygon(rs[0], rs[1:]) for rs in rings]).buffer(1e-7)
-    floors = []
+    lines = shapely.linestrings(np.stack([kxy[outer_kids[0::2]], kxy[outer_kids[1::2]]], axis=1)) \
+        if outer_edges else []
+    face_array = np.asarray(faces, dtype=object)
+    floor_rings = []
     for poly in shapely.get_parts(shapely.polygonize(lines)):
-        if poly.area < 1e-3 * poly.length or not inside.contains(poly.representative_point()):
+        if poly.area < 1e-3 * poly.length or \
+                not shapely.dwithin(face_array, poly.representative_point(), 1e-7).any():
             continue  # the inside of a courtyard, or a zero-width loop of outline edges
         poly = orient(poly, -1.0)  # clockwise from above: the normal points down
-        ids = [[vid(_key(p), ground_z)[0] for p in np.asarray(r.coords)[:-1]]
-               for r in [poly.exterior, *poly.interiors]]
-        floors.append(Surface([np.asarray(r) for r in ids], "GroundSurface"))
-    surfaces[:0] = floors
-    return Solid(np.asarray(verts), surfaces)
+        rs = []
+        for r in [poly.exterior, *poly.interiors]:
+            k = np.array([kid_of[_key(c)] for c in np.asarray(r.coords)[:-1]], dtype=np.int64)
+            rs.append(k * width + level_index(k, np.full(len(k), float(ground_z))))
+        floor_rings.append(rs)
+    requests += [r for rs in floor_rings for r in rs]
+    # ids in order of first use
+    uniq, first = np.unique(np.concatenate(requests), return_index=True)
+    by_use = np.argsort(first, kind="stable")
+    rank = np.empty(len(uniq), dtype=np.int64)
+    rank[by_use] = np.arange(len(uniq))
+    used = uniq[by_use]
+    verts = np.column_stack([kxy[used // width], table[used // width, used % width]])
 
+    def ids(codes):
+        return rank[np.searchsorted(uniq, codes)]
 
-def _level_sets(levels: dict, tol: float) -> dict:
-    """Per vertex key, its heights sorted and grouped where consecutive ones differ by more
-    than ``tol``, each group replaced by its mean: all vertices at once (sorted by key,
-    then height), bit for bit as ``np.mean`` of each group."""
-    keys = list(levels)
-    if not keys:
-        return {}
-    counts = np.fromiter((len(levels[k]) for k in keys), dtype=np.int64, count=len(keys))
-    owner = np.repeat(np.arange(len(keys)), counts)
-    z = np.fromiter((v for k in keys for v in levels[k]), dtype=np.float64, count=int(counts.sum()))
-    order = np.lexsort((z, owner))
-    z, owner = z[order], owner[order]
-    new = np.r_[True, (owner[1:] != owner[:-1]) | (np.diff(z) > tol)]
-    starts = np.flatnonzero(new)
-    sizes = np.diff(np.r_[starts, len(z)])
-    means = np.empty(len(starts))
-    for m in np.unique(sizes):  # groups of one size as rows: a row sum is np.mean's sum
-        sel = np.flatnonzero(sizes == m)
-        means[sel] = z[starts[sel, None] + np.arange(m)].sum(axis=1) / m
-    per_key = np.searchsorted(owner[starts], np.arange(len(keys) + 1))
-    return {k: means[per_key[i]:per_key[i + 1]] for i, k in enumerate(keys)}
+    roof_ids = ids(requests[0])
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    surfaces = []
+    ring_i = 0
+    for rs in rings:
+        surfaces.append(Surface([roof_ids[bounds[ring_i + j]:bounds[ring_i + j + 1]]
+                                 for j in range(len(rs))], "RoofSurface"))
+        ring_i += len(rs)
+    if wall_rings:
+        cut = np.cumsum([len(r) for r in wall_rings])[:-1]
+        surfaces += [Surface([r], "WallSurface")
+                     for r in np.split(ids(np.concatenate(wall_rings)), cut)]
+    surfaces[:0] = [Surface([ids(r) for r in rs], "GroundSurface") for rs in floor_rings]
+    return Solid(verts.reshape(-1, 3), surfaces)
 
 
 def _dedupe(ring):

@@ -314,23 +314,32 @@ def _merge_faces(polys, labels, min_area):
 
     polys = list(polys)
     labels = list(labels)
+    # areas and boxes kept beside the faces (a face's changes only when it absorbs another):
+    # the pair scan below reads them O(n^2) times per merge
+    areas = [p.area for p in polys]
+    boxes = [p.bounds for p in polys]
+
+    def apart(a, b):  # boxes disjoint: no shared boundary
+        return a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1]
+
     changed = True
     while changed and len(polys) > 1:
         changed = False
         for i in range(len(polys)):
             for j in range(i + 1, len(polys)):
                 same = labels[i] == labels[j]
-                small = min(polys[i].area, polys[j].area) < min_area
-                if not (same or small):
+                small = min(areas[i], areas[j]) < min_area
+                if not (same or small) or apart(boxes[i], boxes[j]):
                     continue
                 shared = polys[i].boundary.intersection(polys[j].boundary).length
                 if shared <= 1e-9:
                     continue
                 if small and not same:
                     # the small face joins the neighbour it shares most boundary with
-                    k = i if polys[i].area < polys[j].area else j
+                    k = i if areas[i] < areas[j] else j
                     best = max((m for m in range(len(polys)) if m != k),
-                               key=lambda m: polys[k].boundary.intersection(polys[m].boundary).length)
+                               key=lambda m: 0.0 if apart(boxes[k], boxes[m]) else
+                               polys[k].boundary.intersection(polys[m].boundary).length)
                     if best not in (i, j):
                         continue
                     keep_label = labels[j] if k == i else labels[i]
@@ -340,8 +349,9 @@ def _merge_faces(polys, labels, min_area):
                 if merged.geom_type != "Polygon":
                     continue
                 polys[i] = shapely.normalize(merged)
+                areas[i], boxes[i] = polys[i].area, polys[i].bounds
                 labels[i] = keep_label
-                del polys[j], labels[j]
+                del polys[j], labels[j], areas[j], boxes[j]
                 changed = True
                 break
             if changed:

@@ -255,14 +255,22 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
         ])
     t = np.linspace(0.0, 1.0, n)
     h, w = dt.shape
-    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster.
-    ix = np.floor(p0[:, None, None, 0] + 0.5 + t * d[..., None, 0]).astype(np.intp)
-    iy = np.floor(p0[:, None, None, 1] + 0.5 + t * d[..., None, 1]).astype(np.intp)
-    np.clip(ix, 0, h - 1, out=ix)
-    np.clip(iy, 0, w - 1, out=iy)
+
+    def cells(a0, a1, size):
+        """Nearest raster row (or column) of every sample, floor(a + 0.5) clipped to the
+        raster, for each pair of the distinct start and end coordinates (a window of
+        candidates has few distinct x and few distinct y: (2w+1) each, not (2w+1)^2)."""
+        s, si = np.unique(a0, return_inverse=True)
+        e, ei = np.unique(a1, return_inverse=True)
+        a = (s[:, None, None] + 0.5) + t * (e[None, :] - s[:, None])[..., None]
+        return np.clip(np.floor(a), 0, size - 1).astype(np.intp), si.ravel(), ei.ravel()
+
+    ix, xs, xe = cells(p0[:, 0], p1[:, 0], h)
+    iy, ys, ye = cells(p0[:, 1], p1[:, 1], w)
     ix *= w
-    ix += iy
-    dist = dt.ravel()[ix]  # (d_u, d_v, n), raster cells
+    flat = ix[xs[:, None], xe[None, :]]
+    flat += iy[ys[:, None], ye[None, :]]
+    dist = dt.ravel()[flat]  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
     wts = np.full(n, 1.0 / (n - 1))
     wts[[0, -1]] *= 0.5
