@@ -94,3 +94,27 @@ def test_canonical_order_is_the_seven_key_lexsort():
         attrs = [rng.integers(0, 3, n).astype(np.uint8), rng.integers(0, 9, n).astype(np.uint16)]
         want = np.lexsort(attrs[::-1] + cols[::-1])
         assert np.array_equal(_canonical_order(cols, attrs), want)
+
+
+@pytest.mark.parametrize("dup", [False, True])
+def test_points_of_tiles_sorted_on_integer_steps_as_on_coordinates(dup):
+    """The tile reader sorts the points of same-resolution tiles on their integer
+    steps: the same order (ties by attributes included) as the float lexsort."""
+    from lidar2city.io.las import DecodedTile, _points_order
+
+    rng = np.random.default_rng(5)
+    parts = []
+    for base in ([85_000_000, 447_000_000, -18_000], [85_200_000, 446_990_000, 0]):
+        n = 1500
+        steps = rng.integers(0, 4 if dup else 200_000, (n, 3)).astype(np.int32)
+        attrs = {"classification": rng.integers(0, 3, n).astype(np.uint8),
+                 "intensity": rng.integers(0, 9, n).astype(np.uint16)}
+        parts.append(DecodedTile(steps, np.array(base, dtype=np.int64),
+                                 np.full(3, 0.001), attrs))
+    world = np.concatenate([p.world() for p in parts])
+    attrs = [np.concatenate([p.attrs[k] for p in parts]) for k in ("classification", "intensity")]
+    want = np.lexsort(attrs[::-1] + [world[:, 2], world[:, 1], world[:, 0]])
+    order, cols = _points_order(parts, attrs)
+    assert np.array_equal(order, want)
+    for d in range(3):
+        assert np.array_equal(cols(d, order), world[want, d])

@@ -320,7 +320,9 @@ def test_a_run_holds_at_most_max_cost_whatever_the_area(costs, cap):
 
 def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
     """After each block of a run the shared cache holds, of each tile, only the points
-    inside the boxes of the run's later blocks; nothing once the run is over."""
+    inside the boxes of the run's later blocks, in scratch files (none in memory);
+    nothing once the run is over."""
+    from lidar2city.io.las import SpilledTile
     from lidar2city.tools.reconstruct import plan_reconstruct, run_blocks
 
     plan = plan_reconstruct([area / "town.laz"], tmp_path / "x.city.json",
@@ -337,7 +339,9 @@ def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
 
     def check(k):
         later = [s.world_box for s in specs[k + 1:] if s.world_box is not None]
-        for world, _ in task._cache.tiles.values():
+        for spilled in task._cache.tiles.values():
+            assert isinstance(spilled, SpilledTile)  # nothing held in memory between blocks
+            world = spilled.load().world()
             x, y = world[:, 0], world[:, 1]
             inside = np.zeros(len(world), dtype=bool)
             for x0, y0, x1, y1 in later:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import EmptyInputError
-from ..io.las import TileReader
+from ..io.las import DecodedTile, SpilledTile, TileReader
 
 logger = logging.getLogger(__name__)
 
@@ -98,23 +98,29 @@ class BlockOutput:
 
 class _TileCache:
     """Decoded tiles shared by the blocks a process runs in turn, kept only while
-    a later block of the same run still reads them.
+    a later block of the same run still reads them, and never in memory between
+    blocks.
 
     A run of consecutive blocks (:mod:`lidar2city.tools.engine` gives a process
     runs of neighbouring blocks) first tells the cache its blocks
-    (:func:`tile_keeper`); after each block, a tile that no later block of the
-    run reads is dropped, and one that later blocks read is cut down to the
-    points inside their boxes (the only points they will take from it). A tile
-    is decoded about once per run, and a process holds the tiles of the block it runs
-    plus the parts of them its next blocks read, soonest needed first, up to
-    :data:`KEEP_BLOCKS` blocks' worth of points: memory does not grow with the
-    area. Outside a run every tile is dropped after its block.
+    (:func:`tile_keeper`). As soon as a block has read its points
+    (:meth:`release`), each tile it read is cut down to the points inside the
+    boxes of the run's later blocks (the only points they will take from it)
+    and written to an unlinked scratch file (:class:`~lidar2city.io.las.SpilledTile`,
+    17 bytes a point); a tile no later block reads is dropped. The next block
+    that reads the tile loads those points back instead of decoding the LAZ
+    again. A tile is decoded about once per run, and the scratch files hold at
+    most :data:`KEEP_BLOCKS` times the largest block read (soonest needed
+    first), so neither memory nor scratch space grows with the area: what a
+    process holds while a block runs is that block's points. Outside a run
+    every tile is dropped after its block.
     """
 
     def __init__(self):
-        self.tiles = {}
+        self.tiles = {}  # key -> DecodedTile (being read) or SpilledTile
         self.lock = threading.Lock()
         self.later = None  # path -> [(position in the run, world box)] while a run is on
+        self.position = {}  # block index -> position in the run
         self.decoded = 0
         self.largest = 0  # points of the largest block read in the run
 
@@ -129,6 +135,10 @@ class _TileCache:
         key = (tile.path, st.st_size, st.st_mtime_ns)
         with self.lock:
             hit = self.tiles.get(key)
+            if isinstance(hit, SpilledTile):
+                spilled, hit = hit, hit.load()
+                spilled.close()
+                self.tiles[key] = hit
         if hit is None:
             hit = decode()
             with self.lock:
@@ -144,49 +154,67 @@ class _TileCache:
                 for t in spec.tiles:
                     later.setdefault(t.path, []).append((k, spec.world_box))
         with self.lock:
+            self._drop(list(self.tiles))
             self.later = later
+            self.position = {spec.index: k for k, spec in enumerate(specs)}
 
-    def keep_after(self, k: int) -> None:
-        """Keep of each tile only what the run's blocks after ``k`` read from it,
-        soonest needed first, up to :data:`KEEP_BLOCKS` times the largest block
-        read so far (what the next block reads is always kept)."""
+    def release(self, index, path=None) -> None:
+        """The block ``index`` has read its points (from the tile ``path``, default
+        all): keep of each tile only what the run's later blocks read, in scratch
+        files (see :meth:`keep_after`)."""
+        self.keep_after(self.position.get(index, -1) if self.later is not None else None,
+                        path=path)
+
+    def keep_after(self, k, path=None) -> None:
+        """Keep of each tile (or of the tile ``path``) only what the run's blocks
+        after position ``k`` read from it, written to scratch files, soonest
+        needed first, up to :data:`KEEP_BLOCKS` times the largest block read so
+        far (what the next block reads is always kept); ``k`` None: keep nothing."""
         with self.lock:
             later = self.later or {}
             kept = []
             for key in list(self.tiles):
-                boxes = [(j, b) for j, b in later.get(key[0], ()) if j > k]
-                world, attrs = self.tiles.pop(key)
-                if not boxes:
+                if path is not None and key[0] != path:
                     continue
-                x, y = world[:, 0], world[:, 1]
-                inside = np.zeros(len(world), dtype=bool)
-                for _, (x0, y0, x1, y1) in boxes:  # the comparisons of TileReader.box
-                    inside |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
-                if not inside.all():
-                    world, attrs = world[inside], {n: v[inside] for n, v in attrs.items()}
-                kept.append((boxes[0][0], key, (world, attrs)))
+                boxes = [] if k is None else [(j, b) for j, b in later.get(key[0], ()) if j > k]
+                if not boxes:
+                    self._drop([key])
+                    continue
+                tile = self.tiles[key]
+                if isinstance(tile, DecodedTile):  # read by this block: cut and put away
+                    inside = tile.inside([b for _, b in boxes])  # the comparisons of TileReader.box
+                    tile = self.tiles[key] = (tile.take(inside) if not inside.all()
+                                              else tile).spill()
+                kept.append((boxes[0][0], key, len(tile)))
             # farthest next use out first (Belady) when over the budget
             kept.sort(key=lambda item: (item[0], item[1]))
             budget, total = KEEP_BLOCKS * self.largest, 0
-            for first, key, hit in kept:
-                total += len(hit[0])
-                if first == k + 1 or total <= budget:
-                    self.tiles[key] = hit
+            for first, key, n in kept:
+                total += n
+                if not (first == k + 1 or total <= budget):
+                    self._drop([key])
+
+    def _drop(self, keys) -> None:
+        for key in keys:
+            tile = self.tiles.pop(key)
+            if isinstance(tile, SpilledTile):
+                tile.close()
 
     def stop(self) -> None:
         """The run is over: drop every tile."""
         with self.lock:
-            self.tiles.clear()
+            self._drop(list(self.tiles))
             self.later = None
+            self.position = {}
             self.largest = 0
 
     def points(self) -> int:
         with self.lock:
-            return sum(len(world) for world, _ in self.tiles.values())
+            return sum(len(tile) for tile in self.tiles.values())
 
 
-#: the tile points a process keeps between blocks: at most this many times its
-#: largest block read (besides what the next block reads)
+#: the tile points a process keeps in scratch files between blocks: at most
+#: this many times its largest block read (besides what the next block reads)
 KEEP_BLOCKS = 3
 _cache = _TileCache()
 
@@ -207,7 +235,16 @@ def tile_keeper(specs):
 
 
 class _SharedTileReader(TileReader):
-    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a run."""
+    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a run;
+    each tile is put away (:meth:`_TileCache.release`) as soon as the block ``index``
+    has taken its points from it."""
+
+    def __init__(self, tiles, *, origin, index):
+        super().__init__(tiles, origin=origin)
+        self.index = index
+
+    def _taken(self, k):
+        _cache.release(self.index, path=self.tiles[k].path)
 
     def _tile(self, k):
         def decode():
@@ -217,13 +254,18 @@ class _SharedTileReader(TileReader):
 
         return _cache.get(self.tiles[k], decode)
 
+
 def _read_box(spec):
     """The points of the spec's world box (shared decoded tiles), or None when empty."""
     if spec.world_box is None or not spec.tiles:
         return None
-    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin))
-    cloud = reader.box(*spec.world_box)
-    _cache.read(len(cloud))
+    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin),
+                               index=spec.index)
+    try:
+        cloud = reader.box(*spec.world_box)
+        _cache.read(len(cloud))
+    finally:
+        _cache.release(spec.index)  # the block runs with its own points only
     return cloud if len(cloud) else None
 
 
