@@ -327,7 +327,14 @@ def _points_order(parts, attrs):
         return out
 
     def cols(d, order):
-        c = steps(d)[order].astype(np.float64)
+        c = np.empty(n, dtype=np.float64)
+        i = 0
+        for p in parts:  # base + steps: integers far below 2**53, exact in float64
+            seg = c[i:i + len(p)]
+            seg[...] = p.steps[:, d]
+            seg += p.base[d]
+            i += len(p)
+        c = c[order]
         return np.multiply(c, scales[d], out=c)
 
     def full():

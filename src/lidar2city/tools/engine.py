@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 
 from ..errors import DependencyError, InputError
@@ -51,6 +52,10 @@ class InProcess:
 
     def __exit__(self, *exc):
         return False
+
+    def ready(self):
+        """Ready at once (see :meth:`DaskExecutor.ready`)."""
+        return self
 
     def map(self, fn, items, *args, run_hook=None, costs=None):
         """``fn(item, *args)`` for every item in turn: ``(index, result or exception)``.
@@ -97,18 +102,47 @@ class DaskExecutor:
         self.workers = workers
         self._cluster = None
         self._client = None
+        self._starting = None
+        self._error = None
+        self._dlog = None
         self.startup_seconds = 0.0
 
     def __enter__(self):
+        """Start the cluster (or connect to it) in the background: the caller plans
+        its work meanwhile; the first :meth:`map` waits for it (and raises its
+        error, e.g. a scheduler that does not answer)."""
         t0 = time.perf_counter()
-        try:
-            return self._start()
-        finally:
-            self.startup_seconds = time.perf_counter() - t0
+        self._error = None
+
+        def start():
+            try:
+                self._start()
+                # the workers import the task modules now, not in their first task
+                self._client.run(_warm)
+            except BaseException as exc:  # noqa: BLE001 - raised by ready()
+                self._error = exc
+            finally:
+                self.startup_seconds = time.perf_counter() - t0
+
+        self._starting = threading.Thread(target=start, name="lidar2city-dask-start",
+                                          daemon=True)
+        self._starting.start()
+        return self
+
+    def ready(self):
+        """Wait for the cluster started by ``__enter__``; raise its start's error."""
+        if self._starting is not None:
+            self._starting.join()
+            self._starting = None
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        return self
 
     def process_cpu(self) -> dict:
         """CPU seconds of each worker process so far (start-up and imports included),
         by worker address."""
+        self.ready()
         return dict(sorted(self._client.run(_process_cpu).items()))
 
     def _start(self):
@@ -150,12 +184,23 @@ class DaskExecutor:
         return self
 
     def __exit__(self, *exc):
+        if self._starting is not None:  # the caller is done before the cluster was needed
+            self._starting.join()
+            self._starting = None
+        try:
+            self._close()
+        finally:
+            if self._error is not None and exc[0] is None:  # a start that failed unseen
+                raise self._error
+        return False
+
+    def _close(self):
         if self._client is not None:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
-        self._dlog.setLevel(self._dlog_level)
-        return False
+        if self._dlog is not None:
+            self._dlog.setLevel(self._dlog_level)
 
     def map(self, fn, items, *args, run_hook=None, costs=None):
         """As :meth:`InProcess.map`; a cluster task is a run of consecutive items
@@ -166,6 +211,7 @@ class DaskExecutor:
         items = list(items)
         if not items:
             return
+        self.ready()
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
         runs = runs_of(len(items), self.workers, costs)
@@ -193,6 +239,7 @@ class DaskExecutor:
                 f.cancel()
 
     def describe(self) -> str:
+        self.ready()
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
 
@@ -262,6 +309,11 @@ def _process_cpu() -> float:
     """CPU seconds of this process (user + system, all its threads)."""
     t = os.times()
     return t.user + t.system
+
+
+def _warm():
+    """Import what a worker's tasks use (run on every worker once the cluster is up)."""
+    from . import reconstruct, task  # noqa: F401
 
 
 def _run_many(items, *args, fn, run_hook=None):
