@@ -350,8 +350,8 @@ def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
 
     class Watched(engine.InProcess):
         def map(self, fn, items, *args, run_hook=None, costs=None):
-            def hook(run):
-                keep = run_hook(run)
+            def hook(run, ahead=()):
+                keep = run_hook(run, ahead)
 
                 def after(k):
                     keep(k)

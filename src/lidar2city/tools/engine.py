@@ -26,7 +26,7 @@ from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "RETRIES", "CONNECT_TIMEOUT",
+__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES", "CONNECT_TIMEOUT",
            "RUNS_PER_WORKER", "RUN_MAX_COST"]
 
 #: times a failed task is tried again before its failure is reported
@@ -57,17 +57,19 @@ class InProcess:
         """Ready at once (see :meth:`DaskExecutor.ready`)."""
         return self
 
-    def map(self, fn, items, *args, run_hook=None, costs=None):
+    def map(self, fn, items, *args, run_hook=None, costs=None, ahead=()):
         """``fn(item, *args)`` for every item in turn: ``(index, result or exception)``.
 
-        ``run_hook(items)``, when given, is called once with the items this
+        ``run_hook(items, ahead)``, when given, is called once with the items this
         process will run in turn and returns ``after(k)``, called after the
-        ``k``-th of them (e.g. to keep only the inputs the next items share).
+        ``k``-th of them (e.g. to keep only the inputs the next items share);
+        ``ahead``: the items the process is expected to run after these (a
+        cluster worker's next runs), whose inputs may be kept too.
         ``costs`` (one number per item) tells a cluster how to cut the items
         into runs of equal work; here they are all one run.
         """
         items = list(items)
-        after = run_hook(items) if run_hook is not None and items else None
+        after = run_hook(items, list(ahead)) if run_hook is not None and items else None
         try:
             for i, item in enumerate(items):
                 for attempt in range(RETRIES + 1):
@@ -205,7 +207,14 @@ class DaskExecutor:
     def map(self, fn, items, *args, run_hook=None, costs=None):
         """As :meth:`InProcess.map`; a cluster task is a run of consecutive items
         (:func:`runs_of`, of equal total ``costs`` when given), and ``run_hook``
-        is called on the worker per run."""
+        is called on the worker per run.
+
+        The runs are dealt to the workers in contiguous shares (:func:`shares_of`):
+        each worker is asked to run its share's runs in order (Dask may still move
+        a run to an idle worker near the end, or to another when one dies), and
+        each run is told the rest of its share (``ahead``), so a worker keeps the
+        inputs its next run shares with this one instead of reading them again.
+        """
         from distributed import as_completed
 
         items = list(items)
@@ -215,11 +224,20 @@ class DaskExecutor:
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
         runs = runs_of(len(items), self.workers, costs)
-        futures = self._client.map(_run_many, [items[a:b] for a, b in runs],
-                                   *[[a] * len(runs) for a in shared], fn=fn, run_hook=run_hook,
-                                   pure=False,
-                                   retries=RETRIES)
-        where = {f.key: r for f, r in zip(futures, runs, strict=True)}
+        names = sorted(self._client.scheduler_info().get("workers", {}))
+        shares = shares_of(len(runs), max(1, len(names)))
+        futures, where = [], {}
+        for rank, (k, r) in enumerate(_dealt(shares)):
+            a, b = runs[r]
+            last = runs[shares[k][1] - 1][1]  # the end of the share's items
+            # earlier submitted, higher priority: each worker's runs start in order
+            fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn, run_hook=run_hook,
+                                      ahead=items[b:last], pure=False, retries=RETRIES,
+                                      priority=len(runs) - rank,
+                                      workers=[names[k]] if names else None,
+                                      allow_other_workers=True)
+            futures.append(fut)
+            where[fut.key] = (a, b)
         try:
             with self._client.as_current():
                 completed = as_completed(futures)
@@ -316,10 +334,29 @@ def _warm():
     from . import reconstruct, task  # noqa: F401
 
 
-def _run_many(items, *args, fn, run_hook=None):
+def shares_of(runs: int, workers: int) -> list:
+    """``(first run, stop)`` of each worker's share: ``runs`` cut into ``workers``
+    contiguous shares of (nearly) equal numbers of runs."""
+    cuts = [runs * k // workers for k in range(workers + 1)]
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def _dealt(shares) -> list:
+    """``(share, run)`` in the order runs are handed out: the first run of every
+    share, then the second of every share..."""
+    out, depth = [], 0
+    while True:
+        row = [(k, a + depth) for k, (a, b) in enumerate(shares) if a + depth < b]
+        if not row:
+            return out
+        out += row
+        depth += 1
+
+
+def _run_many(items, *args, fn, run_hook=None, ahead=()):
     """One cluster task: ``fn`` over a run of items in turn, each tried as in
     :class:`InProcess`; ``[(offset in the run, result or exception)]``."""
-    return list(InProcess().map(fn, items, *args, run_hook=run_hook))
+    return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
 def make_executor(workers: int = 1, scheduler: str | None = None):

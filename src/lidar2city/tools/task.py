@@ -118,11 +118,14 @@ class _TileCache:
 
     def __init__(self):
         self.tiles = {}  # key -> DecodedTile (being read) or SpilledTile
+        # key -> the blocks (indices) whose boxes the kept points cover; None: all
+        self.covers = {}
         self.lock = threading.Lock()
-        self.later = None  # path -> [(position in the run, world box)] while a run is on
+        # path -> [(position in the run, world box, block index)] while a run is on
+        self.later = None
         self.position = {}  # block index -> position in the run
         self.decoded = 0
-        self.largest = 0  # points of the largest block read in the run
+        self.largest = 0  # points of the largest block read
 
     def read(self, n: int) -> None:
         """Note a block's read of ``n`` points."""
@@ -143,20 +146,28 @@ class _TileCache:
             hit = decode()
             with self.lock:
                 self.tiles[key] = hit
+                self.covers[key] = None
                 self.decoded += 1
         return hit
 
-    def start(self, specs) -> None:
-        """A run of ``specs`` begins: index which of its blocks read which tile."""
+    def start(self, specs, ahead=()) -> None:
+        """A run of ``specs`` begins, to be followed by ``ahead`` (the blocks the
+        process expects to run next): index which of these blocks read which
+        tile. A tile kept from the previous run stays when it holds the points
+        of every block here that reads it, else it is dropped (decoded again)."""
         later = {}
-        for k, spec in enumerate(specs):
+        for k, spec in enumerate([*specs, *ahead]):
             if spec.world_box is not None:
                 for t in spec.tiles:
-                    later.setdefault(t.path, []).append((k, spec.world_box))
+                    later.setdefault(t.path, []).append((k, spec.world_box, spec.index))
         with self.lock:
-            self._drop(list(self.tiles))
+            for key in list(self.tiles):
+                need = {i for _, _, i in later.get(key[0], ())}
+                cover = self.covers.get(key)
+                if not need or (cover is not None and not need <= cover):
+                    self._drop([key])
             self.later = later
-            self.position = {spec.index: k for k, spec in enumerate(specs)}
+            self.position = {spec.index: k for k, spec in enumerate([*specs, *ahead])}
 
     def release(self, index, path=None) -> None:
         """The block ``index`` has read its points (from the tile ``path``, default
@@ -167,24 +178,26 @@ class _TileCache:
 
     def keep_after(self, k, path=None) -> None:
         """Keep of each tile (or of the tile ``path``) only what the run's blocks
-        after position ``k`` read from it, written to scratch files, soonest
-        needed first, up to :data:`KEEP_BLOCKS` times the largest block read so
-        far (what the next block reads is always kept); ``k`` None: keep nothing."""
+        after position ``k`` (and the blocks ahead) read from it, written to
+        scratch files, soonest needed first, up to :data:`KEEP_BLOCKS` times the
+        largest block read (what the next block reads is always kept); ``k``
+        None: keep nothing."""
         with self.lock:
             later = self.later or {}
             kept = []
             for key in list(self.tiles):
                 if path is not None and key[0] != path:
                     continue
-                boxes = [] if k is None else [(j, b) for j, b in later.get(key[0], ()) if j > k]
+                boxes = [] if k is None else [e for e in later.get(key[0], ()) if e[0] > k]
                 if not boxes:
                     self._drop([key])
                     continue
                 tile = self.tiles[key]
                 if isinstance(tile, DecodedTile):  # read by this block: cut and put away
-                    inside = tile.inside([b for _, b in boxes])  # the comparisons of TileReader.box
+                    inside = tile.inside([b for _, b, _ in boxes])  # the comparisons of TileReader.box
                     tile = self.tiles[key] = (tile.take(inside) if not inside.all()
                                               else tile).spill()
+                    self.covers[key] = frozenset(i for _, _, i in boxes)
                 kept.append((boxes[0][0], key, len(tile)))
             # farthest next use out first (Belady) when over the budget
             kept.sort(key=lambda item: (item[0], item[1]))
@@ -194,19 +207,26 @@ class _TileCache:
                 if not (first == k + 1 or total <= budget):
                     self._drop([key])
 
+    def end_run(self, k) -> None:
+        """The run is over after its position ``k``: keep only what the blocks ahead read."""
+        self.keep_after(k)
+        with self.lock:
+            self.later = None
+            self.position = {}
+
     def _drop(self, keys) -> None:
         for key in keys:
             tile = self.tiles.pop(key)
+            self.covers.pop(key, None)
             if isinstance(tile, SpilledTile):
                 tile.close()
 
     def stop(self) -> None:
-        """The run is over: drop every tile."""
+        """Drop every tile (no run is on)."""
         with self.lock:
             self._drop(list(self.tiles))
             self.later = None
             self.position = {}
-            self.largest = 0
 
     def points(self) -> int:
         with self.lock:
@@ -214,20 +234,27 @@ class _TileCache:
 
 
 #: the tile points a process keeps in scratch files between blocks: at most
-#: this many times its largest block read (besides what the next block reads)
-KEEP_BLOCKS = 3
+#: this many times its largest block read (besides what the next block reads),
+#: ~40 MB of scratch space for blocks of 300,000 points; enough for the strip
+#: of tiles a row of blocks leaves to the next row on areas tens of blocks wide
+KEEP_BLOCKS = 8
 _cache = _TileCache()
 
 
-def tile_keeper(specs):
+def tile_keeper(specs, ahead=()):
     """The run hook of :meth:`lidar2city.tools.engine.InProcess.map` for blocks:
     ``keep(k)`` after the ``k``-th block of the run keeps only the tile points
-    the run's next blocks read (``keep(len(specs))`` at the end drops all)."""
-    _cache.start(specs)
+    the run's next blocks (and the blocks ``ahead``, which the process will
+    run next) read; after the last block, only those the blocks ahead read."""
+    _cache.start(specs, ahead)
+    ended = []
 
     def keep(k):
+        if ended:
+            return
         if k >= len(specs) - 1:
-            _cache.stop()
+            ended.append(k)
+            _cache.end_run(k)
         else:
             _cache.keep_after(k)
 
