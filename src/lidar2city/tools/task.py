@@ -361,6 +361,17 @@ def run_block(spec, options: BlockOptions) -> BlockOutput:
 
 
 def _peak_mb() -> float:
+    """This process's peak resident memory (MB): Linux's ``VmHWM``, the peak of
+    its own address space. ``ru_maxrss`` is only the fallback: Linux carries it
+    over ``exec``, so a process started by a large one (a Dask worker spawned
+    by its nanny, a benchmark's child) would report its parent's size."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         import resource
     except ImportError:  # pragma: no cover - not on Windows
