@@ -292,7 +292,8 @@ def test_a_cluster_takes_runs_of_consecutive_items_covering_all_once(n, workers)
 
 
 @pytest.mark.parametrize("costs", [[1] * 10 + [5] * 38, [0, 0, 0, 0, 100], [3, 1, 2]])
-def test_runs_of_equal_cost_cover_every_item_once_in_order(costs):
+def test_runs_of_equal_cost_cover_every_item_once_in_order(costs, monkeypatch):
+    monkeypatch.setattr(engine, "RUNS_PER_WORKER", 2)
     n = len(costs)
     runs = engine.runs_of(n, 2, costs)
     assert runs[0][0] == 0 and runs[-1][1] == n and all(a < b for a, b in runs)
@@ -381,3 +382,25 @@ def test_footprints_on_tiles_give_the_same_bytes_on_one_and_two_workers(area, tm
     assert not s1["failed_blocks"] and not task._cache.tiles
     fps, _ = read_footprints(one)
     assert fps.ids == [f"b{i + 1:05d}" for i in range(s1["buildings"])]
+
+
+@pytest.mark.parametrize("runs,workers", [(8, 2), (9, 2), (3, 4), (12, 5)])
+def test_runs_are_dealt_in_contiguous_shares_first_runs_first(runs, workers):
+    """Each worker's share is a stretch of consecutive runs (their inputs pass from
+    run to run); every share's first run is handed out before any second run."""
+    shares = engine.shares_of(runs, workers)
+    assert [a for a, _ in shares] == sorted(a for a, _ in shares) and shares[0][0] == 0
+    assert shares[-1][1] == runs and all(b == c for (_, b), (c, _) in zip(shares, shares[1:]))
+    assert max(b - a for a, b in shares) - min(b - a for a, b in shares) <= 1
+    dealt = engine._dealt(shares)
+    assert sorted(r for _, r in dealt) == list(range(runs))
+    depth = [r - shares[k][0] for k, r in dealt]
+    assert depth == sorted(depth)
+    assert all(shares[k][0] <= r < shares[k][1] for k, r in dealt)
+
+
+def test_a_run_count_is_a_multiple_of_the_workers():
+    """More runs than RUNS_PER_WORKER x workers (the cap) still give every worker
+    as many runs."""
+    runs = engine.runs_of(30, 2, [100] * 30, max_cost=280)  # 3000 / 280: 11 runs at least
+    assert len(runs) % 2 == 0 and len(runs) >= 11

@@ -262,10 +262,10 @@ class DaskExecutor:
                 else f"Dask LocalCluster of {self.workers} workers")
 
 
-#: runs per worker: enough for the workers to finish together, few enough for
-#: each run to be a long stretch of neighbouring items (each run boundary has
-#: both its sides decode the tiles they share)
-RUNS_PER_WORKER = 2
+#: runs per worker: a worker's runs are one contiguous share whose inputs pass
+#: from run to run (:func:`shares_of`), so runs cost no extra reading; several
+#: per worker let an idle worker take a short run off a slow one at the end
+RUNS_PER_WORKER = 4
 
 #: the most work one cluster task takes (in ``costs`` units: buildings for
 #: blocks of footprints, else items): a task returns its items' results
@@ -298,7 +298,7 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
     dealt one by one to alternate workers make every worker decode every tile.
     About ``RUNS_PER_WORKER`` runs per worker, of equal length, or of equal
     total ``costs`` (one non-negative number per item, e.g. its buildings) when given;
-    more runs when that would give a run more than ``max_cost`` (default
+    more runs (a multiple of ``workers``) when that would give a run more than ``max_cost`` (default
     :data:`RUN_MAX_COST`; an item costs 1 without ``costs``), so that what a
     task holds is bounded whatever the area (a single item may cost more).
     """
@@ -307,9 +307,11 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
     max_cost = RUN_MAX_COST if max_cost is None else max_cost
     total = (np.arange(1, n + 1, dtype=np.float64) if costs is None
              else np.cumsum(np.asarray(costs, dtype=np.float64).reshape(n)))
-    want = RUNS_PER_WORKER * max(1, int(workers or 1))
+    w = max(1, int(workers or 1))
+    want = RUNS_PER_WORKER * w
     if n and total[-1] > 0:
         want = max(want, int(np.ceil(total[-1] / max_cost)))
+        want = -(-want // w) * w  # equal numbers of runs for every worker's share
     count = max(1, min(n, want))
     if costs is None:
         cuts = [n * k // count for k in range(count + 1)]
