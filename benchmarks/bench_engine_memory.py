@@ -14,7 +14,7 @@ between blocks for later blocks (in unlinked scratch files, not in memory),
 the tiles decoded (each tile once when the scratch budget holds the strip of
 tiles a row of blocks leaves to the next), and the most results waiting for
 earlier footprints of the file's order (the footprints are written tile by tile, the blocks run row by
-row). ``--repeat K`` reconstructs the same area K times in the one process and
+row), and the most points a block read. ``--repeat K`` reconstructs the same area K times in the one process and
 prints the peak after each: a peak that still rises on the same blocks is the
 heap's fragmentation, not live data.
 """
@@ -52,13 +52,13 @@ for spec in plan.specs:
         waiting.discard(nxt)
         nxt += 1
     most = max(most, len(waiting))
-top = {"rss": 0.0, "inuse": 0.0, "free": 0.0, "cache": 0}
+top = {"rss": 0.0, "inuse": 0.0, "free": 0.0, "cache": 0, "largest": 0}
 
 def seen(done, total):
     m = libc.mallinfo2()
     rss = int(open("/proc/self/statm").read().split()[1]) * resource.getpagesize() / 2**20
     for k, v in (("rss", rss), ("inuse", m.uordblks / 2**20), ("free", m.fordblks / 2**20),
-                 ("cache", task._cache.points())):
+                 ("cache", task._cache.points()), ("largest", task._cache.largest)):
         top[k] = max(top[k], v)
 
 peaks = []
@@ -94,7 +94,8 @@ def main():
                   f"resident {m['rss']:.0f} MB, C heap in use {m['inuse']:.0f} MB, C heap "
                   f"free (kept by glibc) {m['free']:.0f} MB; tile points kept for later blocks "
                   f"(scratch files) {m['cache'] / 1e6:.2f} M, {m['decoded']} decodings of "
-                  f"{m['tiles']} tiles; {m['waiting']} results waiting for earlier footprints",
+                  f"{m['tiles']} tiles; largest block read {m['largest']:,} points; "
+                  f"{m['waiting']} results waiting for earlier footprints",
                   flush=True)
 
 
