@@ -181,13 +181,17 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
         paths = [paths]
     forced = parse_crs(crs) if crs is not None else None
-    out = []
+    out, shared = [], {}
     for path in paths:
         p = check_input_file(path)
         with _reading(p), laspy.open(p) as f:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = forced if forced is not None else _read_crs(f, p)
+        if tile_crs is not None:
+            # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
+            # state: 300 MB for 10,000 tiles otherwise)
+            tile_crs = shared.setdefault(tile_crs.to_wkt(), tile_crs)
         out.append(TileInfo(str(p), mins, maxs, count, tile_crs))
     if not out:
         raise EmptyInputError("no input file given")
