@@ -13,8 +13,9 @@ glibc keeps, not given back to the system), the most decoded tile points kept
 between blocks for later blocks (in unlinked scratch files, not in memory),
 the tiles decoded (each tile once when the scratch budget holds the strip of
 tiles a row of blocks leaves to the next), and the most results waiting for
-earlier footprints of the file's order (the footprints are written tile by tile, the blocks run row by
-row), and the most points a block read. ``--repeat K`` reconstructs the same area K times in the one process and
+earlier footprints of the file's order (the footprints are written tile by
+tile, the blocks run row by row), and the most points a block read.
+``--repeat K`` reconstructs the same area K times in the one process and
 prints the peak after each: a peak that still rises on the same blocks is the
 heap's fragmentation, not live data.
 """

@@ -15,7 +15,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las", "read_tile", "read_points", "scan_tiles",
+__all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las",
+           "read_tile", "read_points", "scan_tiles",
            "with_neighbours",
            "write_las", "write_points", "POINT_ATTRIBUTES"]
 

@@ -12,7 +12,10 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   processes (one thread each), or an existing cluster given by its scheduler
   address (started with ``dask scheduler`` / ``dask worker``). A cluster task
   is a run of consecutive items (:func:`runs_of`), so a worker's items are
-  neighbours that share their inputs (a block's tiles).
+  neighbours that share their inputs (a block's tiles); each worker is dealt a
+  contiguous share of the runs (:func:`shares_of`) and each run is told the
+  rest of its share, so those inputs pass from run to run.
+  The cluster starts in the background when the executor is entered.
 """
 
 from __future__ import annotations
@@ -26,7 +29,8 @@ from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES", "CONNECT_TIMEOUT",
+__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
+           "CONNECT_TIMEOUT",
            "RUNS_PER_WORKER", "RUN_MAX_COST"]
 
 #: times a failed task is tried again before its failure is reported

@@ -194,7 +194,8 @@ class _TileCache:
                     continue
                 tile = self.tiles[key]
                 if isinstance(tile, DecodedTile):  # read by this block: cut and put away
-                    inside = tile.inside([b for _, b, _ in boxes])  # the comparisons of TileReader.box
+                    # the comparisons of TileReader.box
+                    inside = tile.inside([b for _, b, _ in boxes])
                     tile = self.tiles[key] = (tile.take(inside) if not inside.all()
                                               else tile).spill()
                     self.covers[key] = frozenset(i for _, _, i in boxes)
