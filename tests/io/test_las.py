@@ -118,3 +118,22 @@ def test_points_of_tiles_sorted_on_integer_steps_as_on_coordinates(dup):
     assert np.array_equal(order, want)
     for d in range(3):
         assert np.array_equal(cols(d, order), world[want, d])
+
+
+@pytest.mark.parametrize("n", [0, 1, 500])
+def test_a_spilled_tile_loads_back_the_same(n):
+    """A decoded tile written to a scratch file (empty ones included) loads back equal."""
+    from lidar2city.io.las import DecodedTile
+
+    rng = np.random.default_rng(2)
+    tile = DecodedTile(rng.integers(0, 10**6, (n, 3)).astype(np.int32),
+                       np.array([85_000_000, 447_000_000, 0], dtype=np.int64), np.full(3, 0.001),
+                       {"classification": rng.integers(0, 9, n).astype(np.uint8),
+                        "intensity": rng.integers(0, 999, n).astype(np.uint16)})
+    spilled = tile.spill()
+    back = spilled.load()
+    spilled.close()
+    assert len(spilled) == n and np.array_equal(back.steps, tile.steps)
+    assert back.steps.dtype == np.int32 and np.array_equal(back.world(), tile.world())
+    assert all(np.array_equal(back.attrs[k], v) and back.attrs[k].dtype == v.dtype
+               for k, v in tile.attrs.items())

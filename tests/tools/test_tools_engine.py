@@ -404,3 +404,32 @@ def test_a_run_count_is_a_multiple_of_the_workers():
     as many runs."""
     runs = engine.runs_of(30, 2, [100] * 30, max_cost=280)  # 3000 / 280: 11 runs at least
     assert len(runs) % 2 == 0 and len(runs) >= 11
+
+
+def test_a_run_told_of_other_blocks_than_it_gets_next_reads_the_same_points(area, tmp_path):
+    """Tiles kept for the blocks a run was told come next hold only their points: a
+    run that gets other blocks decodes the tiles again and reads exactly what a
+    fresh read gives."""
+    from lidar2city.tools.reconstruct import plan_reconstruct
+
+    plan = plan_reconstruct([area / "town.laz"], tmp_path / "x.city.json",
+                            footprints=area / "fp.gpkg", lods=("1.2",), block_size=BLOCK)
+    specs = [s for s in plan.specs if s.world_box is not None]
+    assert len(specs) >= 3
+    fresh = []
+    for s in specs:
+        task._cache.stop()
+        fresh.append(task._read_box(s))
+    try:
+        keep = task.tile_keeper(specs[:1], ahead=specs[-1:])  # told: the last block next
+        got = [task._read_box(specs[0])]
+        keep(0)
+        keep = task.tile_keeper(specs[1:])  # but gets the others
+        for k, s in enumerate(specs[1:]):
+            got.append(task._read_box(s))
+            keep(k)
+    finally:
+        task._cache.stop()
+    for a, b in zip(got, fresh, strict=True):
+        assert np.array_equal(a.xyz, b.xyz)
+        assert np.array_equal(a.attributes["classification"], b.attributes["classification"])

@@ -466,7 +466,8 @@ class SpilledTile:
         self._layout = [(n, a.dtype, a.shape) for n, a in arrays.items()]
         self._file = tempfile.TemporaryFile(prefix="lidar2city-tile-")
         for a in arrays.values():
-            self._file.write(memoryview(np.ascontiguousarray(a)).cast("B"))
+            if a.size:  # (an empty tile part has nothing to write)
+                self._file.write(memoryview(np.ascontiguousarray(a)).cast("B"))
         self._file.flush()
 
     def __len__(self) -> int:

@@ -14,7 +14,7 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   is a run of consecutive items (:func:`runs_of`), so a worker's items are
   neighbours that share their inputs (a block's tiles); each worker is dealt a
   contiguous share of the runs (:func:`shares_of`) and each run is told the
-  rest of its share, so those inputs pass from run to run.
+  share's next runs, so those inputs pass from run to run.
   The cluster starts in the background when the executor is entered.
 """
 
@@ -31,7 +31,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
            "CONNECT_TIMEOUT",
-           "RUNS_PER_WORKER", "RUN_MAX_COST"]
+           "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS"]
 
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
@@ -216,8 +216,9 @@ class DaskExecutor:
         The runs are dealt to the workers in contiguous shares (:func:`shares_of`):
         each worker is asked to run its share's runs in order (Dask may still move
         a run to an idle worker near the end, or to another when one dies), and
-        each run is told the rest of its share (``ahead``), so a worker keeps the
-        inputs its next run shares with this one instead of reading them again.
+        each run is told the share's next runs (``ahead``, :data:`AHEAD_RUNS`), so
+        a worker keeps the inputs its next runs share with this one instead of
+        reading them again.
         """
         from distributed import as_completed
 
@@ -233,10 +234,13 @@ class DaskExecutor:
         futures, where = [], {}
         for rank, (k, r) in enumerate(_dealt(shares)):
             a, b = runs[r]
-            last = runs[shares[k][1] - 1][1]  # the end of the share's items
+            # the share's next runs (the tiles they read are kept for them), not all
+            # the rest: what a task carries stays bounded whatever the area
+            nxt = min(r + AHEAD_RUNS, shares[k][1] - 1)
+            ahead = items[b:runs[nxt][1]] if nxt > r else []
             # earlier submitted, higher priority: each worker's runs start in order
             fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn, run_hook=run_hook,
-                                      ahead=items[b:last], pure=False, retries=RETRIES,
+                                      ahead=ahead, pure=False, retries=RETRIES,
                                       priority=len(runs) - rank,
                                       workers=[names[k]] if names else None,
                                       allow_other_workers=True)
@@ -270,6 +274,12 @@ class DaskExecutor:
 #: from run to run (:func:`shares_of`), so runs cost no extra reading; several
 #: per worker let an idle worker take a short run off a slow one at the end
 RUNS_PER_WORKER = 4
+
+#: the runs of its share a run is told of (their items travel with the task):
+#: the tiles a run decodes are kept for these too, so a strip of tiles that a
+#: row of blocks leaves to the next row is decoded once even when a run is
+#: shorter than a row
+AHEAD_RUNS = 3
 
 #: the most work one cluster task takes (in ``costs`` units: buildings for
 #: blocks of footprints, else items): a task returns its items' results

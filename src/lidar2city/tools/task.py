@@ -131,13 +131,18 @@ class _TileCache:
         """Note a block's read of ``n`` points."""
         self.largest = max(self.largest, int(n))
 
-    def get(self, tile, decode):
-        """The decoded ``tile`` (``decode()`` when it is not kept), keyed by its file's
+    def get(self, tile, decode, index=None):
+        """The decoded ``tile`` (``decode()`` when it is not kept, or when what is kept
+        was cut without the points of the block ``index``), keyed by its file's
         path, size and modification time."""
         st = os.stat(tile.path)
         key = (tile.path, st.st_size, st.st_mtime_ns)
         with self.lock:
             hit = self.tiles.get(key)
+            cover = self.covers.get(key)
+            if hit is not None and cover is not None and index not in cover:
+                self._drop([key])  # kept for other blocks only: decoded again
+                hit = None
             if isinstance(hit, SpilledTile):
                 spilled, hit = hit, hit.load()
                 spilled.close()
@@ -153,8 +158,8 @@ class _TileCache:
     def start(self, specs, ahead=()) -> None:
         """A run of ``specs`` begins, to be followed by ``ahead`` (the blocks the
         process expects to run next): index which of these blocks read which
-        tile. A tile kept from the previous run stays when it holds the points
-        of every block here that reads it, else it is dropped (decoded again)."""
+        tile. A tile kept from the previous run stays when one of these blocks
+        reads it; a block it was not cut for decodes it again (:meth:`get`)."""
         later = {}
         for k, spec in enumerate([*specs, *ahead]):
             if spec.world_box is not None:
@@ -162,9 +167,7 @@ class _TileCache:
                     later.setdefault(t.path, []).append((k, spec.world_box, spec.index))
         with self.lock:
             for key in list(self.tiles):
-                need = {i for _, _, i in later.get(key[0], ())}
-                cover = self.covers.get(key)
-                if not need or (cover is not None and not need <= cover):
+                if key[0] not in later:
                     self._drop([key])
             self.later = later
             self.position = {spec.index: k for k, spec in enumerate([*specs, *ahead])}
@@ -198,7 +201,11 @@ class _TileCache:
                     inside = tile.inside([b for _, b, _ in boxes])
                     tile = self.tiles[key] = (tile.take(inside) if not inside.all()
                                               else tile).spill()
-                    self.covers[key] = frozenset(i for _, _, i in boxes)
+                    # the blocks whose points it now holds: those of the boxes, and
+                    # of the blocks it held before (a tile loaded back from scratch)
+                    cover = frozenset(i for _, _, i in boxes)
+                    old = self.covers.get(key)
+                    self.covers[key] = cover if old is None else cover & old
                 kept.append((boxes[0][0], key, len(tile)))
             # farthest next use out first (Belady) when over the budget
             kept.sort(key=lambda item: (item[0], item[1]))
@@ -280,7 +287,7 @@ class _SharedTileReader(TileReader):
             self._tiles.clear()  # held by the shared cache only
             return hit
 
-        return _cache.get(self.tiles[k], decode)
+        return _cache.get(self.tiles[k], decode, self.index)
 
 
 def _read_box(spec):
