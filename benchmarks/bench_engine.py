@@ -14,9 +14,10 @@ of 200 m; to a streamed CityJSONSeq) in a fresh process with ``--workers 1``
 (in process) and, on the largest area, with ``--workers 2`` (a local Dask
 cluster). Printed per run: buildings, wall
 seconds, buildings per second, the peak resident memory of the process that
-ran the blocks (``ru_maxrss`` read in the worker after each block; with 1
-worker that process is also the client, which holds the results not yet
-written),
+ran the blocks (Linux ``VmHWM`` read in the worker after each block: its own
+peak; ``ru_maxrss`` would count the size of this script, which Linux carries
+over into the child it starts; with 1 worker that process is also the
+client, which holds the results not yet written),
 seconds per building, and the MD5 of the output (the same for every worker
 count) and the CPU seconds used by the run and all the processes it started
 (Dask workers included); for a cluster also the seconds to start it, the CPU

@@ -5,13 +5,17 @@ Usage: ``PYTHONPATH=src python benchmarks/bench_engine_memory.py [--sizes 2,4,8,
 The synthetic areas of ``bench_engine.py`` (n x n demo-town tiles, blocks of
 200 m, LoD1.2 to a streamed CityJSONSeq) are reconstructed with ``--workers 1``
 in a fresh process each. Printed per area, over its blocks (after each one):
-the peak resident memory (``ru_maxrss``), the largest resident memory between
+the peak resident memory (``VmHWM``: the process's own peak; ``ru_maxrss``,
+carried over ``exec``, would count this script's size), the largest resident memory between
 blocks, the most bytes the C heap had in use (glibc ``mallinfo2().uordblks``:
 live arrays and objects) and the most it held free (``fordblks``: freed memory
-glibc keeps, not given back to the system), the most decoded tile points the
-tile cache kept, and the most results waiting for earlier footprints of the
-file's order (the footprints are written tile by tile, the blocks run row by
-row). ``--repeat K`` reconstructs the same area K times in the one process and
+glibc keeps, not given back to the system), the most decoded tile points kept
+between blocks for later blocks (in unlinked scratch files, not in memory),
+the tiles decoded (each tile once when the scratch budget holds the strip of
+tiles a row of blocks leaves to the next), and the most results waiting for
+earlier footprints of the file's order (the footprints are written tile by
+tile, the blocks run row by row), and the most points a block read.
+``--repeat K`` reconstructs the same area K times in the one process and
 prints the peak after each: a peak that still rises on the same blocks is the
 heap's fragmentation, not live data.
 """
@@ -49,22 +53,23 @@ for spec in plan.specs:
         waiting.discard(nxt)
         nxt += 1
     most = max(most, len(waiting))
-top = {"rss": 0.0, "inuse": 0.0, "free": 0.0, "cache": 0}
+top = {"rss": 0.0, "inuse": 0.0, "free": 0.0, "cache": 0, "largest": 0}
 
 def seen(done, total):
     m = libc.mallinfo2()
     rss = int(open("/proc/self/statm").read().split()[1]) * resource.getpagesize() / 2**20
     for k, v in (("rss", rss), ("inuse", m.uordblks / 2**20), ("free", m.fordblks / 2**20),
-                 ("cache", task._cache.points())):
+                 ("cache", task._cache.points()), ("largest", task._cache.largest)):
         top[k] = max(top[k], v)
 
 peaks = []
 for _ in range(a["repeat"]):
     R.reconstruct(a["tiles"], a["out"], footprints=a["fp"], block_size=a["block"],
                   block_progress=seen)
-    peaks.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    peaks.append(task._peak_mb())  # VmHWM: ru_maxrss would count this script's own size
 print(json.dumps({"blocks": len(plan.specs), "buildings": plan.total, "waiting": most,
-                  "peaks": peaks, **top}))
+                  "peaks": peaks, "tiles": len(a["tiles"]), "decoded": task._cache.decoded,
+                  **top}))
 """
 
 
@@ -88,8 +93,11 @@ def main():
             print(f"{n * n:3d} tiles, {m['blocks']} blocks, {m['buildings']} buildings: peak "
                   f"{' -> '.join(f'{v:.0f}' for v in m['peaks'])} MB; between blocks at most: "
                   f"resident {m['rss']:.0f} MB, C heap in use {m['inuse']:.0f} MB, C heap "
-                  f"free (kept by glibc) {m['free']:.0f} MB, tile cache {m['cache'] / 1e6:.2f} M "
-                  f"points, {m['waiting']} results waiting for earlier footprints", flush=True)
+                  f"free (kept by glibc) {m['free']:.0f} MB; tile points kept for later blocks "
+                  f"(scratch files) {m['cache'] / 1e6:.2f} M, {m['decoded']} decodings of "
+                  f"{m['tiles']} tiles; largest block read {m['largest']:,} points; "
+                  f"{m['waiting']} results waiting for earlier footprints",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -96,27 +96,6 @@ def test_canonical_order_is_the_seven_key_lexsort():
         assert np.array_equal(_canonical_order(cols, attrs), want)
 
 
-def test_canonical_order_on_a_coordinate_grid_is_the_lexsort():
-    """Coordinates snapped to a file's grid sort by their integer steps: np.lexsort's
-    order, ties included, and a column off the grid falls back to its ranks."""
-    from lidar2city.io.las import _canonical_order
-
-    rng = np.random.default_rng(4)
-    scales = (0.001, 0.01, 0.00025)
-    for dup in (False, True):
-        n = 3000
-        span = 5 if dup else 10**6
-        cols = [np.round(rng.integers(-span, span, n) * s + 85000.0 * (d == 0), 12)
-                for d, s in enumerate(scales)]
-        cols = [np.round(c / s) * s for c, s in zip(cols, scales)]  # as _read_world snaps
-        attrs = [rng.integers(0, 3, n).astype(np.uint8)]
-        want = np.lexsort(attrs[::-1] + cols[::-1])
-        assert np.array_equal(_canonical_order(cols, attrs, scales=scales), want)
-        off = [cols[0] + 1e-7 * rng.random(n), cols[1], cols[2]]  # x no longer on its grid
-        want = np.lexsort(attrs[::-1] + off[::-1])
-        assert np.array_equal(_canonical_order(off, attrs, scales=scales), want)
-
-
 @pytest.mark.parametrize("late", [0, 20_000, 99_999])
 def test_has_classes_finds_a_class_wherever_it_first_appears(tmp_path, late):
     """The class scan reads growing chunks: a class first met deep in the file (past the
@@ -133,3 +112,46 @@ def test_has_classes_finds_a_class_wherever_it_first_appears(tmp_path, late):
     reader = TileReader(scan_tiles([out], crs="EPSG:28992"))
     assert reader.has_classes([6])
     assert not reader.has_classes([17])
+
+
+@pytest.mark.parametrize("dup", [False, True])
+def test_points_of_tiles_sorted_on_integer_steps_as_on_coordinates(dup):
+    """The tile reader sorts the points of same-resolution tiles on their integer
+    steps: the same order (ties by attributes included) as the float lexsort."""
+    from lidar2city.io.las import DecodedTile, _points_order
+
+    rng = np.random.default_rng(5)
+    parts = []
+    for base in ([85_000_000, 447_000_000, -18_000], [85_200_000, 446_990_000, 0]):
+        n = 1500
+        steps = rng.integers(0, 4 if dup else 200_000, (n, 3)).astype(np.int32)
+        attrs = {"classification": rng.integers(0, 3, n).astype(np.uint8),
+                 "intensity": rng.integers(0, 9, n).astype(np.uint16)}
+        parts.append(DecodedTile(steps, np.array(base, dtype=np.int64),
+                                 np.full(3, 0.001), attrs))
+    world = np.concatenate([p.world() for p in parts])
+    attrs = [np.concatenate([p.attrs[k] for p in parts]) for k in ("classification", "intensity")]
+    want = np.lexsort(attrs[::-1] + [world[:, 2], world[:, 1], world[:, 0]])
+    order, cols = _points_order(parts, attrs)
+    assert np.array_equal(order, want)
+    for d in range(3):
+        assert np.array_equal(cols(d, order), world[want, d])
+
+
+@pytest.mark.parametrize("n", [0, 1, 500])
+def test_a_spilled_tile_loads_back_the_same(n):
+    """A decoded tile written to a scratch file (empty ones included) loads back equal."""
+    from lidar2city.io.las import DecodedTile
+
+    rng = np.random.default_rng(2)
+    tile = DecodedTile(rng.integers(0, 10**6, (n, 3)).astype(np.int32),
+                       np.array([85_000_000, 447_000_000, 0], dtype=np.int64), np.full(3, 0.001),
+                       {"classification": rng.integers(0, 9, n).astype(np.uint8),
+                        "intensity": rng.integers(0, 999, n).astype(np.uint16)})
+    spilled = tile.spill()
+    back = spilled.load()
+    spilled.close()
+    assert len(spilled) == n and np.array_equal(back.steps, tile.steps)
+    assert back.steps.dtype == np.int32 and np.array_equal(back.world(), tile.world())
+    assert all(np.array_equal(back.attrs[k], v) and back.attrs[k].dtype == v.dtype
+               for k, v in tile.attrs.items())

@@ -292,7 +292,8 @@ def test_a_cluster_takes_runs_of_consecutive_items_covering_all_once(n, workers)
 
 
 @pytest.mark.parametrize("costs", [[1] * 10 + [5] * 38, [0, 0, 0, 0, 100], [3, 1, 2]])
-def test_runs_of_equal_cost_cover_every_item_once_in_order(costs):
+def test_runs_of_equal_cost_cover_every_item_once_in_order(costs, monkeypatch):
+    monkeypatch.setattr(engine, "RUNS_PER_WORKER", 2)
     n = len(costs)
     runs = engine.runs_of(n, 2, costs)
     assert runs[0][0] == 0 and runs[-1][1] == n and all(a < b for a, b in runs)
@@ -320,7 +321,9 @@ def test_a_run_holds_at_most_max_cost_whatever_the_area(costs, cap):
 
 def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
     """After each block of a run the shared cache holds, of each tile, only the points
-    inside the boxes of the run's later blocks; nothing once the run is over."""
+    inside the boxes of the run's later blocks, in scratch files (none in memory);
+    nothing once the run is over."""
+    from lidar2city.io.las import SpilledTile
     from lidar2city.tools.reconstruct import plan_reconstruct, run_blocks
 
     plan = plan_reconstruct([area / "town.laz"], tmp_path / "x.city.json",
@@ -337,7 +340,9 @@ def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
 
     def check(k):
         later = [s.world_box for s in specs[k + 1:] if s.world_box is not None]
-        for world, _ in task._cache.tiles.values():
+        for spilled in task._cache.tiles.values():
+            assert isinstance(spilled, SpilledTile)  # nothing held in memory between blocks
+            world = spilled.load().world()
             x, y = world[:, 0], world[:, 1]
             inside = np.zeros(len(world), dtype=bool)
             for x0, y0, x1, y1 in later:
@@ -346,8 +351,8 @@ def test_a_run_keeps_only_the_tile_points_its_next_blocks_read(area, tmp_path):
 
     class Watched(engine.InProcess):
         def map(self, fn, items, *args, run_hook=None, costs=None):
-            def hook(run):
-                keep = run_hook(run)
+            def hook(run, ahead=()):
+                keep = run_hook(run, ahead)
 
                 def after(k):
                     keep(k)
@@ -377,3 +382,54 @@ def test_footprints_on_tiles_give_the_same_bytes_on_one_and_two_workers(area, tm
     assert not s1["failed_blocks"] and not task._cache.tiles
     fps, _ = read_footprints(one)
     assert fps.ids == [f"b{i + 1:05d}" for i in range(s1["buildings"])]
+
+
+@pytest.mark.parametrize("runs,workers", [(8, 2), (9, 2), (3, 4), (12, 5)])
+def test_runs_are_dealt_in_contiguous_shares_first_runs_first(runs, workers):
+    """Each worker's share is a stretch of consecutive runs (their inputs pass from
+    run to run); every share's first run is handed out before any second run."""
+    shares = engine.shares_of(runs, workers)
+    assert [a for a, _ in shares] == sorted(a for a, _ in shares) and shares[0][0] == 0
+    assert shares[-1][1] == runs and all(b == c for (_, b), (c, _) in zip(shares, shares[1:]))
+    assert max(b - a for a, b in shares) - min(b - a for a, b in shares) <= 1
+    dealt = engine._dealt(shares)
+    assert sorted(r for _, r in dealt) == list(range(runs))
+    depth = [r - shares[k][0] for k, r in dealt]
+    assert depth == sorted(depth)
+    assert all(shares[k][0] <= r < shares[k][1] for k, r in dealt)
+
+
+def test_a_run_count_is_a_multiple_of_the_workers():
+    """More runs than RUNS_PER_WORKER x workers (the cap) still give every worker
+    as many runs."""
+    runs = engine.runs_of(30, 2, [100] * 30, max_cost=280)  # 3000 / 280: 11 runs at least
+    assert len(runs) % 2 == 0 and len(runs) >= 11
+
+
+def test_a_run_told_of_other_blocks_than_it_gets_next_reads_the_same_points(area, tmp_path):
+    """Tiles kept for the blocks a run was told come next hold only their points: a
+    run that gets other blocks decodes the tiles again and reads exactly what a
+    fresh read gives."""
+    from lidar2city.tools.reconstruct import plan_reconstruct
+
+    plan = plan_reconstruct([area / "town.laz"], tmp_path / "x.city.json",
+                            footprints=area / "fp.gpkg", lods=("1.2",), block_size=BLOCK)
+    specs = [s for s in plan.specs if s.world_box is not None]
+    assert len(specs) >= 3
+    fresh = []
+    for s in specs:
+        task._cache.stop()
+        fresh.append(task._read_box(s))
+    try:
+        keep = task.tile_keeper(specs[:1], ahead=specs[-1:])  # told: the last block next
+        got = [task._read_box(specs[0])]
+        keep(0)
+        keep = task.tile_keeper(specs[1:])  # but gets the others
+        for k, s in enumerate(specs[1:]):
+            got.append(task._read_box(s))
+            keep(k)
+    finally:
+        task._cache.stop()
+    for a, b in zip(got, fresh, strict=True):
+        assert np.array_equal(a.xyz, b.xyz)
+        assert np.array_equal(a.attributes["classification"], b.attributes["classification"])

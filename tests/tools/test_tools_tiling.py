@@ -62,6 +62,8 @@ def test_scan_tiles_reads_headers_and_checks_crs(town_tiles, tmp_path):
     _, d, sets = town_tiles
     tiles = scan_tiles(sets["four"])
     assert sum(t.count for t in tiles) == read_las(d / "whole.laz").data.header.point_count
+    # one CRS object for all the tiles (a country's tile index holds thousands)
+    assert tiles[0].crs is not None and all(t.crs is tiles[0].crs for t in tiles)
     assert TileReader(tiles).world_bounds()[0] > 0  # the empty tile's zeros are left out
     bad = tmp_path / "bad.laz"
     bad.write_bytes(b"not a las file")

@@ -15,7 +15,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LasTile", "TileInfo", "TileReader", "read_las", "read_points", "scan_tiles",
+__all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las",
+           "read_tile", "read_points", "scan_tiles",
            "with_neighbours",
            "write_las", "write_points", "POINT_ATTRIBUTES"]
 
@@ -158,15 +159,13 @@ def read_points(paths, *, crs=None, require_crs=False) -> PointCloud:
 
 @dataclass(frozen=True, eq=False)
 class TileInfo:
-    """A tile's header: path, bounds (CRS units), point count, CRS and coordinate
-    resolution (``scales``, CRS units per integer step; None when unknown)."""
+    """A tile's header: path, bounds (CRS units), point count and CRS."""
 
     path: str
     mins: np.ndarray
     maxs: np.ndarray
     count: int
     crs: object
-    scales: tuple | None = None
 
 
 def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
@@ -183,15 +182,18 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
         paths = [paths]
     forced = parse_crs(crs) if crs is not None else None
-    out = []
+    out, shared = [], {}
     for path in paths:
         p = check_input_file(path)
         with _reading(p), laspy.open(p) as f:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = forced if forced is not None else _read_crs(f, p)
-            scales = tuple(float(v) for v in h.scales)
-        out.append(TileInfo(str(p), mins, maxs, count, tile_crs, scales))
+        if tile_crs is not None:
+            # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
+            # state: 300 MB for 10,000 tiles otherwise)
+            tile_crs = shared.setdefault(tile_crs.to_wkt(), tile_crs)
+        out.append(TileInfo(str(p), mins, maxs, count, tile_crs))
     if not out:
         raise EmptyInputError("no input file given")
     if len({t.crs.to_wkt() if t.crs is not None else None for t in out}) > 1:
@@ -269,79 +271,124 @@ class TileReader:
                     size = min(4 * size, READ_CHUNK)
         return False
 
-    def _tile(self, k):
+    def _tile(self, k) -> DecodedTile:
         if k in self._tiles:
             self._tiles.move_to_end(k)
             return self._tiles[k]
         path = self.tiles[k].path
         self.reads += 1
-        self._tiles[k] = _read_world(path)
+        self._tiles[k] = read_tile(path)
         while len(self._tiles) > self.cache:
             self._tiles.popitem(last=False)
         return self._tiles[k]
 
+    def _taken(self, k) -> None:
+        """Tile ``k``'s points in a box were taken (a subclass may put the tile away)."""
+
     def box(self, xmin, ymin, xmax, ymax) -> PointCloud:
         """The points with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (world CRS units)."""
-        parts, attrs, scales = [], [], set()
+        parts = []
         for k, t in enumerate(self.tiles):
             if not t.count or t.maxs[0] < xmin or t.mins[0] > xmax or t.maxs[1] < ymin \
                     or t.mins[1] > ymax:
                 continue
-            scales.add(t.scales)
-            world, a = self._tile(k)
-            inside = ((world[:, 0] >= xmin) & (world[:, 0] <= xmax)
-                      & (world[:, 1] >= ymin) & (world[:, 1] <= ymax))
-            idx = np.flatnonzero(inside)
-            del inside
-            parts.append((world, idx))
-            attrs.append({n: v[idx] for n, v in a.items()})
-        keys = sorted(set.intersection(*(set(a) for a in attrs))) if attrs else []
-        values = {n: np.concatenate([a[n] for a in attrs]) for n in keys}
-        del attrs
+            tile = self._tile(k)
+            parts.append(tile.take(np.flatnonzero(tile.inside([(xmin, ymin, xmax, ymax)]))))
+            del tile
+            self._taken(k)
+        keys = sorted(set.intersection(*(set(p.attrs) for p in parts))) if parts else []
+        values = {n: np.concatenate([p.attrs[n] for p in parts]) for n in keys}
         # canonical order: the same points give the same cloud whatever the tiling
-        cols = [np.concatenate([w[i, d] for w, i in parts]) if parts else np.zeros(0)
-                for d in range(3)]
-        # the tiles' points lie on their coordinate grid (:func:`_read_world` snaps them):
-        # one shared grid gives integer sort keys directly
-        grid = scales.pop() if len(scales) == 1 else None
-        order = _canonical_order(cols, [values[n] for n in keys], scales=grid)
+        order, cols = _points_order(parts, [values[n] for n in keys])
         values = {n: v[order] for n, v in values.items()}
         # local coordinates, column by column: (world - origin) * scale, as from_world
         scale = (self.xy_unit, self.xy_unit, self.z_unit)
         local = np.empty((len(order), 3), dtype=np.float64)
         for d in range(3):
-            c = cols[d][order]
-            cols[d] = None
+            c = cols(d, order)
             np.subtract(c, self.origin[d], out=c)
             np.multiply(c, scale[d], out=c)
             local[:, d] = c
         return PointCloud(local, self.origin.copy(), self.crs, self.xy_unit, self.z_unit, values)
 
 
-def _canonical_order(cols, attrs, *, scales=None):
+def _points_order(parts, attrs):
+    """``(order, cols)``: the canonical order of the points of ``parts`` (a list of
+    :class:`DecodedTile`) by x, y, z then ``attrs`` (:func:`_canonical_order`), and
+    ``cols(d, order)``, their world coordinate ``d`` in that order (float64, new array).
+
+    Tiles of one resolution (the usual case) are sorted on one int64 key made
+    of their integer steps, built a column at a time (no float ranks, no
+    copy of all three columns): the steps of one resolution are in the order
+    of the coordinates they give, so the order is the same.
+    """
+    if not parts:
+        return np.zeros(0, dtype=np.int64), lambda d, order: np.zeros(0)
+    scales = parts[0].scales
+    if not all(np.array_equal(p.scales, scales) for p in parts):
+        world = [np.concatenate([p.column(d) for p in parts]) for d in range(3)]
+        return _canonical_order(world, attrs), lambda d, order: world[d][order]
+    n = sum(len(p) for p in parts)
+
+    def steps(d):
+        out = np.empty(n, dtype=np.int64)
+        i = 0
+        for p in parts:
+            np.add(p.steps[:, d], p.base[d], out=out[i:i + len(p)], casting="unsafe")
+            i += len(p)
+        return out
+
+    def cols(d, order):
+        c = np.empty(n, dtype=np.float64)
+        i = 0
+        for p in parts:  # base + steps: integers far below 2**53, exact in float64
+            seg = c[i:i + len(p)]
+            seg[...] = p.steps[:, d]
+            seg += p.base[d]
+            i += len(p)
+        c = c[order]
+        return np.multiply(c, scales[d], out=c)
+
+    def full():
+        return np.lexsort(attrs[::-1] + [cols(d, slice(None)) for d in range(3)][::-1])
+
+    if n < 2:
+        return full(), cols
+    lo = [min(int(p.base[d]) + int(p.steps[:, d].min()) for p in parts if len(p)) for d in range(3)]
+    hi = [max(int(p.base[d]) + int(p.steps[:, d].max()) for p in parts if len(p)) for d in range(3)]
+    sizes = [h - l + 1 for l, h in zip(lo, hi, strict=True)]
+    if sizes[0] * sizes[1] * sizes[2] >= 2 ** 63:
+        return full(), cols
+    key = None
+    for d in range(3):  # ((x - x0) * ny + (y - y0)) * nz + (z - z0)
+        c = steps(d)
+        c -= lo[d]
+        if key is None:
+            key = c
+        else:
+            key *= sizes[d]
+            key += c
+        del c
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    if np.any(key[1:] == key[:-1]):  # coinciding points: their attributes decide
+        return full(), cols
+    return order, cols
+
+
+def _canonical_order(cols, attrs):
     """``np.lexsort(attrs[::-1] + cols[::-1])``: the points by x, then y, z, then ``attrs``.
 
     Sorting on seven keys costs ~0.1 s per million points per key; points rarely
     share all three coordinates, so they are sorted once on one integer key
     made of the ranks of x, y and z, and the full sort is only run when two
     points coincide (or the ranks do not fit in one key). Same order either way.
-    ``scales``: when every coordinate of column ``d`` is an integer multiple of
-    ``scales[d]`` (points snapped to a file's grid), that integer is its rank
-    (same order, no sort per column).
     """
     n = len(cols[0])
     if n < 2:
         return np.lexsort(attrs[::-1] + cols[::-1])
     ranks, sizes = [], []
-    for d, c in enumerate(cols):
-        if scales is not None and scales[d] > 0:
-            steps = np.rint(c / scales[d])
-            if np.abs(steps).max() < 2.0 ** 52 and np.array_equal(steps * scales[d], c):
-                r = steps.astype(np.int64)
-                r -= r.min()
-                ranks.append(r)
-                sizes.append(int(r.max()) + 1)
-                continue
+    for c in cols:
         u, inv = np.unique(c, return_inverse=True)
         ranks.append(inv.reshape(-1).astype(np.int64))
         sizes.append(len(u))
@@ -356,18 +403,118 @@ def _canonical_order(cols, attrs, *, scales=None):
     return order
 
 
+@dataclass(eq=False)
+class DecodedTile:
+    """A decoded tile's points held compactly: the coordinates as integer steps
+    of the file's resolution (int32 from a per-tile ``base``, 12 bytes a point
+    instead of 24) and the :data:`POINT_ATTRIBUTES` the file has.
+
+    World coordinate ``d`` of a point is ``(base[d] + steps[:, d]) * scales[d]``:
+    the file's coordinate snapped to its resolution (see :func:`read_tile`).
+    """
+
+    steps: np.ndarray  # (N, 3) int32 (int64 when a tile spans more than 2**31 steps)
+    base: np.ndarray  # (3,) int64
+    scales: np.ndarray  # (3,) float64
+    attrs: dict
+
+    def __len__(self) -> int:
+        return len(self.steps)
+
+    @property
+    def nbytes(self) -> int:
+        return self.steps.nbytes + sum(v.nbytes for v in self.attrs.values())
+
+    def column(self, d: int) -> np.ndarray:
+        """World coordinate ``d`` of every point (float64, CRS units)."""
+        c = self.steps[:, d].astype(np.float64)
+        c += self.base[d]  # exact: integers far below 2**53
+        return np.multiply(c, self.scales[d], out=c)
+
+    def world(self) -> np.ndarray:
+        """World coordinates, shape (N, 3) float64."""
+        return np.column_stack([self.column(d) for d in range(3)]) if len(self) \
+            else np.zeros((0, 3))
+
+    def inside(self, boxes) -> np.ndarray:
+        """Boolean mask of the points in any of the world ``boxes`` ``(xmin, ymin, xmax, ymax)``
+        (bounds included)."""
+        x, y = self.column(0), self.column(1)
+        mask = np.zeros(len(self), dtype=bool)
+        for x0, y0, x1, y1 in boxes:
+            mask |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+        return mask
+
+    def take(self, idx) -> DecodedTile:
+        """The points ``idx`` (indices or a mask), as a new tile."""
+        return DecodedTile(self.steps[idx], self.base, self.scales,
+                           {n: v[idx] for n, v in self.attrs.items()})
+
+    def spill(self) -> SpilledTile:
+        """The tile written to an unlinked scratch file (see :class:`SpilledTile`)."""
+        return SpilledTile(self)
+
+
+class SpilledTile:
+    """A :class:`DecodedTile` kept in an unlinked scratch file instead of memory.
+
+    The file (in the temporary folder, ``TMPDIR``) has no name from the start:
+    it goes when the tile is closed or the process ends, however it ends.
+    Reading it back costs a copy of its bytes (from the system's file cache
+    while there is room), far less than decoding its LAZ again.
+    """
+
+    def __init__(self, tile: DecodedTile):
+        import tempfile
+
+        self.count = len(tile)
+        self.base, self.scales = tile.base, tile.scales
+        arrays = {"": tile.steps, **tile.attrs}
+        self._layout = [(n, a.dtype, a.shape) for n, a in arrays.items()]
+        self._file = tempfile.TemporaryFile(prefix="lidar2city-tile-")
+        for a in arrays.values():
+            if a.size:  # (an empty tile part has nothing to write)
+                self._file.write(memoryview(np.ascontiguousarray(a)).cast("B"))
+        self._file.flush()
+
+    def __len__(self) -> int:
+        return self.count
+
+    def load(self) -> DecodedTile:
+        """The tile back in memory (the file is kept until :meth:`close`)."""
+        self._file.seek(0)
+        arrays = {}
+        for name, dtype, shape in self._layout:
+            a = np.empty(shape, dtype=dtype)
+            if a.nbytes and self._file.readinto(memoryview(a).cast("B")) != a.nbytes:
+                raise OSError("a scratch file of decoded points was cut short")
+            arrays[name] = a
+        steps = arrays.pop("")
+        return DecodedTile(steps, self.base, self.scales, arrays)
+
+    def close(self) -> None:
+        self._file.close()
+
+
 #: points decoded at a time when a tile is read for :class:`TileReader`
 READ_CHUNK = 262_144
 
 
 def _read_world(path, *, chunk: int = READ_CHUNK):
-    """``(world xyz (N, 3), {name: values})`` of a tile, decoded ``chunk`` points at a time.
+    """``(world xyz (N, 3), {name: values})`` of a tile (:func:`read_tile`)."""
+    tile = read_tile(path, chunk=chunk)
+    return tile.world(), tile.attrs
+
+
+def read_tile(path, *, chunk: int = READ_CHUNK) -> DecodedTile:
+    """A tile's points as a :class:`DecodedTile`, decoded ``chunk`` points at a time.
 
     Only the coordinates and :data:`POINT_ATTRIBUTES` are kept (never the
     whole point record), written into arrays allocated once. Coordinates are
     snapped to the file's resolution: offset + integer x scale is rounded
     differently for different offsets, and tiles cut from one survey may
-    carry different offsets.
+    carry different offsets; the snapped coordinate is kept as its integer
+    number of resolution steps.
     """
     import laspy
 
@@ -377,29 +524,31 @@ def _read_world(path, *, chunk: int = READ_CHUNK):
             n = int(f.header.point_count)
             scales = np.asarray(f.header.scales, dtype=np.float64)
             names = [d for d in POINT_ATTRIBUTES if d in set(f.header.point_format.dimension_names)]
-            world = np.empty((n, 3), dtype=np.float64)
+            steps = np.empty((n, 3), dtype=np.int64)
             attrs: dict = {}
             i = 0
             for pts in f.chunk_iterator(chunk):
                 m = min(len(pts), n - i)
                 for d, axis in enumerate("xyz"):
-                    world[i:i + m, d] = np.asarray(pts[axis])[:m]
+                    w = np.asarray(pts[axis], dtype=np.float64)[:m] / scales[d]
+                    if not np.isfinite(w).all():
+                        raise InputError(f"{path}: point coordinates contain NaN or infinite "
+                                         "values")
+                    steps[i:i + m, d] = np.round(w)
                 for d in names:
                     v = np.asarray(pts[d])[:m]
                     if d not in attrs:
                         attrs[d] = np.empty(n, dtype=v.dtype)
                     attrs[d][i:i + m] = v
                 i += m
-    if i < n:
-        world = world[:i].copy()
+    steps = steps[:i]
     attrs = {d: (attrs[d][:i].copy() if i < n else attrs[d]) if d in attrs
              else np.zeros(i, dtype=np.uint8) for d in names}
-    np.divide(world, scales, out=world)
-    np.round(world, out=world)
-    np.multiply(world, scales, out=world)
-    if not np.isfinite(world).all():
-        raise InputError(f"{path}: point coordinates contain NaN or infinite values")
-    return world, attrs
+    base = steps.min(axis=0) if i else np.zeros(3, dtype=np.int64)
+    span = int((steps.max(axis=0) - base).max()) if i else 0
+    rel = np.empty((i, 3), dtype=np.int32 if span < 2 ** 31 else np.int64)
+    np.subtract(steps, base, out=rel, casting="unsafe")
+    return DecodedTile(rel, base.astype(np.int64), scales, attrs)
 
 
 def with_neighbours(cloud, neighbours, *, buffer=50.0, crs=None):

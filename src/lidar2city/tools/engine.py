@@ -12,21 +12,26 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   processes (one thread each), or an existing cluster given by its scheduler
   address (started with ``dask scheduler`` / ``dask worker``). A cluster task
   is a run of consecutive items (:func:`runs_of`), so a worker's items are
-  neighbours that share their inputs (a block's tiles).
+  neighbours that share their inputs (a block's tiles); each worker is dealt a
+  contiguous share of the runs (:func:`shares_of`) and each run is told the
+  share's next runs, so those inputs pass from run to run.
+  The cluster starts in the background when the executor is entered.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 
 from ..errors import DependencyError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "RETRIES", "CONNECT_TIMEOUT",
-           "RUNS_PER_WORKER", "RUN_MAX_COST"]
+__all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
+           "CONNECT_TIMEOUT",
+           "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS"]
 
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
@@ -52,17 +57,23 @@ class InProcess:
     def __exit__(self, *exc):
         return False
 
-    def map(self, fn, items, *args, run_hook=None, costs=None):
+    def ready(self):
+        """Ready at once (see :meth:`DaskExecutor.ready`)."""
+        return self
+
+    def map(self, fn, items, *args, run_hook=None, costs=None, ahead=()):
         """``fn(item, *args)`` for every item in turn: ``(index, result or exception)``.
 
-        ``run_hook(items)``, when given, is called once with the items this
+        ``run_hook(items, ahead)``, when given, is called once with the items this
         process will run in turn and returns ``after(k)``, called after the
-        ``k``-th of them (e.g. to keep only the inputs the next items share).
+        ``k``-th of them (e.g. to keep only the inputs the next items share);
+        ``ahead``: the items the process is expected to run after these (a
+        cluster worker's next runs), whose inputs may be kept too.
         ``costs`` (one number per item) tells a cluster how to cut the items
         into runs of equal work; here they are all one run.
         """
         items = list(items)
-        after = run_hook(items) if run_hook is not None and items else None
+        after = run_hook(items, list(ahead)) if run_hook is not None and items else None
         try:
             for i, item in enumerate(items):
                 for attempt in range(RETRIES + 1):
@@ -97,18 +108,47 @@ class DaskExecutor:
         self.workers = workers
         self._cluster = None
         self._client = None
+        self._starting = None
+        self._error = None
+        self._dlog = None
         self.startup_seconds = 0.0
 
     def __enter__(self):
+        """Start the cluster (or connect to it) in the background: the caller plans
+        its work meanwhile; the first :meth:`map` waits for it (and raises its
+        error, e.g. a scheduler that does not answer)."""
         t0 = time.perf_counter()
-        try:
-            return self._start()
-        finally:
-            self.startup_seconds = time.perf_counter() - t0
+        self._error = None
+
+        def start():
+            try:
+                self._start()
+                # the workers import the task modules now, not in their first task
+                self._client.run(_warm)
+            except BaseException as exc:  # noqa: BLE001 - raised by ready()
+                self._error = exc
+            finally:
+                self.startup_seconds = time.perf_counter() - t0
+
+        self._starting = threading.Thread(target=start, name="lidar2city-dask-start",
+                                          daemon=True)
+        self._starting.start()
+        return self
+
+    def ready(self):
+        """Wait for the cluster started by ``__enter__``; raise its start's error."""
+        if self._starting is not None:
+            self._starting.join()
+            self._starting = None
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        return self
 
     def process_cpu(self) -> dict:
         """CPU seconds of each worker process so far (start-up and imports included),
         by worker address."""
+        self.ready()
         return dict(sorted(self._client.run(_process_cpu).items()))
 
     def _start(self):
@@ -150,30 +190,62 @@ class DaskExecutor:
         return self
 
     def __exit__(self, *exc):
+        if self._starting is not None:  # the caller is done before the cluster was needed
+            self._starting.join()
+            self._starting = None
+        try:
+            self._close()
+        finally:
+            if self._error is not None and exc[0] is None:  # a start that failed unseen
+                raise self._error
+        return False
+
+    def _close(self):
         if self._client is not None:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
-        self._dlog.setLevel(self._dlog_level)
-        return False
+        if self._dlog is not None:
+            self._dlog.setLevel(self._dlog_level)
 
     def map(self, fn, items, *args, run_hook=None, costs=None):
         """As :meth:`InProcess.map`; a cluster task is a run of consecutive items
         (:func:`runs_of`, of equal total ``costs`` when given), and ``run_hook``
-        is called on the worker per run."""
+        is called on the worker per run.
+
+        The runs are dealt to the workers in contiguous shares (:func:`shares_of`):
+        each worker is asked to run its share's runs in order (Dask may still move
+        a run to an idle worker near the end, or to another when one dies), and
+        each run is told the share's next runs (``ahead``, :data:`AHEAD_RUNS`), so
+        a worker keeps the inputs its next runs share with this one instead of
+        reading them again.
+        """
         from distributed import as_completed
 
         items = list(items)
         if not items:
             return
+        self.ready()
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
         runs = runs_of(len(items), self.workers, costs)
-        futures = self._client.map(_run_many, [items[a:b] for a, b in runs],
-                                   *[[a] * len(runs) for a in shared], fn=fn, run_hook=run_hook,
-                                   pure=False,
-                                   retries=RETRIES)
-        where = {f.key: r for f, r in zip(futures, runs, strict=True)}
+        names = sorted(self._client.scheduler_info().get("workers", {}))
+        shares = shares_of(len(runs), max(1, len(names)))
+        futures, where = [], {}
+        for rank, (k, r) in enumerate(_dealt(shares)):
+            a, b = runs[r]
+            # the share's next runs (the tiles they read are kept for them), not all
+            # the rest: what a task carries stays bounded whatever the area
+            nxt = min(r + AHEAD_RUNS, shares[k][1] - 1)
+            ahead = items[b:runs[nxt][1]] if nxt > r else []
+            # earlier submitted, higher priority: each worker's runs start in order
+            fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn, run_hook=run_hook,
+                                      ahead=ahead, pure=False, retries=RETRIES,
+                                      priority=len(runs) - rank,
+                                      workers=[names[k]] if names else None,
+                                      allow_other_workers=True)
+            futures.append(fut)
+            where[fut.key] = (a, b)
         try:
             with self._client.as_current():
                 completed = as_completed(futures)
@@ -193,14 +265,21 @@ class DaskExecutor:
                 f.cancel()
 
     def describe(self) -> str:
+        self.ready()
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
 
 
-#: runs per worker: enough for the workers to finish together, few enough for
-#: each run to be a long stretch of neighbouring items (each run boundary has
-#: both its sides decode the tiles they share)
-RUNS_PER_WORKER = 2
+#: runs per worker: a worker's runs are one contiguous share whose inputs pass
+#: from run to run (:func:`shares_of`), so runs cost no extra reading; several
+#: per worker let an idle worker take a short run off a slow one at the end
+RUNS_PER_WORKER = 4
+
+#: the runs of its share a run is told of (their items travel with the task):
+#: the tiles a run decodes are kept for these too, so a strip of tiles that a
+#: row of blocks leaves to the next row is decoded once even when a run is
+#: shorter than a row
+AHEAD_RUNS = 3
 
 #: the most work one cluster task takes (in ``costs`` units: buildings for
 #: blocks of footprints, else items): a task returns its items' results
@@ -233,7 +312,7 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
     dealt one by one to alternate workers make every worker decode every tile.
     About ``RUNS_PER_WORKER`` runs per worker, of equal length, or of equal
     total ``costs`` (one non-negative number per item, e.g. its buildings) when given;
-    more runs when that would give a run more than ``max_cost`` (default
+    more runs (a multiple of ``workers``) when that would give a run more than ``max_cost`` (default
     :data:`RUN_MAX_COST`; an item costs 1 without ``costs``), so that what a
     task holds is bounded whatever the area (a single item may cost more).
     """
@@ -242,9 +321,11 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
     max_cost = RUN_MAX_COST if max_cost is None else max_cost
     total = (np.arange(1, n + 1, dtype=np.float64) if costs is None
              else np.cumsum(np.asarray(costs, dtype=np.float64).reshape(n)))
-    want = RUNS_PER_WORKER * max(1, int(workers or 1))
+    w = max(1, int(workers or 1))
+    want = RUNS_PER_WORKER * w
     if n and total[-1] > 0:
         want = max(want, int(np.ceil(total[-1] / max_cost)))
+        want = -(-want // w) * w  # equal numbers of runs for every worker's share
     count = max(1, min(n, want))
     if costs is None:
         cuts = [n * k // count for k in range(count + 1)]
@@ -264,10 +345,34 @@ def _process_cpu() -> float:
     return t.user + t.system
 
 
-def _run_many(items, *args, fn, run_hook=None):
+def _warm():
+    """Import what a worker's tasks use (run on every worker once the cluster is up)."""
+    from . import reconstruct, task  # noqa: F401
+
+
+def shares_of(runs: int, workers: int) -> list:
+    """``(first run, stop)`` of each worker's share: ``runs`` cut into ``workers``
+    contiguous shares of (nearly) equal numbers of runs."""
+    cuts = [runs * k // workers for k in range(workers + 1)]
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def _dealt(shares) -> list:
+    """``(share, run)`` in the order runs are handed out: the first run of every
+    share, then the second of every share..."""
+    out, depth = [], 0
+    while True:
+        row = [(k, a + depth) for k, (a, b) in enumerate(shares) if a + depth < b]
+        if not row:
+            return out
+        out += row
+        depth += 1
+
+
+def _run_many(items, *args, fn, run_hook=None, ahead=()):
     """One cluster task: ``fn`` over a run of items in turn, each tried as in
     :class:`InProcess`; ``[(offset in the run, result or exception)]``."""
-    return list(InProcess().map(fn, items, *args, run_hook=run_hook))
+    return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
 def make_executor(workers: int = 1, scheduler: str | None = None):

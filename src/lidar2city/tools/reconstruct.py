@@ -125,9 +125,18 @@ class PointGrid:
             self.starts = np.zeros(2, dtype=np.int64)
             return
         self.lo = self.xy.min(axis=0)
-        ij = np.floor((self.xy - self.lo) / self.cell).astype(np.int64)
-        self.shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
-        key = ij[:, 0] * self.shape[1] + ij[:, 1]
+        # cell of each point, a column at a time: floor((xy - lo) / cell)
+        ij = []
+        for d in range(2):
+            t = np.subtract(self.xy[:, d], self.lo[d])
+            np.divide(t, self.cell, out=t)
+            ij.append(np.floor(t, out=t).astype(np.int64))
+            del t
+        self.shape = (int(ij[0].max()) + 1, int(ij[1].max()) + 1)
+        key = ij[0]
+        key *= self.shape[1]
+        key += ij[1]
+        del ij
         self.order = np.argsort(key, kind="stable")
         counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
         self.starts = np.concatenate([[0], np.cumsum(counts)])
@@ -682,11 +691,25 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         Bad options, a journal of another run beside ``output``, a scheduler
         that does not answer.
     """
-    from ..io.journal import Journal, file_stamp, run_key
-    from ..io.tiles import tile_paths
     from .engine import make_executor
 
     t0 = time.perf_counter()
+    # a cluster starts (its workers import the task modules) while the area is planned
+    with make_executor(workers, scheduler) as executor:
+        return _reconstruct(executor, t0, inputs, output, footprints=footprints, lods=lods,
+                            crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
+                            progress=progress, method=method, primitives=primitives,
+                            check_images=check_images, block_size=block_size, resume=resume,
+                            block_progress=block_progress, edits=edits)
+
+
+def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config, fmt, id_field,
+                 layer, progress, method, primitives, check_images, block_size, resume,
+                 block_progress, edits) -> ReconstructSummary:
+    """:func:`reconstruct` on a started ``executor``."""
+    from ..io.journal import Journal, file_stamp, run_key
+    from ..io.tiles import tile_paths
+
     paths = tile_paths(inputs)
     inputs = paths
     plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
@@ -733,16 +756,15 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             logger.info("resuming: %d of %d blocks already done", len(done), n_blocks)
         pending = [s for s in plan.specs if s.index not in done]
         if pending:
-            with make_executor(workers, scheduler) as executor:
-                logger.info("%d blocks on %s", len(pending), executor.describe())
-                for k, out in enumerate(run_blocks(executor, plan, pending), start=1):
-                    # a failed block is tried again by --resume; the last one to finish
-                    # is not saved (nothing runs after it: no block would be spared)
-                    if not out.failed and k < len(pending):
-                        journal.save(out.index, out)
-                    take(out)
-                state["startup"], state["process_cpu"] = (executor.startup_seconds,
-                                                          executor.process_cpu())
+            logger.info("%d blocks on %s", len(pending), executor.describe())
+            for k, out in enumerate(run_blocks(executor, plan, pending), start=1):
+                # a failed block is tried again by --resume; the last one to finish
+                # is not saved (nothing runs after it: no block would be spared)
+                if not out.failed and k < len(pending):
+                    journal.save(out.index, out)
+                take(out)
+            state["startup"], state["process_cpu"] = (executor.startup_seconds,
+                                                      executor.process_cpu())
         ordered.check()
         sink.close()
     except BaseException:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import EmptyInputError
-from ..io.las import TileReader
+from ..io.las import DecodedTile, SpilledTile, TileReader
 
 logger = logging.getLogger(__name__)
 
@@ -98,108 +98,171 @@ class BlockOutput:
 
 class _TileCache:
     """Decoded tiles shared by the blocks a process runs in turn, kept only while
-    a later block of the same run still reads them.
+    a later block of the same run still reads them, and never in memory between
+    blocks.
 
     A run of consecutive blocks (:mod:`lidar2city.tools.engine` gives a process
     runs of neighbouring blocks) first tells the cache its blocks
-    (:func:`tile_keeper`); after each block, a tile that no later block of the
-    run reads is dropped, and one that later blocks read is cut down to the
-    points inside their boxes (the only points they will take from it). A tile
-    is decoded about once per run, and a process holds the tiles of the block it runs
-    plus the parts of them its next blocks read, soonest needed first, up to
-    :data:`KEEP_BLOCKS` blocks' worth of points: memory does not grow with the
-    area. Outside a run every tile is dropped after its block.
+    (:func:`tile_keeper`). As soon as a block has read its points
+    (:meth:`release`), each tile it read is cut down to the points inside the
+    boxes of the run's later blocks (the only points they will take from it)
+    and written to an unlinked scratch file (:class:`~lidar2city.io.las.SpilledTile`,
+    17 bytes a point); a tile no later block reads is dropped. The next block
+    that reads the tile loads those points back instead of decoding the LAZ
+    again. A tile is decoded about once per run, and the scratch files hold at
+    most :data:`KEEP_BLOCKS` times the largest block read (soonest needed
+    first), so neither memory nor scratch space grows with the area: what a
+    process holds while a block runs is that block's points. Outside a run
+    every tile is dropped after its block.
     """
 
     def __init__(self):
-        self.tiles = {}
+        self.tiles = {}  # key -> DecodedTile (being read) or SpilledTile
+        # key -> the blocks (indices) whose boxes the kept points cover; None: all
+        self.covers = {}
         self.lock = threading.Lock()
-        self.later = None  # path -> [(position in the run, world box)] while a run is on
+        # path -> [(position in the run, world box, block index)] while a run is on
+        self.later = None
+        self.position = {}  # block index -> position in the run
         self.decoded = 0
-        self.largest = 0  # points of the largest block read in the run
+        self.largest = 0  # points of the largest block read
 
     def read(self, n: int) -> None:
         """Note a block's read of ``n`` points."""
         self.largest = max(self.largest, int(n))
 
-    def get(self, tile, decode):
-        """The decoded ``tile`` (``decode()`` when it is not kept), keyed by its file's
+    def get(self, tile, decode, index=None):
+        """The decoded ``tile`` (``decode()`` when it is not kept, or when what is kept
+        was cut without the points of the block ``index``), keyed by its file's
         path, size and modification time."""
         st = os.stat(tile.path)
         key = (tile.path, st.st_size, st.st_mtime_ns)
         with self.lock:
             hit = self.tiles.get(key)
+            cover = self.covers.get(key)
+            if hit is not None and cover is not None and index not in cover:
+                self._drop([key])  # kept for other blocks only: decoded again
+                hit = None
+            if isinstance(hit, SpilledTile):
+                spilled, hit = hit, hit.load()
+                spilled.close()
+                self.tiles[key] = hit
         if hit is None:
             hit = decode()
             with self.lock:
                 self.tiles[key] = hit
+                self.covers[key] = None
                 self.decoded += 1
         return hit
 
-    def start(self, specs) -> None:
-        """A run of ``specs`` begins: index which of its blocks read which tile."""
+    def start(self, specs, ahead=()) -> None:
+        """A run of ``specs`` begins, to be followed by ``ahead`` (the blocks the
+        process expects to run next): index which of these blocks read which
+        tile. A tile kept from the previous run stays when one of these blocks
+        reads it; a block it was not cut for decodes it again (:meth:`get`)."""
         later = {}
-        for k, spec in enumerate(specs):
+        for k, spec in enumerate([*specs, *ahead]):
             if spec.world_box is not None:
                 for t in spec.tiles:
-                    later.setdefault(t.path, []).append((k, spec.world_box))
+                    later.setdefault(t.path, []).append((k, spec.world_box, spec.index))
         with self.lock:
+            for key in list(self.tiles):
+                if key[0] not in later:
+                    self._drop([key])
             self.later = later
+            self.position = {spec.index: k for k, spec in enumerate([*specs, *ahead])}
 
-    def keep_after(self, k: int) -> None:
-        """Keep of each tile only what the run's blocks after ``k`` read from it,
-        soonest needed first, up to :data:`KEEP_BLOCKS` times the largest block
-        read so far (what the next block reads is always kept)."""
+    def release(self, index, path=None) -> None:
+        """The block ``index`` has read its points (from the tile ``path``, default
+        all): keep of each tile only what the run's later blocks read, in scratch
+        files (see :meth:`keep_after`)."""
+        self.keep_after(self.position.get(index, -1) if self.later is not None else None,
+                        path=path)
+
+    def keep_after(self, k, path=None) -> None:
+        """Keep of each tile (or of the tile ``path``) only what the run's blocks
+        after position ``k`` (and the blocks ahead) read from it, written to
+        scratch files, soonest needed first, up to :data:`KEEP_BLOCKS` times the
+        largest block read (what the next block reads is always kept); ``k``
+        None: keep nothing."""
         with self.lock:
             later = self.later or {}
             kept = []
             for key in list(self.tiles):
-                boxes = [(j, b) for j, b in later.get(key[0], ()) if j > k]
-                world, attrs = self.tiles.pop(key)
-                if not boxes:
+                if path is not None and key[0] != path:
                     continue
-                x, y = world[:, 0], world[:, 1]
-                inside = np.zeros(len(world), dtype=bool)
-                for _, (x0, y0, x1, y1) in boxes:  # the comparisons of TileReader.box
-                    inside |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
-                if not inside.all():
-                    world, attrs = world[inside], {n: v[inside] for n, v in attrs.items()}
-                kept.append((boxes[0][0], key, (world, attrs)))
+                boxes = [] if k is None else [e for e in later.get(key[0], ()) if e[0] > k]
+                if not boxes:
+                    self._drop([key])
+                    continue
+                tile = self.tiles[key]
+                if isinstance(tile, DecodedTile):  # read by this block: cut and put away
+                    # the comparisons of TileReader.box
+                    inside = tile.inside([b for _, b, _ in boxes])
+                    tile = self.tiles[key] = (tile.take(inside) if not inside.all()
+                                              else tile).spill()
+                    # the blocks whose points it now holds: those of the boxes, and
+                    # of the blocks it held before (a tile loaded back from scratch)
+                    cover = frozenset(i for _, _, i in boxes)
+                    old = self.covers.get(key)
+                    self.covers[key] = cover if old is None else cover & old
+                kept.append((boxes[0][0], key, len(tile)))
             # farthest next use out first (Belady) when over the budget
             kept.sort(key=lambda item: (item[0], item[1]))
             budget, total = KEEP_BLOCKS * self.largest, 0
-            for first, key, hit in kept:
-                total += len(hit[0])
-                if first == k + 1 or total <= budget:
-                    self.tiles[key] = hit
+            for first, key, n in kept:
+                total += n
+                if not (first == k + 1 or total <= budget):
+                    self._drop([key])
+
+    def end_run(self, k) -> None:
+        """The run is over after its position ``k``: keep only what the blocks ahead read."""
+        self.keep_after(k)
+        with self.lock:
+            self.later = None
+            self.position = {}
+
+    def _drop(self, keys) -> None:
+        for key in keys:
+            tile = self.tiles.pop(key)
+            self.covers.pop(key, None)
+            if isinstance(tile, SpilledTile):
+                tile.close()
 
     def stop(self) -> None:
-        """The run is over: drop every tile."""
+        """Drop every tile (no run is on)."""
         with self.lock:
-            self.tiles.clear()
+            self._drop(list(self.tiles))
             self.later = None
-            self.largest = 0
+            self.position = {}
 
     def points(self) -> int:
         with self.lock:
-            return sum(len(world) for world, _ in self.tiles.values())
+            return sum(len(tile) for tile in self.tiles.values())
 
 
-#: the tile points a process keeps between blocks: at most this many times its
-#: largest block read (besides what the next block reads)
-KEEP_BLOCKS = 3
+#: the tile points a process keeps in scratch files between blocks: at most
+#: this many times its largest block read (besides what the next block reads),
+#: ~40 MB of scratch space for blocks of 300,000 points; enough for the strip
+#: of tiles a row of blocks leaves to the next row on areas tens of blocks wide
+KEEP_BLOCKS = 8
 _cache = _TileCache()
 
 
-def tile_keeper(specs):
+def tile_keeper(specs, ahead=()):
     """The run hook of :meth:`lidar2city.tools.engine.InProcess.map` for blocks:
     ``keep(k)`` after the ``k``-th block of the run keeps only the tile points
-    the run's next blocks read (``keep(len(specs))`` at the end drops all)."""
-    _cache.start(specs)
+    the run's next blocks (and the blocks ``ahead``, which the process will
+    run next) read; after the last block, only those the blocks ahead read."""
+    _cache.start(specs, ahead)
+    ended = []
 
     def keep(k):
+        if ended:
+            return
         if k >= len(specs) - 1:
-            _cache.stop()
+            ended.append(k)
+            _cache.end_run(k)
         else:
             _cache.keep_after(k)
 
@@ -207,7 +270,16 @@ def tile_keeper(specs):
 
 
 class _SharedTileReader(TileReader):
-    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a run."""
+    """A :class:`TileReader` whose decoded tiles are shared by the blocks of a run;
+    each tile is put away (:meth:`_TileCache.release`) as soon as the block ``index``
+    has taken its points from it."""
+
+    def __init__(self, tiles, *, origin, index):
+        super().__init__(tiles, origin=origin)
+        self.index = index
+
+    def _taken(self, k):
+        _cache.release(self.index, path=self.tiles[k].path)
 
     def _tile(self, k):
         def decode():
@@ -215,15 +287,20 @@ class _SharedTileReader(TileReader):
             self._tiles.clear()  # held by the shared cache only
             return hit
 
-        return _cache.get(self.tiles[k], decode)
+        return _cache.get(self.tiles[k], decode, self.index)
+
 
 def _read_box(spec):
     """The points of the spec's world box (shared decoded tiles), or None when empty."""
     if spec.world_box is None or not spec.tiles:
         return None
-    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin))
-    cloud = reader.box(*spec.world_box)
-    _cache.read(len(cloud))
+    reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin),
+                               index=spec.index)
+    try:
+        cloud = reader.box(*spec.world_box)
+        _cache.read(len(cloud))
+    finally:
+        _cache.release(spec.index)  # the block runs with its own points only
     return cloud if len(cloud) else None
 
 
@@ -292,6 +369,17 @@ def run_block(spec, options: BlockOptions) -> BlockOutput:
 
 
 def _peak_mb() -> float:
+    """This process's peak resident memory (MB): Linux's ``VmHWM``, the peak of
+    its own address space. ``ru_maxrss`` is only the fallback: Linux carries it
+    over ``exec``, so a process started by a large one (a Dask worker spawned
+    by its nanny, a benchmark's child) would report its parent's size."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         import resource
     except ImportError:  # pragma: no cover - not on Windows
