@@ -188,8 +188,9 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
 
     Parameters
     ----------
-    p_u, p_v : ndarray, shapes (d_u, 2), (d_v, 2)
-        Candidate positions (grid units, building frame).
+    p_u, p_v : ndarray, shapes (..., d_u, 2), (..., d_v, 2)
+        Candidate positions (grid units, building frame); leading dimensions
+        (e.g. one per edge) broadcast.
     cell : float
         Cell size (m).
     t_adjust : float
@@ -198,10 +199,10 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (d_u, d_v)
+    ndarray, shape (..., d_u, d_v)
         Penalty in metres (the edge length) or 0.
     """
-    d = (np.asarray(p_v)[None, :, :] - np.asarray(p_u)[:, None, :]) * cell
+    d = (np.asarray(p_v)[..., None, :, :] - np.asarray(p_u)[..., :, None, :]) * cell
     ext = np.abs(d)
     m = ext.min(axis=-1)
     aligned = m <= 1e-9 * cell
@@ -217,9 +218,23 @@ def short_edge_energy(p_u, p_v, *, cell: float, short_length: float) -> np.ndarr
     vanishes) unless the data hold it with more deviation energy than that
     — a long wall offset by a real step does.
     """
-    d = (np.asarray(p_v)[None, :, :] - np.asarray(p_u)[:, None, :]) * cell
+    d = (np.asarray(p_v)[..., None, :, :] - np.asarray(p_u)[..., :, None, :]) * cell
     length = np.hypot(d[..., 0], d[..., 1])
     return ((length > 1e-9 * cell) & (length < short_length)).astype(np.float64)
+
+
+def _axis_cells(a0, a1, t, size):
+    """``floor(a0 + 0.5 + t (a1 - a0))`` clipped to ``[0, size)`` per distinct end pair.
+
+    Returns the cells, shape ``(k0, k1, len(t))`` over the distinct values of ``a0``
+    and ``a1``, and the index of each input value among them.
+    """
+    u0, i0 = np.unique(a0, return_inverse=True)
+    u1, i1 = np.unique(a1, return_inverse=True)
+    d = u1[None, :] - u0[:, None]
+    c = np.floor(u0[:, None, None] + 0.5 + t * d[..., None]).astype(np.intp)
+    np.clip(c, 0, size - 1, out=c)
+    return c, i0.ravel(), i1.ravel()
 
 
 def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: float = 1.0) -> np.ndarray:
@@ -255,13 +270,16 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
         ])
     t = np.linspace(0.0, 1.0, n)
     h, w = dt.shape
-    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster.
-    ix = np.floor(p0[:, None, None, 0] + 0.5 + t * d[..., None, 0]).astype(np.intp)
-    iy = np.floor(p0[:, None, None, 1] + 0.5 + t * d[..., None, 1]).astype(np.intp)
-    np.clip(ix, 0, h - 1, out=ix)
-    np.clip(iy, 0, w - 1, out=iy)
-    ix *= w
-    ix += iy
+    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster. A
+    # sample's row depends only on the x of its two ends (its column on their y), so
+    # each is computed once per pair of distinct ends (a 7 x 7 window has 7 distinct
+    # x per vertex: 49 rows of samples, not 49 x 49) and then looked up: the same
+    # double arithmetic per sample as sampling every pair, ~3x faster.
+    cx, ax, bx = _axis_cells(p0[:, 0], p1[:, 0], t, h)
+    cy, ay, by = _axis_cells(p0[:, 1], p1[:, 1], t, w)
+    cx *= w
+    ix = cx[ax[:, None], bx[None, :]]
+    ix += cy[ay[:, None], by[None, :]]
     dist = dt.ravel()[ix]  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
     wts = np.full(n, 1.0 / (n - 1))
@@ -304,14 +322,28 @@ def edge_energy_tables(
     """
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
+    # the integer samples read as doubles once per raster, not once per candidate pair
+    raster = raster._replace(dt=raster.dt.astype(np.float64))
+    dirs = shorts = None
+    if len(edges) and len({len(c) for c in candidates}) == 1:
+        # every vertex has the same number of candidates: the small energies of all
+        # edges in one array operation each (the same arithmetic per element)
+        pos = np.stack(candidates)
+        pu, pv = pos[edges[:, 0]], pos[edges[:, 1]]
+        if np.any(weights):
+            dirs = direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
+        if c_short:
+            shorts = short_edge_energy(pu, pv, cell=cell, short_length=short_length)
     out = []
-    for (u, v), wd in zip(edges, weights, strict=True):
+    for k, ((u, v), wd) in enumerate(zip(edges, weights, strict=True)):
         pu, pv = candidates[u], candidates[v]
         e = c_dis * deviation_energy(pu, pv, raster, cell=cell)
         if wd:
-            e = e + wd * direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
+            e = e + wd * (dirs[k] if dirs is not None else
+                          direction_energy(pu, pv, cell=cell, t_adjust=t_adjust))
         if c_short:
-            e = e + c_short * short_edge_energy(pu, pv, cell=cell, short_length=short_length)
+            e = e + c_short * (shorts[k] if shorts is not None else
+                               short_edge_energy(pu, pv, cell=cell, short_length=short_length))
         out.append(e)
     return out
 
