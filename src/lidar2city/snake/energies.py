@@ -202,11 +202,24 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
     ndarray, shape (..., d_u, d_v)
         Penalty in metres (the edge length) or 0.
     """
+    return _direction(*_pair_extents(p_u, p_v, cell), cell=cell, t_adjust=t_adjust)
+
+
+def _pair_extents(p_u, p_v, cell):
+    """x and y extents (m) and length of every candidate pair."""
     d = (np.asarray(p_v)[..., None, :, :] - np.asarray(p_u)[..., :, None, :]) * cell
-    m = np.minimum(np.abs(d[..., 0]), np.abs(d[..., 1]))  # the smaller extent
+    return d[..., 0], d[..., 1], np.hypot(d[..., 0], d[..., 1])
+
+
+def _direction(dx, dy, length, *, cell, t_adjust):
+    m = np.minimum(np.abs(dx), np.abs(dy))  # the smaller extent
     aligned = m <= 1e-9 * cell
     adjustable = m <= t_adjust
-    return np.where(adjustable & ~aligned, np.hypot(d[..., 0], d[..., 1]), 0.0)
+    return np.where(adjustable & ~aligned, length, 0.0)
+
+
+def _short(length, *, cell, short_length):
+    return ((length > 1e-9 * cell) & (length < short_length)).astype(np.float64)
 
 
 def short_edge_energy(p_u, p_v, *, cell: float, short_length: float) -> np.ndarray:
@@ -217,9 +230,7 @@ def short_edge_energy(p_u, p_v, *, cell: float, short_length: float) -> np.ndarr
     vanishes) unless the data hold it with more deviation energy than that
     — a long wall offset by a real step does.
     """
-    d = (np.asarray(p_v)[..., None, :, :] - np.asarray(p_u)[..., :, None, :]) * cell
-    length = np.hypot(d[..., 0], d[..., 1])
-    return ((length > 1e-9 * cell) & (length < short_length)).astype(np.float64)
+    return _short(_pair_extents(p_u, p_v, cell)[2], cell=cell, short_length=short_length)
 
 
 class _Ends(NamedTuple):
@@ -346,11 +357,11 @@ def edge_energy_tables(
         # every vertex has the same number of candidates: the small energies of all
         # edges in one array operation each (the same arithmetic per element)
         pos = np.stack(candidates)
-        pu, pv = pos[edges[:, 0]], pos[edges[:, 1]]
+        dx, dy, length = _pair_extents(pos[edges[:, 0]], pos[edges[:, 1]], cell)
         if np.any(weights):
-            dirs = direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
+            dirs = _direction(dx, dy, length, cell=cell, t_adjust=t_adjust)
         if c_short:
-            shorts = short_edge_energy(pu, pv, cell=cell, short_length=short_length)
+            shorts = _short(length, cell=cell, short_length=short_length)
     ends = [_ends(c, raster) for c in candidates]  # once per vertex, not per edge end
     out = []
     for k, ((u, v), wd) in enumerate(zip(edges, weights, strict=True)):
