@@ -251,8 +251,9 @@ def _ends(p, raster: DistanceRaster) -> _Ends:
     return _Ends(q, ux, ix.ravel(), uy, iy.ravel())
 
 
-def _axis_cells(u0, u1, i0, i1, t, size):
-    """``floor(a0 + 0.5 + t (a1 - a0))`` clipped to ``[0, size)``, shape (d_u, d_v, len(t)).
+def _axis_cells(u0, u1, i0, i1, t, size, stride=1):
+    """``floor(a0 + 0.5 + t (a1 - a0))`` clipped to ``[0, size)``, times ``stride``,
+    shape (d_u, d_v, len(t)).
 
     Computed once per pair of distinct values ``u0 x u1`` and looked up by the
     indices ``i0``, ``i1`` of every candidate's value among them.
@@ -260,6 +261,7 @@ def _axis_cells(u0, u1, i0, i1, t, size):
     d = u1[None, :] - u0[:, None]
     c = np.floor(u0[:, None, None] + 0.5 + t * d[..., None]).astype(np.intp)
     np.clip(c, 0, size - 1, out=c)
+    c *= stride
     return np.take(c.reshape(-1, len(t)), i0[:, None] * len(u1) + i1[None, :], axis=0)
 
 
@@ -305,8 +307,7 @@ def _deviation(p_u, p_v, e0: _Ends, e1: _Ends, raster: DistanceRaster, *, cell, 
     # it is computed once per pair of distinct x (a 7 x 7 window has 7 distinct x per
     # vertex: 49 rows of samples, not 49 x 49) and looked up: the same double
     # arithmetic per sample as sampling every pair, a third of the passes.
-    ix = _axis_cells(e0.ux, e1.ux, e0.ix, e1.ix, t, h)
-    ix *= w
+    ix = _axis_cells(e0.ux, e1.ux, e0.ix, e1.ix, t, h, stride=w)
     ix += _axis_cells(e0.uy, e1.uy, e0.iy, e1.iy, t, w)
     dist = np.take(dt.ravel(), ix)  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
