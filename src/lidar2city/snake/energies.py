@@ -56,6 +56,8 @@ from ..errors import InputError
 _RASTER_BUDGET = 8_000_000
 #: Largest number of samples (candidate pairs x points) read at once.
 _SAMPLE_BUDGET = 1_000_000
+# edges whose direction / jog tables are computed in one array operation
+_EDGE_BATCH = 64
 
 __all__ = [
     "window_offsets",
@@ -351,28 +353,29 @@ def edge_energy_tables(
     """
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
-    # the integer samples read as doubles once per raster, not once per candidate pair
-    raster = raster._replace(dt=raster.dt.astype(np.float64))
-    dirs = shorts = None
-    if len(edges) and len({len(c) for c in candidates}) == 1:
-        # every vertex has the same number of candidates: the small energies of all
-        # edges in one array operation each (the same arithmetic per element)
-        pos = np.stack(candidates)
-        dx, dy, length = _pair_extents(pos[edges[:, 0]], pos[edges[:, 1]], cell)
-        if np.any(weights):
-            dirs = _direction(dx, dy, length, cell=cell, t_adjust=t_adjust)
-        if c_short:
-            shorts = _short(length, cell=cell, short_length=short_length)
+    if raster.dt.size <= _SAMPLE_BUDGET:
+        # the integer distances read as doubles once per raster, not once per sample
+        # (a large raster stays int32: bounded memory, the same sums)
+        raster = raster._replace(dt=raster.dt.astype(np.float64))
+    # every vertex with the same number of candidates: the small energies of up to
+    # _EDGE_BATCH edges in one array operation each (the same arithmetic per element)
+    pos = np.stack(candidates) if len(edges) and len({len(c) for c in candidates}) == 1 else None
     ends = [_ends(c, raster) for c in candidates]  # once per vertex, not per edge end
     out = []
     for k, ((u, v), wd) in enumerate(zip(edges, weights, strict=True)):
+        j = k % _EDGE_BATCH
+        if pos is not None and j == 0:
+            batch = edges[k:k + _EDGE_BATCH]
+            dx, dy, length = _pair_extents(pos[batch[:, 0]], pos[batch[:, 1]], cell)
+            dirs = _direction(dx, dy, length, cell=cell, t_adjust=t_adjust) if np.any(weights) else None
+            shorts = _short(length, cell=cell, short_length=short_length) if c_short else None
         pu, pv = candidates[u], candidates[v]
         e = c_dis * _deviation(pu, pv, ends[u], ends[v], raster, cell=cell)
         if wd:
-            e = e + wd * (dirs[k] if dirs is not None else
+            e = e + wd * (dirs[j] if pos is not None else
                           direction_energy(pu, pv, cell=cell, t_adjust=t_adjust))
         if c_short:
-            e = e + c_short * (shorts[k] if shorts is not None else
+            e = e + c_short * (shorts[j] if pos is not None else
                                short_edge_energy(pu, pv, cell=cell, short_length=short_length))
         out.append(e)
     return out
