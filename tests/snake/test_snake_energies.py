@@ -12,6 +12,7 @@ from lidar2city.snake.energies import (
     direction_energy,
     distance_raster,
     edge_energy_tables,
+    short_edge_energy,
     window_offsets,
 )
 
@@ -87,3 +88,62 @@ def test_edge_tables_shapes_and_weights():
     np.testing.assert_allclose(diff, 2.0 * dirs)
     # The horizontal candidate edge has no direction penalty.
     assert dirs[0, 0] == 0.0
+
+
+def _deviation_every_pair(p_u, p_v, raster, cell):
+    """E_Dis sampled pair by pair (the formula without the per-axis lookup)."""
+    dt, origin, scale = raster
+    p0 = np.asarray(p_u, dtype=np.float64) * scale - origin
+    p1 = np.asarray(p_v, dtype=np.float64) * scale - origin
+    d = p1[None, :, :] - p0[:, None, :]
+    length = np.hypot(d[..., 0], d[..., 1])
+    n = max(int(np.ceil(float(length.max()))), 1) + 1
+    t = np.linspace(0.0, 1.0, n)
+    ix = np.clip(np.floor(p0[:, None, None, 0] + 0.5 + t * d[..., None, 0]).astype(np.intp), 0, dt.shape[0] - 1)
+    iy = np.clip(np.floor(p0[:, None, None, 1] + 0.5 + t * d[..., None, 1]).astype(np.intp), 0, dt.shape[1] - 1)
+    wts = np.full(n, 1.0 / (n - 1))
+    wts[[0, -1]] *= 0.5
+    return np.einsum("abn,n->ab", dt[ix, iy].astype(np.float64), wts) * length * (cell / scale) ** 2
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_deviation_lookup_matches_sampling_every_pair(seed):
+    # free (window) and fixed (off-grid) vertices, candidates reaching past the raster
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 30, (6, 2))
+    seg = np.stack([xy[:-1], xy[1:]], axis=1)
+    r = distance_raster(seg, margin=1, subdivide=4)
+    cands = candidate_positions(xy, 3, fixed=np.arange(6) == 2)
+    for u, v in [(0, 1), (1, 2), (2, 3), (0, 5), (4, 4)]:
+        got = deviation_energy(cands[u], cands[v], r, cell=0.5)
+        np.testing.assert_allclose(got, _deviation_every_pair(cands[u], cands[v], r, 0.5), rtol=1e-12, atol=1e-12)
+
+
+def test_deviation_long_edge_in_chunks_matches_sampling_every_pair():
+    seg = np.array([[[0.0, 0.0], [400.0, 3.0]]])  # long: the candidates of u go in chunks
+    r = distance_raster(seg, margin=4, subdivide=4)
+    cands = candidate_positions(seg[0], 3)
+    got = deviation_energy(cands[0], cands[1], r, cell=0.5)
+    n = int(np.ceil(np.hypot(*(cands[1][:, None] - cands[0][None]).T).max() * r.scale)) + 1
+    rows = 1_000_000 // (n * 49)  # the samples' memory budget
+    assert rows < 49
+    ref = np.concatenate([_deviation_every_pair(cands[0][i:i + rows], cands[1], r, 0.5) for i in range(0, 49, rows)])
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_edge_tables_batched_equal_edge_by_edge():
+    xy = np.array([[0.0, 0.0], [10.0, 0.4], [10.0, 6.0], [0.2, 6.1]])
+    seg = np.stack([xy, np.roll(xy, -1, axis=0)], axis=1)
+    r = distance_raster(seg, margin=4)
+    edges = np.array([(0, 1), (1, 2), (2, 3), (3, 0)])
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=np.array([1.0, 0.0, 2.0, 1.0]), c_dis=1.0, c_short=0.5, short_length=1.0)
+    free = candidate_positions(xy, 2)  # equal candidate counts: all edges at once
+    mixed = candidate_positions(xy, 2, fixed=[True, False, False, False])  # edge by edge
+    for cands in (free, mixed):
+        tables = edge_energy_tables(cands, edges, r, **kw)
+        for k, (u, v) in enumerate(edges):
+            ref = deviation_energy(cands[u], cands[v], r, cell=0.5)
+            if kw["c_dir"][k]:
+                ref = ref + kw["c_dir"][k] * direction_energy(cands[u], cands[v], cell=0.5, t_adjust=1.0)
+            ref = ref + 0.5 * short_edge_energy(cands[u], cands[v], cell=0.5, short_length=1.0)
+            np.testing.assert_array_equal(tables[k], ref)

@@ -338,6 +338,16 @@ def _meet(p, d, q, e, fallback):
     return x if np.hypot(*(x - fallback)) < 3.0 else None
 
 
+def _cov2(x):
+    """``np.cov(x.T)`` of points (k, 2), k >= 2: the same operations in the same order
+    (and so the same doubles), without its argument handling (called per piece)."""
+    x = np.array(x.T, ndmin=2, dtype=np.float64)
+    x -= x.mean(axis=1)[:, None]
+    c = np.dot(x, x.T.conj())
+    c *= np.true_divide(1, x.shape[1] - 1)
+    return c
+
+
 def _fit_line(sub, direction, snap_angle):
     """Total-least-squares line (point, unit direction from the first to the last point) of
     points (m, 2), its direction snapped to the building axes; and the largest distance to it."""
@@ -345,7 +355,7 @@ def _fit_line(sub, direction, snap_angle):
     if len(sub) < 3:
         d = sub[-1] - sub[0]
     else:
-        w, v = np.linalg.eigh(np.cov((sub - m).T))
+        w, v = np.linalg.eigh(_cov2(sub - m))
         d = v[:, 1]
     n = np.hypot(*d)
     if n < 1e-12:

@@ -56,6 +56,8 @@ from ..errors import InputError
 _RASTER_BUDGET = 8_000_000
 #: Largest number of samples (candidate pairs x points) read at once.
 _SAMPLE_BUDGET = 1_000_000
+# edges whose direction / jog tables are computed in one array operation
+_EDGE_BATCH = 64
 
 __all__ = [
     "window_offsets",
@@ -188,8 +190,9 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
 
     Parameters
     ----------
-    p_u, p_v : ndarray, shapes (d_u, 2), (d_v, 2)
-        Candidate positions (grid units, building frame).
+    p_u, p_v : ndarray, shapes (..., d_u, 2), (..., d_v, 2)
+        Candidate positions (grid units, building frame); leading dimensions
+        (e.g. one per edge) broadcast.
     cell : float
         Cell size (m).
     t_adjust : float
@@ -198,15 +201,27 @@ def direction_energy(p_u, p_v, *, cell: float, t_adjust: float) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (d_u, d_v)
+    ndarray, shape (..., d_u, d_v)
         Penalty in metres (the edge length) or 0.
     """
-    d = (np.asarray(p_v)[None, :, :] - np.asarray(p_u)[:, None, :]) * cell
-    ext = np.abs(d)
-    m = ext.min(axis=-1)
+    return _direction(*_pair_extents(p_u, p_v, cell), cell=cell, t_adjust=t_adjust)
+
+
+def _pair_extents(p_u, p_v, cell):
+    """x and y extents (m) and length of every candidate pair."""
+    d = (np.asarray(p_v)[..., None, :, :] - np.asarray(p_u)[..., :, None, :]) * cell
+    return d[..., 0], d[..., 1], np.hypot(d[..., 0], d[..., 1])
+
+
+def _direction(dx, dy, length, *, cell, t_adjust):
+    m = np.minimum(np.abs(dx), np.abs(dy))  # the smaller extent
     aligned = m <= 1e-9 * cell
     adjustable = m <= t_adjust
-    return np.where(adjustable & ~aligned, np.hypot(d[..., 0], d[..., 1]), 0.0)
+    return np.where(adjustable & ~aligned, length, 0.0)
+
+
+def _short(length, *, cell, short_length):
+    return ((length > 1e-9 * cell) & (length < short_length)).astype(np.float64)
 
 
 def short_edge_energy(p_u, p_v, *, cell: float, short_length: float) -> np.ndarray:
@@ -217,9 +232,39 @@ def short_edge_energy(p_u, p_v, *, cell: float, short_length: float) -> np.ndarr
     vanishes) unless the data hold it with more deviation energy than that
     — a long wall offset by a real step does.
     """
-    d = (np.asarray(p_v)[None, :, :] - np.asarray(p_u)[:, None, :]) * cell
-    length = np.hypot(d[..., 0], d[..., 1])
-    return ((length > 1e-9 * cell) & (length < short_length)).astype(np.float64)
+    return _short(_pair_extents(p_u, p_v, cell)[2], cell=cell, short_length=short_length)
+
+
+class _Ends(NamedTuple):
+    """Candidate positions of one vertex in raster coordinates, with their distinct
+    x (and y) values and the index of each position's x (y) among them."""
+
+    q: np.ndarray
+    ux: np.ndarray
+    ix: np.ndarray
+    uy: np.ndarray
+    iy: np.ndarray
+
+
+def _ends(p, raster: DistanceRaster) -> _Ends:
+    q = np.asarray(p, dtype=np.float64) * raster.scale - raster.origin  # raster coordinates
+    ux, ix = np.unique(q[:, 0], return_inverse=True)
+    uy, iy = np.unique(q[:, 1], return_inverse=True)
+    return _Ends(q, ux, ix.ravel(), uy, iy.ravel())
+
+
+def _axis_cells(u0, u1, i0, i1, t, size, stride=1):
+    """``floor(a0 + 0.5 + t (a1 - a0))`` clipped to ``[0, size)``, times ``stride``,
+    shape (d_u, d_v, len(t)).
+
+    Computed once per pair of distinct values ``u0 x u1`` and looked up by the
+    indices ``i0``, ``i1`` of every candidate's value among them.
+    """
+    d = u1[None, :] - u0[:, None]
+    c = np.floor(u0[:, None, None] + 0.5 + t * d[..., None]).astype(np.intp)
+    np.clip(c, 0, size - 1, out=c)
+    c *= stride
+    return np.take(c.reshape(-1, len(t)), i0[:, None] * len(u1) + i1[None, :], axis=0)
 
 
 def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: float = 1.0) -> np.ndarray:
@@ -241,9 +286,13 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
     -------
     ndarray, shape (d_u, d_v)
     """
+    return _deviation(p_u, p_v, _ends(p_u, raster), _ends(p_v, raster), raster, cell=cell, step=step)
+
+
+def _deviation(p_u, p_v, e0: _Ends, e1: _Ends, raster: DistanceRaster, *, cell, step=1.0):
+    """:func:`deviation_energy` with the candidates' :func:`_ends` given."""
     dt, origin, scale = raster
-    p0 = np.asarray(p_u, dtype=np.float64) * scale - origin  # raster coordinates
-    p1 = np.asarray(p_v, dtype=np.float64) * scale - origin
+    p0, p1 = e0.q, e1.q
     d = p1[None, :, :] - p0[:, None, :]  # (d_u, d_v, 2)
     length = np.hypot(d[..., 0], d[..., 1])
     n = max(int(np.ceil(float(length.max(initial=0.0)) / step)), 1) + 1
@@ -255,22 +304,14 @@ def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: flo
         ])
     t = np.linspace(0.0, 1.0, n)
     h, w = dt.shape
-
-    def cells(a0, a1, size):
-        """Nearest raster row (or column) of every sample, floor(a + 0.5) clipped to the
-        raster, for each pair of the distinct start and end coordinates (a window of
-        candidates has few distinct x and few distinct y: (2w+1) each, not (2w+1)^2)."""
-        s, si = np.unique(a0, return_inverse=True)
-        e, ei = np.unique(a1, return_inverse=True)
-        a = (s[:, None, None] + 0.5) + t * (e[None, :] - s[:, None])[..., None]
-        return np.clip(np.floor(a), 0, size - 1).astype(np.intp), si.ravel(), ei.ravel()
-
-    ix, xs, xe = cells(p0[:, 0], p1[:, 0], h)
-    iy, ys, ye = cells(p0[:, 1], p1[:, 1], w)
-    ix *= w
-    flat = ix[xs[:, None], xe[None, :]]
-    flat += iy[ys[:, None], ye[None, :]]
-    dist = dt.ravel()[flat]  # (d_u, d_v, n), raster cells
+    # Nearest raster cell of every sample: floor(x + 0.5), clipped to the raster. A
+    # sample's row depends only on the x of its two ends (its column on their y), so
+    # it is computed once per pair of distinct x (a 7 x 7 window has 7 distinct x per
+    # vertex: 49 rows of samples, not 49 x 49) and looked up: the same double
+    # arithmetic per sample as sampling every pair, a third of the passes.
+    ix = _axis_cells(e0.ux, e1.ux, e0.ix, e1.ix, t, h, stride=w)
+    ix += _axis_cells(e0.uy, e1.uy, e0.iy, e1.iy, t, w)
+    dist = np.take(dt.ravel(), ix)  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
     wts = np.full(n, 1.0 / (n - 1))
     wts[[0, -1]] *= 0.5
@@ -312,14 +353,30 @@ def edge_energy_tables(
     """
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
+    if raster.dt.size <= _SAMPLE_BUDGET:
+        # the integer distances read as doubles once per raster, not once per sample
+        # (a large raster stays int32: bounded memory, the same sums)
+        raster = raster._replace(dt=raster.dt.astype(np.float64))
+    # every vertex with the same number of candidates: the small energies of up to
+    # _EDGE_BATCH edges in one array operation each (the same arithmetic per element)
+    pos = np.stack(candidates) if len(edges) and len({len(c) for c in candidates}) == 1 else None
+    ends = [_ends(c, raster) for c in candidates]  # once per vertex, not per edge end
     out = []
-    for (u, v), wd in zip(edges, weights, strict=True):
+    for k, ((u, v), wd) in enumerate(zip(edges, weights, strict=True)):
+        j = k % _EDGE_BATCH
+        if pos is not None and j == 0:
+            batch = edges[k:k + _EDGE_BATCH]
+            dx, dy, length = _pair_extents(pos[batch[:, 0]], pos[batch[:, 1]], cell)
+            dirs = _direction(dx, dy, length, cell=cell, t_adjust=t_adjust) if np.any(weights) else None
+            shorts = _short(length, cell=cell, short_length=short_length) if c_short else None
         pu, pv = candidates[u], candidates[v]
-        e = c_dis * deviation_energy(pu, pv, raster, cell=cell)
+        e = c_dis * _deviation(pu, pv, ends[u], ends[v], raster, cell=cell)
         if wd:
-            e = e + wd * direction_energy(pu, pv, cell=cell, t_adjust=t_adjust)
+            e = e + wd * (dirs[j] if pos is not None else
+                          direction_energy(pu, pv, cell=cell, t_adjust=t_adjust))
         if c_short:
-            e = e + c_short * short_edge_energy(pu, pv, cell=cell, short_length=short_length)
+            e = e + c_short * (shorts[j] if pos is not None else
+                               short_edge_energy(pu, pv, cell=cell, short_length=short_length))
         out.append(e)
     return out
 
