@@ -284,7 +284,7 @@ def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
     """
     import shapely
 
-    from .solid import _key
+    from .solid import _ring_keys
 
     rings = _merge_close([[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces], merge)
     turning = set()
@@ -297,11 +297,10 @@ def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
             cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
             dev = cross / np.maximum(np.hypot(*(nxt - prev).T), 1e-12)
             back = np.einsum("ij,ij->i", u, v) < 0
-            for p in r[(dev > tol) | back]:
-                turning.add(_key(p))
+            turning.update(_ring_keys(r[(dev > tol) | back]))
     out = []
     for f, rs in zip(faces, rings, strict=True):
-        kept = [r[[_key(p) in turning for p in r]] for r in rs]
+        kept = [r[[k in turning for k in _ring_keys(r)]] for r in rs]
         if len(kept[0]) < 3:
             out.append(f)
             continue

@@ -115,12 +115,12 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
                            for a in (xyz[:, 0], xyz[:, 1], xyz[:, 2],
                                      normals[:, 0], normals[:, 1], normals[:, 2]))
     NB = memoryview(np.ascontiguousarray(nbrs, dtype=np.int64).reshape(-1))
-    ok = memoryview(np.ascontiguousarray(usable, dtype=np.bool_))
-    labels = [-1] * n
+    # -1: free; -3: never grown (not usable), so one test serves both
+    labels = np.where(np.asarray(usable, dtype=bool), -1, -3).tolist()
     next_label = 0
     sqrt = math.sqrt
     for s in order.tolist():
-        if labels[s] != -1 or not ok[s]:
+        if labels[s] != -1:
             continue
         # seed plane from the seed's normal through the seed point
         nz = NZ[s]
@@ -146,7 +146,7 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
             i = queue[head] * k
             head += 1
             for j in NB[i:i + k]:
-                if labels[j] != -1 or not ok[j]:
+                if labels[j] != -1:
                     continue
                 x, y, z = X[j], Y[j], Z[j]
                 if abs(z - (a * x + b * y + c)) / norm > dist_tol:
@@ -184,7 +184,7 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
         else:
             next_label += 1
     out = np.array(labels, dtype=np.int64)
-    out[out == -2] = -1
+    out[out < 0] = -1
     return out, next_label
 
 

@@ -20,7 +20,7 @@ import logging
 
 import numpy as np
 
-from .solid import _KEY, _key
+from .solid import _KEY, _key, _ring_keys
 
 logger = logging.getLogger(__name__)
 
@@ -220,23 +220,24 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     face_count: dict = {}
     for f in faces:
         for ring in [f.exterior, *f.interiors]:
-            for p in np.asarray(ring.coords)[:-1]:
-                face_count[_key(p)] = face_count.get(_key(p), 0) + 1
+            for k in _ring_keys(np.asarray(ring.coords)[:-1]):
+                face_count[k] = face_count.get(k, 0) + 1
     redundant = set()  # straight-outline vertices inside one face carry nothing and block moves
     for ring in shapely.get_rings(union):
         c = np.asarray(ring.coords)[:-1]
+        keys = _ring_keys(c)
         for k in range(len(c)):
             for a, b in ((c[k], c[(k + 1) % len(c)]), (c[k], c[k - 1])):
                 ln = _segment_line(a, b)
                 if ln is not None:
-                    wall_lines.setdefault(_key(a), []).append(ln)
+                    wall_lines.setdefault(keys[k], []).append(ln)
             # a footprint corner (not collinear with its neighbours) stays fixed
             u = c[(k + 1) % len(c)] - c[k]
             w = c[k] - c[k - 1]
             if abs(u[0] * w[1] - u[1] * w[0]) > 1e-6 * np.hypot(*u) * np.hypot(*w):
-                fixed_keys.add(_key(c[k]))
-            elif face_count.get(_key(c[k]), 0) == 1:
-                redundant.add(_key(c[k]))
+                fixed_keys.add(keys[k])
+            elif face_count.get(keys[k], 0) == 1:
+                redundant.add(keys[k])
     from shapely.geometry import Point
 
     outline = union.boundary
@@ -284,8 +285,8 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
             rings = []
             for ring in [f.exterior, *f.interiors]:
                 pts = []
-                for p in np.asarray(ring.coords)[:-1]:
-                    k = _key(p)
+                coords = np.asarray(ring.coords)[:-1]
+                for p, k in zip(coords, _ring_keys(coords), strict=True):
                     if (drop_interior and k in interior_of_intersection) or k in redundant:
                         continue
                     q = moves.get(k, p)
