@@ -433,3 +433,30 @@ def test_a_run_told_of_other_blocks_than_it_gets_next_reads_the_same_points(area
     for a, b in zip(got, fresh, strict=True):
         assert np.array_equal(a.xyz, b.xyz)
         assert np.array_equal(a.attributes["classification"], b.attributes["classification"])
+
+
+def test_features_encoded_in_the_blocks_are_the_bytes_the_client_would_write(area, tmp_path,
+                                                                              monkeypatch):
+    real, encoded = task.encode_block, []
+
+    def spy(out, options):
+        out = real(out, options)
+        if out.encoded is not None:  # text, and results without geometry
+            assert len(out.encoded) == len(out.results)
+            assert all(r.footprint is None and not r.parts for r in out.results)
+            encoded.append(out.index)
+        return out
+
+    monkeypatch.setattr(task, "encode_block", spy)
+    out1, out2 = tmp_path / "w1.city.jsonl", tmp_path / "w2.city.jsonl"
+    s1 = _run(area, out1)
+    assert encoded  # the blocks encoded their buildings
+    s2 = _run(area, out2, workers=2)
+    # the reference: every building encoded by the client's writer
+    monkeypatch.setattr(task, "encode_block", lambda out, options: out)
+    ref = tmp_path / "client.city.jsonl"
+    s0 = _run(area, ref)
+    assert out1.read_bytes() == ref.read_bytes() == out2.read_bytes()
+    assert (s1.done, s1.failed, s1.invalid) == (s2.done, s2.failed, s2.invalid) == (
+        s0.done, s0.failed, s0.invalid)
+    assert s0.done >= 5

@@ -19,7 +19,21 @@ import numpy as np
 from ._atomic import _reason, atomic_path, scratch_path
 from .cityjson import _extent, _header, cityjson_features
 
-__all__ = ["CityJSONSeqWriter"]
+__all__ = ["CityJSONSeqWriter", "encode_feature"]
+
+
+def encode_feature(result, attributes=None, *, scale=0.001, xy_unit=1.0, z_unit=1.0):
+    """One building's CityJSONSeq line(s) and its local extent, as
+    :meth:`CityJSONSeqWriter.add` writes them: ``(text, extent or None)``.
+
+    Pure: a worker may encode its buildings and the writer append the text
+    (:meth:`CityJSONSeqWriter.add_encoded`), with the same bytes.
+    """
+    extra = {k: [v] for k, v in (attributes or {}).items()}
+    text = "".join(json.dumps(feat, separators=(",", ":")) + "\n"
+                   for feat in cityjson_features([result], scale=scale, xy_unit=xy_unit,
+                                                 z_unit=z_unit, attributes=extra))
+    return text, _extent([result])
 
 
 class CityJSONSeqWriter:
@@ -57,20 +71,22 @@ class CityJSONSeqWriter:
 
     def add(self, result, attributes=None) -> None:
         """Append one building (``attributes``: extra fields, name -> value)."""
-        ext = _extent([result])
-        if ext is not None:
-            self._lo = np.minimum(self._lo, ext[:3])
-            self._hi = np.maximum(self._hi, ext[3:])
         h = self._head
-        extra = {k: [v] for k, v in (attributes or {}).items()}
-        for feat in cityjson_features([result], scale=h["scale"], xy_unit=h["xy_unit"],
-                                      z_unit=h["z_unit"], attributes=extra):
-            try:
-                self._spool.write(json.dumps(feat, separators=(",", ":")) + "\n")
-            except OSError as exc:  # disk full while spooling: the output is what fails
-                from ..errors import FileFormatError
+        self.add_encoded(*encode_feature(result, attributes, scale=h["scale"],
+                                         xy_unit=h["xy_unit"], z_unit=h["z_unit"]))
 
-                raise FileFormatError(f"cannot write {str(self.path)!r}: {_reason(exc)}") from exc
+    def add_encoded(self, text, extent) -> None:
+        """Append one building already encoded by :func:`encode_feature` (with this
+        writer's ``scale``, ``xy_unit`` and ``z_unit``)."""
+        if extent is not None:
+            self._lo = np.minimum(self._lo, extent[:3])
+            self._hi = np.maximum(self._hi, extent[3:])
+        try:
+            self._spool.write(text)
+        except OSError as exc:  # disk full while spooling: the output is what fails
+            from ..errors import FileFormatError
+
+            raise FileFormatError(f"cannot write {str(self.path)!r}: {_reason(exc)}") from exc
         self.count += 1
 
     def close(self) -> None:

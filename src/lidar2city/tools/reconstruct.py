@@ -740,9 +740,9 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
                 progress(state["buildings"], plan.total, r)
         if block_progress is not None:
             block_progress(state["blocks"], n_blocks)
-        for r, fields in ordered.add(out):
+        for r, fields, encoded in ordered.add(out):
             tally.add(r)
-            sink.add(r, fields)
+            sink.add(r, fields, encoded)
 
     try:
         done = set()
@@ -784,7 +784,9 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
 
 
 class InOrder:
-    """Block outputs in (any order), ``(result, footprint fields)`` out in the output's order.
+    """Block outputs in (any order), ``(result, footprint fields, encoded or None)`` out in
+    the output's order (``encoded``: the block's text of the result, see
+    :func:`lidar2city.tools.task.encode_block`).
 
     With footprints the order is the footprint file's (each footprint carries
     its position in ``_index``); traced footprints come block by block and are
@@ -805,7 +807,9 @@ class InOrder:
         self.points |= out.points
         fps = out.footprints
         keys = sorted(k for k in fps.attributes if not k.startswith("_"))
-        items = [(r, {k: fps.attributes[k][j] for k in keys}) for j, r in enumerate(out.results)]
+        encoded = out.encoded or [None] * len(out.results)
+        items = [(r, {k: fps.attributes[k][j] for k in keys}, encoded[j])
+                 for j, r in enumerate(out.results)]
         if self.plan.traced:
             self.pending[out.index] = items
         else:
@@ -815,7 +819,7 @@ class InOrder:
             got = self.pending.pop(self.next)
             ready += got if self.plan.traced else [got]
             self.next += 1
-        for r, _ in ready:
+        for r, _, _ in ready:
             if self.plan.traced:
                 self.numbered += 1
                 r.id = f"b{self.numbered}"
@@ -842,7 +846,7 @@ class _Collect:
         self.output, self.plan = output, plan
         self.results, self.fields = [], []
 
-    def add(self, result, fields):
+    def add(self, result, fields, encoded=None):
         self.results.append(result)
         self.fields.append(fields)
 
@@ -865,17 +869,24 @@ class _Stream:
 
         f = plan.frame
         self.writer = CityJSONSeqWriter(output, origin=f.origin, crs=f.crs, xy_unit=f.xy_unit,
-                                        z_unit=f.z_unit, configuration=plan.resolved,
-                                        title=_title(plan.lods))
+                                        z_unit=f.z_unit, scale=SEQ_SCALE,
+                                        configuration=plan.resolved, title=_title(plan.lods))
 
-    def add(self, result, fields):
-        self.writer.add(_without_run_attributes(result), fields)
+    def add(self, result, fields, encoded=None):
+        if encoded is not None:  # made in the block, with this writer's scale and units
+            self.writer.add_encoded(*encoded)
+        else:
+            self.writer.add(_without_run_attributes(result), fields)
 
     def close(self):
         self.writer.close()
 
     def abort(self):
         self.writer.abort()
+
+
+#: the quantisation step of a streamed CityJSONSeq output (CRS units)
+SEQ_SCALE = 0.001
 
 
 def _sink(output, plan):
@@ -992,6 +1003,10 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            user_primitives=user_prims,
                            check_images=None if check_images is None else str(check_images),
                            footprints_config=others.get("footprints"),
+                           # given footprints streamed: each block encodes its buildings
+                           encode=({"lods": want, "scale": SEQ_SCALE, "xy_unit": frame.xy_unit,
+                                    "z_unit": frame.z_unit}
+                                   if fmt == "cityjsonseq" and footprints is not None else None),
                            **_edit_options(edits, cfg, lod22, others, want, method))
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang

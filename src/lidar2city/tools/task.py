@@ -61,6 +61,11 @@ class BlockOptions:
         re-applied to their buildings inside the block; empty: none.
     edit_context : EditContext or None
         How the run builds a building, for re-applying ``edits``.
+    encode : dict or None
+        For a streamed CityJSONSeq output of given footprints: the LoDs written
+        and the writer's ``scale``, ``xy_unit`` and ``z_unit``; each building's
+        feature text is then made in the block (:func:`encode_block`), so the
+        run's client only appends text in order. None: the client encodes.
     """
 
     config: object
@@ -73,6 +78,7 @@ class BlockOptions:
     footprints_config: object = None
     edits: tuple = ()
     edit_context: object = None
+    encode: dict | None = None
 
 
 @dataclass(eq=False)
@@ -84,6 +90,8 @@ class BlockOutput:
     building carries that reason; ``worker_mb`` the peak resident memory of
     the process that ran it, ``cpu`` the CPU seconds that process spent on the
     block and ``worker`` which process it was (measures of the run, never written).
+    ``encoded``: with :attr:`BlockOptions.encode`, each building's
+    ``(feature text, local extent)`` (:func:`encode_block`); None otherwise.
     """
 
     index: int
@@ -94,6 +102,7 @@ class BlockOutput:
     worker_mb: float = 0.0
     cpu: float = 0.0
     worker: str = ""
+    encoded: list | None = None
 
 
 class _TileCache:
@@ -365,7 +374,43 @@ def block_footprints(spec):
 
 def run_block(spec, options: BlockOptions) -> BlockOutput:
     """Every building of one block (the task a worker runs); see :func:`_run_block`."""
-    return _measured(_run_block, spec, options)
+    return _measured(_encoded_block, spec, options)
+
+
+def _encoded_block(spec, options):
+    return encode_block(_run_block(spec, options), options)
+
+
+def encode_block(out: BlockOutput, options: BlockOptions) -> BlockOutput:
+    """With ``options.encode`` and given footprints: ``out`` with each building's
+    CityJSONSeq text and extent (:func:`lidar2city.io.cityjsonseq.encode_feature`,
+    the LoDs not written left out, the run's measures not written) in
+    ``encoded``, and light results (no geometry: the LoD keys of what is
+    written, the status, reason and attributes the run's summary counts), so
+    that little travels back and the client only appends text."""
+    enc = options.encode
+    if enc is None or out.failed or not out.results or "_index" not in out.footprints.attributes:
+        return out
+    import dataclasses
+
+    from ..datamodel import Footprints
+    from ..io.cityjsonseq import encode_feature
+    from .reconstruct import _without_run_attributes
+
+    fps = out.footprints
+    keys = sorted(k for k in fps.attributes if not k.startswith("_"))
+    encoded, light = [], []
+    for j, r in enumerate(out.results):
+        kept = {lod: s for lod, s in r.solids.items() if lod in enc["lods"]}
+        written = _without_run_attributes(dataclasses.replace(r, solids=kept))
+        encoded.append(encode_feature(written, {k: fps.attributes[k][j] for k in keys},
+                                      scale=enc["scale"], xy_unit=enc["xy_unit"],
+                                      z_unit=enc["z_unit"]))
+        light.append(dataclasses.replace(r, footprint=None, solids=dict.fromkeys(kept, ()),
+                                         parts={}))
+    out.results, out.encoded = light, encoded
+    out.footprints = Footprints([None] * len(fps), list(fps.ids), fps.attributes)
+    return out
 
 
 def _peak_mb() -> float:
