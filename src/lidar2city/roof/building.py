@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import time
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -303,19 +302,7 @@ def _valid_cut(solid, precision=1e-3) -> bool:
     from ..datamodel import Solid
 
     rounded = Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
-    return not _check(solid) and not check_solid(rounded)
-
-
-_CHECKED = weakref.WeakKeyDictionary()
-
-
-def _check(solid) -> list:
-    """:func:`check_solid` of a solid, once per solid object (a cut solid is validated
-    by :func:`_valid_cut` and again when its roof topology is chosen)."""
-    issues = _CHECKED.get(solid)
-    if issues is None:
-        issues = _CHECKED[solid] = check_solid(solid)
-    return issues
+    return not check_solid(solid) and not check_solid(rounded)
 
 
 def _parts(footprint):
