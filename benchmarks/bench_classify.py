@@ -20,8 +20,12 @@ shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
 25 pts/m2) with building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
 ``--nebraska-png PATH`` draws where the Nebraska sample's building points are
-missed and which are as dark as the leaves (docs/classify_nebraska_misses.png;
-the breakdown by cause, with see-through and intensity tests, is always printed);
+missed, which are as dark as the leaves, and the reference's building share per
+0.3 m column against our outline (docs/classify_nebraska_misses.png; the
+breakdown by cause, with see-through and intensity tests, and the test of a
+2-D labelling are always printed). How Delft's and Nebraska's references label
+the canopy over and beside roofs, and what labelling every point of our outline
+building would score on each, is printed after the Nebraska breakdown;
 ``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
 footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
 
@@ -110,6 +114,75 @@ def main(data: Path):
 NEBRASKA = "misc/file_with_both_wkt_and_geotiff_vlrs.las"
 
 
+def _prf(pred, bld, valid, *, text=True):
+    """Building precision, recall and F1 of the mask ``pred`` against the reference mask ``bld``."""
+    tp = int((pred & bld).sum())
+    fp = int((pred & ~bld & valid).sum())
+    p, r = tp / max(tp + fp, 1), tp / max(int(bld.sum()), 1)
+    f1 = 2 * p * r / max(p + r, 1e-12)
+    return f"precision {p:.3f}, recall {r:.3f}, F1 {f1:.3f}" if text else f1
+
+
+def _in_outline(xyz, out, *, dilate=0.0, shift=(0.0, 0.0)):
+    """Whether each point lies in the classifier's building outline (its building grid),
+    dilated by ``dilate`` metres and shifted by ``shift`` (dx, dy) metres."""
+    from scipy import ndimage
+
+    grid, cell = out["building_grid"], out["cell"]
+    x0, y0 = out["grid_origin"]
+    if dilate > 0:
+        grid = ndimage.distance_transform_edt(~grid) * cell <= dilate
+    j = np.floor((xyz[:, 0] - x0 - shift[0]) / cell).astype(np.int64)
+    i = np.floor((xyz[:, 1] - y0 - shift[1]) / cell).astype(np.int64)
+    ok = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+    inside = np.zeros(len(xyz), bool)
+    inside[ok] = grid[i[ok], j[ok]]
+    return inside
+
+
+def canopy_over_roofs(data: Path):
+    """How each reference labels the canopy over and beside roofs, and what labelling
+    every point of our outline building (at every height) would score on both.
+
+    Per file (Delft: AHN classes, ground = class 2; Nebraska: ASPRS classes): the
+    object points inside our building outline more than ``roof_tolerance`` above
+    the roof (not on a roof plane), and those in the 0.5 m ring round it above
+    the roof, split by reference class; then the building F1 of our classes, and
+    of our classes plus every object point from 0.5 m up in the outline dilated
+    by 0, 0.5 and 1 m.
+    """
+    from lidar2city.classify.core import _classify
+
+    print("\nCanopy over and beside roofs: how the references label it (points of our outline "
+          "more than 1 m above the roof, off the roof planes; reference building / vegetation)")
+    for rel, crs, veg_codes, ignore in (("delft/ahn3_cropped_1.laz", "EPSG:7415", (1,), (9, 26)),
+                                        (NEBRASKA, None, (3, 4, 5), (7,))):
+        path = data / rel
+        if not path.exists():
+            continue
+        cloud = read_points(path, crs=crs)
+        a = cloud.attributes
+        ref = a["classification"]
+        out = _classify(cloud.xyz, ref == 2, return_number=a["return_number"],
+                        number_of_returns=a["number_of_returns"])
+        cls, hag, oi = out["classes"], out["hag"], out["obj_idx"]
+        flags = {}
+        for key in ("seed", "in_building", "in_zone", "above_roof"):
+            flags[key] = np.zeros(len(ref), bool)
+            flags[key][oi] = out[key]
+        bld, veg, valid = ref == 6, np.isin(ref, veg_codes), ~np.isin(ref, ignore)
+        over = flags["above_roof"] & ~flags["seed"]
+        inside, ring = over & flags["in_building"], over & flags["in_zone"] & ~flags["in_building"]
+        obj = valid & (ref != 2) & (hag >= 0.5)
+        rules = ", ".join(
+            f"dilated {b:g} m {_prf((cls == 6) | (obj & _in_outline(cloud.xyz, out, dilate=b)), bld, valid, text=False):.3f}"
+            for b in (0.0, 0.5, 1.0))
+        print(f"  {rel:<44} over the roof {int((inside & bld).sum())} / {int((inside & veg).sum())}, "
+              f"in the ring above it {int((ring & bld).sum())} / {int((ring & veg).sum())}; "
+              f"building F1 ours {_prf(cls == 6, bld, valid, text=False):.3f}, every object point "
+              f"of the outline: {rules}")
+
+
 def nebraska_misses(data: Path, png=None):
     """Where the Nebraska sample's reference building points are missed, and why.
 
@@ -172,6 +245,7 @@ def nebraska_misses(data: Path, png=None):
               f"(rough above {smooth_res:.3f}): rough {np.mean(rough[m]):.2f}, "
               f"ref. vegetation within 0.3 m {np.mean(d_veg[m] < 0.3):.2f}")
     seed, dark = _nebraska_causes(xyz, ref, a["intensity"], out, res)
+    columns, best_shift = _nebraska_columns(xyz, ref, hag, out)
     if png is None:
         return
     import matplotlib
@@ -180,8 +254,8 @@ def nebraska_misses(data: Path, png=None):
     import matplotlib.pyplot as plt
 
     other = ~(hit | miss | false)
-    fig, axes = plt.subplots(2, 3, figsize=(16, 9.2), gridspec_kw={"width_ratios": [1.4, 1, 1]})
-    lower = axes[1]
+    fig, axes = plt.subplots(3, 3, figsize=(16, 13.8), gridspec_kw={"width_ratios": [1.4, 1, 1]})
+    lower, third = axes[1], axes[2]
     axes = axes[0]
     groups = ((other & (ref == 2), "ground", "tan", 0.5),
               (other & veg, "ref. vegetation", "yellowgreen", 0.8),
@@ -189,19 +263,18 @@ def nebraska_misses(data: Path, png=None):
               (false, "vegetation called building", "orange", 2.5))
     z0 = xyz[:, 2].min()
 
-    def draw(row, groups, slices, title):
+    def draw(row, groups, slices, title, *, top=True):
         """Top view (highest on top) and two vertical slices of the point groups."""
-        for m, label, colour, size in groups:
+        for m, label, colour, size in groups if top else ():
             order = np.flatnonzero(m)[np.argsort(xyz[m, 2])]
             row[0].scatter(xyz[order, 0], xyz[order, 1], s=size, c=colour, label=label, lw=0)
         row[0].set_title(title, fontsize=9)
-        row[0].legend(fontsize=7, markerscale=4, loc="upper left")
         for ax, (axis, lo, hi) in zip(row[1:], slices, strict=True):
             sl = (xyz[:, axis] >= lo) & (xyz[:, axis] < hi)
             u = 1 - axis
-            for m, _label, colour, size in groups:
+            for m, label, colour, size in groups:
                 mm = m & sl
-                ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0)
+                ax.scatter(xyz[mm, u], xyz[mm, 2] - z0, s=size + 1, c=colour, lw=0, label=label)
             ax.set_title(f"vertical slice {'xy'[axis]} {lo:g}-{hi:g} m", fontsize=9)
             ax.set_xlabel(f"{'xy'[u]} (m)")
             ax.set_ylabel("height (m)")
@@ -215,11 +288,35 @@ def nebraska_misses(data: Path, png=None):
              (bld & ~seed & ~dark, "ref. building off the roof planes, bright", "black", 2.5))
     draw(lower, kinds, ((1, 1.0, 2.0), (0, 14.0, 15.0)),
          "reference building points: roof planes and dark points")
-    for ax in (*axes, *lower):
+    # the reference labels by 2-D position: share of building per column, our outline
+    inside = _in_outline(xyz, out)
+    sides = ((ref == 2, "ground", "tan", 0.5), (veg & ~inside, "ref. vegetation", "yellowgreen", 0.8),
+             (veg & inside, "ref. vegetation in our outline", "darkgreen", 1.5),
+             (bld & inside, "ref. building in our outline", "red", 1.5),
+             (bld & ~inside, "ref. building outside it", "blue", 2.5))
+    draw(third, sides, ((0, 0.5, 1.5), (1, 6.5, 7.5)),
+         f"reference building share per {_COLUMN:g} m column (points from 0.5 m up)\n"
+         f"black: our outline; dashed: shifted by {best_shift} m (best)", top=False)
+    nrow, ncol = columns.shape
+    im = third[0].imshow(columns, origin="lower", extent=(0, ncol * _COLUMN, 0, nrow * _COLUMN),
+                         cmap="coolwarm_r", vmin=0, vmax=1, interpolation="nearest")
+    fig.colorbar(im, ax=third[0], fraction=0.03)
+    grid, cell = out["building_grid"], out["cell"]
+    gx = out["grid_origin"][0] + (np.arange(grid.shape[1]) + 0.5) * cell
+    gy = out["grid_origin"][1] + (np.arange(grid.shape[0]) + 0.5) * cell
+    third[0].contour(gx, gy, grid.astype(float), levels=[0.5], colors="k")
+    third[0].contour(gx + best_shift[0], gy + best_shift[1], grid.astype(float), levels=[0.5],
+                     colors="k", linestyles="dashed")
+    third[0].set_xlim(0, ncol * _COLUMN)
+    third[0].set_ylim(0, nrow * _COLUMN)
+    for ax in (*axes, *lower, *third):
         ax.set_aspect("equal")
+    for ax in (axes[0], lower[0], third[1]):
+        ax.legend(fontsize=7, markerscale=4, loc="upper right" if ax is third[1] else "upper left")
     fig.suptitle("Nebraska sample: reference building points missed (blue) and where they are "
-                 "(top); which are roof planes and which are as dark as the leaves (bottom)",
-                 fontsize=10)
+                 "(top); which are roof planes and which are as dark as the leaves (middle);\n"
+                 "the reference labels by 2-D position, its building columns reaching over open "
+                 "ground beside the roofs (bottom)", fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=80)
     plt.close(fig)
@@ -290,10 +387,7 @@ def _nebraska_causes(xyz, ref, intensity, out, res):
           f"{np.median(intensity[hv]):9.0f} {np.nanmedian(res[hv]):8.3f}")
 
     def score(pred):
-        tp = int((pred & bld).sum())
-        fp = int((pred & ~bld & valid).sum())
-        p, r = tp / max(tp + fp, 1), tp / max(int(bld.sum()), 1)
-        return f"precision {p:.3f}, recall {r:.3f}, F1 {2 * p * r / max(p + r, 1e-12):.3f}"
+        return _prf(pred, bld, valid)
 
     canopy = ~seed & see_through & dark
     print(f"  ours: {score(pb)}; see-through and dark (intensity under the 5th percentile of "
@@ -312,6 +406,64 @@ def _nebraska_causes(xyz, ref, intensity, out, res):
               f"/{int((rest & veg & (d >= lo) & (d < hi)).sum())}"
               for lo, hi in zip(bands[:-1], bands[1:], strict=True)))
     return seed, dark
+
+
+#: Column size (m) of the test of a 2-D labelling (point spacing 0.09 m: ~10 points a column).
+_COLUMN = 0.3
+
+
+def _nebraska_columns(xyz, ref, hag, out):
+    """Does the Nebraska reference label by 2-D position (a footprint polygon) or in 3-D?
+
+    Object points from 0.5 m up are binned into ``_COLUMN`` (m) columns: the share
+    lying in a column of one reference class (building or vegetation), and the
+    building F1 of the best possible 2-D labelling (each column its majority
+    class). Then the F1 of labelling every object point in our outline building,
+    with the outline shifted by up to 2 m (0.25 m steps): the best shift, and
+    where the reference's building columns lie that our outline plus 0.5 m does
+    not reach (ground seen below them: no roof under the canopy there).
+
+    Returns the building share per column (NaN where empty) and the best shift.
+    """
+    from scipy.spatial import cKDTree
+
+    bld, veg, valid = ref == 6, np.isin(ref, (3, 4, 5)), ref != 7
+    obj = valid & (ref != 2) & (hag >= 0.5)
+    ij = np.floor(xyz[:, :2] / _COLUMN).astype(np.int64)
+    ncol, nrow = ij.max(axis=0) + 1
+    key = ij[:, 1] * ncol + ij[:, 0]
+    nb = np.bincount(key[obj & bld], minlength=nrow * ncol)
+    nv = np.bincount(key[obj & veg], minlength=nrow * ncol)
+    pure = np.where((nb > 0) & (nv > 0), 0, nb + nv).sum() / max((nb + nv).sum(), 1)
+    majority = np.maximum(nb, nv).sum() / max((nb + nv).sum(), 1)
+    column_bld = (nb > nv)[key]
+    share = np.where(nb + nv > 0, nb / np.maximum(nb + nv, 1), np.nan).reshape(nrow, ncol)
+    print(f"  2-D or 3-D labelling? {pure:.3f} of the object points from 0.5 m up lie in "
+          f"{_COLUMN:g} m columns holding one reference class ({majority:.3f} share their "
+          f"column's majority class); the best 2-D labelling (each "
+          f"column its majority class): {_prf(obj & column_bld, bld, valid)}")
+    seed = np.zeros(len(xyz), bool)
+    seed[out["obj_idx"]] = out["seed"]
+    steps = np.arange(-2.0, 2.0001, 0.25)
+    f1 = np.array([[_prf(seed | (obj & _in_outline(xyz, out, shift=(dx, dy))), bld, valid,
+                         text=False) for dx in steps] for dy in steps])
+    iy, ix = np.unravel_index(np.argmax(f1), f1.shape)
+    zero = int(np.argmin(np.abs(steps)))
+    best = (float(steps[ix]), float(steps[iy]))
+    print(f"  every object point from 0.5 m up in our outline building: F1 {f1[zero, zero]:.3f}; "
+          f"with the outline shifted by ({best[0]:+g}, {best[1]:+g}) m, the best shift: "
+          f"{f1[iy, ix]:.3f}")
+    beyond = obj & column_bld & ~_in_outline(xyz, out, dilate=0.5)
+    cols = np.unique(key[beyond])
+    # a roof hidden under the canopy would show through its gaps as the terrain does
+    _, near = cKDTree(xyz[seed, :2]).query(xyz[:, :2])
+    at_roof = obj & (np.abs(xyz[:, 2] - xyz[seed, 2][near]) < 0.75)
+    print(f"  reference building columns beyond our outline + 0.5 m: {len(cols) * _COLUMN ** 2:.1f} m2, "
+          f"{int((beyond & bld).sum())} reference building / {int((beyond & veg).sum())} vegetation "
+          f"points; terrain points seen in {np.isin(cols, key[ref == 2]).mean():.0%} of those "
+          f"columns, a point at roof height (within 0.75 m of the nearest roof plane point's) in "
+          f"{np.isin(cols, key[at_roof]).mean():.0%}: canopy over open ground, no hidden roof")
+    return share, best
 
 
 def density_sweep(data: Path):
@@ -538,6 +690,7 @@ if __name__ == "__main__":
     folder = Path(args[0] if args else default)
     main(folder)
     nebraska_misses(folder, neb_png)
+    canopy_over_roofs(folder)
     density_sweep(folder)
     isprs_sites(folder, png)
     synthetic_surveys()

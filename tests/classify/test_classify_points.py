@@ -424,3 +424,18 @@ def test_far_outlier_is_noise_and_changes_nothing(synthetic):
                           number_of_returns=np.r_[nr, 1])
     assert out[-1] == 7
     assert (out[:-1] == cls).mean() >= 0.995
+
+
+def test_building_grid_geometry_locates_the_points():
+    # the building grid's origin and cell, as returned, put every object point in
+    # the cell the classifier used for it (diagnostics and figures map the outline with them)
+    xyz, truth, rn, nr = scene(seed=2)
+    out = _classify(xyz, truth == GROUND, return_number=rn, number_of_returns=nr)
+    grid, cell = out["building_grid"], out["cell"]
+    x0, y0 = out["grid_origin"]
+    assert cell >= ClassifyConfig().cell and grid.any()
+    p = xyz[out["obj_idx"]]
+    j = np.floor((p[:, 0] - x0) / cell).astype(int)
+    i = np.floor((p[:, 1] - y0) / cell).astype(int)
+    assert i.min() >= 0 and j.min() >= 0 and i.max() < grid.shape[0] and j.max() < grid.shape[1]
+    assert np.array_equal(grid[i, j], out["in_building"])

@@ -633,4 +633,5 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
     return {"classes": cls, "hag": hag, "obj_idx": obj_idx, "shape": shape, "regions": regions,
             "residual": residual, "max_residual": max_residual,
             "seed": seed, "labels": lab, "in_zone": in_zone, "in_building": in_building, "veg_over": veg_over,
-            "edge_veg": edge_veg, "above_roof": above_roof, "linearity": shape.linearity[nn], "spacing": spacing, "k": k, "building_grid": building_grid}
+            "edge_veg": edge_veg, "above_roof": above_roof, "linearity": shape.linearity[nn], "spacing": spacing, "k": k, "building_grid": building_grid,
+            "grid_origin": (float(x0), float(y0)), "cell": cell}
