@@ -174,10 +174,12 @@ def canopy_over_roofs(data: Path):
         over = flags["above_roof"] & ~flags["seed"]
         inside, ring = over & flags["in_building"], over & flags["in_zone"] & ~flags["in_building"]
         obj = valid & (ref != 2) & (hag >= 0.5)
-        rules = ", ".join(
-            f"dilated {b:g} m {_prf((cls == 6) | (obj & _in_outline(cloud.xyz, out, dilate=b)), bld, valid, text=False):.3f}"
-            for b in (0.0, 0.5, 1.0))
-        print(f"  {rel:<44} over the roof {int((inside & bld).sum())} / {int((inside & veg).sum())}, "
+        f1 = [_prf((cls == 6) | (obj & _in_outline(cloud.xyz, out, dilate=d)), bld, valid,
+                   text=False) for d in (0.0, 0.5, 1.0)]
+        rules = ", ".join(f"dilated {d:g} m {f:.3f}" for d, f in zip((0.0, 0.5, 1.0), f1,
+                                                                      strict=True))
+        print(f"  {rel:<44} over the roof {int((inside & bld).sum())} / "
+              f"{int((inside & veg).sum())}, "
               f"in the ring above it {int((ring & bld).sum())} / {int((ring & veg).sum())}; "
               f"building F1 ours {_prf(cls == 6, bld, valid, text=False):.3f}, every object point "
               f"of the outline: {rules}")
@@ -290,7 +292,8 @@ def nebraska_misses(data: Path, png=None):
          "reference building points: roof planes and dark points")
     # the reference labels by 2-D position: share of building per column, our outline
     inside = _in_outline(xyz, out)
-    sides = ((ref == 2, "ground", "tan", 0.5), (veg & ~inside, "ref. vegetation", "yellowgreen", 0.8),
+    sides = ((ref == 2, "ground", "tan", 0.5),
+             (veg & ~inside, "ref. vegetation", "yellowgreen", 0.8),
              (veg & inside, "ref. vegetation in our outline", "darkgreen", 1.5),
              (bld & inside, "ref. building in our outline", "red", 1.5),
              (bld & ~inside, "ref. building outside it", "blue", 2.5))
@@ -458,8 +461,9 @@ def _nebraska_columns(xyz, ref, hag, out):
     # a roof hidden under the canopy would show through its gaps as the terrain does
     _, near = cKDTree(xyz[seed, :2]).query(xyz[:, :2])
     at_roof = obj & (np.abs(xyz[:, 2] - xyz[seed, 2][near]) < 0.75)
-    print(f"  reference building columns beyond our outline + 0.5 m: {len(cols) * _COLUMN ** 2:.1f} m2, "
-          f"{int((beyond & bld).sum())} reference building / {int((beyond & veg).sum())} vegetation "
+    print(f"  reference building columns beyond our outline + 0.5 m: "
+          f"{len(cols) * _COLUMN ** 2:.1f} m2, {int((beyond & bld).sum())} reference building / "
+          f"{int((beyond & veg).sum())} vegetation "
           f"points; terrain points seen in {np.isin(cols, key[ref == 2]).mean():.0%} of those "
           f"columns, a point at roof height (within 0.75 m of the nearest roof plane point's) in "
           f"{np.isin(cols, key[at_roof]).mean():.0%}: canopy over open ground, no hidden roof")
