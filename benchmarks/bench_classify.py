@@ -297,7 +297,7 @@ def nebraska_misses(data: Path, png=None):
              (veg & inside, "ref. vegetation in our outline", "darkgreen", 1.5),
              (bld & inside, "ref. building in our outline", "red", 1.5),
              (bld & ~inside, "ref. building outside it", "blue", 2.5))
-    draw(third, sides, ((0, 0.5, 1.5), (1, 6.5, 7.5)),
+    draw(third, sides, ((0, 2.0, 3.0), (1, 6.5, 7.5)),
          f"reference building share per {_COLUMN:g} m column (points from 0.5 m up)\n"
          f"black: our outline; dashed: shifted by {best_shift} m (best)", top=False)
     nrow, ncol = columns.shape
