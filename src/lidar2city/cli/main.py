@@ -80,6 +80,22 @@ def _stop_workers():  # pragma: no cover - exercised in a subprocess
         for child in mp.active_children():
             with contextlib.suppress(Exception):
                 child.kill()
+    _release_semaphores()
+
+
+def _release_semaphores():  # pragma: no cover - exercised in a subprocess
+    """Unlink the named semaphores the cluster's nannies made in this process (their
+    queues' locks). os._exit skips multiprocessing's exit hooks, so the resource
+    tracker would unlink them itself and warn of "leaked semaphore objects"."""
+    util = sys.modules.get("multiprocessing.util")
+    sync = sys.modules.get("multiprocessing.synchronize")
+    if util is None or sync is None:
+        return
+    with contextlib.suppress(Exception):
+        for finalizer in list(util._finalizer_registry.values()):
+            if getattr(finalizer, "_callback", None) is sync.SemLock._cleanup:
+                with contextlib.suppress(Exception):
+                    finalizer()
 
 
 def _install_interrupt_handlers():
