@@ -49,7 +49,7 @@ from .topology import boundary_chains, label_grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition", "restore_facets"]
 
 
 def arrangement_cells(footprint, segments):
