@@ -1,12 +1,13 @@
 """LoD2.2 roof topology (issue 12): cleanliness on Delft, wireframe F1 on synthetic roofs, speed.
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
-       [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake]
+       [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
 roofs; --topology grid measures the label-grid + snake partition, the one
 before the line arrangement; --no-step-snake sets ``[lod22] step_snake = false``:
-step edges as angle-snapped straight pieces instead of the exact 2-D snake's)
+step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
+--no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost)
 
 1. Delft shared tile, 132 BGT footprints, AHN3 class 6 building points (as
    bench_lod22.py): median roof corners per building (distinct vertices where a
@@ -67,7 +68,8 @@ def config():
     from lidar2city.roof.building import Lod22Config
 
     return Lod22Config(topology=option("--topology") or "arrangement",
-                       step_snake="--no-step-snake" not in sys.argv[1:])
+                       step_snake="--no-step-snake" not in sys.argv[1:],
+                       restore="--no-restore" not in sys.argv[1:])
 
 
 def data_dir() -> Path:

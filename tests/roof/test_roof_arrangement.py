@@ -12,6 +12,7 @@ from lidar2city.roof.arrangement import (
     dissolve_cells,
     drop_collinear,
     extend_to_hits,
+    restore_facets,
     snake_steps,
 )
 from lidar2city.roof.building import Lod22Config, reconstruct_lod22
@@ -318,3 +319,58 @@ def test_step_snake_roofs_valid_and_deterministic():
     assert np.array_equal(a.solids[0].vertices, b.solids[0].vertices)
     sc = wireframe_scores(roof_wireframe(a.solids), s.wireframe, tolerance=0.5)
     assert sc["corner_f1"] >= 0.9
+
+
+def _lost_facet_roof(block=(4.0, 4.0, 6.5, 6.0), height=1.0, spacing=0.3, outside_z=None):
+    """A flat 10 x 10 m roof at 5 m, points every ``spacing``, with a level block ``height``
+    above it (facet 1) that the single face does not carry; ``outside_z``: points just
+    outside the footprint (a neighbour's roof) at that height."""
+    g = np.arange(-0.45, 10.46, spacing)
+    xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    x0, y0, x1, y1 = block
+    on = (xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1)
+    out = ~shapely.contains_xy(SQ, xy[:, 0], xy[:, 1])
+    z = np.where(on, 5.0 + height, 5.0)
+    if outside_z is not None:
+        z = np.where(out & (np.abs(xy[:, 1] - (y0 + y1) / 2) < (y1 - y0) / 2), outside_z, z)
+    labels = np.where(on, 1, 0)
+    planes = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 5.0 + height]])
+    return np.column_stack([xy, z]), labels, planes
+
+
+def test_restore_facets_cuts_a_lost_block_back_in():
+    xyz, labels, planes = _lost_facet_roof()
+    faces, face_labels, n = restore_facets([SQ], [0], SQ, xyz, labels, planes, direction=0.0, spacing=0.3)
+    assert n == 1 and sorted(face_labels.tolist()) == [0, 1]
+    block = faces[int(np.flatnonzero(face_labels == 1)[0])]
+    # the rectangle of the block's points (4.05-6.45 x 4.05-5.85) grown by half a spacing
+    assert block.equals_exact(shapely.normalize(shapely.box(3.9, 3.9, 6.6, 6.0)), 1e-9)
+    assert sum(f.area for f in faces) == pytest.approx(100)
+    assert shapely.union_all(faces).area == pytest.approx(100)
+
+
+@pytest.mark.parametrize("case", ["small", "on_the_face", "strip", "neighbour"])
+def test_restore_facets_leaves_what_is_no_lost_facet(case):
+    kw = {"small": {"block": (4.0, 4.0, 4.7, 4.7)},  # under 1 m2 of points
+          "on_the_face": {"height": 0.2},  # within T_step of the face over it
+          "strip": {"block": (-0.1, 3.0, 0.5, 8.0)},  # a 0.6 m strip along the outline
+          "neighbour": {"block": (8.0, 4.0, 10.1, 6.0), "outside_z": 6.0}}[case]
+    xyz, labels, planes = _lost_facet_roof(**kw)
+    faces, face_labels, n = restore_facets([SQ], [0], SQ, xyz, labels, planes, direction=0.0, spacing=0.3)
+    assert n == 0 and face_labels.tolist() == [0] and faces[0].equals(SQ)
+
+
+def test_restored_block_makes_a_valid_better_roof():
+    # a 1.5 x 1.5 m block on a roof whose label grid has 1 m cells: the partition's
+    # smallest face (4 cells) drops it, the restoration cuts it back in
+    xyz, _, _ = _lost_facet_roof(block=(4.0, 4.0, 5.5, 5.5))
+    on = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0))
+    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, restore=False))
+    assert not check_solid(on.solids[0]) and not check_solid(off.solids[0])
+    assert (off.attributes["roof_planes"], on.attributes["roof_planes"]) == (1, 2)
+    from lidar2city.lod.mesh import solid_triangles
+    from lidar2city.metrics.model import point_mesh_distance, rmse
+
+    inside = xyz[shapely.contains_xy(SQ, xyz[:, 0], xyz[:, 1])]
+    e_on, e_off = (rmse(point_mesh_distance(inside, solid_triangles(r.solids))) for r in (on, off))
+    assert e_on < 0.05 < e_off

@@ -49,7 +49,7 @@ from .topology import boundary_chains, label_grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition", "restore_facets"]
 
 
 def arrangement_cells(footprint, segments):
@@ -1209,3 +1209,116 @@ def collapse_short_edges(faces, footprint, *, min_length):
     idx = [fi for fi in range(len(rings)) if current[fi] is not None]
     out = [current[fi] for fi in idx]
     return [shapely.normalize(f) for f in out], np.asarray(idx, dtype=np.int64)
+
+
+
+
+def _covering_height(faces, face_labels, planes, xy):
+    """Height (N,) of the face over each point (x, y) on its plane; NaN outside every face."""
+    import shapely
+
+    z = np.full(len(xy), np.nan)
+    for f, lab in zip(faces, face_labels, strict=True):
+        on = np.isnan(z)
+        on[on] = shapely.contains_xy(f, xy[on, 0], xy[on, 1])
+        z[on] = xy[on] @ planes[lab][:2] + planes[lab][2]
+    return z
+
+
+def restore_facets(faces, face_labels, footprint, xyz, labels, planes, *, direction, spacing, t_step=0.3,
+                   min_area=1.0, max_rms=0.1, max_slope=60.0, min_fill=0.5, outside=0.5):
+    """Facets the segmentation found and the partition lost, cut back in as rectangles.
+
+    A facet narrower or smaller than the label grid holds well (a dormer, a
+    higher or lower part at the outline, a small terrace) can vanish in the
+    partition: its cells join a neighbour's face and its points sit off that
+    face. A facet no face carries comes back, on its own plane, when it is well
+    supported: its points inside the footprint cover at least ``min_area``
+    (points times ``spacing`` squared), its plane fits them within ``max_rms``,
+    it is no wall (slope at most ``max_slope`` deg), its points stand more than
+    ``t_step`` off the faces over them (median), and they fill at least
+    ``min_fill`` of their rectangle: the rectangle of its points in the
+    building's axes (``direction``), grown by half the point spacing, clipped
+    to the footprint, at least 3 spacings wide (no eave or gutter strip). A
+    facet that goes on at its height outside the footprint (30 % or more of the
+    points within ``outside`` m of its rectangle, beyond the outline, within
+    ``t_step`` of its plane) is a neighbour's roof reaching over the outline
+    and stays out. Rectangles are cut into the faces one at a time, the facet
+    with most points first, a spacing apart from each other.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+        A partition of ``footprint``.
+    face_labels : ndarray of int
+        Facet (index into ``planes``) of each face.
+    footprint : shapely Polygon
+    xyz : ndarray (N, 3)
+        Roof points; ``labels`` (N,) their facets (-1 none).
+    planes : ndarray (K, 3)
+    direction : float
+        Building direction (rad).
+    spacing : float
+        Point spacing (m).
+
+    Returns
+    -------
+    faces : list of shapely Polygon
+    face_labels : ndarray of int
+    restored : int
+        Rectangles cut in.
+    """
+    import shapely
+
+    faces = list(faces)
+    face_labels = np.asarray(face_labels, dtype=np.int64)
+    planes = np.asarray(planes, dtype=np.float64)
+    xyz = np.asarray(xyz, dtype=np.float64)
+    inside = shapely.contains_xy(footprint, xyz[:, 0], xyz[:, 1])
+    min_n = max(4, int(np.ceil(min_area / (spacing * spacing))))
+    kept = set(face_labels.tolist())
+    cand = []
+    for k in range(len(planes)):
+        m = np.flatnonzero((labels == k) & inside)
+        if k in kept or len(m) < min_n:
+            continue
+        pl = planes[k]
+        res = xyz[m, 2] - xyz[m, :2] @ pl[:2] - pl[2]
+        if np.degrees(np.arctan(np.hypot(pl[0], pl[1]))) <= max_slope and np.sqrt(np.mean(res ** 2)) <= max_rms:
+            cand.append((-len(m), k, m))
+    if not cand:
+        return faces, face_labels, 0
+    c, s = np.cos(direction), np.sin(direction)
+    rot = np.array([[c, s], [-s, c]])  # world -> building axes
+    taken = shapely.Polygon()
+    restored = 0
+    for _, k, m in sorted(cand, key=lambda t: t[:2]):
+        pts, pl = xyz[m], planes[k]
+        model = _covering_height(faces, face_labels, planes, pts[:, :2])
+        if not np.isfinite(model).any() or np.nanmedian(np.abs(pts[:, 2] - model)) <= t_step:
+            continue
+        uv = pts[:, :2] @ rot.T
+        lo, hi = uv.min(axis=0) - spacing / 2, uv.max(axis=0) + spacing / 2
+        if np.min(hi - lo) < 3 * spacing:
+            continue  # a strip: an eave, a gutter, a facade's top
+        box = shapely.Polygon(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]) @ rot)
+        rect = box.intersection(footprint)
+        if (rect.geom_type != "Polygon" or rect.area < min_area or rect.intersects(taken)
+                or len(m) * spacing * spacing < min_fill * rect.area):
+            continue
+        out = ~inside & shapely.contains_xy(rect.buffer(outside), xyz[:, 0], xyz[:, 1])
+        if out.any() and np.mean(np.abs(xyz[out, 2] - xyz[out, :2] @ pl[:2] - pl[2]) <= t_step) >= 0.3:
+            continue  # a neighbour's roof reaching over the outline
+        new_f, new_l = [], []
+        for f, lab in zip(faces, face_labels, strict=True):
+            parts = [f] if not f.intersects(rect) or f.touches(rect) else shapely.get_parts(f.difference(rect))
+            for p in parts:
+                if p.geom_type == "Polygon" and p.area > 1e-6:
+                    new_f.append(p)
+                    new_l.append(lab)
+        new_f.append(shapely.normalize(rect))
+        new_l.append(k)
+        faces, face_labels = new_f, np.asarray(new_l, dtype=np.int64)
+        taken = taken.union(rect.buffer(spacing))
+        restored += 1
+    return faces, face_labels, restored

@@ -11,7 +11,7 @@ import numpy as np
 from ..config import field
 from ..errors import ConfigError, FitError
 from ..validate.solid import check_solid
-from .arrangement import arrangement_partition, collapse_short_edges
+from .arrangement import arrangement_partition, collapse_short_edges, restore_facets
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
@@ -53,6 +53,8 @@ class Lod22Config:
     topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
                           "intersection lines and direction-snapped step lines, noded and labelled) "
                           "or 'grid' (label-grid chains simplified, then the snake).")
+    restore: bool = field(True, "With topology 'arrangement': cut the facets the partition lost "
+                          "back in as rectangles when the solid then fits the points better.")
     step_snake: bool = field(True, "With topology 'arrangement': step edges (walls between faces "
                              "at different heights) from the exact 2-D snake over all step "
                              "chains at once; false: straight pieces snapped to the axes by angle.")
@@ -460,22 +462,60 @@ def _closed_shell(solid) -> bool:
 def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg):
     """The solid of one footprint polygon by one roof partition method.
 
+    With ``cfg.restore`` and the arrangement, the roof parts the partition lost
+    (:func:`lidar2city.roof.arrangement.restore_facets`) are cut back in when the
+    solid with them is a closed valid shell and fits the part's points better:
+    the sum of squared point-to-mesh distances drops by at least that of the
+    smallest facet (``min_facet_area`` of points) lying ``T_step`` off.
+
     Returns ``(solid, faces, face_labels, planes, info)``; raises FitError when
     a roof stays below the floor.
     """
     info = {}
+    restored = None
     if method in ("rims", "arrangement"):
         faces, face_labels, kinds, planes = arrangement_partition(
             poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
             max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims",
             step_snake=cfg.step_snake, snake_window=cfg.snake_window, snake_cell=cfg.snake_cell)
         info["rims"] = kinds.count("rim")
+        if cfg.restore:
+            spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+            restored = restore_facets(faces, face_labels, poly, pts, labels, planes, direction=direction,
+                                      spacing=spacing, t_step=2 * cfg.elevation_error,
+                                      min_area=cfg.min_facet_area)
     else:
         part = roof_partition(poly, pts[:, :2], labels, planes, cell=cell, simplify=cfg.simplify)
         faces, face_labels = part.faces, part.face_labels
         if cfg.snake:
             faces, info = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
                                         direction=direction, window=cfg.snake_window)
+    out = _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, cell=cell, cfg=cfg, info=info)
+    if restored is None or not restored[2]:
+        return out
+    import shapely
+
+    try:
+        alt = _finish_solid(method, poly, pts, *restored[:2], planes, ground_z, cell=cell, cfg=cfg, info=info)
+    except (FitError, ValueError, shapely.errors.GEOSException):
+        return out
+    if not _closed_shell(alt[0]) or check_solid(alt[0]):
+        return out
+    from ..lod.mesh import solid_triangles
+    from ..metrics.model import point_mesh_distance
+
+    own = pts[shapely.contains_xy(poly, pts[:, 0], pts[:, 1])]
+    if not len(own):
+        return out
+    sq = [float(np.sum(point_mesh_distance(own, solid_triangles(r[0])) ** 2)) for r in (out, alt)]
+    if sq[0] - sq[1] < cfg.min_facet_area / spacing ** 2 * (2 * cfg.elevation_error) ** 2:
+        return out
+    alt[4]["restored"] = restored[2]
+    return alt
+
+
+def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info):
+    """Refine a roof partition (intersection lines, short edges) and build its solid."""
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
