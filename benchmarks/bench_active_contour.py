@@ -49,6 +49,12 @@ Usage::
     PYTHONPATH=src python benchmarks/bench_active_contour.py [--area delft|alexandria]
         [--population 8] [--generations 4] [--jobs 2] [--seed 0] [--objective cost]
         [--scale log] [--out /tmp/ac_bench] [--skip-full] [--skip-reverse] [--skip-peer]
+        [--planar-grid]
+
+``--planar-grid`` only prints the initial contours' kappa (reference protocol,
+north and south) for a grid of the roof regions' planar-share settings
+(``planar_spread``, ``min_planar_share``; share 0 is the test off): how much
+the start depends on them.
 """
 
 from __future__ import annotations
@@ -119,6 +125,25 @@ def row_domains(ref, objects, split, kind, cell):
     return dom, dom & (rows < split), dom & (rows >= split)
 
 
+def planar_grid(inp, cfg, frame, ref, dom_n, dom_s):
+    """The initial contours' kappa over the roof regions' planar-share settings."""
+    from lidar2city.segment.dsm import RoofRegionsConfig
+
+    print("\ninitial contours (no snake), reference protocol, by planar-share settings:")
+    for spread, share in ((0.5, 0.0), (0.4, 0.3), (0.4, 0.4), (0.4, 0.5), (0.5, 0.3), (0.5, 0.4),
+                          (0.5, 0.5), (0.6, 0.5), (0.6, 0.6)):
+        rc = dataclasses.replace(RoofRegionsConfig(), planar_spread=spread,
+                                 min_planar_share=share)
+        scene = prepare_scene(inp["dsm"], inp["ndsm"], cell=inp["cell"], config=cfg,
+                              roof_config=rc)
+        pred = rasterize_polygons(contours_to_polygons(scene.contours, frame, simplify=0),
+                                  ref.shape, frame)
+        kn = pixel_metrics(pred[dom_n], ref[dom_n])["kappa"]
+        ks = pixel_metrics(pred[dom_s], ref[dom_s])["kappa"]
+        print(f"  planar_spread {spread:.1f}, min_planar_share {share:.1f}: "
+              f"kappa north {kn:.4f}, south {ks:.4f}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--population", type=int, default=12)
@@ -132,6 +157,7 @@ def main():
     ap.add_argument("--scale", choices=["log", "linear"], default="log")
     ap.add_argument("--area", choices=sorted(AREAS), default="delft")
     ap.add_argument("--skip-peer", action="store_true")
+    ap.add_argument("--planar-grid", action="store_true")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -164,6 +190,9 @@ def main():
         print(f"domain {k:9s}: {int(da.sum())} px; north {int(dn.sum())} px with {int((ref & dn).sum())} "
               f"reference px, south {int(ds.sum())} px with {int((ref & ds).sum())} reference px")
     dom_all, dom_n, dom_s = domains["reference"]
+    if args.planar_grid:
+        planar_grid(inp, cfg, frame, ref, dom_n, dom_s)
+        return
 
     def ga(dom, label):
         t0 = time.perf_counter()

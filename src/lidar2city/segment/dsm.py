@@ -36,6 +36,7 @@ __all__ = [
     "dtm_from_dsm",
     "fill_nodata",
     "roughness",
+    "slope_spread",
     "vegetation_from_roughness",
     "vegetation_from_colour",
     "building_mask",
@@ -265,6 +266,66 @@ def roughness(ndsm, *, size=3) -> np.ndarray:
     return np.where(valid, out, np.nan)
 
 
+def slope_spread(dsm, *, cell, window=1.5) -> np.ndarray:
+    """Spread of the local plane slopes around each pixel (m/m); low on planar faces.
+
+    The slope of a least-squares plane is taken in a ``window`` (m, rounded to
+    an odd number of pixels, at least 3) around every pixel; its spread is the
+    standard deviation of those slope vectors over the same window, and each
+    pixel keeps the least spread of the windows two pixels around it, so a
+    pixel next to a ridge or an eave still finds a window on one face.
+
+    A roof face is planar over metres: its slopes agree even where a DSM
+    keeping the highest point per cell makes the heights themselves noisy
+    (a steep roof's residual to a plane reaches decimetres there, as much as
+    a tree's), while a tree crown's slopes point every way.
+
+    Parameters
+    ----------
+    dsm : ndarray, shape (H, W)
+        Heights (m); NaN cells take their nearest valid height.
+    cell : float
+        Pixel size (m).
+    window : float
+        Side of the plane-fit window (m).
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        Spread of the slope vectors (dimensionless, m per m), NaN where the
+        DSM is NaN.
+
+    Examples
+    --------
+    >>> y, x = np.mgrid[0:12, 0:12] * 0.5
+    >>> bool(np.allclose(slope_spread(0.8 * x + 0.3 * y, cell=0.5), 0.0))
+    True
+    """
+    z = _check_grid(dsm, "dsm")
+    cell = _check_cell(cell)
+    if not window > 0:
+        raise InputError(f"window must be a positive number of metres, got {window}")
+    valid = np.isfinite(z)
+    if not valid.any():
+        raise EmptyInputError("the DSM holds no valid pixel")
+    if not valid.all():
+        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+        z = z[tuple(idx)]
+    size = max(3, int(round(window / cell)) | 1)
+    r = np.arange(size) - size // 2
+    var_x = float((r**2).mean())
+    ky = np.repeat(r[:, None], size, axis=1).astype(np.float64) / (size * size * var_x * cell)
+    # plane slopes along columns (x) and rows (y) in m per m
+    b = ndimage.correlate(z, ky.T, mode="nearest")
+    c = ndimage.correlate(z, ky, mode="nearest")
+    mean2 = ndimage.uniform_filter(b * b + c * c, size, mode="nearest")
+    mb = ndimage.uniform_filter(b, size, mode="nearest")
+    mc = ndimage.uniform_filter(c, size, mode="nearest")
+    spread = np.sqrt(np.maximum(mean2 - mb * mb - mc * mc, 0.0))
+    spread = ndimage.minimum_filter(spread, size + 2, mode="nearest")
+    return np.where(valid, spread, np.nan)
+
+
 def vegetation_from_roughness(ndsm, elevated, *, cell, threshold=0.6, window=5.0):
     """Vegetation among ``elevated`` pixels: locally rough (non-planar) surfaces.
 
@@ -474,6 +535,14 @@ class RoofRegionsConfig:
                                    "large (m2) are merged into the region they share the "
                                    "longest edge with (dormers, roof steps, low annexes) "
                                    "if they also hold min_pixels; 0: they are dropped")
+    min_planar_share: float = field(0.5, "regions with a smaller share of planar pixels (slope "
+                                         "spread below planar_spread) are dropped: tree crowns "
+                                         "slope every way, roofs are a few planar faces; 0: off "
+                                         "(off on rasters coarser than 1 m, where 3 x 3 windows "
+                                         "span whole roofs)")
+    planar_spread: float = field(0.5, "a pixel is planar when the spread of the plane slopes "
+                                      "around it (slope_spread, 1.5 m windows) is below this "
+                                      "(m per m)")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -663,7 +732,8 @@ def _merge_fragments(lab, keep, candidate, rounds=3):
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
-                 expand_roughness=0.2, merge_area=5.0):
+                 expand_roughness=0.2, merge_area=5.0, min_planar_share=0.5,
+                 planar_spread=0.5):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -686,6 +756,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     ``edge_fraction``), small holes are filled and large ones kept as
     courtyards, and their outer edges are moved in by ``edge_inset`` metres
     (:func:`inset_regions`: the highest point per cell overstates roofs).
+    Last, a region is dropped when less than ``min_planar_share`` of its
+    pixels are planar (:func:`slope_spread` below ``planar_spread``): tree
+    crowns and bushes whose heights grew into a smooth-enough region (only on
+    rasters of 1 m or finer).
 
     Parameters
     ----------
@@ -719,6 +793,9 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         raise InputError(f"saddle_depth must be >= 0, got {saddle_depth}")
     if edge_inset < 0:
         raise InputError(f"edge_inset must be >= 0, got {edge_inset}")
+    if not 0 <= min_planar_share <= 1 or not planar_spread > 0:
+        raise InputError(f"min_planar_share must be in [0, 1] and planar_spread > 0, got "
+                         f"{min_planar_share} and {planar_spread}")
     elevated = np.isfinite(ndsm) & np.isfinite(dsm) & (ndsm > min_height)
     if vegetation is not None:
         vegetation = np.asarray(vegetation, dtype=bool)
@@ -777,6 +854,11 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
             lab = np.where(fill, near, lab)
     if edge_inset > 0:
         lab = inset_regions(lab, cell=cell, inset=edge_inset)
+    if min_planar_share > 0 and cell <= 1.0 and lab.any():
+        planar = (lab > 0) & (slope_spread(dsm, cell=cell) < planar_spread)
+        n_all = np.bincount(lab.ravel())
+        share = np.bincount(lab[planar], minlength=len(n_all)) / np.maximum(n_all, 1)
+        lab = np.where(share[lab] >= min_planar_share, lab, 0)
     # touching regions stay apart (no re-labelling of connected components)
     ids = np.unique(lab[lab > 0])
     remap = np.zeros(lab.max() + 1, dtype=np.int32)
