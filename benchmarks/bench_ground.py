@@ -13,7 +13,7 @@ error of each method on the synthetic terrains of
 process against plainly reading and writing the same file with laspy (best
 of ``--repeat`` runs each) and prints the ratio.
 
-``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
+``--loo`` adds the leave-one-sample-out check (``--loo-methods`` restricts it) of SMRF, smrf_refined and
 smrf_segments (the same grid for the three): for
 each ISPRS sample, the parameter set of a coarse grid (:data:`LOO_GRID`) that
 minimises the mean total error over the six other samples plus the
@@ -119,8 +119,9 @@ def synthetic(scenes):
     print(f"{'mean':<20} " + " ".join(f"{100 * np.mean(totals[m]):>13.2f}" for m in methods))
 
 
-def leave_one_out(samples, scenes):
-    for method, grid in LOO_GRID.items():
+def leave_one_out(samples, scenes, methods=tuple(LOO_GRID)):
+    for method in methods:
+        grid = LOO_GRID[method]
         leave_one_out_method(method, GROUND_METHODS[method],
                              GroundConfig(method=method).method_params(), grid, samples, scenes)
 
@@ -190,13 +191,18 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--loo", action="store_true")
+    ap.add_argument("--loo-methods", default=",".join(LOO_GRID),
+                    help="comma-separated methods of the leave-one-out check (default all)")
     args = ap.parse_args()
+    loo_methods = args.loo_methods.split(",")
+    if not set(loo_methods) <= set(LOO_GRID):
+        ap.error(f"--loo-methods: choose from {', '.join(LOO_GRID)}")
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     accuracy(samples)
     scenes = synthetic_scenes()
     synthetic(scenes)
     if args.loo:
-        leave_one_out(samples, scenes)
+        leave_one_out(samples, scenes, loo_methods)
     if not args.no_speed:
         speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat)
 
