@@ -21,7 +21,14 @@ family (``smrf_refined`` and ``smrf_segments``) on ``DIR/isprs/reference``:
   "give back terrain-like object cells" step such as ``smrf_segments``), and, second, also the terrain cells whose lowest point is a
   reference object taken out (a perfect surface on SMRF's grid).
 
-A few tens of seconds.
+Then the same slope table for ``smrf_segments`` with its hysteresis option
+(``strong_slope`` 0.4), and a leave-one-sample-out check of terrain-slope
+estimators (:func:`estimator_check`): is there a statistic of the tile
+(percentiles of the gradient of SMRF's provisional surface, the share of
+object cells) from which a threshold rule, chosen on the six other samples
+plus the synthetic terrains, predicts each held-out sample's slope?
+
+A few minutes.
 """
 
 from __future__ import annotations
@@ -164,6 +171,8 @@ def main():
         xyz, **dict(REFINED, slope=slope)))
     rows = slope_table(samples, "smrf_segments", lambda xyz, slope: smrf_segments(
         xyz, **dict(SEGMENTS, slope=slope)))
+    slope_table(samples, "smrf_segments strong_slope=0.4", lambda xyz, slope: smrf_segments(
+        xyz, **dict(SEGMENTS, slope=slope, strong_slope=0.4)))
     scenes = synthetic_scenes()
     syn_rows = [[100 * ground_errors(smrf_segments(s.xyz, **dict(SEGMENTS, slope=slope)),
                                      s.ground)["total"] for slope in SLOPES]
