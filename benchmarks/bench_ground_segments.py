@@ -23,6 +23,15 @@ unless ``--no-loo``, the leave-one-sample-out check of ``bench_ground.py
 parameters at their defaults; smrf_refined has nothing to choose there: its
 mean). ``bench_ground.py --loo`` runs the check over SMRF's parameters (81
 sets). A minute or two.
+
+The hysteresis option (``strong_slope``, off by default) is measured beside
+them as ``hysteresis``: ``smrf_segments`` at slope 0.1 (the slope the
+leave-one-out grid chooses on all seven samples) with ``strong_slope`` 0.4,
+an object region with no cell the opening cuts at 0.4 (no wall, no crown
+edge) given back. ``--strong-loo`` adds the leave-one-out check of
+``bench_ground.py --loo`` (81 sets over slope, window, scalar, threshold)
+with ``strong_slope`` 0.4, to compare with ``bench_ground.py --loo
+--loo-methods smrf_segments`` (a few more minutes).
 """
 
 from __future__ import annotations
@@ -37,6 +46,7 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_ground import (  # noqa: E402
+    LOO_GRID,
     arg_parser,
     leave_one_out_method,
     load,
@@ -48,6 +58,7 @@ from lidar2city.metrics.ground import ground_errors  # noqa: E402
 
 REFINED = GroundConfig(method="smrf_refined").method_params()
 SEGMENTS = GroundConfig(method="smrf_segments").method_params()
+HYSTERESIS = dict(SEGMENTS, slope=0.1, strong_slope=0.4)
 
 
 def small_tile():
@@ -60,13 +71,15 @@ def small_tile():
 def main():
     ap = arg_parser(__doc__)
     ap.add_argument("--no-loo", action="store_true")
+    ap.add_argument("--strong-loo", action="store_true")
     args = ap.parse_args()
     refs = reference_paths(args.data)
     samples = {p.name.split("-")[0]: load(p) for p in refs}
     methods = {"refined": lambda xyz: smrf_refined(xyz, **REFINED),
-               "segments": lambda xyz: smrf_segments(xyz, **SEGMENTS)}
+               "segments": lambda xyz: smrf_segments(xyz, **SEGMENTS),
+               "hysteresis": lambda xyz: smrf_segments(xyz, **HYSTERESIS)}
     print(f"smrf_segments defaults: {SEGMENTS}")
-    print(f"{'sample':<8} " + " ".join(f"{m + ' ' + c:>14}" for m in methods
+    print(f"{'sample':<8} " + " ".join(f"{m + ' ' + c:>17}" for m in methods
                                        for c in ("I", "II", "total")))
     rows = []
     for name, (xyz, ref) in samples.items():
@@ -75,8 +88,8 @@ def main():
             e = ground_errors(fn(xyz), ref)
             row += [e["type_i"], e["type_ii"], e["total"]]
         rows.append(row)
-        print(f"{name:<8} " + " ".join(f"{100 * v:>14.2f}" for v in row), flush=True)
-    print(f"{'mean':<8} " + " ".join(f"{100 * v:>14.2f}" for v in np.mean(rows, axis=0)))
+        print(f"{name:<8} " + " ".join(f"{100 * v:>17.2f}" for v in row), flush=True)
+    print(f"{'mean':<8} " + " ".join(f"{100 * v:>17.2f}" for v in np.mean(rows, axis=0)))
     scenes = synthetic_scenes()
     for m, fn in methods.items():
         syn = np.mean([ground_errors(fn(s.xyz), s.ground)["total"] for s in scenes.values()])
@@ -87,6 +100,9 @@ def main():
         leave_one_out_method("smrf_segments (SMRF defaults)", smrf_segments, SEGMENTS,
                              {"jump": (0.5, 0.6, 0.75), "raised": (0.5, 0.6, 0.7)},
                              samples, scenes)
+    if args.strong_loo:
+        leave_one_out_method("smrf_segments strong_slope=0.4", smrf_segments, HYSTERESIS,
+                             LOO_GRID["smrf_segments"], samples, scenes)
 
 
 if __name__ == "__main__":

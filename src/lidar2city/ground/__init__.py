@@ -27,7 +27,7 @@ from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
-from .segment_filter import smrf_segments, terrain_segments
+from .segment_filter import anchored_objects, smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
 
 __all__ = [
@@ -39,6 +39,7 @@ __all__ = [
     "smrf_refined",
     "smrf_segments",
     "terrain_segments",
+    "anchored_objects",
     "pmf",
     "pmf_windows",
     "low_outliers",
@@ -107,6 +108,10 @@ class GroundConfig:
     raised: float = field(0.6, "smrf_segments: an object segment raised above the terrain along "
                                "less than this share of its boundary is given back")
     min_cells: int = field(4, "smrf_segments: fewest cells of a segment given back")
+    strong_slope: float | None = field(None, "smrf_segments: an object region stays object only "
+                                             "if the opening also cuts one of its cells at this "
+                                             "slope (rise/run), e.g. 0.4 with slope 0.1; default "
+                                             "none: no such test")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -134,6 +139,8 @@ class GroundConfig:
             raise ConfigError(f"ground.raised: must be in (0, 1], got {self.raised!r}")
         if not (isinstance(self.min_cells, int) and self.min_cells >= 1):
             raise ConfigError(f"ground.min_cells: must be an integer >= 1, got {self.min_cells!r}")
+        if self.strong_slope is not None and not self.strong_slope > 0:
+            raise ConfigError(f"ground.strong_slope: must be > 0, got {self.strong_slope!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 

@@ -8,11 +8,11 @@ import numpy as np
 
 from ..errors import InputError
 from ._grid import inpaint, min_surface
-from .smrf_filter import _checked_outliers, _near_surface, smrf_surface
+from .smrf_filter import _checked_outliers, _near_surface, _smrf_grids
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["smrf_segments", "terrain_segments"]
+__all__ = ["anchored_objects", "smrf_segments", "terrain_segments"]
 
 
 def _block_lowest(zmin, objects, block):
@@ -71,6 +71,36 @@ def _components(n, a, b):
         if np.array_equal(new, label):
             return label
         label = new
+
+
+def anchored_objects(objects, strong) -> np.ndarray:
+    """Object cells 4-connected (through object cells) to a ``strong`` object cell.
+
+    Hysteresis on SMRF's slope: a cell judged object only by a strict slope
+    threshold stays object when its object region also holds a cell judged
+    object at a lenient one (a wall, a crown edge); a region cut only by the
+    strict threshold (a hilltop, a terrace edge, the convex top of a steep
+    slope) is terrain.
+
+    Parameters
+    ----------
+    objects, strong : ndarray of bool, shape (H, W)
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        The cells of ``objects`` whose component holds a cell of ``objects & strong``.
+    """
+    h, w = objects.shape
+    o = objects.ravel()
+    idx = np.arange(h * w).reshape(h, w)
+    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
+    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    join = o[a] & o[b]
+    label = _components(h * w, a[join], b[join])
+    anchored = np.zeros(h * w, dtype=bool)
+    anchored[label[o & strong.ravel()]] = True
+    return (o & anchored[label]).reshape(h, w)
 
 
 def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
@@ -146,7 +176,8 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
 def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
                   scalar: float = 1.25, threshold: float = 0.5, extend: float = 10.0,
                   jump: float = 0.6, raised: float = 0.6, min_cells: int = 4,
-                  outlier_radius: float = 5.0, outlier_depth: float = 1.5) -> np.ndarray:
+                  strong_slope: float | None = None, outlier_radius: float = 5.0,
+                  outlier_depth: float = 1.5) -> np.ndarray:
     """Ground points by SMRF with terrain-like object segments given back to the surface.
 
     1. Low outliers (:func:`~lidar2city.ground.low_outliers`) are set aside as non-ground.
@@ -160,7 +191,14 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
        rounded, at least 1; the spacing is ``1 / sqrt(density)`` over the
        occupied cells of a grid of about 5 m), with ``jump`` scaled by that
        cell size when it exceeds 1 m.
-    4. The provisional surface is the minimum surface of the remaining
+    4. With ``strong_slope`` (hysteresis on SMRF's slope, off by default),
+       :func:`anchored_objects` gives back too every remaining object region
+       (4-connected object cells) without a cell that the same opening
+       series judges object at ``strong_slope``: a wall or a crown edge is cut
+       at any slope, a hilltop, a terrace edge or a bridge ramp only at a
+       strict one, so a strict ``slope`` (0.1, which flat urban samples want)
+       no longer cuts steep terrain.
+    5. The provisional surface is the minimum surface of the remaining
        terrain cells, inpainted, and points within ``threshold + scalar *
        slope`` of it are ground (Pingel et al. 2013, eq. 3).
 
@@ -174,6 +212,11 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
         As in :func:`~lidar2city.ground.smrf_refined`.
     jump, raised, min_cells
         As in :func:`terrain_segments`.
+    strong_slope : float or None
+        Slope (rise over run) at which an object region must hold a cell cut
+        by the opening to stay object; None (default) leaves step 4 out.
+        Measured by ``benchmarks/bench_ground_segments.py`` (``hysteresis``:
+        slope 0.1, strong_slope 0.4).
 
     Returns
     -------
@@ -213,6 +256,9 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
         raise InputError(f"raised must be in (0, 1], got {raised!r}")
     if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
         raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
+    if strong_slope is not None and not (
+            isinstance(strong_slope, (int, float, np.integer, np.floating)) and strong_slope > 0):
+        raise InputError(f"strong_slope must be a number > 0 or None, got {strong_slope!r}")
     xyz, out = _checked_outliers(xyz, cell=cell, slope=slope, window=window, scalar=scalar,
                                  threshold=threshold, outlier_radius=outlier_radius,
                                  outlier_depth=outlier_depth, jump=jump)
@@ -220,8 +266,9 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     if n == 0 or out.all():
         return np.zeros(n, dtype=bool)
     pts = xyz[~out]
-    surface, objects, spec = smrf_surface(xyz, cell=cell, slope=slope, window=window,
-                                          exclude=out, extend=extend)
+    surface, objects, spec, strong = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
+                                                 exclude=out, extend=extend,
+                                                 strong_slope=strong_slope)
     base = float(np.min(pts[:, 2]))
     zmin = min_surface(pts, spec, base=base, dtype=np.float32)
     filled = ~np.isnan(zmin)
@@ -230,11 +277,12 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
         # the reflection turns objects near the edges into pits; on a tile not much
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
-        plain = smrf_surface(xyz, cell=cell, slope=slope, window=window, exclude=out)
+        plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
+                            strong_slope=strong_slope)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
-            surface, objects, _ = plain
+            surface, objects, _, strong = plain
     # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
     coarse = max(1, int(round(5.0 / cell)))
     occupied = np.count_nonzero(filled) if coarse == 1 else np.count_nonzero(
@@ -243,6 +291,8 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     block = max(1, int(np.floor(spacing / cell + 0.5)))
     kept = terrain_segments(zmin, objects, jump=jump * max(cell * block, 1.0), raised=raised,
                             min_cells=min_cells, block=block)
+    if strong is not None:
+        kept = anchored_objects(kept, strong)
     given = objects & ~kept & ~np.isnan(zmin)
     if given.any():
         provisional = np.where(kept | np.isnan(zmin), np.float32(np.nan), zmin)

@@ -59,6 +59,15 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     spec : GridSpec
         The grid.
     """
+    surface, objects, spec, _ = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
+                                            exclude=exclude, bounds=bounds, extend=extend)
+    return surface, objects, spec
+
+
+def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0.0,
+                strong_slope=None):
+    """:func:`smrf_surface` and, from the same opening series, the cells judged object
+    at ``strong_slope`` (None when not given)."""
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window)
     if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
@@ -77,14 +86,18 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     if pad > 0:
         zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
     objects = np.zeros(zfilled.shape, dtype=bool)
+    strong = None if strong_slope is None else np.zeros(zfilled.shape, dtype=bool)
     last = zfilled
     for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
         step = last - opened
         objects |= step > np.float32(slope * radius * cell)
+        if strong is not None:
+            strong |= step > np.float32(strong_slope * radius * cell)
         last = opened
     if pad > 0:
         objects = objects[pad:-pad, pad:-pad]
         last = last[pad:-pad, pad:-pad]
+        strong = None if strong is None else strong[pad:-pad, pad:-pad]
     provisional = np.where(objects | empty, np.float32(np.nan), zmin)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
@@ -93,7 +106,7 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     else:
         surface = inpaint(provisional)
     surface = surface.astype(np.float64) + base
-    return surface, objects, spec
+    return surface, objects, spec, strong
 
 
 def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
