@@ -49,7 +49,7 @@ from .topology import boundary_chains, label_grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "roof_lines", "arrangement_partition"]
 
 
 def arrangement_cells(footprint, segments):
@@ -982,9 +982,38 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     return rims
 
 
+def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
+               snap_angle=15.0, cap=None, step_snake=False, snake_window=3, snake_cell=0.5):
+    """The straight boundary polylines of a footprint's roof facets, before any rim.
+
+    The label grid of the facets (:func:`.topology.label_grid`), its inner
+    boundary chains, and their polylines (:func:`chain_segments`, with the points
+    for the intersection test). It is the costly part of
+    :func:`arrangement_partition` and does not depend on its ``rims``: the
+    partitions with and without rims take the same ``lines``.
+
+    Parameters are those of :func:`arrangement_partition`.
+
+    Returns
+    -------
+    segments : list of ndarray (m, 2)
+    kinds : list of str
+    """
+    from scipy.spatial import cKDTree
+
+    planes = np.asarray(planes, dtype=np.float64)
+    cap = 1.5 * t_step if cap is None else cap
+    grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
+    chains, pairs = boundary_chains(grid)
+    return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
+                          max_shift=max_shift, snap_angle=snap_angle,
+                          points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
+                          step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
+
+
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
                           max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True,
-                          step_snake=False, snake_window=3, snake_cell=0.5):
+                          step_snake=False, snake_window=3, snake_cell=0.5, lines=None):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters
@@ -1009,6 +1038,9 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     step_snake : bool
         Step edges from the exact 2-D snake (:func:`snake_steps`, half-window
         ``snake_window``, grid step ``snake_cell`` cells).
+    lines : (segments, kinds), optional
+        :func:`roof_lines` of the same footprint, points, planes and parameters,
+        when already computed (not modified); computed here when None.
 
     Returns
     -------
@@ -1025,15 +1057,12 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     planes = np.asarray(planes, dtype=np.float64)
     min_face_area = 4 * cell * cell if min_face_area is None else min_face_area
     cap = 1.5 * t_step if cap is None else cap
-    grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
-    chains, pairs = boundary_chains(grid)
-    from scipy.spatial import cKDTree
-
-    segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
-                                 t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
-                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
-                                 step_snake=step_snake, snake_window=snake_window,
-                                 snake_cell=snake_cell)
+    if lines is None:
+        lines = roof_lines(footprint, xyz, labels, planes, cell=cell, direction=direction,
+                           t_step=t_step, max_shift=max_shift, snap_angle=snap_angle, cap=cap,
+                           step_snake=step_snake, snake_window=snake_window,
+                           snake_cell=snake_cell)
+    segs, kinds = list(lines[0]), list(lines[1])
     n_planes = len(planes)
     found = rim_strips(footprint, xyz, labels, planes, cell=cell, t_step=t_step) if rims and n_planes else []
     # every rim's inner line is a step (the label grid cannot hold a strip narrower than a
