@@ -318,3 +318,29 @@ def test_step_snake_roofs_valid_and_deterministic():
     assert np.array_equal(a.solids[0].vertices, b.solids[0].vertices)
     sc = wireframe_scores(roof_wireframe(a.solids), s.wireframe, tolerance=0.5)
     assert sc["corner_f1"] >= 0.9
+
+
+def test_roof_lines_shared_by_the_partitions_with_and_without_rims():
+    """The boundary lines computed once (:func:`roof_lines`) give each partition what it
+    computes by itself, and the partition with rims does not add its rim lines to them."""
+    from lidar2city.roof.arrangement import arrangement_partition, roof_lines
+
+    xyz, labels, planes = _parapet_roof()
+    # a second level on the south half, so there are inner boundary lines to share
+    south = xyz[:, 1] < 5.0
+    xyz[south, 2] += 1.5
+    labels[south] = 1
+    planes = np.vstack([planes, [[0.0, 0.0, 7.5]]])
+    kw = dict(cell=0.35, direction=0.0, step_snake=True)
+    lines = roof_lines(SQ, xyz, labels, planes, **kw)
+    assert lines[1] and set(lines[1]) <= {"step", "intersection"}
+    before = ([s.copy() for s in lines[0]], list(lines[1]))
+    for rims in (True, False):
+        own = arrangement_partition(SQ, xyz, labels, planes, rims=rims, **kw)
+        shared = arrangement_partition(SQ, xyz, labels, planes, rims=rims, lines=lines, **kw)
+        assert ("rim" in own[2]) == rims and own[2] == shared[2]
+        np.testing.assert_array_equal(own[1], shared[1])
+        np.testing.assert_array_equal(own[3], shared[3])
+        assert [f.wkb for f in own[0]] == [f.wkb for f in shared[0]]
+    assert lines[1] == before[1]
+    assert all(np.array_equal(a, b) for a, b in zip(lines[0], before[0], strict=True))
