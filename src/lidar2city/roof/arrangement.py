@@ -881,13 +881,12 @@ def _cell_labels(cells, xyz, planes, cap):
     ip, ic = ip[first], ic[first]
     counts = np.bincount(ic, minlength=n).astype(float)
     cost = np.zeros((n, len(planes)))
-    # points by chunks: a block of many houses has ~1e4-1e5 points and ~1e2 planes
-    # (the same sums, added in the same order)
-    for s in range(0, len(ip), 8192):
-        p, c = ip[s:s + 8192], ic[s:s + 8192]
-        res = np.abs(xyz[p, 2:3] - (xyz[p, 0:1] * planes[:, 0] + xyz[p, 1:2] * planes[:, 1]
-                                     + planes[:, 2]))
-        np.add.at(cost, c, np.minimum(res, cap))
+    # a plane at a time: a block of many houses has ~1e4-1e5 points and ~1e2 planes;
+    # bincount adds each cell's residuals in point order, as a running sum from zero
+    x, y, z = xyz[ip, 0], xyz[ip, 1], xyz[ip, 2]
+    for k, (a, b, c) in enumerate(planes[:, :3]):
+        res = np.abs(z - (x * a + y * b + c))
+        cost[:, k] = np.bincount(ic, weights=np.minimum(res, cap), minlength=n)
     labels = np.where(counts > 0, np.argmin(cost, axis=1), -1)
     return labels, counts
 
@@ -922,7 +921,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     xy = xyz[:, :2]
     inside = shapely.contains_xy(footprint, xy[:, 0], xy[:, 1])
     rims = []
-    d_out = shapely.distance(footprint.boundary, shapely.points(xy))
+    d_out = None  # distances to the outline, of the points that need them (a rim facet's)
     for ring in shapely.get_rings(footprint):
         c = np.asarray(ring.coords)
         for a, b in zip(c[:-1], c[1:], strict=True):
@@ -969,8 +968,15 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
                 # roof inside, that facet's points along the outline
                 own = labels[run]
                 own = int(np.bincount(own[own >= 0]).argmax()) if (own >= 0).sum() > len(run) / 2 else -1
-                if own >= 0 and (own == inner_label
-                                 or np.mean(d_out[labels == own] < width + 1.5 * cell) < 0.8):
+                if own >= 0 and own != inner_label:
+                    if d_out is None:
+                        d_out = np.full(len(xy), np.nan)
+                    on = np.flatnonzero(labels == own)
+                    todo = on[np.isnan(d_out[on])]
+                    d_out[todo] = shapely.distance(footprint.boundary, shapely.points(xy[todo]))
+                    if np.mean(d_out[on] < width + 1.5 * cell) < 0.8:
+                        own = -1
+                elif own >= 0:
                     own = -1
                 out = zone & ~inside & (d < -outside / 2) & (d > -outside)
                 if out.sum() and np.mean(np.abs(xyz[out, 2] - z0) <= 2 * level_tol) >= 0.3:
