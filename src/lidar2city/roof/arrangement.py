@@ -49,7 +49,7 @@ from .topology import boundary_chains, label_grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "arrangement_partition", "restore_facets"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "roof_lines", "arrangement_partition", "restore_facets"]
 
 
 def arrangement_cells(footprint, segments):
@@ -92,7 +92,7 @@ def _seq_sum(values) -> float:
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
 
 
-def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
+def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0, straighten=True):
     """Merge cells into faces: same-label neighbours join; small faces take a neighbour's label.
 
     Parameters
@@ -108,6 +108,9 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
         Per-cell evidence (e.g. point counts); a face with none joins a neighbour too.
     min_width : float
         Faces narrower than this on average (2 area / perimeter, m) join a neighbour too.
+    straighten : bool
+        Drop the vertices left straight by the merges (:func:`drop_collinear`); False
+        when the caller does it over these faces and others together.
 
     Returns
     -------
@@ -243,7 +246,8 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
             if p.geom_type == "Polygon" and p.area > 1e-9:
                 faces.append(p)
                 face_labels.append(labels[idx[0]])
-    return drop_collinear(faces), np.asarray(face_labels, dtype=np.int64)
+    face_labels = np.asarray(face_labels, dtype=np.int64)
+    return (drop_collinear(faces) if straighten else faces), face_labels
 
 
 def _merge_close(rings, tol):
@@ -881,15 +885,35 @@ def _cell_labels(cells, xyz, planes, cap):
     ip, ic = ip[first], ic[first]
     counts = np.bincount(ic, minlength=n).astype(float)
     cost = np.zeros((n, len(planes)))
-    # points by chunks: a block of many houses has ~1e4-1e5 points and ~1e2 planes
-    # (the same sums, added in the same order)
-    for s in range(0, len(ip), 8192):
-        p, c = ip[s:s + 8192], ic[s:s + 8192]
-        res = np.abs(xyz[p, 2:3] - (xyz[p, 0:1] * planes[:, 0] + xyz[p, 1:2] * planes[:, 1]
-                                     + planes[:, 2]))
-        np.add.at(cost, c, np.minimum(res, cap))
+    # a plane at a time: a block of many houses has ~1e4-1e5 points and ~1e2 planes;
+    # bincount adds each cell's residuals in point order, as a running sum from zero
+    x, y, z = xyz[ip, 0], xyz[ip, 1], xyz[ip, 2]
+    for k, (a, b, c) in enumerate(planes[:, :3]):
+        res = np.abs(z - (x * a + y * b + c))
+        cost[:, k] = np.bincount(ic, weights=np.minimum(res, cap), minlength=n)
     labels = np.where(counts > 0, np.argmin(cost, axis=1), -1)
     return labels, counts
+
+
+def _dissolve_beside_rims(faces, labels, counts, exempt, *, min_area, min_width):
+    """The faces whose label is not in ``exempt`` (rims) held to the smallest area and
+    width (:func:`dissolve_cells`), then the rim faces as they are, after them.
+
+    Straight vertices are dropped over all the faces at once, rims included: a
+    vertex where a rim turns stays in the face beside it even when the face that
+    turned there was merged away (dropping it from that face alone would leave a
+    T-junction the solid cannot close).
+
+    Returns ``(faces, labels)``.
+    """
+    labels = np.asarray(labels)
+    on = np.isin(labels, exempt)
+    keep = np.flatnonzero(~on)
+    out, out_labels = dissolve_cells([faces[i] for i in keep], labels[keep], min_area=min_area,
+                                     weights=np.asarray(counts)[keep], min_width=min_width,
+                                     straighten=False)
+    out = drop_collinear(out + [faces[i] for i in np.flatnonzero(on)])
+    return out, np.concatenate([out_labels, labels[on]])
 
 
 def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.1, min_points=6,
@@ -922,7 +946,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     xy = xyz[:, :2]
     inside = shapely.contains_xy(footprint, xy[:, 0], xy[:, 1])
     rims = []
-    d_out = shapely.distance(footprint.boundary, shapely.points(xy))
+    d_out = None  # distances to the outline, of the points that need them (a rim facet's)
     for ring in shapely.get_rings(footprint):
         c = np.asarray(ring.coords)
         for a, b in zip(c[:-1], c[1:], strict=True):
@@ -969,8 +993,15 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
                 # roof inside, that facet's points along the outline
                 own = labels[run]
                 own = int(np.bincount(own[own >= 0]).argmax()) if (own >= 0).sum() > len(run) / 2 else -1
-                if own >= 0 and (own == inner_label
-                                 or np.mean(d_out[labels == own] < width + 1.5 * cell) < 0.8):
+                if own >= 0 and own != inner_label:
+                    if d_out is None:
+                        d_out = np.full(len(xy), np.nan)
+                    on = np.flatnonzero(labels == own)
+                    todo = on[np.isnan(d_out[on])]
+                    d_out[todo] = shapely.distance(footprint.boundary, shapely.points(xy[todo]))
+                    if np.mean(d_out[on] < width + 1.5 * cell) < 0.8:
+                        own = -1
+                elif own >= 0:
                     own = -1
                 out = zone & ~inside & (d < -outside / 2) & (d > -outside)
                 if out.sum() and np.mean(np.abs(xyz[out, 2] - z0) <= 2 * level_tol) >= 0.3:
@@ -982,9 +1013,38 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     return rims
 
 
+def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
+               snap_angle=15.0, cap=None, step_snake=False, snake_window=3, snake_cell=0.5):
+    """The straight boundary polylines of a footprint's roof facets, before any rim.
+
+    The label grid of the facets (:func:`.topology.label_grid`), its inner
+    boundary chains, and their polylines (:func:`chain_segments`, with the points
+    for the intersection test). It is the costly part of
+    :func:`arrangement_partition` and does not depend on its ``rims``: the
+    partitions with and without rims take the same ``lines``.
+
+    Parameters are those of :func:`arrangement_partition`.
+
+    Returns
+    -------
+    segments : list of ndarray (m, 2)
+    kinds : list of str
+    """
+    from scipy.spatial import cKDTree
+
+    planes = np.asarray(planes, dtype=np.float64)
+    cap = 1.5 * t_step if cap is None else cap
+    grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
+    chains, pairs = boundary_chains(grid)
+    return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
+                          max_shift=max_shift, snap_angle=snap_angle,
+                          points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
+                          step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
+
+
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
                           max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True,
-                          step_snake=False, snake_window=3, snake_cell=0.5):
+                          step_snake=False, snake_window=3, snake_cell=0.5, lines=None):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters
@@ -1009,6 +1069,9 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     step_snake : bool
         Step edges from the exact 2-D snake (:func:`snake_steps`, half-window
         ``snake_window``, grid step ``snake_cell`` cells).
+    lines : (segments, kinds), optional
+        :func:`roof_lines` of the same footprint, points, planes and parameters,
+        when already computed (not modified); computed here when None.
 
     Returns
     -------
@@ -1025,15 +1088,12 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
     planes = np.asarray(planes, dtype=np.float64)
     min_face_area = 4 * cell * cell if min_face_area is None else min_face_area
     cap = 1.5 * t_step if cap is None else cap
-    grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
-    chains, pairs = boundary_chains(grid)
-    from scipy.spatial import cKDTree
-
-    segs, kinds = chain_segments(chains, pairs, planes, cell=cell, direction=direction,
-                                 t_step=t_step, max_shift=max_shift, snap_angle=snap_angle,
-                                 points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
-                                 step_snake=step_snake, snake_window=snake_window,
-                                 snake_cell=snake_cell)
+    if lines is None:
+        lines = roof_lines(footprint, xyz, labels, planes, cell=cell, direction=direction,
+                           t_step=t_step, max_shift=max_shift, snap_angle=snap_angle, cap=cap,
+                           step_snake=step_snake, snake_window=snake_window,
+                           snake_cell=snake_cell)
+    segs, kinds = list(lines[0]), list(lines[1])
     n_planes = len(planes)
     found = rim_strips(footprint, xyz, labels, planes, cell=cell, t_step=t_step) if rims and n_planes else []
     # every rim's inner line is a step (the label grid cannot hold a strip narrower than a
@@ -1073,14 +1133,9 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         # rims are narrow by nature: first empty cells join a neighbour and same-plane cells
         # dissolve, then only the faces off the rims are held to the smallest area and width
         merged, merged_labels = dissolve_cells(cells, cell_lab, weights=counts)
-        on = np.isin(merged_labels, exempt)
         _, merged_counts = _cell_labels(merged, xyz, planes, cap)
-        keep = np.flatnonzero(~on)
-        faces, face_labels = dissolve_cells([merged[i] for i in keep], merged_labels[keep],
-                                            min_area=min_face_area, weights=merged_counts[keep],
-                                            min_width=cell)
-        faces = faces + [merged[i] for i in np.flatnonzero(on)]
-        face_labels = np.concatenate([face_labels, merged_labels[on]])
+        faces, face_labels = _dissolve_beside_rims(merged, merged_labels, merged_counts, exempt,
+                                                   min_area=min_face_area, min_width=cell)
     else:
         faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
                                             min_width=cell)

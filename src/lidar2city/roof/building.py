@@ -11,7 +11,7 @@ import numpy as np
 from ..config import field
 from ..errors import ConfigError, FitError
 from ..validate.solid import check_solid
-from .arrangement import arrangement_partition, collapse_short_edges, restore_facets
+from .arrangement import arrangement_partition, collapse_short_edges, restore_facets, roof_lines
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
@@ -391,13 +391,14 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                                    flat_slope=cfg.flat_slope)
         # the arrangement with raised rims along the outline, without them, then the grid
         methods = ("rims", "arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
-        info = {}
+        info, shared = {}, {}
         for method in methods:
             if method == "arrangement" and not info.get("rims", 1):
                 continue  # no rim was found: the same partition as the first try
             try:
                 solid, faces, face_labels, planes_k, info = _part_solid(
-                    method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg)
+                    method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg,
+                    shared=shared)
             except (FitError, ValueError, shapely.errors.GEOSException) as exc:
                 if method == methods[-1]:
                     raise
@@ -459,7 +460,7 @@ def _closed_shell(solid) -> bool:
     return bool(np.all(directed == 1) and np.all(und == 2))
 
 
-def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg):
+def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction, cfg, shared=None):
     """The solid of one footprint polygon by one roof partition method.
 
     With ``cfg.restore`` and the arrangement, the roof parts the partition lost
@@ -468,16 +469,24 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     the sum of squared point-to-mesh distances drops by at least that of the
     smallest facet (``min_facet_area`` of points) lying ``T_step`` off.
 
+    ``shared``: a dict kept across the methods tried on the same polygon; the
+    arrangement's boundary lines (:func:`.arrangement.roof_lines`, most of its
+    cost) are computed once in it for the tries with and without rims.
+
     Returns ``(solid, faces, face_labels, planes, info)``; raises FitError when
     a roof stays below the floor.
     """
     info = {}
     restored = None
     if method in ("rims", "arrangement"):
+        kw = dict(cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
+                  max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, step_snake=cfg.step_snake,
+                  snake_window=cfg.snake_window, snake_cell=cfg.snake_cell)
+        shared = {} if shared is None else shared
+        if "lines" not in shared:
+            shared["lines"] = roof_lines(poly, pts, labels, planes, **kw)
         faces, face_labels, kinds, planes = arrangement_partition(
-            poly, pts, labels, planes, cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
-            max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, rims=method == "rims",
-            step_snake=cfg.step_snake, snake_window=cfg.snake_window, snake_cell=cfg.snake_cell)
+            poly, pts, labels, planes, rims=method == "rims", lines=shared["lines"], **kw)
         info["rims"] = kinds.count("rim")
         if cfg.restore:
             spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
