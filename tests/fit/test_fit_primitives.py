@@ -498,7 +498,11 @@ def test_lidar_outline_improves_corners():
 
 
 @settings(max_examples=40, deadline=None)
-@given(boxes=st.lists(st.tuples(st.floats(0, 20), st.floats(0, 20), st.floats(2, 12), st.floats(2, 12)),
+# no subnormal coordinates (5e-324 m): GEOS's snapping flags a division by zero on them,
+# and no footprint in metres about a local origin holds one
+@given(boxes=st.lists(st.tuples(st.floats(0, 20, allow_subnormal=False),
+                                st.floats(0, 20, allow_subnormal=False),
+                                st.floats(2, 12), st.floats(2, 12)),
                       min_size=1, max_size=4),
        az=st.floats(0, 180), off=st.floats(-3, 3), slope=st.floats(0.1, 1.5), kind=st.sampled_from([1, 2, 4]))
 def test_envelope_solids_over_random_footprints_are_closed(boxes, az, off, slope, kind):
