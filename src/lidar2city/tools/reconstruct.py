@@ -524,8 +524,8 @@ def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attri
     elif fmt == "obj":
         from ..io.obj import write_obj
 
-        write_obj(path, results, origin=cloud.origin, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
-                  lod=lods)
+        write_obj(path, results, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
+                  z_unit=cloud.z_unit, lod=lods)
     elif fmt == "gpkg":
         _write_gpkg(path, results, cloud, attributes=attributes, configuration=configuration,
                     lods=lods)
