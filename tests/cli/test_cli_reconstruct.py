@@ -5,8 +5,9 @@ import pytest
 from shapely.geometry import Polygon, box
 
 
-def _synthetic_inputs(tmp_path):
-    """Two flat-roofed blocks and an L-shaped one on flat ground, 10 pts/m2, in RD New."""
+def _synthetic_inputs(tmp_path, tile_crs=True):
+    """Two flat-roofed blocks and an L-shaped one on flat ground, 10 pts/m2, in RD New
+    (the tile without a CRS when not ``tile_crs``)."""
     from pyproj import CRS
 
     from lidar2city.datamodel import PointCloud
@@ -28,13 +29,26 @@ def _synthetic_inputs(tmp_path):
         cls[inside] = 6
     z += rng.normal(0, 0.03, len(z))
     world = np.column_stack([xy + [ox, oy], z])
-    cloud = PointCloud.from_world(world, crs=CRS.from_epsg(28992),
+    cloud = PointCloud.from_world(world, crs=CRS.from_epsg(28992) if tile_crs else None,
                                   attributes={"classification": cls})
     las = tmp_path / "t.laz"
     write_points(las, cloud)
     gpkg = tmp_path / "f.gpkg"
     write_polygons(gpkg, fps, {"bag_id": ["A", "B", "C"]}, origin=(ox, oy), crs=CRS.from_epsg(28992))
     return las, gpkg, heights
+
+
+def test_reconstruct_tile_without_crs_takes_the_footprints_crs(runner, tmp_path, caplog):
+    """An AHN-like tile without a CRS, footprints in RD New, no --crs: the output
+    carries the footprints' CRS (with a warning), not none."""
+    from lidar2city.cli.main import cli
+
+    las, gpkg, _ = _synthetic_inputs(tmp_path, tile_crs=False)
+    out = tmp_path / "o.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(gpkg), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "taking the footprints'" in caplog.text
+    assert json.loads(out.read_text())["metadata"]["referenceSystem"].endswith("/28992")
 
 
 def test_reconstruct_formats(runner, tmp_path):

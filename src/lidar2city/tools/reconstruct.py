@@ -976,6 +976,16 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
     tiles = scan_tiles(inputs, crs=crs)
+    if crs is None and footprints is not None and tiles[0].crs is None:
+        # tiles without a CRS (AHN): the footprints' CRS is the best guess, so that
+        # the output still carries one (a wrong guess shows as footprints off the tile)
+        from ..io.vector import vector_crs
+
+        fp_crs = vector_crs(footprints, layer=layer)
+        if fp_crs is not None:
+            logger.warning("the input has no CRS: taking the footprints' (%s; pass --crs "
+                           "EPSG:xxxx to choose one)", fp_crs.name)
+            tiles = scan_tiles(inputs, crs=fp_crs)
     reader = TileReader(tiles)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
