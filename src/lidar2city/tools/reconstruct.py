@@ -765,7 +765,11 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
                 take(out)
             state["startup"], state["process_cpu"] = (executor.startup_seconds,
                                                       executor.process_cpu())
-        ordered.check()
+        try:
+            ordered.check()
+        except InputError:  # every block ran: a --resume could only fail the same way
+            journal.remove()
+            raise
         sink.close()
     except BaseException:
         sink.abort()
