@@ -73,7 +73,8 @@ def _reading(path):
 
 #: leading bytes of the files a user may give where a LAS/LAZ tile is expected
 _SIGNATURES = ((b"ply", "it is a PLY point cloud; convert it to LAS/LAZ first (e.g. "
-                        "`pdal translate IN.ply OUT.laz`)"),
+                        "`pdal translate IN.ply OUT.laz`; a roof-only cloud with every "
+                        "point class 6)"),
                (b"II*\x00", "it is a GeoTIFF raster (a DSM goes in with --dsm)"),
                (b"MM\x00*", "it is a GeoTIFF raster (a DSM goes in with --dsm)"),
                (b"SQLite format 3", "it is a GeoPackage / SQLite file (footprints go in with "
