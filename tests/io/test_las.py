@@ -17,9 +17,10 @@ def test_not_a_las(tmp_path):
         read_las(p)
 
 
-@pytest.mark.parametrize("head, says", [(b"ply\nformat binary_little_endian 1.0\n", "PLY point cloud"),
-                                        (b"II*\x00\x08\x00\x00\x00", "GeoTIFF raster"),
-                                        (b"SQLite format 3\x00", "--footprints")])
+@pytest.mark.parametrize("head, says", [
+    (b"ply\nformat binary_little_endian 1.0\n", "PLY point cloud"),
+    (b"II*\x00\x08\x00\x00\x00", "GeoTIFF raster"),
+    (b"SQLite format 3\x00", "--footprints")])
 def test_a_file_of_another_format_is_named(tmp_path, head, says):
     """A PLY cloud, a DSM or a footprint file given as a tile: the one-line error says
     what the file is and where it goes, not laspy's 'Invalid file signature'."""

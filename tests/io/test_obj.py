@@ -32,7 +32,8 @@ def test_obj_carries_its_crs(tmp_path):
     beside the file (as GIS tools read it), and none is written without a CRS."""
     from pyproj import CRS
 
-    r = BuildingResult("a", solids={"1.2": prism_solid(Polygon([(0, 0), (4, 0), (4, 4)]), 0.0, 3.0)})
+    solid = prism_solid(Polygon([(0, 0), (4, 0), (4, 4)]), 0.0, 3.0)
+    r = BuildingResult("a", solids={"1.2": solid})
     path = tmp_path / "m.obj"
     write_obj(path, [r], origin=[85000, 447000, 0], crs=CRS.from_epsg(7415))
     assert "# crs EPSG:7415\n" in path.read_text()

@@ -473,8 +473,9 @@ def test_no_building_anywhere_leaves_no_journal(tmp_path):
     rng = np.random.default_rng(3)
     xy = rng.uniform(0, [150.0, 60.0], (12000, 2))
     world = np.column_stack([xy + [85000.0, 447000.0], rng.normal(0, 0.03, len(xy))])
-    write_points(tmp_path / "flat.laz", PointCloud.from_world(
-        world, crs=CRS.from_epsg(28992), attributes={"classification": np.full(len(xy), 2, np.uint8)}))
+    ground = {"classification": np.full(len(xy), 2, np.uint8)}
+    write_points(tmp_path / "flat.laz",
+                 PointCloud.from_world(world, crs=CRS.from_epsg(28992), attributes=ground))
     out = tmp_path / "o.city.json"
     with pytest.raises(EmptyInputError, match="no building footprint"):
         reconstruct([tmp_path / "flat.laz"], out, block_size=BLOCK)

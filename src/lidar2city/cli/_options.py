@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["check_output", "check_not_input", "crs_option", "engine_options", "EngineProgress", "neighbours_options",
-           "output_option", "progress", "progress_callback", "run_on_tiles"]
+__all__ = ["check_output", "check_not_input", "crs_option", "engine_options", "EngineProgress",
+           "neighbours_options", "output_option", "progress", "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",

@@ -107,7 +107,8 @@ def write_obj(path, results, *, origin, crs=None, xy_unit=1.0, z_unit=1.0, lod="
                 faces = inverse[np.array(tris)] + 1
                 f.write("".join(f"f {a} {b} {c}\n" for a, b, c in faces))
     if crs is not None:
-        with atomic_path(Path(path).with_suffix(".prj")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        prj = Path(path).with_suffix(".prj")
+        with atomic_path(prj) as tmp, open(tmp, "w", encoding="utf-8") as f:
             f.write(crs.to_wkt())
 
 

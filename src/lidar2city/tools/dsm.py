@@ -532,9 +532,9 @@ def rasters_from_las(paths, *, cell, dsm_out, ortho_out=None, crs=None) -> dict:
     """Grid a point cloud into a DSM GeoTIFF and, with RGB, an orthoimage GeoTIFF.
 
     The DSM holds the highest point per cell (heights in the CRS's vertical units,
-    as `rasterize` writes them and the DSM methods read them); the orthoimage the colour of that point (3 bands,
-    uint16 as stored in LAS). Both are in the cloud's CRS with ``cell`` metres
-    pixels.
+    as `rasterize` writes them and the DSM methods read them); the orthoimage the
+    colour of that point (3 bands, uint16 as stored in LAS). Both are in the
+    cloud's CRS with ``cell`` metres pixels.
     """
     from affine import Affine
 
