@@ -51,6 +51,28 @@ def test_reconstruct_tile_without_crs_takes_the_footprints_crs(runner, tmp_path,
     assert json.loads(out.read_text())["metadata"]["referenceSystem"].endswith("/28992")
 
 
+def test_duplicate_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
+    """A footprint file holding some outlines twice: every footprint gets its model
+    (ids made unique), and the run warns once that the models overlap."""
+    from pyproj import CRS
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+
+    las, _, _ = _synthetic_inputs(tmp_path)
+    fps = [box(5, 5, 15, 13), box(15, 5, 25, 13), box(5, 5, 15, 13)]
+    dup = tmp_path / "dup.gpkg"
+    write_polygons(dup, fps, {"bag_id": ["A", "B", "A"]}, origin=(85000.0, 447000.0),
+                   crs=CRS.from_epsg(28992))
+    out = tmp_path / "d.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(dup), "-o", str(out),
+                              "--id-field", "bag_id"])
+    assert res.exit_code == 0, res.output
+    assert "3 of 3 buildings reconstructed" in res.output
+    assert "1 footprint(s) of" in caplog.text and "repeat an earlier one" in caplog.text
+    assert {"A", "B", "A-2"} <= set(json.loads(out.read_text())["CityObjects"])
+
+
 def test_reconstruct_formats(runner, tmp_path):
     from lidar2city.cli.main import cli
 
