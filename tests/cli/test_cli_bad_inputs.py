@@ -703,3 +703,25 @@ def test_footprints_with_touching_holes_give_files_that_validate(runner, block, 
         assert res.exit_code == 0, res.output
         res = runner.invoke(cli, ["validate", str(out)])
         assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize("args", [
+    ["classify", "{t}", "-o", "{t}"],
+    ["ground", "{t}", "-o", "{o}", "--dtm", "{t}"],
+    ["rasterize", "{t}", "-o", "{t}"],
+    ["footprints", "{t}", "-o", "{t}"],
+    ["reconstruct", "{t}", "--format", "cityjson", "-o", "{t}"],
+    ["reconstruct", "{t}", "--footprints", "{f}", "--format", "gpkg", "-o", "{f}"],
+])
+def test_an_output_that_is_an_input_is_refused(runner, block, tmp_path, args):
+    """``classify x.laz -o x.laz`` or a --format that lets an output land on the tile
+    would replace the user's data: one line before any work, the input untouched."""
+    from lidar2city.cli.main import cli
+
+    shutil.copy(block / "t.laz", tmp_path / "t.laz")
+    shutil.copy(block / "f.gpkg", tmp_path / "f.gpkg")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    names = {"t": tmp_path / "t.laz", "f": tmp_path / "f.gpkg", "o": tmp_path / "o.laz"}
+    res = runner.invoke(cli, [a.format(**names) for a in args])
+    assert "is also an input" in _error_line(res)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before

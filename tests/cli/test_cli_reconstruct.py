@@ -5,8 +5,9 @@ import pytest
 from shapely.geometry import Polygon, box
 
 
-def _synthetic_inputs(tmp_path):
-    """Two flat-roofed blocks and an L-shaped one on flat ground, 10 pts/m2, in RD New."""
+def _synthetic_inputs(tmp_path, tile_crs=True):
+    """Two flat-roofed blocks and an L-shaped one on flat ground, 10 pts/m2, in RD New
+    (the tile without a CRS when not ``tile_crs``)."""
     from pyproj import CRS
 
     from lidar2city.datamodel import PointCloud
@@ -28,13 +29,48 @@ def _synthetic_inputs(tmp_path):
         cls[inside] = 6
     z += rng.normal(0, 0.03, len(z))
     world = np.column_stack([xy + [ox, oy], z])
-    cloud = PointCloud.from_world(world, crs=CRS.from_epsg(28992),
+    cloud = PointCloud.from_world(world, crs=CRS.from_epsg(28992) if tile_crs else None,
                                   attributes={"classification": cls})
     las = tmp_path / "t.laz"
     write_points(las, cloud)
     gpkg = tmp_path / "f.gpkg"
     write_polygons(gpkg, fps, {"bag_id": ["A", "B", "C"]}, origin=(ox, oy), crs=CRS.from_epsg(28992))
     return las, gpkg, heights
+
+
+def test_reconstruct_tile_without_crs_takes_the_footprints_crs(runner, tmp_path, caplog):
+    """An AHN-like tile without a CRS, footprints in RD New, no --crs: the output
+    carries the footprints' CRS (with a warning), not none."""
+    from lidar2city.cli.main import cli
+
+    las, gpkg, _ = _synthetic_inputs(tmp_path, tile_crs=False)
+    out = tmp_path / "o.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(gpkg), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "taking the footprints'" in caplog.text
+    assert json.loads(out.read_text())["metadata"]["referenceSystem"].endswith("/28992")
+
+
+def test_duplicate_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
+    """A footprint file holding some outlines twice: every footprint gets its model
+    (ids made unique), and the run warns once that the models overlap."""
+    from pyproj import CRS
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+
+    las, _, _ = _synthetic_inputs(tmp_path)
+    fps = [box(5, 5, 15, 13), box(15, 5, 25, 13), box(5, 5, 15, 13)]
+    dup = tmp_path / "dup.gpkg"
+    write_polygons(dup, fps, {"bag_id": ["A", "B", "A"]}, origin=(85000.0, 447000.0),
+                   crs=CRS.from_epsg(28992))
+    out = tmp_path / "d.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(dup), "-o", str(out),
+                              "--id-field", "bag_id"])
+    assert res.exit_code == 0, res.output
+    assert "3 of 3 buildings reconstructed" in res.output
+    assert "1 footprint(s) of" in caplog.text and "repeat an earlier one" in caplog.text
+    assert {"A", "B", "A-2"} <= set(json.loads(out.read_text())["CityObjects"])
 
 
 def test_reconstruct_formats(runner, tmp_path):

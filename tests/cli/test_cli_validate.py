@@ -45,3 +45,24 @@ def test_validate_not_cityjson(runner, tmp_path):
     p.write_text("[1, 2]")
     res = runner.invoke(cli, ["validate", str(p), "--no-schema"])
     assert res.exit_code == 1 and res.output.startswith("Error:")
+
+
+def test_validate_an_obj_or_gpkg_output_says_what_it_takes(runner, tmp_path):
+    """`validate` on the OBJ or GeoPackage that `reconstruct` wrote: one line saying the
+    file is not CityJSON and how to get one, not a JSON or UTF-8 decoding error."""
+    from pyproj import CRS
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.obj import write_obj
+    from lidar2city.io.vector import write_polygons
+
+    rs = [BuildingResult("a", solids={"1.2": prism_solid(box(0, 0, 5, 5), 0.0, 4.0)})]
+    write_obj(tmp_path / "m.obj", rs, origin=[1000.0, 2000.0, 0.0])
+    write_polygons(tmp_path / "m.gpkg", [box(0, 0, 5, 5)], {"id": ["a"]}, origin=(1000.0, 2000.0),
+                   crs=CRS.from_epsg(28992))
+    for name, what in (("m.obj", "an OBJ mesh"), ("m.gpkg", "a GeoPackage")):
+        res = runner.invoke(cli, ["validate", str(tmp_path / name)])
+        assert res.exit_code == 1, res.output
+        assert res.output.strip().splitlines() == [
+            f"Error: {str(tmp_path / name)!r} is not CityJSON: it is {what}, read here as "
+            "CityJSON (.city.json / .city.jsonl): make the model with -o NAME.city.json"]

@@ -17,6 +17,19 @@ def test_not_a_las(tmp_path):
         read_las(p)
 
 
+@pytest.mark.parametrize("head, says", [
+    (b"ply\nformat binary_little_endian 1.0\n", "PLY point cloud"),
+    (b"II*\x00\x08\x00\x00\x00", "GeoTIFF raster"),
+    (b"SQLite format 3\x00", "--footprints")])
+def test_a_file_of_another_format_is_named(tmp_path, head, says):
+    """A PLY cloud, a DSM or a footprint file given as a tile: the one-line error says
+    what the file is and where it goes, not laspy's 'Invalid file signature'."""
+    p = tmp_path / "x.laz"
+    p.write_bytes(head + bytes(300))
+    with pytest.raises(FileFormatError, match=f"not a readable LAS/LAZ file: it is .*{says}"):
+        read_las(p)
+
+
 def test_feet_crs_read_in_metres(data):
     pc = read_points(data / "misc" / "autzen_trim.laz")
     assert pc.crs is not None

@@ -25,3 +25,18 @@ def test_obj_round_trip(tmp_path):
     assert np.isclose(vol, (100 - 9) * 5)
     write_obj(tmp_path / "l.obj", [r1], origin=[85000, 447000, 0], local=True)
     assert "# origin 85000.000" in (tmp_path / "l.obj").read_text()
+
+
+def test_obj_carries_its_crs(tmp_path):
+    """OBJ has no CRS field: the CRS goes in a header comment and a ``.prj`` sidecar
+    beside the file (as GIS tools read it), and none is written without a CRS."""
+    from pyproj import CRS
+
+    solid = prism_solid(Polygon([(0, 0), (4, 0), (4, 4)]), 0.0, 3.0)
+    r = BuildingResult("a", solids={"1.2": solid})
+    path = tmp_path / "m.obj"
+    write_obj(path, [r], origin=[85000, 447000, 0], crs=CRS.from_epsg(7415))
+    assert "# crs EPSG:7415\n" in path.read_text()
+    assert CRS.from_user_input((tmp_path / "m.prj").read_text()).equals(CRS.from_epsg(7415))
+    write_obj(tmp_path / "n.obj", [r], origin=[85000, 447000, 0])
+    assert not (tmp_path / "n.prj").exists() and "# crs" not in (tmp_path / "n.obj").read_text()

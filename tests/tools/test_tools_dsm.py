@@ -202,3 +202,34 @@ def test_dsm_config_file_errors_are_one_line_errors(tmp_path):
     assert cfg["dsm_roofs"].min_area == 20.0
     with pytest.raises(ConfigError):
         load_dsm_config(None, **{"ground.cell": 2.0})
+
+
+def test_a_feet_dsm_gives_the_metric_dsm_result(scene, tmp_path):
+    """A DSM in a feet CRS (as `rasterize` writes for US tiles) holds heights in feet:
+    the same scene in feet gives the same outlines, metric heights and areas, and
+    prisms whose vertices are in feet, instead of 3.28 times taller buildings and
+    thresholds (2.5 m minimum height) applied to feet."""
+    import pyogrio
+
+    ft = 0.3048
+    crs_ft = CRS.from_epsg(2994)  # NAD83(HARN) / Oregon Lambert (ft)
+    t_ft = Affine(1.0 / ft, 0.0, 2000000.0, 0.0, -1.0 / ft, 800000.0)
+    paths = []
+    for p in scene:
+        r = read_raster(p)
+        out = tmp_path / f"{p.stem}_ft.tif"
+        write_raster(out, Raster(r.array / ft, t_ft, crs_ft, np.isfinite(r.array)))
+        paths.append(out)
+    metric = footprints_from_dsm(scene[0], dtm=scene[1], output=tmp_path / "m.gpkg")
+    feet = footprints_from_dsm(paths[0], dtm=paths[1], output=tmp_path / "f.gpkg")
+    assert feet["buildings"] == metric["buildings"] == 2
+    fields = {}
+    for name in ("m", "f"):
+        meta, _, _, values = pyogrio.raw.read(tmp_path / f"{name}.gpkg")
+        fields[name] = dict(zip(meta["fields"], values, strict=True))
+    np.testing.assert_allclose(fields["f"]["height"], fields["m"]["height"], rtol=1e-6)
+    np.testing.assert_allclose(fields["f"]["area"], fields["m"]["area"], rtol=1e-6)
+    res_m, res_f = lod1_from_dsm(scene[0], dtm=scene[1]), lod1_from_dsm(paths[0], dtm=paths[1])
+    assert res_f["z_unit"] == pytest.approx(ft)
+    for bm, bf in zip(res_m["buildings"], res_f["buildings"], strict=True):
+        assert bf.attributes["roof_z"] == pytest.approx(bm.attributes["roof_z"], rel=1e-6)

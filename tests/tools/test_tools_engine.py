@@ -460,3 +460,23 @@ def test_features_encoded_in_the_blocks_are_the_bytes_the_client_would_write(are
     assert (s1.done, s1.failed, s1.invalid) == (s2.done, s2.failed, s2.invalid) == (
         s0.done, s0.failed, s0.invalid)
     assert s0.done >= 5
+
+
+def test_no_building_anywhere_leaves_no_journal(tmp_path):
+    """A run that finds no building in any block fails with one line; a --resume could
+    only fail the same way, so no journal is left beside the missing output."""
+    from pyproj import CRS
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.errors import EmptyInputError
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, [150.0, 60.0], (12000, 2))
+    world = np.column_stack([xy + [85000.0, 447000.0], rng.normal(0, 0.03, len(xy))])
+    ground = {"classification": np.full(len(xy), 2, np.uint8)}
+    write_points(tmp_path / "flat.laz",
+                 PointCloud.from_world(world, crs=CRS.from_epsg(28992), attributes=ground))
+    out = tmp_path / "o.city.json"
+    with pytest.raises(EmptyInputError, match="no building footprint"):
+        reconstruct([tmp_path / "flat.laz"], out, block_size=BLOCK)
+    assert not out.exists() and not journal_path(out).exists()

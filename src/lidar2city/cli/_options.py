@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["check_output", "crs_option", "engine_options", "EngineProgress", "neighbours_options",
-           "output_option", "progress", "progress_callback", "run_on_tiles"]
+__all__ = ["check_output", "check_not_input", "crs_option", "engine_options", "EngineProgress",
+           "neighbours_options", "output_option", "progress", "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
     "--crs", default=None, metavar="CRS",
@@ -32,6 +32,24 @@ def check_output(ctx, param, value):
 
         check_output_path(value)
     return value
+
+
+def check_not_input(outputs, *inputs) -> None:
+    """An output path that is also one of the input files is an error before any work:
+    the run would replace the user's data (``classify x.laz -o x.laz``,
+    ``reconstruct x.laz --format cityjson -o x.laz``)."""
+    from pathlib import Path
+
+    from ..errors import InputError
+
+    given = set()
+    for i in inputs:
+        for p in ([i] if isinstance(i, (str, Path)) else i or ()):
+            if p is not None and Path(p).is_file():
+                given.add(Path(p).resolve())
+    for o in [outputs] if isinstance(outputs, (str, Path)) else outputs:
+        if o is not None and Path(o).resolve() in given:
+            raise InputError(f"output {str(o)!r} is also an input: give the output another name")
 
 
 def engine_options(f):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, engine_options, neighbours_options, run_on_tiles
+from ._options import check_not_input, crs_option, engine_options, neighbours_options, run_on_tiles
 from .ground import METHODS as GROUND_METHODS
 
 NAMES = {1: "other", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
@@ -38,6 +38,7 @@ def command(input, output, crs, ground_from_file, ground_method, config, neighbo
     """
     from ..tools.classify import classify_file
 
+    check_not_input(output, input, neighbours)
     if run_on_tiles(classify_file, input, output, neighbours=neighbours, workers=workers,
                     scheduler=scheduler, buffer=buffer, crs=crs,
                     ground_from_file=ground_from_file, ground_method=ground_method,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, engine_options, neighbours_options, run_on_tiles
+from ._options import check_not_input, crs_option, engine_options, neighbours_options, run_on_tiles
 
 METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
@@ -36,6 +36,7 @@ def command(input, output, method, dtm, cell, crs, config, neighbours, buffer, w
     """
     from ..tools.ground import ground_file
 
+    check_not_input((output, dtm), input, neighbours)
     if cell is not None and not cell > 0:
         raise click.BadParameter("must be > 0", param_hint="--cell")
     if run_on_tiles(ground_file, input, output, neighbours=neighbours, workers=workers,

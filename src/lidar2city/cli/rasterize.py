@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import crs_option, output_option
+from ._options import check_not_input, crs_option, output_option
 
 PRODUCTS = ("dsm", "dtm", "ndsm", "intensity", "rgb")  # keys of tools.rasterize.PRODUCTS
 
@@ -28,6 +28,7 @@ def command(inputs, output, product, cell, ground, max_gap, crs):
     """Grid the points of INPUTS (tiles of one area) into one GeoTIFF product."""
     from ..tools.rasterize import rasterize_files
 
+    check_not_input(output, inputs)
     if not cell > 0:
         raise click.BadParameter("must be > 0", param_hint="--cell")
     if max_gap is not None and not max_gap >= 0:

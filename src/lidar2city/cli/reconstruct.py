@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-from ._options import (EngineProgress, crs_option, engine_options, output_option, progress,
-                       progress_callback)
+from ._options import (EngineProgress, check_not_input, crs_option, engine_options, output_option,
+                       progress, progress_callback)
 
 
 @click.command("reconstruct")
@@ -75,6 +75,7 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
     """
     from ..errors import InputError
 
+    check_not_input(output, inputs, dsm, dtm, ortho, footprints, primitives_file, edits)
     if dsm is None:
         if not inputs:
             raise InputError("give point-cloud INPUTS or --dsm DSM.tif (see lidar2city reconstruct "

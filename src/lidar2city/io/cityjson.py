@@ -336,18 +336,31 @@ def read_json_documents(path) -> list[dict]:
         When the file is not JSON / JSON Lines.
     """
     p = check_input_file(path)
+    other = _NOT_CITYJSON.get(p.suffix.lower())
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{str(p)!r} cannot be read: {exc}") from None
+        raise FileFormatError(f"{str(p)!r} is not CityJSON: {other}" if other
+                              else f"{str(p)!r} cannot be read: {exc}") from None
     try:
         return [json.loads(text)]
     except json.JSONDecodeError:
+        if other:
+            raise FileFormatError(f"{str(p)!r} is not CityJSON: {other}") from None
         pass
     try:
         return [json.loads(line) for line in text.splitlines() if line.strip()]
     except json.JSONDecodeError as exc:
         raise FileFormatError(f"{str(p)!r} is not JSON: {exc}") from None
+
+
+#: what a model file of another format given where CityJSON is read is, and what to do
+_NOT_CITYJSON = {
+    ext: f"it is {what}, read here as CityJSON (.city.json / .city.jsonl): make the model "
+         "with -o NAME.city.json"
+    for ext, what in ((".obj", "an OBJ mesh"), (".gpkg", "a GeoPackage"),
+                      (".las", "a point cloud"), (".laz", "a point cloud"),
+                      (".tif", "a raster"), (".ply", "a point cloud"))}
 
 
 def read_cityjson(path) -> CityModel:

@@ -65,9 +65,31 @@ def _reading(path):
         raise
     except Exception as exc:  # laspy.LaspyException, OSError, lazrs.LazrsError, ValueError
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise FileFormatError(f"{str(path)!r} is not a readable LAS/LAZ file: {msg}") from None
+        raise FileFormatError(f"{str(path)!r} is not a readable LAS/LAZ file: "
+                              f"{_other_format(path) or msg}") from None
     finally:
         laspy_log.setLevel(level)
+
+
+#: leading bytes of the files a user may give where a LAS/LAZ tile is expected
+_SIGNATURES = ((b"ply", "it is a PLY point cloud; convert it to LAS/LAZ first (e.g. "
+                        "`pdal translate IN.ply OUT.laz`; a roof-only cloud with every "
+                        "point class 6)"),
+               (b"II*\x00", "it is a GeoTIFF raster (a DSM goes in with --dsm)"),
+               (b"MM\x00*", "it is a GeoTIFF raster (a DSM goes in with --dsm)"),
+               (b"SQLite format 3", "it is a GeoPackage / SQLite file (footprints go in with "
+                                    "--footprints)"),
+               (b"{", "it is a JSON file"))
+
+
+def _other_format(path) -> str | None:
+    """What ``path`` is when its first bytes are those of another known format, else None."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return None
+    return next((what for sig, what in _SIGNATURES if head.startswith(sig)), None)
 
 
 def _read_crs(las, path):

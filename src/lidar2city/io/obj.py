@@ -11,9 +11,16 @@ Coordinates: world coordinates in CRS units (``local=False``, the default,
 written with millimetre precision: the same numbers as the CityJSON), or,
 with ``local=True``, relative to the origin given in the header comment
 ``# origin X Y Z`` (convenient for viewers working in single precision).
+
+CRS: OBJ has no field for it, so it goes in the header comment ``# crs EPSG:7415``
+(the authority code, else the CRS's name) and, in full, as WKT in a ``.prj``
+sidecar beside the file (``buildings.obj`` -> ``buildings.prj``), written
+atomically too. Without a CRS neither is written.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +44,7 @@ def _objects(results, lods):
                     yield f"{r.id}{tag}-part{k + 1}", [p]
 
 
-def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod="1.2",
+def write_obj(path, results, *, origin, crs=None, xy_unit=1.0, z_unit=1.0, lod="1.2",
               local: bool = False, precision: int = 3) -> None:
     """Write the ``lod`` models of ``results`` to an OBJ file, atomically.
 
@@ -46,6 +53,8 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod="1.2",
     results : sequence of BuildingResult
     origin : array_like, shape (3,)
         World coordinates of the local origin (CRS units).
+    crs : pyproj.CRS, optional
+        The coordinates' CRS: header comment and ``.prj`` sidecar (see module doc).
     xy_unit, z_unit : float
         Metres per CRS unit.
     lod : str or sequence of str
@@ -83,6 +92,9 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod="1.2",
         uniq, inverse = np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
     with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as f:
         f.write(f"# lidar2city LoD{'+'.join(lods)} buildings\n")
+        if crs is not None:
+            auth = crs.to_authority()
+            f.write(f"# crs {':'.join(auth) if auth else crs.name}\n")
         if local:
             f.write(f"# origin {origin[0]:.{precision}f} {origin[1]:.{precision}f} "
                     f"{origin[2]:.{precision}f}\n")
@@ -94,6 +106,10 @@ def write_obj(path, results, *, origin, xy_unit=1.0, z_unit=1.0, lod="1.2",
                 f.write(f"g {sem}\n")
                 faces = inverse[np.array(tris)] + 1
                 f.write("".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+    if crs is not None:
+        prj = Path(path).with_suffix(".prj")
+        with atomic_path(prj) as tmp, open(tmp, "w", encoding="utf-8") as f:
+            f.write(crs.to_wkt())
 
 
 def read_obj(path):

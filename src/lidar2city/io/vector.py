@@ -14,8 +14,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "read_footprints", "unique", "repair_polygonal", "VectorLayer", "write_layers", "write_polygons",
-           "to_local", "to_world"]
+__all__ = ["no_pam", "read_footprints", "vector_crs", "unique", "repair_polygonal", "VectorLayer",
+           "write_layers", "write_polygons", "to_local", "to_world"]
 
 
 def to_local(geoms, origin, xy_unit=1.0):
@@ -121,6 +121,27 @@ def no_pam():
         yield
     finally:
         pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": before})
+
+
+def vector_crs(path, *, layer=None):
+    """The CRS of a vector source's layer (default the first), or None when it has none.
+
+    Raises
+    ------
+    FileFormatError
+        If the source cannot be opened.
+    """
+    import pyogrio
+    from pyproj import CRS
+
+    p = check_input_file(path)
+    try:
+        with no_pam():
+            wkt = pyogrio.read_info(str(p), layer=layer).get("crs")
+    except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
+        raise FileFormatError(f"{str(p)!r} is not a readable vector source: "
+                              f"{str(exc).splitlines()[0]}") from None
+    return CRS.from_user_input(wkt) if wkt else None
 
 
 def no_usable_footprint(path, geometries, notes) -> None:

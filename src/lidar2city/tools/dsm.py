@@ -168,7 +168,16 @@ def _segment_config(cfg, method):
     return cfg["dsm_roofs"] if method == "roofs" else cfg["dsm_buildings"]
 
 
+def _z_unit(raster) -> float:
+    """Metres per unit of a DSM's / DTM's values: its CRS's vertical unit (feet for a
+    feet CRS, as `rasterize` writes them)."""
+    from ..crs import unit_factors
+
+    return unit_factors(raster.crs)[1]
+
+
 def _read_inputs(dsm, dtm, ortho):
+    """The DSM, DTM (heights in metres) and orthoimage rasters, checked."""
     d = read_raster(dsm)
     t = d.transform
     if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.a <= 0 or t.e >= 0:
@@ -188,6 +197,10 @@ def _read_inputs(dsm, dtm, ortho):
             raise InputError(f"the orthoimage {ortho} needs 3 colour bands, got shape {arr.shape}")
         if arr.shape[1:] != d.shape or not np.allclose(tuple(o.transform)[:6], tuple(t)[:6]):
             raise InputError(f"the orthoimage {ortho} must share the DSM's grid (shape {d.shape})")
+    z = _z_unit(d)
+    if z != 1.0:  # heights in metres, as every threshold is
+        d = dataclasses.replace(d, array=d.array * z)
+        dt = None if dt is None else dataclasses.replace(dt, array=dt.array * z)
     return d, dt, o
 
 
@@ -371,7 +384,8 @@ def footprints_from_dsm(dsm, *, dtm=None, ortho=None, output, regularize="fit", 
                       method=segmentation, dtm_config=cfg["dsm_dtm"],
                       segment_config=_segment_config(cfg, segmentation))
     if dtm_out is not None:
-        write_raster(dtm_out, Raster(seg["dtm"], d.transform, d.crs, np.isfinite(seg["dtm"])))
+        write_raster(dtm_out, Raster(seg["dtm"] / _z_unit(d), d.transform, d.crs,
+                                     np.isfinite(seg["dtm"])))
     results = outlines_from_labels(seg["labels"], seg["ndsm"], cell=cell, regularize=regularize,
                                    fit_config=cfg["polygon_fit"], lod1_config=cfg["dsm_lod1"],
                                    progress=progress)
@@ -445,7 +459,7 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
     dict
         ``buildings`` (list of :class:`BuildingResult` with ``solids["1.2"]``,
         local metres), ``origin`` (world, CRS units, z 0), ``crs``, ``xy_unit``,
-        ``z_unit`` (metres per unit of the raster values: 1) and counts.
+        ``z_unit`` (metres per unit of the raster values: the CRS's vertical unit) and counts.
     """
     t0 = time.perf_counter()
     cfg = _configs(config)
@@ -508,7 +522,7 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
         r.attributes.update({"ground_z": ground, "roof_z": ground + h})
     return {
         "buildings": results, "origin": np.array([origin[0], origin[1], 0.0]), "crs": d.crs,
-        "xy_unit": d.xy_unit, "z_unit": 1.0,
+        "xy_unit": d.xy_unit, "z_unit": _z_unit(d),
         "ok": sum(r.ok for r in results), "failed": sum(not r.ok for r in results),
         "seconds": round(time.perf_counter() - t0, 2),
     }
@@ -517,10 +531,10 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
 def rasters_from_las(paths, *, cell, dsm_out, ortho_out=None, crs=None) -> dict:
     """Grid a point cloud into a DSM GeoTIFF and, with RGB, an orthoimage GeoTIFF.
 
-    The DSM holds the highest point per cell (heights in the cloud's z units
-    converted to metres); the orthoimage the colour of that point (3 bands,
-    uint16 as stored in LAS). Both are in the cloud's CRS with ``cell`` metres
-    pixels.
+    The DSM holds the highest point per cell (heights in the CRS's vertical units,
+    as `rasterize` writes them and the DSM methods read them); the orthoimage the
+    colour of that point (3 bands, uint16 as stored in LAS). Both are in the
+    cloud's CRS with ``cell`` metres pixels.
     """
     from affine import Affine
 
@@ -538,7 +552,7 @@ def rasters_from_las(paths, *, cell, dsm_out, ortho_out=None, crs=None) -> dict:
     x0w = cloud.origin[0] + g["x0"] / u
     y0w = cloud.origin[1] + g["y0"] / u
     transform = Affine(cell / u, 0.0, x0w, 0.0, -cell / u, y0w)
-    dsm = g["dsm"] + cloud.origin[2] * cloud.z_unit
+    dsm = g["dsm"] / cloud.z_unit + cloud.origin[2]
     write_raster(dsm_out, Raster(dsm, transform, cloud.crs, np.isfinite(dsm)))
     if ortho_out is not None and g["values"] is not None:
         vals = np.nan_to_num(g["values"], nan=0.0)

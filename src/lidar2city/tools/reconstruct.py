@@ -300,6 +300,7 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     chunk = int(chunk or FOOTPRINT_CHUNK)
     area = shapely.box(*extent)
     all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
+    outlines, repeated = set(), 0  # a footprint repeated exactly: two overlapping models
     while True:
         part, _ = read_footprints(path, layer=layer, id_field=id_field, origin=frame.origin[:2],
                                   xy_unit=frame.xy_unit, target_crs=frame.crs,
@@ -312,6 +313,10 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
             if g is None or g.intersects(area):
                 keep.append(True)
                 fids.append(f)
+                if g is not None:  # 64-bit hashes: the planner stays small on any file
+                    key = hash(g.wkb)
+                    repeated += key in outlines
+                    outlines.add(key)
                 bounds.append([np.nan] * 4 if g is None or g.is_empty else g.bounds)
             else:
                 keep.append(False)
@@ -329,6 +334,10 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     if len(kept) < len(all_ids):
         logger.info("%d footprint(s) outside the point cloud's extent skipped",
                     len(all_ids) - len(kept))
+    if repeated:
+        logger.warning("%d footprint(s) of %r repeat an earlier one's outline exactly: each "
+                       "gets its own (overlapping) model; remove the duplicates", repeated,
+                       str(path))
     return fids, [ids[i] for i in kept], np.array(bounds, dtype=np.float64).reshape(-1, 4)
 
 
@@ -524,8 +533,8 @@ def write_buildings(path, results, cloud, *, fmt=None, configuration=None, attri
     elif fmt == "obj":
         from ..io.obj import write_obj
 
-        write_obj(path, results, origin=cloud.origin, xy_unit=cloud.xy_unit, z_unit=cloud.z_unit,
-                  lod=lods)
+        write_obj(path, results, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
+                  z_unit=cloud.z_unit, lod=lods)
     elif fmt == "gpkg":
         _write_gpkg(path, results, cloud, attributes=attributes, configuration=configuration,
                     lods=lods)
@@ -765,7 +774,11 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
                 take(out)
             state["startup"], state["process_cpu"] = (executor.startup_seconds,
                                                       executor.process_cpu())
-        ordered.check()
+        try:
+            ordered.check()
+        except InputError:  # every block ran: a --resume could only fail the same way
+            journal.remove()
+            raise
         sink.close()
     except BaseException:
         sink.abort()
@@ -976,6 +989,16 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     want = tuple(lods) if lods else cfg.lods
     lod22 = others.get("lod22") if want22 and method == "roof" else None
     tiles = scan_tiles(inputs, crs=crs)
+    if crs is None and footprints is not None and tiles[0].crs is None:
+        # tiles without a CRS (AHN): the footprints' CRS is the best guess, so that
+        # the output still carries one (a wrong guess shows as footprints off the tile)
+        from ..io.vector import vector_crs
+
+        fp_crs = vector_crs(footprints, layer=layer)
+        if fp_crs is not None:
+            logger.warning("the input has no CRS: taking the footprints' (%s; pass --crs "
+                           "EPSG:xxxx to choose one)", fp_crs.name)
+            tiles = scan_tiles(inputs, crs=fp_crs)
     reader = TileReader(tiles)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
