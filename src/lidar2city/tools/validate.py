@@ -60,8 +60,10 @@ def validate_model(model, *, planarity_tolerance=0.01, snap_tolerance=0.001,
     :func:`lidar2city.validate.check_solid` in coordinates relative to the
     model's lower corner (CRS units: tolerances are in those units); the
     BuildingParts of a Building must not overlap (601). MultiSurface and
-    CompositeSurface geometries are not solids and are checked as shells
-    (closed, manifold, oriented) too, since LoD1/LoD2 buildings should be.
+    CompositeSurface geometries of buildings are checked as shells too
+    (closed, manifold, oriented), since LoD1/LoD2 buildings should be; those
+    of other objects (terrain, roads, water) only polygon by polygon, as
+    val3dity does: they do not enclose a volume.
     """
     from ..validate.solid import Issue, check_solid, parts_overlap
 
@@ -75,6 +77,8 @@ def validate_model(model, *, planarity_tolerance=0.01, snap_tolerance=0.001,
         rep.geometries = len(geoms)
         lods = sorted({str(g.get("lod")) for g in geoms})
         for lod in lods:
+            shell = rep.type.startswith("Building") or any(
+                g.get("type") not in _SURFACES for g in geoms if str(g.get("lod")) == lod)
             try:
                 solids = model.solids(oid, lod=lod, include_children=False, origin=origin)
             except (TypeError, ValueError, IndexError, KeyError, AttributeError) as exc:
@@ -82,7 +86,7 @@ def validate_model(model, *, planarity_tolerance=0.01, snap_tolerance=0.001,
                 rep.issues.append((lod, 0, Issue(901, None, f"geometry unreadable ({exc})")))
                 continue
             for k, s in enumerate(solids):
-                for issue in check_solid(s, **kw):
+                for issue in check_solid(s, shell=shell, **kw):
                     rep.issues.append((lod, k, issue))
         children = [c for c in obj.get("children", []) or []
                     if model.objects.get(c, {}).get("type") == "BuildingPart"]
@@ -98,6 +102,10 @@ def validate_model(model, *, planarity_tolerance=0.01, snap_tolerance=0.001,
                     rep.issues.append((lod, a, Issue(601, None, f"parts {a} and {b} overlap")))
         reports.append(rep)
     return reports
+
+
+#: geometry types that are surfaces, not solids
+_SURFACES = ("MultiSurface", "CompositeSurface")
 
 
 def validate_file(path, *, schema_dir=None, schema: bool = True, **tolerances) -> FileReport:

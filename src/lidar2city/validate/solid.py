@@ -412,7 +412,7 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
 
 
 def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: float = 0.001,
-                overlap_tolerance: float = 0.001) -> list[Issue]:
+                overlap_tolerance: float = 0.001, shell: bool = True) -> list[Issue]:
     """Validate one solid (its exterior shell) and list the errors found.
 
     Parameters
@@ -425,6 +425,9 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
         Vertices closer than this (m) are the same vertex (val3dity: 0.001).
     overlap_tolerance : float
         Distance (m) below which coplanar faces count as one plane.
+    shell : bool
+        False: only the polygons are checked (val3dity's 1xx / 2xx codes), as
+        for a surface that is not meant to close a volume (terrain, a road).
 
     Returns
     -------
@@ -469,7 +472,7 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
             _polygon_checks(verts, rings, i, issues, planarity_tolerance)
     for _, faces in sorted(simple.items()):
         _simple_faces_checks(verts, rings_per_face, np.array(faces), issues, planarity_tolerance)
-    if issues:
+    if issues or not shell:
         return issues
     if len(rings_per_face) < 4:
         return [Issue(301, None, f"{len(rings_per_face)} polygons")]
