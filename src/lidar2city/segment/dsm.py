@@ -535,12 +535,12 @@ class RoofRegionsConfig:
                                    "large (m2) are merged into the region they share the "
                                    "longest edge with (dormers, roof steps, low annexes) "
                                    "if they also hold min_pixels; 0: they are dropped")
-    min_planar_share: float = field(0.5, "regions with a smaller share of planar pixels (slope "
+    min_planar_share: float = field(0.4, "regions with a smaller share of planar pixels (slope "
                                          "spread below planar_spread) are dropped: tree crowns "
                                          "slope every way, roofs are a few planar faces; 0: off "
                                          "(off on rasters coarser than 1 m, where 3 x 3 windows "
                                          "span whole roofs)")
-    planar_spread: float = field(0.5, "a pixel is planar when the spread of the plane slopes "
+    planar_spread: float = field(0.4, "a pixel is planar when the spread of the plane slopes "
                                       "around it (slope_spread, 1.5 m windows) is below this "
                                       "(m per m)")
 
@@ -732,8 +732,8 @@ def _merge_fragments(lab, keep, candidate, rounds=3):
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
-                 expand_roughness=0.2, merge_area=5.0, min_planar_share=0.5,
-                 planar_spread=0.5):
+                 expand_roughness=0.2, merge_area=5.0, min_planar_share=0.4,
+                 planar_spread=0.4):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
