@@ -122,8 +122,10 @@ class _TileCache:
     again. A tile is decoded about once per run, and the scratch files hold at
     most :data:`KEEP_BLOCKS` times the largest block read (soonest needed
     first), so neither memory nor scratch space grows with the area: what a
-    process holds while a block runs is that block's points. Outside a run
-    every tile is dropped after its block.
+    process holds while a block runs is that block's points, compact (17
+    bytes a point), and the full-width cloud of one group of its buildings at
+    a time (:func:`_run_groups`). Outside a run every tile is dropped after
+    its block.
     """
 
     def __init__(self):
@@ -298,10 +300,13 @@ class _SharedTileReader(TileReader):
     def __init__(self, tiles, *, origin, index):
         super().__init__(tiles, origin=origin)
         self.index = index
+        self.decoded = False
 
     def _taken(self, k):
         _cache.release(self.index, path=self.tiles[k].path)
-        give_back_memory()  # the tile's decoding or loading, freed: not left to pile up
+        if self.decoded:  # a decoding's transient arrays, freed: not left to pile up
+            self.decoded = False
+            give_back_memory()
 
     def _visit_order(self, ks):
         # the tiles to decode first, while the block holds none of its points yet
@@ -312,6 +317,7 @@ class _SharedTileReader(TileReader):
         def decode():
             hit = super(_SharedTileReader, self)._tile(k)
             self._tiles.clear()  # held by the shared cache only
+            self.decoded = True
             return hit
 
         return _cache.get(self.tiles[k], decode, self.index)
@@ -530,10 +536,7 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
             return BlockOutput(spec.index, [], Footprints([], []), cloud is not None)
         fps = Footprints(fps.geometries, [f"b{j + 1}" for j in range(len(fps))], fps.attributes)
     if cloud is None:  # no building point in this block
-        results = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
-                               else "no building point in the block around the footprint")
-                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
-        return BlockOutput(spec.index, results, fps, False)
+        return _without_points(spec, fps)
     images = options.check_images
     if images is not None and spec.footprints is None:
         # traced ids are numbered per block: one folder of check images per block
@@ -613,10 +616,7 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
     n = sum(len(p) for p in parts)
     if not n or not any(np.isin(p.attrs["classification"], cfg.building_classes).any()
                         for p in parts):
-        results = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
-                               else "no building point in the block around the footprint")
-                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
-        return BlockOutput(spec.index, results, fps, False)
+        return _without_points(spec, fps)
     frame, origin = spec.frame, reader.origin
     xy, z_unit = reader.xy_unit, reader.z_unit
 
@@ -690,6 +690,14 @@ def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
         results = apply_block_edits(results, footprints, cloud, classes, options.edits,
                                     options.edit_context)
     return results
+
+
+def _without_points(spec, fps) -> BlockOutput:
+    """The output of a block without any building point: each footprint's reason."""
+    results = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
+                           else "no building point in the block around the footprint")
+               for fid, g in zip(fps.ids, fps.geometries, strict=True)]
+    return BlockOutput(spec.index, results, fps, False)
 
 
 def _unmodelled(fid, reason):
