@@ -531,3 +531,26 @@ def test_buildings_built_group_by_group_equal_those_of_the_whole_blocks_cloud(tm
         box = (gz[:, 0] >= x0) & (gz[:, 0] <= x1) & (gz[:, 1] >= y0) & (gz[:, 1] <= y1)
         assert box.sum() > 0
         assert np.array_equal(np.sort(area_ground[0](x0, y0, x1, y1)), np.sort(gz[box, 2]))
+
+
+@pytest.mark.slow
+def test_delft_built_group_by_group_is_the_same_bytes_as_from_whole_blocks(data, tmp_path,
+                                                                          monkeypatch):
+    """Real AHN3 points and BGT footprints (132 row houses), blocks of 100 m, groups
+    of a few houses each: the same output as every block's whole cloud."""
+    tile = data / "delft" / "ahn3_cropped_1.laz"
+    fp = data / "delft" / "footprints_bgt.gpkg"
+    monkeypatch.setattr(task, "GROUP_POINTS", 20_000)
+    seen = []
+    real = task._run_groups
+    monkeypatch.setattr(task, "_run_groups", lambda *a: seen.append(1) or real(*a))
+    out = {}
+    for mode in ("groups", "whole"):
+        if mode == "whole":
+            monkeypatch.setattr(task, "_by_groups", lambda spec, options: False)
+        out[mode] = tmp_path / f"{mode}.city.jsonl"
+        s = reconstruct([tile], out[mode], footprints=fp, lods=("1.2", "1.3"), crs="EPSG:7415",
+                        block_size=100.0)
+        assert s.done >= 100
+    assert len(seen) >= 4  # the blocks went group by group
+    assert out["groups"].read_bytes() == out["whole"].read_bytes()
