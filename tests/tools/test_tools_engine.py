@@ -480,3 +480,97 @@ def test_no_building_anywhere_leaves_no_journal(tmp_path):
     with pytest.raises(EmptyInputError, match="no building footprint"):
         reconstruct([tmp_path / "flat.laz"], out, block_size=BLOCK)
     assert not out.exists() and not journal_path(out).exists()
+
+
+@pytest.mark.parametrize("lods", [("1.2", "1.3"), ("1.2", "2.2")])
+def test_buildings_built_group_by_group_equal_those_of_the_whole_blocks_cloud(tmp_path, lods,
+                                                                             monkeypatch):
+    """A block builds its buildings in groups, each with the full-width cloud of its
+    footprints' surroundings only: the same results as from the block's whole
+    cloud, with groups of a few buildings, a building across groups' cells and
+    a building without ground around it (its ground level from the area's
+    ground points within 50 m, outside its group's cloud)."""
+    import dataclasses
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.tools.reconstruct import _without_run_attributes, plan_reconstruct
+
+    town = make_town(size=(160.0, 120.0), density=3.0, seed=5, n_trees=5)
+    c, g = town.cloud, town.footprints.geometries[0]
+    x0, y0, x1, y1 = g.bounds
+    xy = c.xyz[:, :2]
+    near = (xy[:, 0] > x0 - 15) & (xy[:, 0] < x1 + 15) & (xy[:, 1] > y0 - 15) & (xy[:, 1] < y1 + 15)
+    keep = ~(near & (c.attributes["classification"] == 2))  # no ground within 15 m
+    cloud = PointCloud(c.xyz[keep], c.origin, c.crs, c.xy_unit, c.z_unit,
+                       {k: v[keep] for k, v in c.attributes.items()})
+    write_points(tmp_path / "town.laz", cloud)
+    write_polygons(tmp_path / "fp.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=c.origin, crs=c.crs)
+    plan = plan_reconstruct([tmp_path / "town.laz"], tmp_path / "x.city.jsonl",
+                            footprints=tmp_path / "fp.gpkg", lods=lods, block_size=200.0)
+    assert task._by_groups(plan.specs[0], plan.options)
+
+    def built(grouped):
+        monkeypatch.setattr(task, "_by_groups", lambda spec, options: grouped)
+        out = []
+        for spec in plan.specs:
+            task._cache.stop()
+            b = task._run_block(spec, plan.options)
+            out += [dataclasses.asdict(_without_run_attributes(r)) for r in b.results]
+        task._cache.stop()
+        return out
+
+    whole = built(False)
+    monkeypatch.setattr(task, "GROUP_POINTS", 500)  # groups of a few buildings each
+    groups = task.footprint_groups
+    seen = []
+    monkeypatch.setattr(task, "footprint_groups",
+                        lambda *a, **k: seen.append(groups(*a, **k)) or seen[-1])
+    from lidar2city.tools import reconstruct as R
+
+    real, area_ground = R.reconstruct_buildings, []
+
+    def spy(*a, **k):
+        area_ground.append(k["area_ground"])
+        return real(*a, **k)
+
+    monkeypatch.setattr(R, "reconstruct_buildings", spy)
+    grouped = built(True)
+    assert sum(len(g) for g in seen) >= 2  # several groups
+    assert {r["attributes"].get("ground_source") for r in whole} > {"ring"}
+    assert len(grouped) == len(whole) >= 5
+    for a, b in zip(grouped, whole, strict=True):
+        assert repr(a) == repr(b)
+    # the area's ground level of a building without any ground near it (a rare
+    # last resort): the ground points of the whole block's cloud within 50 m
+    cloud = task._read_box(plan.specs[0])
+    task._cache.stop()
+    gz = cloud.xyz[np.isin(cloud.attributes["classification"], plan.options.config.ground_classes)]
+    for x0, y0, x1, y1 in [(x0 - 50, y0 - 50, x1 + 50, y1 + 50), (-1e3, -1e3, 1e3, 1e3),
+                           (10.0, 20.0, 60.5, 70.25)]:
+        box = (gz[:, 0] >= x0) & (gz[:, 0] <= x1) & (gz[:, 1] >= y0) & (gz[:, 1] <= y1)
+        assert box.sum() > 0
+        assert np.array_equal(np.sort(area_ground[0](x0, y0, x1, y1)), np.sort(gz[box, 2]))
+
+
+@pytest.mark.slow
+def test_delft_built_group_by_group_is_the_same_bytes_as_from_whole_blocks(data, tmp_path,
+                                                                          monkeypatch):
+    """Real AHN3 points and BGT footprints (132 row houses), blocks of 100 m, groups
+    of a few houses each: the same output as every block's whole cloud."""
+    tile = data / "delft" / "ahn3_cropped_1.laz"
+    fp = data / "delft" / "footprints_bgt.gpkg"
+    monkeypatch.setattr(task, "GROUP_POINTS", 20_000)
+    seen = []
+    real = task._run_groups
+    monkeypatch.setattr(task, "_run_groups", lambda *a: seen.append(1) or real(*a))
+    out = {}
+    for mode in ("groups", "whole"):
+        if mode == "whole":
+            monkeypatch.setattr(task, "_by_groups", lambda spec, options: False)
+        out[mode] = tmp_path / f"{mode}.city.jsonl"
+        s = reconstruct([tile], out[mode], footprints=fp, lods=("1.2", "1.3"), crs="EPSG:7415",
+                        block_size=100.0)
+        assert s.done >= 100
+    assert len(seen) >= 4  # the blocks went group by group
+    assert out["groups"].read_bytes() == out["whole"].read_bytes()

@@ -354,7 +354,8 @@ def _chunk_order(geometries, chunk):
 
 
 def reconstruct_buildings(cloud, footprints, *, config=None, building=None, ground=None,
-                          chunk: float = 250.0, progress=None, lod22=None) -> list:
+                          chunk: float = 250.0, progress=None, lod22=None,
+                          area_ground=None) -> list:
     """LoD1 models of every footprint (results in footprint order).
 
     Parameters
@@ -371,6 +372,12 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
         ``progress(done, total, result)`` after each building.
     lod22 : Lod22Config, optional
         Also build LoD2.2 roofs (:func:`lidar2city.roof.building.reconstruct_lod22`).
+    area_ground : callable, optional
+        ``area_ground(xmin, ymin, xmax, ymax)``: the heights of the ground points in
+        that local box (bounds included), for the area's ground level of a
+        building without ground around it (50 m around its footprint); default
+        those of ``cloud``. For a cloud cut to the buildings' surroundings
+        (:func:`lidar2city.tools.task.run_block`) that keeps the wider area elsewhere.
     """
     from ..lod.lod1 import Lod1Config, reconstruct_building
     from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
@@ -406,10 +413,9 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             gi = ggrid.query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
             def fallback(x0=x0, y0=y0, x1=x1, y1=y1):
                 # the area's ground level: ground points within 50 m
-                wide = ggrid.query(x0 - area_radius, y0 - area_radius, x1 + area_radius,
-                                   y1 + area_radius)
-                return (float(np.percentile(gxyz[wide, 2], cfg.ground_percentile))
-                        if len(wide) else None)
+                box = (x0 - area_radius, y0 - area_radius, x1 + area_radius, y1 + area_radius)
+                z = gxyz[ggrid.query(*box), 2] if area_ground is None else area_ground(*box)
+                return float(np.percentile(z, cfg.ground_percentile)) if len(z) else None
 
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback)
@@ -725,6 +731,9 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
                             config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
                             primitives=primitives, check_images=check_images,
                             block_size=block_size, edits=edits)
+    from .task import give_back_memory
+
+    give_back_memory()  # what the planning freed (it reads every header), before the blocks
     key = run_key({
         "version": _version(), "inputs": [file_stamp(p) for p in paths],
         "footprints": None if footprints is None else file_stamp(footprints),

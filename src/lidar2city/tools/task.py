@@ -30,8 +30,9 @@ from ..io.las import DecodedTile, SpilledTile, TileReader
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "run_block", "reconstruct_block",
-           "tile_keeper", "TracedBlock", "trace_block"]
+__all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
+           "give_back_memory", "run_block", "reconstruct_block", "tile_keeper", "TracedBlock",
+           "trace_block"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,8 +122,10 @@ class _TileCache:
     again. A tile is decoded about once per run, and the scratch files hold at
     most :data:`KEEP_BLOCKS` times the largest block read (soonest needed
     first), so neither memory nor scratch space grows with the area: what a
-    process holds while a block runs is that block's points. Outside a run
-    every tile is dropped after its block.
+    process holds while a block runs is that block's points, compact (17
+    bytes a point), and the full-width cloud of one group of its buildings at
+    a time (:func:`_run_groups`). Outside a run every tile is dropped after
+    its block.
     """
 
     def __init__(self):
@@ -163,6 +166,17 @@ class _TileCache:
                 self.covers[key] = None
                 self.decoded += 1
         return hit
+
+    def holds(self, tile, index=None) -> bool:
+        """Whether ``tile`` is kept with the points of the block ``index`` (no decoding)."""
+        try:
+            st = os.stat(tile.path)
+        except OSError:
+            return False
+        key = (tile.path, st.st_size, st.st_mtime_ns)
+        with self.lock:
+            cover = self.covers.get(key)
+            return key in self.tiles and (cover is None or index in cover)
 
     def start(self, specs, ahead=()) -> None:
         """A run of ``specs`` begins, to be followed by ``ahead`` (the blocks the
@@ -286,30 +300,52 @@ class _SharedTileReader(TileReader):
     def __init__(self, tiles, *, origin, index):
         super().__init__(tiles, origin=origin)
         self.index = index
+        self.decoded = False
 
     def _taken(self, k):
         _cache.release(self.index, path=self.tiles[k].path)
+        if self.decoded:  # a decoding's transient arrays, freed: not left to pile up
+            self.decoded = False
+            give_back_memory()
+
+    def _visit_order(self, ks):
+        # the tiles to decode first, while the block holds none of its points yet
+        # (a decoding needs several times the memory of the points it keeps)
+        return sorted(ks, key=lambda k: _cache.holds(self.tiles[k], self.index))
 
     def _tile(self, k):
         def decode():
             hit = super(_SharedTileReader, self)._tile(k)
             self._tiles.clear()  # held by the shared cache only
+            self.decoded = True
             return hit
 
         return _cache.get(self.tiles[k], decode, self.index)
 
 
-def _read_box(spec):
-    """The points of the spec's world box (shared decoded tiles), or None when empty."""
+def _read_parts(spec):
+    """``(reader, parts)``: the points of the spec's world box, compact and unordered
+    (:meth:`~lidar2city.io.las.TileReader.parts`, shared decoded tiles); None when
+    the spec has nothing to read."""
     if spec.world_box is None or not spec.tiles:
         return None
     reader = _SharedTileReader(list(spec.tiles), origin=np.asarray(spec.frame.origin),
                                index=spec.index)
     try:
-        cloud = reader.box(*spec.world_box)
-        _cache.read(len(cloud))
+        parts = reader.parts(*spec.world_box)
+        _cache.read(sum(len(p) for p in parts))
     finally:
         _cache.release(spec.index)  # the block runs with its own points only
+    return reader, parts
+
+
+def _read_box(spec, read=None):
+    """The points of the spec's world box (shared decoded tiles; ``read``: those of
+    :func:`_read_parts` already read), or None when empty."""
+    read = _read_parts(spec) if read is None else read
+    if read is None:
+        return None
+    cloud = read[0].cloud(read[1])
     return cloud if len(cloud) else None
 
 
@@ -322,17 +358,19 @@ def _measured(task, spec, *args):
     finally:
         if _cache.later is None:  # not in a run: nothing to keep
             _cache.stop()
+        give_back_memory()
     out.worker_mb = _peak_mb()
     out.cpu = time.process_time() - t0
     out.worker = f"{socket.gethostname()}:{os.getpid()}"
     return out
 
 
-def _block_cloud(spec, options):
-    """``(cloud, classes)`` of the spec's world box, or ``(None, None)`` without building points."""
+def _block_cloud(spec, options, read=None):
+    """``(cloud, classes)`` of the spec's world box (``read``: its points already read),
+    or ``(None, None)`` without building points."""
     from .reconstruct import point_roles
 
-    cloud = _read_box(spec)
+    cloud = _read_box(spec, read)
     if cloud is None:
         return None, None
     try:
@@ -413,6 +451,32 @@ def encode_block(out: BlockOutput, options: BlockOptions) -> BlockOutput:
     return out
 
 
+def give_back_memory() -> None:
+    """Give the heap memory freed by a block back to the system (glibc's
+    ``malloc_trim``; elsewhere nothing): what glibc keeps after a block is
+    scattered free space that the next block's arrays, of other sizes, do not
+    all reuse, so without it a process's resident memory creeps up with the
+    number of blocks it has run."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
+def _malloc_trim():
+    global _TRIM
+    if _TRIM is False:
+        try:
+            import ctypes
+
+            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+        except (OSError, AttributeError):
+            _TRIM = None
+    return _TRIM
+
+
+_TRIM = False
+
+
 def _peak_mb() -> float:
     """This process's peak resident memory (MB): Linux's ``VmHWM``, the peak of
     its own address space. ``ru_maxrss`` is only the fallback: Linux carries it
@@ -450,7 +514,12 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
     """
     from ..datamodel import Footprints
 
-    cloud, classes = _block_cloud(spec, options)
+    read = None
+    if _by_groups(spec, options):
+        read = _read_parts(spec)
+        if all("classification" in p.attrs for p in read[1]):
+            return _run_groups(spec, options, *read)
+    cloud, classes = _block_cloud(spec, options, read)
     fps = None if spec.footprints is None else block_footprints(spec)
     if fps is not None and cloud is not None and not options.classified:
         # raw input: the footprints say where the buildings are
@@ -467,16 +536,129 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
             return BlockOutput(spec.index, [], Footprints([], []), cloud is not None)
         fps = Footprints(fps.geometries, [f"b{j + 1}" for j in range(len(fps))], fps.attributes)
     if cloud is None:  # no building point in this block
-        results = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
-                               else "no building point in the block around the footprint")
-                   for fid, g in zip(fps.ids, fps.geometries, strict=True)]
-        return BlockOutput(spec.index, results, fps, False)
+        return _without_points(spec, fps)
     images = options.check_images
     if images is not None and spec.footprints is None:
         # traced ids are numbered per block: one folder of check images per block
         images = str(Path(images) / f"block_{spec.cell[0]}_{spec.cell[1]}")
     return BlockOutput(spec.index, reconstruct_block(cloud, classes, fps, options,
                                                      check_images=images), fps, True)
+
+
+#: about how many points a block turns into a full-width cloud at a time: its
+#: buildings are built in groups of neighbouring footprints, each group with
+#: the points around it only (:func:`_run_groups`), so that what a block holds
+#: at full width does not grow with how many points the block reads
+GROUP_POINTS = 40_000
+
+
+def _by_groups(spec, options) -> bool:
+    """Whether the block's buildings can be built group by group with the same
+    results: each building then reads only the points around its footprint
+    (classified input, given footprints, LoD1 / LoD2.2 from the roof topology).
+    Classifying raw points, tracing footprints, fitting primitives and
+    re-applying edits look at the whole block."""
+    return (options.classified and spec.footprints is not None and options.primitives is None
+            and not options.edits and spec.world_box is not None and bool(spec.tiles))
+
+
+def _local(part, d, origin, scale):
+    """Local coordinate ``d`` of a compact part's points, computed as
+    :meth:`~lidar2city.io.las.TileReader.cloud` computes it (the same bits)."""
+    c = part.column(d)
+    np.subtract(c, origin[d], out=c)
+    return np.multiply(c, scale, out=c)
+
+
+def footprint_groups(bounds, box, spacing_area: float, *, points: int = GROUP_POINTS,
+                     least: float = 50.0) -> list:
+    """Footprints grouped by the square cells (from ``box``'s lower corner) holding
+    their centres, the cells sized so that one holds about ``points`` points at
+    ``spacing_area`` m² per point, and at least ``least`` m wide.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (N, 4)
+        Local ``(xmin, ymin, xmax, ymax)`` of each footprint (NaN when empty:
+        they go with the first cell).
+    box : sequence of 4 float
+        The block's local box.
+
+    Returns
+    -------
+    list of list of int
+        The footprints of each group, in their order, groups row by row.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
+    side = max(float(np.sqrt(points * spacing_area)), float(least))
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    centre = np.nan_to_num(centre - np.asarray(box[:2], dtype=np.float64), nan=0.0)
+    keys = np.floor(np.maximum(centre, 0.0) / side).astype(np.int64)
+    groups: dict = {}
+    for i, (kx, ky) in enumerate(keys.tolist()):
+        groups.setdefault((ky, kx), []).append(i)
+    return [groups[k] for k in sorted(groups)]
+
+
+def _run_groups(spec, options, reader, parts) -> BlockOutput:
+    """Every building of a block, group by group (:func:`footprint_groups`): the
+    block's points are held compact (17 bytes a point) and each group gets the
+    full-width cloud of its footprints' surroundings only (search radius and
+    roof overhang, + 1 m), in the canonical order of the block's cloud. A
+    building queries its points by its footprint's box, so it gets the same
+    points in the same order as from the whole block's cloud, and the area's
+    ground level (50 m around) is taken from the block's compact points: the
+    same results as :func:`reconstruct_block` on the block's cloud."""
+    from .reconstruct import _subset, reconstruct_buildings
+
+    cfg = options.config
+    fps = block_footprints(spec)
+    n = sum(len(p) for p in parts)
+    if not n or not any(np.isin(p.attrs["classification"], cfg.building_classes).any()
+                        for p in parts):
+        return _without_points(spec, fps)
+    frame, origin = spec.frame, reader.origin
+    xy, z_unit = reader.xy_unit, reader.z_unit
+
+    def area_ground(x0, y0, x1, y1):
+        world = frame.to_world([x0 - 1.0, y0 - 1.0, x1 + 1.0, y1 + 1.0])
+        out = []
+        for p in parts:
+            idx = np.flatnonzero(p.inside([world])
+                                 & np.isin(p.attrs["classification"], cfg.ground_classes))
+            if len(idx):
+                q = p.take(idx)
+                x, y = _local(q, 0, origin, xy), _local(q, 1, origin, xy)
+                keep = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+                out.append(_local(q, 2, origin, z_unit)[keep])
+        return np.concatenate(out) if out else np.zeros(0)
+
+    bounds = np.array([[np.nan] * 4 if g is None or g.is_empty else g.bounds
+                       for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
+    wb = np.asarray(spec.world_box, dtype=np.float64)
+    box = np.concatenate([(wb[:2] - origin[:2]) * xy, (wb[2:] - origin[:2]) * xy])
+    area = float((box[2] - box[0]) * (box[3] - box[1]))
+    pad = cfg.search_radius + (options.lod22.overhang if options.lod22 is not None else 0.0) + 1.0
+    results = [None] * len(fps)
+    # cells at least 5 paddings wide: a group's cloud is at most ~2x its cells' area
+    for idx in footprint_groups(bounds, box, area / n, points=GROUP_POINTS, least=5 * pad):
+        b = bounds[idx]
+        b = b[np.isfinite(b).all(axis=1)]
+        sub = []
+        if len(b):  # the group's surroundings: what its buildings query
+            world = frame.to_world([b[:, 0].min() - pad, b[:, 1].min() - pad,
+                                    b[:, 2].max() + pad, b[:, 3].max() + pad])
+            sub = [p.take(np.flatnonzero(p.inside([world]))) for p in parts]
+        cloud = reader.cloud(sub)
+        classes = cloud.attributes.get("classification", np.zeros(0, dtype=np.uint8))
+        done = reconstruct_buildings(cloud, _subset(fps, idx), config=cfg,
+                                     building=np.isin(classes, cfg.building_classes),
+                                     ground=np.isin(classes, cfg.ground_classes),
+                                     lod22=options.lod22, area_ground=area_ground)
+        del cloud, classes, sub
+        for i, r in zip(idx, done, strict=True):
+            results[i] = r
+    return BlockOutput(spec.index, results, fps, True)
 
 
 def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
@@ -508,6 +690,14 @@ def reconstruct_block(cloud, classes, footprints, options: BlockOptions, *,
         results = apply_block_edits(results, footprints, cloud, classes, options.edits,
                                     options.edit_context)
     return results
+
+
+def _without_points(spec, fps) -> BlockOutput:
+    """The output of a block without any building point: each footprint's reason."""
+    results = [_unmodelled(fid, "invalid footprint: empty geometry" if g is None or g.is_empty
+                           else "no building point in the block around the footprint")
+               for fid, g in zip(fps.ids, fps.geometries, strict=True)]
+    return BlockOutput(spec.index, results, fps, False)
 
 
 def _unmodelled(fid, reason):
