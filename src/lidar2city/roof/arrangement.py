@@ -892,6 +892,19 @@ def _cell_labels(cells, xyz, planes, cap):
     return labels, counts
 
 
+def _nearest(pts, queries, tree_type):
+    """Index into ``pts`` of the nearest point to each query: ``tree_type(pts).query``'s
+    answer. Small sets (the usual rim candidates) by brute force, which gives the same
+    index whenever the nearest point is clear of the second by more than rounding; any
+    query with a (near) tie, and large sets, go to the tree."""
+    if len(pts) * len(queries) <= 65_536 and len(pts) >= 2:
+        d2 = (queries[:, None, 0] - pts[None, :, 0]) ** 2 + (queries[:, None, 1] - pts[None, :, 1]) ** 2
+        two = np.partition(d2, 1, axis=1)[:, :2]
+        if np.all(two[:, 1] > two[:, 0] * (1.0 + 1e-9) + 1e-300):
+            return np.argmin(d2, axis=1)
+    return tree_type(pts).query(queries)[1]
+
+
 def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.1, min_points=6,
                outside=0.5):
     """Raised rims along the outline (parapet tops): level runs of points above the roof inside.
@@ -922,7 +935,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
     xy = xyz[:, :2]
     inside = shapely.contains_xy(footprint, xy[:, 0], xy[:, 1])
     rims = []
-    d_out = shapely.distance(footprint.boundary, shapely.points(xy))
+    d_out = None  # distance of every point to the outline, when a rim facet needs it
     for ring in shapely.get_rings(footprint):
         c = np.asarray(ring.coords)
         for a, b in zip(c[:-1], c[1:], strict=True):
@@ -941,7 +954,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
             if len(cand) < min_points or not len(inner):
                 continue
             # only points standing t_step above the plane of the nearest roof point inside
-            near = inner[cKDTree(xy[inner]).query(xy[cand])[1]]
+            near = inner[_nearest(xy[inner], xy[cand], cKDTree)]
             pl = planes[labels[near]]
             cand = cand[xyz[cand, 2] - np.einsum("ij,ij->i", xy[cand], pl[:, :2]) - pl[:, 2] >= t_step]
             if len(cand) < min_points:
@@ -969,8 +982,12 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
                 # roof inside, that facet's points along the outline
                 own = labels[run]
                 own = int(np.bincount(own[own >= 0]).argmax()) if (own >= 0).sum() > len(run) / 2 else -1
-                if own >= 0 and (own == inner_label
-                                 or np.mean(d_out[labels == own] < width + 1.5 * cell) < 0.8):
+                if own >= 0 and own != inner_label:
+                    if d_out is None:
+                        d_out = shapely.distance(footprint.boundary, shapely.points(xy))
+                    if np.mean(d_out[labels == own] < width + 1.5 * cell) < 0.8:
+                        own = -1
+                elif own >= 0:
                     own = -1
                 out = zone & ~inside & (d < -outside / 2) & (d > -outside)
                 if out.sum() and np.mean(np.abs(xyz[out, 2] - z0) <= 2 * level_tol) >= 0.3:
