@@ -87,6 +87,17 @@ def _adjacency(cells):
     return {(int(i), int(j)): float(L) for i, j, L in zip(a, b, lengths, strict=True) if L > 1e-9}
 
 
+_INF = float("inf")
+
+
+def _close_points(p, q) -> bool:
+    """``np.allclose(p, q)`` of two points, coordinate by coordinate in Python floats (the
+    same double arithmetic, without its array set-up; called per chain end)."""
+    return all(a == b or (abs(a - b) <= 1e-08 + 1e-05 * abs(b) and abs(a) < _INF > abs(b))
+               for a, b in zip(np.asarray(p, dtype=np.float64).tolist(),
+                               np.asarray(q, dtype=np.float64).tolist(), strict=True))
+
+
 def _seq_sum(values) -> float:
     """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in)."""
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
@@ -249,9 +260,9 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
 def _merge_close(rings, tol):
     """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
     across all rings) and consecutive repeats removed."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
+
+    from .._components import component_labels
 
     flat = [r for rs in rings for r in rs]
     if not flat:
@@ -259,8 +270,7 @@ def _merge_close(rings, tol):
     pts = np.concatenate(flat)
     pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
     if len(pairs):
-        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(pts), len(pts)))
-        _, comp = connected_components(g, directed=False)
+        comp = component_labels(len(pts), pairs[:, 0], pairs[:, 1])
         first = np.full(comp.max() + 1, -1)
         first[comp[::-1]] = np.arange(len(pts))[::-1]
         pts = pts[first[comp]]
@@ -270,7 +280,7 @@ def _merge_close(rings, tol):
         for r in rs:
             c = pts[k:k + len(r)]
             k += len(r)
-            new_rs.append(c[np.any(c != np.roll(c, 1, axis=0), axis=1)])
+            new_rs.append(c[np.any(c != np.concatenate([c[-1:], c[:-1]]), axis=1)])  # np.roll(c, 1)
         out.append(new_rs)
     return out
 
@@ -292,7 +302,7 @@ def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
         for r in rs:
             if len(r) < 3:
                 continue
-            prev, nxt = np.roll(r, 1, axis=0), np.roll(r, -1, axis=0)
+            prev, nxt = np.concatenate([r[-1:], r[:-1]]), np.concatenate([r[1:], r[:1]])  # np.roll
             u, v = r - prev, nxt - r
             cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
             dev = cross / np.maximum(np.hypot(*(nxt - prev).T), 1e-12)
@@ -588,7 +598,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         if s is None:
             s = _dp(raw, tol) if len(raw) >= 2 else raw
         if cl:
-            s = s[:-1] if len(s) > 1 and np.allclose(s[0], s[-1]) else s
+            s = s[:-1] if len(s) > 1 and _close_points(s[0], s[-1]) else s
         if len(s) < (3 if cl else 2):
             ids.append(None)
             continue
@@ -759,7 +769,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         if a < 0 or b < 0 or len(c) < 2:
             continue
         c = np.asarray(c, dtype=float)
-        closed = len(c) > 3 and np.allclose(c[0], c[-1])
+        closed = len(c) > 3 and _close_points(c[0], c[-1])
         pa, pb = planes[a], planes[b]
         dz = (pa[0] - pb[0]) * c[:, 0] + (pa[1] - pb[1]) * c[:, 1] + pa[2] - pb[2]
         line = _plane_line(pa, pb)
@@ -840,7 +850,7 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
                        dtype=object)
     rays, where = [], []
     for k, s in enumerate(segments):
-        if len(s) < 2 or np.allclose(s[0], s[-1]):
+        if len(s) < 2 or _close_points(s[0], s[-1]):
             continue
         for i, j in ((0, 1), (-1, -2)):
             d = s[i] - s[j]

@@ -376,8 +376,7 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     from them. A cluster of half the smallest facet (6 points at least) gets its least-squares
     plane, or a horizontal one at its median height when no plane fits it.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from .._components import component_labels
 
     free = (labels < 0) & usable
     if free.sum() < max(min_points // 2, 6):
@@ -391,8 +390,8 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     # only link points at similar heights (no jumps across steps)
     dz = np.abs(xyz[idx[rows[ok]], 2] - xyz[idx[cols[ok]], 2])
     link = dz < 3 * dist_tol
-    g = coo_matrix((np.ones(link.sum()), (rows[ok][link], cols[ok][link])), shape=(len(idx), len(idx)))
-    n_comp, comp = connected_components(g, directed=False)
+    comp = component_labels(len(idx), rows[ok][link], cols[ok][link])
+    n_comp = int(comp.max()) + 1
     sizes = np.bincount(comp, minlength=n_comp)
     planes = list(planes)
     labels = labels.copy()

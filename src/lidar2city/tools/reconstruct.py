@@ -138,7 +138,9 @@ class PointGrid:
         key *= self.shape[1]
         key += ij[1]
         del ij
-        self.order = np.argsort(key, kind="stable")
+        # the order inside a cell does not matter (a query returns its indices sorted):
+        # the default sort, several times faster than a stable one
+        self.order = np.argsort(key)
         counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
         self.starts = np.concatenate([[0], np.cumsum(counts)])
         # the coordinates in cell order: a query reads runs of neighbouring memory
