@@ -858,13 +858,14 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
             if n < 1e-9:
                 continue
             d = d / n
-            rays.append(LineString([s[i] + d * 1e-6, s[i] + d * max_ext]))
+            rays.append(np.array([s[i] + d * 1e-6, s[i] + d * max_ext]))
             where.append((k, i, d))
     out = [s.copy() for s in segments]
     if not rays:
         return out
-    # each ray against the lines whose boxes it meets (an index, not every line)
-    rays = np.asarray(rays, dtype=object)
+    # each ray against the lines whose boxes it meets (an index, not every line); the
+    # rays made in one call
+    rays = shapely.linestrings(np.stack(rays))
     ir, il = shapely.STRtree(lines).query(rays, predicate="intersects")
     hits = shapely.intersection(rays[ir], lines[il])
     coords, counts = shapely.get_coordinates(hits), shapely.get_num_coordinates(hits)
