@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import os
 import signal
@@ -32,6 +33,11 @@ class _RootGroup(LazyGroup):
 
         _atomic.begin_run()
         previous = _install_interrupt_handlers()
+        thresholds = gc.get_threshold()
+        # a run makes millions of short-lived arrays and geometries, freed by reference
+        # counting; with the default threshold (700) the cycle collector ran ~370 times
+        # in a reconstruct of the Delft tile (~2 % of its CPU), every 10,000 ~30 times
+        gc.set_threshold(max(thresholds[0], _GC_THRESHOLD), *thresholds[1:])
         try:
             return super().invoke(ctx)
         except Lidar2CityError as exc:
@@ -47,8 +53,13 @@ class _RootGroup(LazyGroup):
             where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
             _fail(ctx, f"{where}{exc.strerror or exc}")
         finally:
+            gc.set_threshold(*thresholds)
             _restore_handlers(previous)
             _atomic.end_run()
+
+
+#: allocations between two collections of the youngest generation during a run
+_GC_THRESHOLD = 10_000
 
 
 def _fail(ctx, message):

@@ -188,8 +188,8 @@ def _height_labels(footprint, xyz, *, cell, step, min_area):
     """:func:`height_regions` with the raster's upper-left corner ``(x0, y_top)`` instead of
     its transform (no affine import on the reconstruct path)."""
     from scipy import ndimage
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+
+    from .._components import component_labels
 
     x0, y0, x1, y1 = footprint.bounds
     x0, y0 = np.floor(x0 / cell) * cell - cell, np.floor(y0 / cell) * cell - cell
@@ -212,8 +212,7 @@ def _height_labels(footprint, xyz, *, cell, step, min_area):
     # continuous surfaces: neighbours within the rise of a 63 degree roof (2 x cell)
     ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) <= 2.0 * cell
     n = rows * cols
-    graph = coo_matrix((np.ones(int(ok.sum())), (pairs[ok, 0], pairs[ok, 1])), shape=(n, n))
-    _, lab = connected_components(graph, directed=False)
+    lab = component_labels(n, pairs[ok, 0], pairs[ok, 1])
     lab = _merge_by_height(lab, pairs, mask, hv, step)
     lab = _merge_small(lab, pairs, mask, max(1, int(np.ceil(min_area / (cell * cell)))))
     lab = np.where(mask.ravel(), lab, -1).reshape(rows, cols)

@@ -87,6 +87,17 @@ def _adjacency(cells):
     return {(int(i), int(j)): float(L) for i, j, L in zip(a, b, lengths, strict=True) if L > 1e-9}
 
 
+_INF = float("inf")
+
+
+def _close_points(p, q) -> bool:
+    """``np.allclose(p, q)`` of two points, coordinate by coordinate in Python floats (the
+    same double arithmetic, without its array set-up; called per chain end)."""
+    return all(a == b or (abs(a - b) <= 1e-08 + 1e-05 * abs(b) and abs(a) < _INF > abs(b))
+               for a, b in zip(np.asarray(p, dtype=np.float64).tolist(),
+                               np.asarray(q, dtype=np.float64).tolist(), strict=True))
+
+
 def _seq_sum(values) -> float:
     """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in)."""
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
@@ -253,9 +264,9 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0, 
 def _merge_close(rings, tol):
     """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
     across all rings) and consecutive repeats removed."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
+
+    from .._components import component_labels
 
     flat = [r for rs in rings for r in rs]
     if not flat:
@@ -263,8 +274,7 @@ def _merge_close(rings, tol):
     pts = np.concatenate(flat)
     pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
     if len(pairs):
-        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(pts), len(pts)))
-        _, comp = connected_components(g, directed=False)
+        comp = component_labels(len(pts), pairs[:, 0], pairs[:, 1])
         first = np.full(comp.max() + 1, -1)
         first[comp[::-1]] = np.arange(len(pts))[::-1]
         pts = pts[first[comp]]
@@ -274,7 +284,7 @@ def _merge_close(rings, tol):
         for r in rs:
             c = pts[k:k + len(r)]
             k += len(r)
-            new_rs.append(c[np.any(c != np.roll(c, 1, axis=0), axis=1)])
+            new_rs.append(c[np.any(c != np.concatenate([c[-1:], c[:-1]]), axis=1)])  # np.roll(c, 1)
         out.append(new_rs)
     return out
 
@@ -296,7 +306,7 @@ def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
         for r in rs:
             if len(r) < 3:
                 continue
-            prev, nxt = np.roll(r, 1, axis=0), np.roll(r, -1, axis=0)
+            prev, nxt = np.concatenate([r[-1:], r[:-1]]), np.concatenate([r[1:], r[:1]])  # np.roll
             u, v = r - prev, nxt - r
             cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
             dev = cross / np.maximum(np.hypot(*(nxt - prev).T), 1e-12)
@@ -592,7 +602,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         if s is None:
             s = _dp(raw, tol) if len(raw) >= 2 else raw
         if cl:
-            s = s[:-1] if len(s) > 1 and np.allclose(s[0], s[-1]) else s
+            s = s[:-1] if len(s) > 1 and _close_points(s[0], s[-1]) else s
         if len(s) < (3 if cl else 2):
             ids.append(None)
             continue
@@ -763,7 +773,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         if a < 0 or b < 0 or len(c) < 2:
             continue
         c = np.asarray(c, dtype=float)
-        closed = len(c) > 3 and np.allclose(c[0], c[-1])
+        closed = len(c) > 3 and _close_points(c[0], c[-1])
         pa, pb = planes[a], planes[b]
         dz = (pa[0] - pb[0]) * c[:, 0] + (pa[1] - pb[1]) * c[:, 1] + pa[2] - pb[2]
         line = _plane_line(pa, pb)
@@ -844,7 +854,7 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
                        dtype=object)
     rays, where = [], []
     for k, s in enumerate(segments):
-        if len(s) < 2 or np.allclose(s[0], s[-1]):
+        if len(s) < 2 or _close_points(s[0], s[-1]):
             continue
         for i, j in ((0, 1), (-1, -2)):
             d = s[i] - s[j]
@@ -852,13 +862,14 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
             if n < 1e-9:
                 continue
             d = d / n
-            rays.append(LineString([s[i] + d * 1e-6, s[i] + d * max_ext]))
+            rays.append(np.array([s[i] + d * 1e-6, s[i] + d * max_ext]))
             where.append((k, i, d))
     out = [s.copy() for s in segments]
     if not rays:
         return out
-    # each ray against the lines whose boxes it meets (an index, not every line)
-    rays = np.asarray(rays, dtype=object)
+    # each ray against the lines whose boxes it meets (an index, not every line); the
+    # rays made in one call
+    rays = shapely.linestrings(np.stack(rays))
     ir, il = shapely.STRtree(lines).query(rays, predicate="intersects")
     hits = shapely.intersection(rays[ir], lines[il])
     coords, counts = shapely.get_coordinates(hits), shapely.get_num_coordinates(hits)
@@ -916,6 +927,19 @@ def _dissolve_beside_rims(faces, labels, counts, exempt, *, min_area, min_width)
     return out, np.concatenate([out_labels, labels[on]])
 
 
+def _nearest(pts, queries, tree_type):
+    """Index into ``pts`` of the nearest point to each query: ``tree_type(pts).query``'s
+    answer. Small sets (the usual rim candidates) by brute force, which gives the same
+    index whenever the nearest point is clear of the second by more than rounding; any
+    query with a (near) tie, and large sets, go to the tree."""
+    if len(pts) * len(queries) <= 65_536 and len(pts) >= 2:
+        d2 = (queries[:, None, 0] - pts[None, :, 0]) ** 2 + (queries[:, None, 1] - pts[None, :, 1]) ** 2
+        two = np.partition(d2, 1, axis=1)[:, :2]
+        if np.all(two[:, 1] > two[:, 0] * (1.0 + 1e-9) + 1e-300):
+            return np.argmin(d2, axis=1)
+    return tree_type(pts).query(queries)[1]
+
+
 def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.1, min_points=6,
                outside=0.5):
     """Raised rims along the outline (parapet tops): level runs of points above the roof inside.
@@ -965,7 +989,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
             if len(cand) < min_points or not len(inner):
                 continue
             # only points standing t_step above the plane of the nearest roof point inside
-            near = inner[cKDTree(xy[inner]).query(xy[cand])[1]]
+            near = inner[_nearest(xy[inner], xy[cand], cKDTree)]
             pl = planes[labels[near]]
             cand = cand[xyz[cand, 2] - np.einsum("ij,ij->i", xy[cand], pl[:, :2]) - pl[:, 2] >= t_step]
             if len(cand) < min_points:

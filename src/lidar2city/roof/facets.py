@@ -80,13 +80,31 @@ def fit_plane(xyz) -> np.ndarray | None:
     xyz = np.asarray(xyz, dtype=np.float64)
     m = xyz.mean(axis=0)
     d = xyz - m
-    A = np.array([[d[:, 0] @ d[:, 0], d[:, 0] @ d[:, 1]], [d[:, 0] @ d[:, 1], d[:, 1] @ d[:, 1]]])
-    rhs = np.array([d[:, 0] @ d[:, 2], d[:, 1] @ d[:, 2]])
-    det = A[0, 0] * A[1, 1] - A[0, 1] ** 2
-    if det <= 1e-12 * max(A[0, 0] * A[1, 1], 1e-300):
+    sxx, sxy, syy = d[:, 0] @ d[:, 0], d[:, 0] @ d[:, 1], d[:, 1] @ d[:, 1]
+    sxz, syz = d[:, 0] @ d[:, 2], d[:, 1] @ d[:, 2]
+    det = sxx * syy - sxy ** 2
+    if det <= 1e-12 * max(sxx * syy, 1e-300):
         return None
-    a, b = np.linalg.solve(A, rhs)
+    a, b = _solve2(float(sxx), float(sxy), float(syy), float(sxz), float(syz))
     return np.array([a, b, m[2] - a * m[0] - b * m[1]])
+
+
+def _solve2(a00, a01, a11, r0, r1):
+    """``np.linalg.solve([[a00, a01], [a01, a11]], [r0, r1])`` of a well-conditioned
+    symmetric 2 x 2 system, as LAPACK's LU with partial pivoting computes it (pivot row
+    scaled by the reciprocal of the pivot, then the triangular solves): the same doubles
+    without the ~10 us of its array set-up (fitted thousands of times per tile). Falls
+    back to numpy for anything not finite."""
+    p00, p01, p10, p11, q0, q1 = a00, a01, a01, a11, r0, r1
+    if abs(p10) > abs(p00):  # the larger first column entry pivots (the first on ties)
+        p00, p01, p10, p11, q0, q1 = p10, p11, p00, p01, q1, q0
+    lower = p10 * (1.0 / p00)
+    u11 = p11 - lower * p01
+    x1 = (q1 - lower * q0) / u11
+    x0 = (q0 - p01 * x1) / p00
+    if u11 == 0.0 or not (math.isfinite(x0) and math.isfinite(x1)):
+        x0, x1 = np.linalg.solve(np.array([[a00, a01], [a01, a11]]), np.array([r0, r1])).tolist()
+    return x0, x1
 
 
 def local_normals(xyz, neighbors) -> tuple[np.ndarray, np.ndarray]:
@@ -260,7 +278,12 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     li = labels[:, None].repeat(nbrs.shape[1], axis=1)
     lj = labels[nbrs]
     m = (li >= 0) & (lj >= 0) & (li != lj)
-    pairs = np.unique(np.sort(np.column_stack([li[m], lj[m]]), axis=1), axis=0)
+    # the distinct (low, high) label pairs in lexicographic order, as np.unique(axis=0)
+    # gives them, from one integer key (several times faster than sorting rows)
+    lo, hi = np.minimum(li[m], lj[m]), np.maximum(li[m], lj[m])
+    base = max(n_labels, int(hi.max()) + 1 if len(hi) else 0)
+    key = np.unique(lo.astype(np.int64) * base + hi)
+    pairs = np.column_stack([key // base, key % base])
     normals = np.column_stack([-planes[:, 0], -planes[:, 1], np.ones(n_labels)])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) if len(pairs) else np.zeros(0)
@@ -371,8 +394,7 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     from them. A cluster of half the smallest facet (6 points at least) gets its least-squares
     plane, or a horizontal one at its median height when no plane fits it.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from .._components import component_labels
 
     free = (labels < 0) & usable
     if free.sum() < max(min_points // 2, 6):
@@ -386,8 +408,8 @@ def _leftover_facets(xyz, labels, planes, nbrs, usable, dist_tol, min_points):
     # only link points at similar heights (no jumps across steps)
     dz = np.abs(xyz[idx[rows[ok]], 2] - xyz[idx[cols[ok]], 2])
     link = dz < 3 * dist_tol
-    g = coo_matrix((np.ones(link.sum()), (rows[ok][link], cols[ok][link])), shape=(len(idx), len(idx)))
-    n_comp, comp = connected_components(g, directed=False)
+    comp = component_labels(len(idx), rows[ok][link], cols[ok][link])
+    n_comp = int(comp.max()) + 1
     sizes = np.bincount(comp, minlength=n_comp)
     planes = list(planes)
     labels = labels.copy()

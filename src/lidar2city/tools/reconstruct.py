@@ -123,6 +123,7 @@ class PointGrid:
             self.shape = (1, 1)
             self.order = np.zeros(0, dtype=np.int64)
             self.starts = np.zeros(2, dtype=np.int64)
+            self._sorted = self.xy
             return
         self.lo = self.xy.min(axis=0)
         # cell of each point, a column at a time: floor((xy - lo) / cell)
@@ -137,9 +138,14 @@ class PointGrid:
         key *= self.shape[1]
         key += ij[1]
         del ij
-        self.order = np.argsort(key, kind="stable")
+        # the order inside a cell does not matter (a query returns its indices sorted):
+        # the default sort, several times faster than a stable one
+        self.order = np.argsort(key)
         counts = np.bincount(key, minlength=self.shape[0] * self.shape[1])
         self.starts = np.concatenate([[0], np.cumsum(counts)])
+        # the coordinates in cell order: a query reads runs of neighbouring memory
+        # instead of gathering points from all over the cloud
+        self._sorted = self.xy[self.order]
 
     def query(self, xmin, ymin, xmax, ymax) -> np.ndarray:
         """Indices of the points inside the box (bounds included), sorted."""
@@ -155,10 +161,10 @@ class PointGrid:
         a = self.starts[rows * self.shape[1] + j0]
         b = self.starts[rows * self.shape[1] + j1 + 1]
         cnt = b - a
-        idx = self.order[np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-        p = self.xy[idx]
+        pos = np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+        p = self._sorted[pos]
         keep = (p[:, 0] >= xmin) & (p[:, 0] <= xmax) & (p[:, 1] >= ymin) & (p[:, 1] <= ymax)
-        return np.sort(idx[keep])
+        return np.sort(self.order[pos[keep]])
 
 
 def lod1_config(config=None, *, lods=None, stages=()):

@@ -1,0 +1,71 @@
+"""The roof steps' fast paths give what the library calls they replace give."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from lidar2city.roof.arrangement import _close_points, _nearest
+from lidar2city.roof.topology import _cross_dilation
+
+coord = st.floats(-1e4, 1e4, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=st.tuples(coord, coord), d=st.tuples(st.floats(-1e-3, 1e-3), st.floats(-1e-7, 1e-7)))
+def test_close_points_is_allclose(p, d):
+    a = np.array(p)
+    for b in (a + np.array(d), a.copy(), a + 1.0):
+        assert _close_points(a, b) == np.allclose(a, b)
+    for special in (np.inf, -np.inf, np.nan):
+        b = a.copy()
+        b[1] = special
+        assert _close_points(a, b) == np.allclose(a, b)
+        assert _close_points(b, b) == np.allclose(b, b)
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 300), q=st.integers(1, 60),
+       grid=st.booleans())
+def test_nearest_is_the_trees(seed, n, q, grid):
+    rng = np.random.default_rng(seed)
+    pts, qs = rng.random((n, 2)) * 20, rng.random((q, 2)) * 20
+    if grid:  # millimetre coordinates on a coarse lattice: many equal distances
+        pts, qs = np.round(pts) / 2, np.round(qs) / 2
+    np.testing.assert_array_equal(_nearest(pts, qs, cKDTree), cKDTree(pts).query(qs)[1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), h=st.integers(1, 9), w=st.integers(1, 9))
+def test_cross_dilation_is_binary_dilation(seed, h, w):
+    m = np.random.default_rng(seed).random((h, w)) < 0.3
+    np.testing.assert_array_equal(_cross_dilation(m), ndimage.binary_dilation(m))
+
+
+def _fit_plane_numpy(xyz):
+    """fit_plane as it was, with np.linalg.solve."""
+    m = xyz.mean(axis=0)
+    d = xyz - m
+    A = np.array([[d[:, 0] @ d[:, 0], d[:, 0] @ d[:, 1]], [d[:, 0] @ d[:, 1], d[:, 1] @ d[:, 1]]])
+    rhs = np.array([d[:, 0] @ d[:, 2], d[:, 1] @ d[:, 2]])
+    if A[0, 0] * A[1, 1] - A[0, 1] ** 2 <= 1e-12 * max(A[0, 0] * A[1, 1], 1e-300):
+        return None
+    a, b = np.linalg.solve(A, rhs)
+    return np.array([a, b, m[2] - a * m[0] - b * m[1]])
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 80), spread=st.floats(0.01, 50.0),
+       tilt=st.floats(-3.0, 3.0), skew=st.floats(-1.0, 1.0))
+def test_fit_plane_same_doubles_as_linalg_solve(seed, n, spread, tilt, skew):
+    from lidar2city.roof.facets import fit_plane
+
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(0.0, spread, (n, 3)) + 1000.0
+    xyz[:, 1] += skew * xyz[:, 0]  # elongated, correlated point sets (either pivot row)
+    xyz[:, 2] = tilt * xyz[:, 0] - 0.5 * xyz[:, 1] + rng.normal(0.0, 0.05, n)
+    expected, got = _fit_plane_numpy(xyz), fit_plane(xyz)
+    assert (expected is None) == (got is None)
+    if got is not None:
+        assert got.tobytes() == expected.tobytes()
