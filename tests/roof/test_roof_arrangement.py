@@ -400,37 +400,3 @@ def test_roof_lines_shared_by_the_partitions_with_and_without_rims():
         assert [f.wkb for f in own[0]] == [f.wkb for f in shared[0]]
     assert lines[1] == before[1]
     assert all(np.array_equal(a, b) for a, b in zip(lines[0], before[0], strict=True))
-
-
-def _vertices(face):
-    return {tuple(np.round(c, 9)) for r in shapely.get_rings(face) for c in np.asarray(r.coords)}
-
-
-def test_faces_beside_rims_keep_the_vertices_where_a_rim_turns():
-    """A small face beside a rim merges into its neighbour: the corner it had on the rim's
-    line is straight in the merged face, but the rim still has it, so the merged face keeps
-    it (a T-junction there left the solid open)."""
-    from lidar2city.roof.arrangement import _dissolve_beside_rims
-
-    # noded as arrangement cells are: the rim has the corners of the faces beside it
-    rim = shapely.Polygon([(0, 9.5), (6, 9.5), (6.5, 9.5), (10, 9.5), (10, 10), (0, 10)])  # a rim
-    big = shapely.box(0, 0, 6, 9.5)  # label 0
-    small = shapely.box(6, 9.2, 6.5, 9.5)  # label 1, 0.15 m2: merges into a neighbour
-    rest = shapely.Polygon([(6, 0), (10, 0), (10, 9.5), (6.5, 9.5), (6.5, 9.2), (6, 9.2)])  # label 2
-    cells = [big, small, rest, rim]
-    labels = np.array([0, 1, 2, 9])
-    faces, face_labels = _dissolve_beside_rims(cells, labels, np.array([100.0, 5, 100, 20]), [9],
-                                               min_area=0.5, min_width=0.0)
-    assert sorted(face_labels.tolist()) == [0, 2, 9] and face_labels[-1] == 9
-    assert sum(f.area for f in faces) == pytest.approx(100.0)
-    # every vertex of a face lying on another face's edge is a vertex of that face too
-    verts = [_vertices(f) for f in faces]
-    for i, f in enumerate(faces):
-        for j, g in enumerate(faces):
-            if i != j:
-                for v in verts[j]:
-                    if f.boundary.distance(shapely.Point(v)) < 1e-9:
-                        assert v in verts[i], (i, j, v)
-    # of the small face's corners on the rim's line, the one where the face it merged into
-    # turns stays (in the rim too); the other is straight everywhere and goes
-    assert len({(6.0, 9.5), (6.5, 9.5)} & verts[-1]) == 1

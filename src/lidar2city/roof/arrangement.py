@@ -103,7 +103,7 @@ def _seq_sum(values) -> float:
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
 
 
-def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0, straighten=True):
+def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
     """Merge cells into faces: same-label neighbours join; small faces take a neighbour's label.
 
     Parameters
@@ -119,9 +119,6 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0, 
         Per-cell evidence (e.g. point counts); a face with none joins a neighbour too.
     min_width : float
         Faces narrower than this on average (2 area / perimeter, m) join a neighbour too.
-    straighten : bool
-        Drop the vertices left straight by the merges (:func:`drop_collinear`); False
-        when the caller does it over these faces and others together.
 
     Returns
     -------
@@ -257,8 +254,7 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0, 
             if p.geom_type == "Polygon" and p.area > 1e-9:
                 faces.append(p)
                 face_labels.append(labels[idx[0]])
-    face_labels = np.asarray(face_labels, dtype=np.int64)
-    return (drop_collinear(faces) if straighten else faces), face_labels
+    return drop_collinear(faces), np.asarray(face_labels, dtype=np.int64)
 
 
 def _merge_close(rings, tol):
@@ -906,27 +902,6 @@ def _cell_labels(cells, xyz, planes, cap):
     return labels, counts
 
 
-def _dissolve_beside_rims(faces, labels, counts, exempt, *, min_area, min_width):
-    """The faces whose label is not in ``exempt`` (rims) held to the smallest area and
-    width (:func:`dissolve_cells`), then the rim faces as they are, after them.
-
-    Straight vertices are dropped over all the faces at once, rims included: a
-    vertex where a rim turns stays in the face beside it even when the face that
-    turned there was merged away (dropping it from that face alone would leave a
-    T-junction the solid cannot close).
-
-    Returns ``(faces, labels)``.
-    """
-    labels = np.asarray(labels)
-    on = np.isin(labels, exempt)
-    keep = np.flatnonzero(~on)
-    out, out_labels = dissolve_cells([faces[i] for i in keep], labels[keep], min_area=min_area,
-                                     weights=np.asarray(counts)[keep], min_width=min_width,
-                                     straighten=False)
-    out = drop_collinear(out + [faces[i] for i in np.flatnonzero(on)])
-    return out, np.concatenate([out_labels, labels[on]])
-
-
 def _nearest(pts, queries, tree_type):
     """Index into ``pts`` of the nearest point to each query: ``tree_type(pts).query``'s
     answer. Small sets (the usual rim candidates) by brute force, which gives the same
@@ -1157,9 +1132,14 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         # rims are narrow by nature: first empty cells join a neighbour and same-plane cells
         # dissolve, then only the faces off the rims are held to the smallest area and width
         merged, merged_labels = dissolve_cells(cells, cell_lab, weights=counts)
+        on = np.isin(merged_labels, exempt)
         _, merged_counts = _cell_labels(merged, xyz, planes, cap)
-        faces, face_labels = _dissolve_beside_rims(merged, merged_labels, merged_counts, exempt,
-                                                   min_area=min_face_area, min_width=cell)
+        keep = np.flatnonzero(~on)
+        faces, face_labels = dissolve_cells([merged[i] for i in keep], merged_labels[keep],
+                                            min_area=min_face_area, weights=merged_counts[keep],
+                                            min_width=cell)
+        faces = faces + [merged[i] for i in np.flatnonzero(on)]
+        face_labels = np.concatenate([face_labels, merged_labels[on]])
     else:
         faces, face_labels = dissolve_cells(cells, cell_lab, min_area=min_face_area, weights=counts,
                                             min_width=cell)
