@@ -6,6 +6,7 @@ import logging
 
 import numpy as np
 
+from .._components import component_labels
 from ..errors import InputError
 from ._grid import inpaint, min_surface
 from .smrf_filter import _checked_outliers, _near_surface, _smrf_grids
@@ -55,22 +56,11 @@ def _fill_from_neighbours(grid):
 
 def _components(n, a, b):
     """Connected-component label (the smallest node index of its component) of nodes
-    ``0..n-1`` joined by the edges ``a[i] - b[i]``: min-label propagation with pointer
-    jumping, pure numpy."""
-    label = np.arange(n)
-    while True:
-        low = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, label[a], low)
-        np.minimum.at(new, label[b], low)
-        while True:  # pointer jumping: every node to its root
-            jumped = new[new]
-            if np.array_equal(jumped, new):
-                break
-            new = jumped
-        if np.array_equal(new, label):
-            return label
-        label = new
+    ``0..n-1`` joined by the edges ``a[i] - b[i]``."""
+    comp = component_labels(n, a, b)
+    smallest = np.full(int(comp.max()) + 1 if n else 0, n, dtype=np.int64)
+    np.minimum.at(smallest, comp, np.arange(n))
+    return smallest[comp]
 
 
 def anchored_objects(objects, strong) -> np.ndarray:
