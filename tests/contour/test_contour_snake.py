@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 import shapely
@@ -253,3 +255,33 @@ def test_anchor_keeps_a_good_start_and_offset_moves_the_edge_inward():
     assert p.intersection(shrunk).area / p.union(shrunk).area > 0.9
     with pytest.raises(InputError):
         evolve_contours([start], sc.gvf, sc.image, sc.ndsm, offset=-1.0)
+
+
+def test_a_snake_that_does_not_move_gives_back_its_start_pixels():
+    # an L-shaped block, a building rotated by 30 degrees (staircase edges) and one
+    # cut by the raster's edge, 0.5 m pixels
+    from lidar2city.contour import WEIGHT_NAMES, contours_to_polygons, run_scene
+
+    rng = np.random.default_rng(3)
+    dsm = rng.normal(0.0, 0.05, (90, 100))
+    dsm[10:40, 10:30] = 9.0
+    dsm[30:40, 30:55] = 9.0
+    rr, cc = np.mgrid[:90, :100]
+    u = (cc - 70) * np.cos(np.pi / 6) + (rr - 60) * np.sin(np.pi / 6)
+    v = -(cc - 70) * np.sin(np.pi / 6) + (rr - 60) * np.cos(np.pi / 6)
+    dsm[(np.abs(u) < 14) & (np.abs(v) < 8)] = 7.0
+    dsm[78:90, 82:100] = 6.0
+    cfg = ActiveContourConfig()
+    scene = prepare_scene(dsm, dsm, cell=0.5, config=cfg)
+    assert len(scene.contours) == 3
+    frame = PixelFrame(cell=0.5)
+    start = rasterize_polygons(contours_to_polygons(scene.contours, frame, simplify=0), dsm.shape, frame)
+    assert start[89, 95] and start[20:30, 15:25].all() and start[60, 70]
+    zero = dict.fromkeys(WEIGHT_NAMES, 0.0)
+    for it in (1, 20):
+        moved = run_scene(scene, zero, config=dataclasses.replace(cfg, max_iter=it))
+        polys = contours_to_polygons(moved, frame, simplify=cfg.simplify)
+        assert all(p is not None for p in polys)
+        # neither the resampling, the clipping to the raster nor the simplification
+        # loses or adds a pixel
+        np.testing.assert_array_equal(rasterize_polygons(polys, dsm.shape, frame), start)

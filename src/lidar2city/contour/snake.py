@@ -381,7 +381,11 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
     contours = [resample_contour(c, spacing, min_vertices=min_vertices) for c in contours]
     # a jagged contour must not grow without bound: at most 3 times its first vertex count
     caps = [3 * len(c) for c in contours]
-    hi = np.array([shape[0] - 1, shape[1] - 1], dtype=np.float64)
+    # the raster covers pixel corners -0.5 .. H - 0.5 (pixel centres at integers): a
+    # contour around a region on the raster's edge runs half a pixel outside its
+    # first centre and must keep that pixel
+    lo = np.array([-0.5, -0.5])
+    hi = np.array([shape[0] - 0.5, shape[1] - 0.5], dtype=np.float64)
     # the fixed point A v = F does not depend on the time step: scale it with the
     # external weights so the explicit external step stays stable for any weights
     tau0 = tau / max(1.0, gamma + mu + epsilon + (anchor if use_anchor else 0.0))
@@ -447,7 +451,7 @@ def evolve_contours(contours, gvf, image, ndsm, *, alpha=0.1, beta=0.1, gamma=1.
         if over.any():
             force[over] *= (limit / mag[over])[:, None]
         new = lu.solve(v + tau * force)
-        np.clip(new, 0.0, hi, out=new)
+        np.clip(new, lo, hi, out=new)
         step = float(np.sqrt(np.mean(np.sum((new - v) ** 2, axis=1))))
         v = new
         if callback is not None:
