@@ -8,7 +8,8 @@ NORTH part only (fitness (FP + FN) / N over the reference neighbourhood,
 weights searched as log10 in [-2, 1]); pixel metrics are reported on the
 SOUTH part, never seen by the tuning, for
 
-* the initial contours (no snake),
+* the initial contours (no snake), and the snake with every weight zero (no
+  motion: it must score exactly the initial contours),
 * the untuned (hand-set) and the shipped default weights,
 * the weights tuned on the north part,
 * scikit-image's ``active_contour`` initialised with the same contours
@@ -222,6 +223,10 @@ def main():
     preds["previous pipeline: untuned weights"] = predict(scene_prev, prev_weights, prev, frame, shape)
     preds["initial contours (no snake)"] = rasterize_polygons(
         contours_to_polygons(scene.contours, frame, simplify=0), shape, frame)
+    # every weight zero: the contours do not move, so this row must equal the one above
+    # (resampling, clipping to the raster and simplification lose no pixel)
+    preds["snake, zero weights (no motion)"] = predict(
+        scene, dict.fromkeys(UNTUNED_WEIGHTS, 0.0), cfg, frame, shape)
     t0 = time.perf_counter()
     preds["snake, untuned weights"] = predict(scene, UNTUNED_WEIGHTS, cfg, frame, shape)
     t_def = time.perf_counter() - t0
