@@ -72,7 +72,8 @@ def config():
 
     return Lod22Config(topology=option("--topology") or "arrangement",
                        step_snake="--no-step-snake" not in sys.argv[1:],
-                       restore="--no-restore" not in sys.argv[1:])
+                       restore="--no-restore" not in sys.argv[1:],
+                       select="--select" in sys.argv[1:])
 
 
 def data_dir() -> Path:
