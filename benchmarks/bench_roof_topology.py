@@ -73,7 +73,7 @@ def config():
     return Lod22Config(topology=option("--topology") or "arrangement",
                        step_snake="--no-step-snake" not in sys.argv[1:],
                        restore="--no-restore" not in sys.argv[1:],
-                       select="--select" in sys.argv[1:])
+                       select="--select" in sys.argv[1:], raised_parts="--raised" in sys.argv[1:])
 
 
 def data_dir() -> Path:
@@ -305,6 +305,18 @@ def pareto(d, ks=(0, 1, 2, 4, 8, 16, 32, 64, 128)):
     for k in ks:
         meds = [[np.median(v) for v in choose(k, i)] for i in halves.values()]
         print(f"    k {k:4g}: " + ", ".join(f"{c:.1f} / {r:.4f}" for r, c in meds))
+    names = [name for name, _ in PARETO_VARIANTS]
+    sets = {"all": np.arange(len(R)),
+            "[lod22] select's three": np.array([names.index(n) for n in ("default", "steps by angle",
+                                                                          "min facet 2 m2")])}
+    print("  choice per building by BIC, n log(SSE/n) + p log(n) corners (no constant fitted; "
+          "[lod22] select uses p = 3): p, then median corners / RMSE on " + ", ".join(halves))
+    for label, rows in sets.items():
+        for p in (2, 3, 4):
+            cost = npts * np.log(R[rows] ** 2 + 1e-9) + p * np.log(npts) * C[rows]
+            pick = rows[np.argmin(cost, axis=0)]
+            meds = [(np.median(R[pick[i], i]), np.median(C[pick[i], i])) for i in halves.values()]
+            print(f"    {label}, p {p}: " + ", ".join(f"{c:.1f} / {r:.4f}" for r, c in meds))
     ok = [k for k in ks if np.median(choose(k, halves["tuning (even)"])[1]) <= 14]
     if ok:
         k = min(ok, key=lambda k: np.median(choose(k, halves["tuning (even)"])[0]))

@@ -12,7 +12,8 @@ import numpy as np
 from ..config import field
 from ..errors import AlgorithmError, ConfigError, FitError
 from ..validate.solid import check_solid
-from .arrangement import arrangement_partition, collapse_short_edges, restore_facets, roof_lines
+from .arrangement import (arrangement_partition, collapse_short_edges, raised_parts, restore_facets,
+                          roof_lines)
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
@@ -60,6 +61,9 @@ class Lod22Config:
     step_snake: bool = field(True, "With topology 'arrangement': step edges (walls between faces "
                              "at different heights) from the exact 2-D snake over all step "
                              "chains at once; false: straight pieces snapped to the axes by angle.")
+    raised_parts: bool = field(False, "With topology 'arrangement': clusters of points standing "
+                               "T_step above the roof (chimneys, small dormers) cut in as level "
+                               "rectangles when the model's BIC (see select) drops.")
     select: bool = field(False, "Build each building's roof three ways (as configured, with step "
                          "edges snapped by angle, with twice min_facet_area) and keep the one of "
                          "least BIC, n log(SSE / n) + 3 log(n) corners (n points inside the "
@@ -412,6 +416,10 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                 solid, faces, face_labels, planes_k, info = _part_solid(
                     method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg,
                     shared=shared)
+                if cfg.raised_parts and method != "grid":
+                    solid, faces, face_labels, planes_k, info = _with_raised_parts(
+                        (solid, faces, face_labels, planes_k, info), method, poly, pts, ground_z,
+                        cell=cell, direction=d, spacing=spacing, cfg=cfg)
             except (FitError, ValueError, shapely.errors.GEOSException) as exc:
                 if method == methods[-1]:
                     raise
@@ -603,6 +611,30 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     if sq[0] - sq[1] < cfg.min_facet_area / spacing ** 2 * (2 * cfg.elevation_error) ** 2:
         return out
     alt[4]["restored"] = restored[2]
+    return alt
+
+
+def _with_raised_parts(part, method, poly, pts, ground_z, *, cell, direction, spacing, cfg):
+    """``part`` (:func:`_part_solid`'s answer) with the clusters standing above its roof
+    cut in as level rectangles (:func:`lidar2city.roof.arrangement.raised_parts`) when
+    the solid stays a closed valid shell and its :func:`model_cost` over the part's
+    points drops (each rectangle's corners must buy their keep); else ``part``."""
+    import shapely
+
+    solid, faces, face_labels, planes, info = part
+    faces2, labels2, planes2, added = raised_parts(faces, face_labels, poly, pts, planes, direction=direction,
+                                                   spacing=spacing, t_step=2 * cfg.elevation_error)
+    own = pts[shapely.contains_xy(poly, pts[:, 0], pts[:, 1])]
+    if not added or len(own) < 3:
+        return part
+    try:
+        alt = _finish_solid(method, poly, pts, faces2, labels2, planes2, ground_z, cell=cell, cfg=cfg,
+                            info=info)
+    except (FitError, ValueError, shapely.errors.GEOSException):
+        return part
+    if not _closed_shell(alt[0]) or check_solid(alt[0]) or model_cost(own, [alt[0]]) >= model_cost(own, [solid]):
+        return part
+    alt[4]["raised"] = added
     return alt
 
 
