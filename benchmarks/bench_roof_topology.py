@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
        [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
+       [--select] [--raised]
        python benchmarks/bench_roof_topology.py [DATA_DIR] --pareto
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
@@ -9,6 +10,8 @@ roofs; --topology grid measures the label-grid + snake partition, the one
 before the line arrangement; --no-step-snake sets ``[lod22] step_snake = false``:
 step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
 --no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost;
+--select sets ``[lod22] select = true`` (each roof three ways, the least BIC kept);
+--raised sets ``[lod22] raised_parts = true`` (chimneys as level rectangles);
 --pareto prints only the Delft Pareto table of the ``[lod22]`` variants and the
 per-building choice among them, :func:`pareto`)
 
@@ -252,6 +255,9 @@ def delft(d):
           f"roof faces {faces}")
     print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean {1000 * np.mean(times):.1f} ms")
     print(f"  roof types: {type_counts(types)}")
+    models = [r.attributes["roof_model"] for r in results if "roof_model" in r.attributes]
+    if models:
+        print(f"  models kept by [lod22] select: {type_counts(models)}")
     if option("--figure"):
         figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
 
