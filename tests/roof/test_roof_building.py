@@ -189,3 +189,18 @@ def test_select_keeps_bad_input_reasons():
     xyz = np.column_stack([np.linspace(0, 9, 50), np.full(50, 3.0), np.full(50, 5.0)])
     with pytest.raises(FitError, match="one line"):
         reconstruct_lod22(shapely.box(0, 0, 10, 6), xyz, 0.0, config=Lod22Config(select=True))
+
+
+def test_select_and_raised_parts_deterministic():
+    """The same roof, points and options give the same solids and model twice."""
+    from lidar2city.roof.building import Lod22Config
+    from lidar2city.synthetic_roofs import roof_sample
+
+    s = roof_sample("dormer", density=8, seed=2)
+    cfg = Lod22Config(select=True, raised_parts=True)
+    a, b = (reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=cfg, precision=0.001) for _ in range(2))
+    assert a.attributes["roof_model"] == b.attributes["roof_model"]
+    for x, y in zip(a.solids, b.solids, strict=True):
+        assert np.array_equal(x.vertices, y.vertices)
+        assert [[list(map(list, f.rings)), f.semantic] for f in x.surfaces] == \
+            [[list(map(list, f.rings)), f.semantic] for f in y.surfaces]
