@@ -2,12 +2,18 @@
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
        [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
+       [--select] [--raised]
+       python benchmarks/bench_roof_topology.py [DATA_DIR] --pareto
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
 roofs; --topology grid measures the label-grid + snake partition, the one
 before the line arrangement; --no-step-snake sets ``[lod22] step_snake = false``:
 step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
---no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost)
+--no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost;
+--select sets ``[lod22] select = true`` (each roof three ways, the least BIC kept);
+--raised sets ``[lod22] raised_parts = true`` (chimneys as level rectangles);
+--pareto prints only the Delft Pareto table of the ``[lod22]`` variants and the
+per-building choice among them, :func:`pareto`)
 
 1. Delft shared tile, 132 BGT footprints, AHN3 class 6 building points (as
    bench_lod22.py): median roof corners per building (distinct vertices where a
@@ -69,7 +75,8 @@ def config():
 
     return Lod22Config(topology=option("--topology") or "arrangement",
                        step_snake="--no-step-snake" not in sys.argv[1:],
-                       restore="--no-restore" not in sys.argv[1:])
+                       restore="--no-restore" not in sys.argv[1:],
+                       select="--select" in sys.argv[1:], raised_parts="--raised" in sys.argv[1:])
 
 
 def data_dir() -> Path:
@@ -126,32 +133,96 @@ def error_sources(parts):
     return {k: (sq_class[k] / max(sq_total, 1e-12), float(np.median(v))) for k, v in classes.items()}
 
 
+def ceilings(parts, *, near=0.3, link=1.0, min_points=4, inner=1.0):
+    """Median RMSE if a kind of error were modelled away exactly: what each way of improving
+    the roof could reach at best (a diagnostic; the score is unchanged).
+
+    Of the points more than ``near`` m from the model and not in the neighbour-edge class
+    (:func:`error_sources`), clusters (linked within ``link`` m, at least ``min_points``)
+    above the roof are chimneys, dormers and other roof parts; below it and more than
+    ``inner`` m inside the outline, lower roof parts; the rest (single points, facade
+    points within ``inner`` m of the outline, the neighbours' edges) no roof face can take.
+    Points within ``near`` m of the model are what plane placement (refits, shifted
+    step lines) can improve. Returns ``{ceiling: median RMSE}``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    keys = ("points near the model (plane placement, refits, step shifts)",
+            "clusters above the roof (chimneys, dormers)",
+            "clusters above + below the roof > 1 m inside the outline (roof parts)",
+            "all three")
+    out = {k: [] for k in keys}
+    for dist, pts, zr, d_edge, d_other in parts:
+        dz = pts[:, 2] - zr
+        far = dist > near
+        nb = far & (d_edge < 0.3) & (d_other < 0.5) & (dz > 0.3)
+        idx = np.flatnonzero(far & ~nb)
+        up, low = np.zeros(len(dist), bool), np.zeros(len(dist), bool)
+        if len(idx) >= min_points:
+            pairs = cKDTree(pts[idx]).query_pairs(link, output_type="ndarray")
+            graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx),) * 2)
+            n, lab = connected_components(graph, directed=False)
+            big = np.bincount(lab, minlength=n)[lab] >= min_points
+            med_dz = np.array([np.median(dz[idx[lab == c]]) for c in range(n)])
+            med_edge = np.array([np.median(d_edge[idx[lab == c]]) for c in range(n)])
+            up[idx[big & (med_dz[lab] > 0)]] = True
+            low[idx[big & (med_dz[lab] <= 0) & (med_edge[lab] > inner)]] = True
+        zero = {keys[0]: ~far, keys[1]: up, keys[2]: up | low, keys[3]: ~far | up | low}
+        for k, m in zero.items():
+            out[k].append(np.sqrt(np.mean(np.where(m, 0.0, dist) ** 2)))
+    return {k: float(np.median(v)) for k, v in out.items()}
+
+
+def delft_data(d):
+    """The Delft tile's points, its BGT footprints (local metres) and the point classes."""
+    from lidar2city.io.las import read_points
+    from lidar2city.io.vector import read_footprints
+
+    cloud = read_points(d / "ahn3_cropped_1.laz", crs="EPSG:7415")
+    fps, _ = read_footprints(d / "footprints_bgt.gpkg", origin=cloud.origin[:2], target_crs=cloud.crs)
+    return cloud, fps, cloud.get("classification")
+
+
+def delft_models(cloud, fps, cfg):
+    """LoD1.2 + LoD2.2 of every footprint with the ``[lod22]`` configuration ``cfg``."""
+    from lidar2city.lod.lod1 import Lod1Config
+    from lidar2city.tools.reconstruct import reconstruct_buildings
+
+    return reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=cfg)
+
+
+def building_score(g, r, bxyz):
+    """``(points, solids, point-to-mesh distances, (corners, short length, total length))`` of
+    one building's LoD2.2 model: its class 6 points inside the footprint ``g`` against the
+    solids of its result ``r``."""
+    import shapely
+
+    from lidar2city.lod.mesh import solid_triangles
+    from lidar2city.metrics.model import point_mesh_distance
+    from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
+
+    pts = bxyz[shapely.contains_xy(g, bxyz[:, 0], bxyz[:, 1])]
+    s22 = r.solids["2.2"]
+    s22 = s22 if isinstance(s22, list) else [s22]
+    dist = point_mesh_distance(pts, solid_triangles(s22))
+    return pts, s22, dist, roof_cleanliness(roof_wireframe(s22))
+
+
 def delft(d):
     import shapely
 
-    from lidar2city.io.las import read_points
-    from lidar2city.io.vector import read_footprints
-    from lidar2city.lod.lod1 import Lod1Config
-    from lidar2city.lod.mesh import solid_triangles
-    from lidar2city.metrics.model import point_mesh_distance, rmse
-    from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
-    from lidar2city.tools.reconstruct import reconstruct_buildings
+    from lidar2city.metrics.model import rmse
     from lidar2city.validate.solid import check_solid
 
-    laz, fpath = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
-    cloud = read_points(laz, crs="EPSG:7415")
-    fps, _ = read_footprints(fpath, origin=cloud.origin[:2], target_crs=cloud.crs)
-    cls = cloud.get("classification")
-    results = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=config())
+    cloud, fps, cls = delft_data(d)
+    results = delft_models(cloud, fps, config())
     bxyz = cloud.xyz[cls == 6]
     rms, corners, short, total, valid, faces, times, fallback = [], [], 0.0, 0.0, 0, 0, [], 0
     types, parts = [], []
     tree = shapely.STRtree(fps.geometries)
     for g, r in zip(fps.geometries, results, strict=True):
-        pts = bxyz[shapely.contains_xy(g, bxyz[:, 0], bxyz[:, 1])]
-        s22 = r.solids["2.2"]
-        s22 = s22 if isinstance(s22, list) else [s22]
-        dist = point_mesh_distance(pts, solid_triangles(s22))
+        pts, s22, dist, (c, sh, tot) = building_score(g, r, bxyz)
         rms.append(rmse(dist))
         xy = shapely.points(pts[:, :2])
         others = [h for h in tree.query(g.buffer(1.0)) if fps.geometries[h] is not g]
@@ -161,8 +232,6 @@ def delft(d):
         fell = "lod22_fallback" in r.attributes
         valid += all(not check_solid(s) for s in s22) and not fell
         fallback += fell
-        wf = roof_wireframe(s22)
-        c, sh, tot = roof_cleanliness(wf)
         corners.append(c)
         short += sh
         total += tot
@@ -179,12 +248,90 @@ def delft(d):
           "error, median RMSE with that class at zero error):")
     for k, (share, med) in error_sources(parts).items():
         print(f"    {k}: {100 * share:.1f} %, median {med:.3f} m")
+    print("  the best each kind of roof improvement could reach (median RMSE with that error at zero):")
+    for k, med in ceilings(parts).items():
+        print(f"    {k}: {med:.3f} m")
     print(f"  valid LoD2.2 solids {valid}/{n} (LoD1.2 fallbacks with a stated reason: {fallback}), "
           f"roof faces {faces}")
     print(f"  LoD2.2 time per building: median {1000 * np.median(times):.1f} ms, mean {1000 * np.mean(times):.1f} ms")
     print(f"  roof types: {type_counts(types)}")
+    models = [r.attributes["roof_model"] for r in results if "roof_model" in r.attributes]
+    if models:
+        print(f"  models kept by [lod22] select: {type_counts(models)}")
     if option("--figure"):
         figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
+
+
+#: the [lod22] variants the Pareto table compares (name, Lod22Config keywords): every roof
+#: model this code can produce by its options, each a candidate for the per-building choice
+PARETO_VARIANTS = (("default", {}), ("grid partition", {"topology": "grid"}),
+                   ("no restored facets", {"restore": False}), ("steps by angle", {"step_snake": False}),
+                   ("short edges kept", {"min_edge": 0.0}), ("min facet 0.5 m2", {"min_facet_area": 0.5}),
+                   ("min facet 2 m2", {"min_facet_area": 2.0}), ("dist_tol 0.15 m", {"dist_tol": 0.15}),
+                   ("merge angle 5 deg", {"merge_angle": 5.0}))
+
+
+def pareto(d, ks=(0, 1, 2, 4, 8, 16, 32, 64, 128)):
+    """Median corners against median RMSE of every variant in :data:`PARETO_VARIANTS` on Delft,
+    the per-building best of them (the most any choice among them can reach), and the choice
+    per building by one criterion, ``n log(SSE / n) + k corners`` (a BIC-like trade of fit for
+    corners): ``k`` picked on the even-numbered footprints (the lowest median RMSE whose median
+    corners stay <= 14 there), then scored on the odd ones and the whole tile."""
+    from lidar2city.roof.building import Lod22Config
+
+    cloud, fps, cls = delft_data(d)
+    bxyz = cloud.xyz[cls == 6]
+    rms, corners, npts = [], [], None
+    print(f"Delft Pareto table ({len(fps.geometries)} footprints): variant, median corners, short-edge share, "
+          "median RMSE, valid")
+    for name, kw in PARETO_VARIANTS:
+        results = delft_models(cloud, fps, Lod22Config(**kw))
+        scored = [building_score(g, r, bxyz) for g, r in zip(fps.geometries, results, strict=True)]
+        rms.append([np.sqrt(np.mean(x[2] ** 2)) for x in scored])
+        corners.append([x[3][0] for x in scored])
+        npts = np.array([len(x[0]) for x in scored])
+        short = sum(x[3][1] for x in scored) / max(sum(x[3][2] for x in scored), 1e-9)
+        fell = sum("lod22_fallback" in r.attributes for r in results)
+        print(f"  {name:20s} {np.median(corners[-1]):5.1f}  {100 * short:5.2f} %  {np.median(rms[-1]):.4f} m"
+              f"  {len(results) - fell}/{len(results)}")
+    R, C = np.array(rms), np.array(corners, dtype=float)
+    cols = np.arange(R.shape[1])
+    best = np.argmin(R, axis=0)
+    print(f"  per-building best of the {len(R)} (lowest RMSE): median corners {np.median(C[best, cols]):.1f}, "
+          f"median RMSE {np.median(R[best, cols]):.4f} m")
+    halves = {"tuning (even)": cols[0::2], "test (odd)": cols[1::2], "whole tile": cols}
+
+    def choose(k, idx):
+        cost = npts[idx] * np.log(R[:, idx] ** 2 + 1e-9) + k * C[:, idx]
+        pick = np.argmin(cost, axis=0)
+        return R[pick, idx], C[pick, idx]
+
+    print("  choice per building by n log(SSE/n) + k corners: k, then median corners / RMSE on "
+          + ", ".join(halves))
+    for k in ks:
+        meds = [[np.median(v) for v in choose(k, i)] for i in halves.values()]
+        print(f"    k {k:4g}: " + ", ".join(f"{c:.1f} / {r:.4f}" for r, c in meds))
+    names = [name for name, _ in PARETO_VARIANTS]
+    sets = {"all": np.arange(len(R)),
+            "[lod22] select's three": np.array([names.index(n) for n in ("default", "steps by angle",
+                                                                          "min facet 2 m2")])}
+    print("  choice per building by BIC, n log(SSE/n) + p log(n) corners (no constant fitted; "
+          "[lod22] select uses p = 3): p, then median corners / RMSE on " + ", ".join(halves))
+    for label, rows in sets.items():
+        for p in (2, 3, 4):
+            cost = npts * np.log(R[rows] ** 2 + 1e-9) + p * np.log(npts) * C[rows]
+            pick = rows[np.argmin(cost, axis=0)]
+            meds = [(np.median(R[pick[i], i]), np.median(C[pick[i], i])) for i in halves.values()]
+            print(f"    {label}, p {p}: " + ", ".join(f"{c:.1f} / {r:.4f}" for r, c in meds))
+    ok = [k for k in ks if np.median(choose(k, halves["tuning (even)"])[1]) <= 14]
+    if ok:
+        k = min(ok, key=lambda k: np.median(choose(k, halves["tuning (even)"])[0]))
+        r_t, c_t = choose(k, halves["test (odd)"])
+        r_a, c_a = choose(k, cols)
+        print(f"  k chosen on the tuning half: {k:g}; test half: {np.median(c_t):.1f} corners, "
+              f"{np.median(r_t):.4f} m (default there: {np.median(C[0, halves['test (odd)']]):.1f}, "
+              f"{np.median(R[0, halves['test (odd)']]):.4f} m); whole tile {np.median(c_a):.1f} corners, "
+              f"{np.median(r_a):.4f} m")
 
 
 def figure(path, bxyz, geoms, results, size=70.0):
@@ -317,6 +464,9 @@ def city3d(folder):
 
 def main():
     sys.path.insert(0, str(ROOT / "src"))
+    if "--pareto" in sys.argv[1:]:
+        pareto(data_dir() / "delft")
+        return
     only = next((a for a in sys.argv[1:] if a in ("delft", "synthetic", "city3d")), None)
     if only in (None, "delft"):
         delft(data_dir() / "delft")

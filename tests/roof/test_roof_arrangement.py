@@ -400,3 +400,53 @@ def test_roof_lines_shared_by_the_partitions_with_and_without_rims():
         assert [f.wkb for f in own[0]] == [f.wkb for f in shared[0]]
     assert lines[1] == before[1]
     assert all(np.array_equal(a, b) for a, b in zip(lines[0], before[0], strict=True))
+
+
+def test_raised_parts_cut_a_chimney_in():
+    """A 0.8 x 0.8 m chimney 1.5 m above a flat roof (too small for a facet): one level
+    rectangle at its height around its points, grown by half a spacing."""
+    from lidar2city.roof.arrangement import raised_parts
+
+    xyz, _, _ = _lost_facet_roof(block=(4.0, 4.0, 4.8, 4.8), height=1.5)
+    faces, labels, planes, n = raised_parts([SQ], [0], SQ, xyz, np.array([[0.0, 0.0, 5.0]]), direction=0.0,
+                                            spacing=0.3)
+    assert n == 1 and sorted(labels.tolist()) == [0, 1]
+    np.testing.assert_allclose(planes[1], [0.0, 0.0, 6.5])
+    chimney = faces[int(np.flatnonzero(labels == 1)[0])]
+    # its points run 4.05-4.65 in x and y
+    assert chimney.equals_exact(shapely.normalize(shapely.box(3.9, 3.9, 4.8, 4.8)), 1e-9)
+    assert shapely.union_all(faces).area == pytest.approx(100) and sum(f.area for f in faces) == pytest.approx(100)
+
+
+@pytest.mark.parametrize("case", ["low", "neighbour", "single", "strip"])
+def test_raised_parts_leave_what_is_no_raised_part(case):
+    from lidar2city.roof.arrangement import raised_parts
+
+    kw = {"low": {"block": (4.0, 4.0, 4.8, 4.8), "height": 0.2},  # within T_step of the roof
+          "neighbour": {"block": (9.0, 4.0, 10.1, 6.0), "outside_z": 6.5, "height": 1.5},  # goes on outside
+          "single": {"block": (4.0, 4.0, 4.2, 4.2), "height": 1.5},  # one point: no cluster
+          "strip": {"block": (2.0, 4.0, 8.0, 4.5), "height": 1.0}}[case]  # 6 x 0.5 m: a wall's top
+    xyz, _, _ = _lost_facet_roof(**kw)
+    faces, labels, planes, n = raised_parts([SQ], [0], SQ, xyz, np.array([[0.0, 0.0, 5.0]]), direction=0.0,
+                                            spacing=0.3)
+    assert n == 0 and labels.tolist() == [0] and faces[0].equals(SQ) and len(planes) == 1
+
+
+def test_raised_parts_option_makes_a_valid_better_roof():
+    from lidar2city.lod.mesh import solid_triangles
+    from lidar2city.metrics.model import point_mesh_distance, rmse
+
+    # a 0.6 x 0.6 m chimney (9 points, under 1 m2: no facet comes back for it)
+    xyz, _, _ = _lost_facet_roof(block=(4.0, 4.0, 4.7, 4.7), height=1.5)
+    on = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, raised_parts=True))
+    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0))
+    assert not check_solid(on.solids[0]) and not check_solid(off.solids[0])
+    assert (off.attributes["roof_planes"], on.attributes["roof_planes"]) == (1, 2)
+    inside = xyz[shapely.contains_xy(SQ, xyz[:, 0], xyz[:, 1])]
+    e_on, e_off = (rmse(point_mesh_distance(inside, solid_triangles(r.solids))) for r in (on, off))
+    assert e_on < 0.05 < e_off
+    # a plain roof has nothing to cut in: the same solid with the option
+    xyz, _, _ = _lost_facet_roof(height=0.0)
+    a = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(raised_parts=True))
+    b = reconstruct_lod22(SQ, xyz, 0.0)
+    assert np.array_equal(a.solids[0].vertices, b.solids[0].vertices)

@@ -136,3 +136,71 @@ def test_solids_are_validated_once_as_written():
     r.solids["1.2"] = "prism"
     set_lod22(r, res.solids, res.attributes, checked=[[Issue(306, 1, "crossing")]])
     assert r.solids["2.2"] == "prism" and "306" in r.attributes["lod22_fallback"]
+
+
+def test_model_cost_is_bic_with_three_parameters_per_corner():
+    """n log(SSE / n) + 3 log(n) corners, on a flat box roof: exact points cost the 1 mm floor,
+    a point 0.5 m off adds its squared distance, and each corner costs 3 log(n)."""
+    from lidar2city.roof.building import CORNER_PARAMETERS, model_cost
+
+    fp = shapely.box(0, 0, 10, 6)
+    g = np.stack(np.meshgrid(np.arange(0.5, 10, 1.0), np.arange(0.5, 6, 1.0)), -1).reshape(-1, 2)
+    xyz = np.column_stack([g, np.full(len(g), 5.0)])
+    res = reconstruct_lod22(fp, xyz, 0.0)
+    n = len(xyz)
+    assert CORNER_PARAMETERS == 3
+    assert model_cost(xyz, res.solids) == pytest.approx(n * np.log(1e-6) + 3 * np.log(n) * 4)
+    off = xyz.copy()
+    off[27, 2] += 0.5
+    assert model_cost(off, res.solids) == pytest.approx(n * np.log(0.25 / n) + 3 * np.log(n) * 4)
+
+
+def test_select_keeps_the_model_of_least_cost():
+    """With ``select`` the roof built three ways comes back as the one of least BIC (recomputed
+    here from each variant alone), named in ``roof_model``; without it nothing changes."""
+    from lidar2city.roof.building import Lod22Config, model_cost, select_variants
+    from lidar2city.synthetic_roofs import roof_sample
+    from lidar2city.validate.solid import check_solid
+
+    s = roof_sample("dormer", density=8, seed=1)
+    own = s.xyz[shapely.contains_xy(s.footprint, s.xyz[:, 0], s.xyz[:, 1])]
+    cfg = Lod22Config(select=True)
+    chosen = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=cfg, precision=0.001)
+    costs = {}
+    for name, c in select_variants(cfg):
+        assert not c.select
+        r = reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=c, precision=0.001)
+        costs[name] = (model_cost(own, r.solids), r)
+    best = min(costs, key=lambda k: costs[k][0])
+    assert chosen.attributes["roof_model"] == best
+    assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(chosen.solids, costs[best][1].solids,
+                                                                       strict=True))
+    assert all(not check_solid(x) for x in chosen.solids) and not any(chosen.issues)
+    assert "roof_model" not in costs["default"][1].attributes
+    # the variants differ on this roof (else the choice would test nothing)
+    assert len({round(v[0], 6) for v in costs.values()}) > 1
+
+
+def test_select_keeps_bad_input_reasons():
+    """A roof cloud on one line gives the same stated reason with ``select``."""
+    from lidar2city.errors import FitError
+    from lidar2city.roof.building import Lod22Config
+
+    xyz = np.column_stack([np.linspace(0, 9, 50), np.full(50, 3.0), np.full(50, 5.0)])
+    with pytest.raises(FitError, match="one line"):
+        reconstruct_lod22(shapely.box(0, 0, 10, 6), xyz, 0.0, config=Lod22Config(select=True))
+
+
+def test_select_and_raised_parts_deterministic():
+    """The same roof, points and options give the same solids and model twice."""
+    from lidar2city.roof.building import Lod22Config
+    from lidar2city.synthetic_roofs import roof_sample
+
+    s = roof_sample("dormer", density=8, seed=2)
+    cfg = Lod22Config(select=True, raised_parts=True)
+    a, b = (reconstruct_lod22(s.footprint, s.xyz, s.ground_z, config=cfg, precision=0.001) for _ in range(2))
+    assert a.attributes["roof_model"] == b.attributes["roof_model"]
+    for x, y in zip(a.solids, b.solids, strict=True):
+        assert np.array_equal(x.vertices, y.vertices)
+        assert [[list(map(list, f.rings)), f.semantic] for f in x.surfaces] == \
+            [[list(map(list, f.rings)), f.semantic] for f in y.surfaces]

@@ -49,7 +49,7 @@ from .topology import boundary_chains, label_grid
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "roof_lines", "arrangement_partition", "restore_facets"]
+__all__ = ["arrangement_cells", "rim_strips", "dissolve_cells", "drop_collinear", "extend_to_hits", "collapse_short_edges", "chain_segments", "snake_steps", "roof_lines", "arrangement_partition", "restore_facets", "raised_parts"]
 
 
 def arrangement_cells(footprint, segments):
@@ -1284,6 +1284,92 @@ def _covering_height(faces, face_labels, planes, xy):
     return z
 
 
+def _cut_in(faces, face_labels, rect, label):
+    """The partition with the polygon ``rect`` cut out of its faces and added as a face of
+    facet ``label``: ``(faces, face_labels)``."""
+    import shapely
+
+    new_f, new_l = [], []
+    for f, lab in zip(faces, face_labels, strict=True):
+        parts = [f] if not f.intersects(rect) or f.touches(rect) else shapely.get_parts(f.difference(rect))
+        for p in parts:
+            if p.geom_type == "Polygon" and p.area > 1e-6:
+                new_f.append(p)
+                new_l.append(lab)
+    new_f.append(shapely.normalize(rect))
+    new_l.append(label)
+    return new_f, np.asarray(new_l, dtype=np.int64)
+
+
+def raised_parts(faces, face_labels, footprint, xyz, planes, *, direction, spacing, t_step=0.3,
+                 min_points=4, outside=0.5):
+    """Clusters of points standing above the roof faces (chimneys, small dormers, roof
+    boxes), cut in as level rectangles.
+
+    The points inside the footprint more than ``t_step`` above the face over
+    them are linked within 1.5 point ``spacing``; a cluster of at least
+    ``min_points`` becomes the rectangle of its points in the building's axes
+    (``direction``), grown by half a spacing, clipped to the footprint, with a
+    level plane at its points' median height; a long thin one (narrower than 3
+    spacings and over 3 times as long: a parapet, a wall's top) is left out. A
+    cluster whose height goes on
+    beyond the outline (30 % or more of the points within ``outside`` m of its
+    rectangle, outside the footprint, within ``t_step`` of that height) is a
+    neighbour's roof or wall reaching over the outline and stays out. Rectangles
+    are cut in the largest cluster first, a spacing apart.
+
+    Returns
+    -------
+    faces, face_labels, planes
+        The partition with the rectangles and ``planes`` with one level plane per
+        rectangle appended.
+    added : int
+        Rectangles cut in.
+    """
+    import shapely
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    xyz = np.asarray(xyz, dtype=np.float64)
+    planes = np.asarray(planes, dtype=np.float64)
+    inside = shapely.contains_xy(footprint, xyz[:, 0], xyz[:, 1])
+    idx = np.flatnonzero(inside)
+    up = idx[xyz[idx, 2] - _covering_height(faces, face_labels, planes, xyz[idx, :2]) > t_step]
+    if len(up) < min_points:
+        return list(faces), np.asarray(face_labels, dtype=np.int64), planes, 0
+    pairs = cKDTree(xyz[up, :2]).query_pairs(1.5 * spacing, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(up), len(up)))
+    n, lab = connected_components(graph, directed=False)
+    size = np.bincount(lab, minlength=n)
+    c, s = np.cos(direction), np.sin(direction)
+    rot = np.array([[c, s], [-s, c]])  # world -> building axes
+    taken = shapely.Polygon()
+    added, new_planes = 0, []
+    faces, face_labels = list(faces), np.asarray(face_labels, dtype=np.int64)
+    for k in sorted(np.flatnonzero(size >= min_points), key=lambda k: (-size[k], k)):
+        m = up[lab == k]
+        z0 = float(np.median(xyz[m, 2]))
+        uv = xyz[m, :2] @ rot.T
+        lo, hi = uv.min(axis=0) - spacing / 2, uv.max(axis=0) + spacing / 2
+        if np.min(hi - lo) < 3 * spacing and np.max(hi - lo) > 3 * np.min(hi - lo):
+            continue  # a long thin strip: a parapet, a wall's top, an eave - no compact part
+        box = shapely.Polygon(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]) @ rot)
+        rect = box.intersection(footprint)
+        if rect.geom_type != "Polygon" or rect.area < spacing * spacing or rect.intersects(taken):
+            continue
+        out = ~inside & shapely.contains_xy(rect.buffer(outside), xyz[:, 0], xyz[:, 1])
+        if out.any() and np.mean(np.abs(xyz[out, 2] - z0) <= t_step) >= 0.3:
+            continue  # a neighbour's roof or wall reaching over the outline
+        faces, face_labels = _cut_in(faces, face_labels, rect, len(planes) + len(new_planes))
+        new_planes.append([0.0, 0.0, z0])
+        taken = taken.union(rect.buffer(spacing))
+        added += 1
+    if new_planes:
+        planes = np.vstack([planes, new_planes])
+    return faces, face_labels, planes, added
+
+
 def restore_facets(faces, face_labels, footprint, xyz, labels, planes, *, direction, spacing, t_step=0.3,
                    min_area=1.0, max_rms=0.1, max_slope=60.0, min_fill=0.5, outside=0.5):
     """Facets the segmentation found and the partition lost, cut back in as rectangles.
@@ -1368,16 +1454,7 @@ def restore_facets(faces, face_labels, footprint, xyz, labels, planes, *, direct
         out = ~inside & shapely.contains_xy(rect.buffer(outside), xyz[:, 0], xyz[:, 1])
         if out.any() and np.mean(np.abs(xyz[out, 2] - xyz[out, :2] @ pl[:2] - pl[2]) <= t_step) >= 0.3:
             continue  # a neighbour's roof reaching over the outline
-        new_f, new_l = [], []
-        for f, lab in zip(faces, face_labels, strict=True):
-            parts = [f] if not f.intersects(rect) or f.touches(rect) else shapely.get_parts(f.difference(rect))
-            for p in parts:
-                if p.geom_type == "Polygon" and p.area > 1e-6:
-                    new_f.append(p)
-                    new_l.append(lab)
-        new_f.append(shapely.normalize(rect))
-        new_l.append(k)
-        faces, face_labels = new_f, np.asarray(new_l, dtype=np.int64)
+        faces, face_labels = _cut_in(faces, face_labels, rect, k)
         taken = taken.union(rect.buffer(spacing))
         restored += 1
     return faces, face_labels, restored
