@@ -255,10 +255,24 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     n = len(xyz)
     if n == 0 or out.all():
         return np.zeros(n, dtype=bool)
+    surfaces, spec = _segment_surfaces(xyz, out, cell=cell, slope=slope, window=window,
+                                       extend=extend, jump=jump, raised=raised,
+                                       min_cells=min_cells, strong_slope=strong_slope)
+    ground = _near_surface(xyz, surfaces[0], spec, threshold=threshold, scalar=scalar) & ~out
+    logger.debug("smrf_segments: %d of %d points ground", int(ground.sum()), n)
+    return ground
+
+
+def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
+                      strong_slope=None, also=()):
+    """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
+    at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
+    ``also``, the surface with the object cells at that slope given back likewise and then
+    SMRF's own surface at ``slope`` (no segments given back); and the grid."""
     pts = xyz[~out]
-    surface, objects, spec, strong = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
-                                                 exclude=out, extend=extend,
-                                                 strong_slope=strong_slope)
+    more = tuple(also) if strong_slope is None else (strong_slope, *also)
+    surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
+                                                exclude=out, extend=extend, more=more)
     base = float(np.min(pts[:, 2]))
     zmin = min_surface(pts, spec, base=base, dtype=np.float32)
     filled = ~np.isnan(zmin)
@@ -268,27 +282,37 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            strong_slope=strong_slope)
+                            more=more)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
-            surface, objects, _, strong = plain
+            surface, objects, _, extra = plain
+    strong = None if strong_slope is None else extra.pop(0)
     # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
     coarse = max(1, int(round(5.0 / cell)))
     occupied = np.count_nonzero(filled) if coarse == 1 else np.count_nonzero(
         ~np.isnan(_block_lowest(zmin, objects, coarse)[0]))
     spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
     block = max(1, int(np.floor(spacing / cell + 0.5)))
-    kept = terrain_segments(zmin, objects, jump=jump * max(cell * block, 1.0), raised=raised,
-                            min_cells=min_cells, block=block)
-    if strong is not None:
-        kept = anchored_objects(kept, strong)
-    given = objects & ~kept & ~np.isnan(zmin)
-    if given.any():
-        provisional = np.where(kept | np.isnan(zmin), np.float32(np.nan), zmin)
-        surface = inpaint(provisional).astype(np.float64) + base
-    ground = _near_surface(xyz, surface, spec, threshold=threshold, scalar=scalar) & ~out
-    logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m); "
-                 "%d of %d points ground", int(given.sum()), int(objects.sum()), cell * block,
-                 int(ground.sum()), n)
-    return ground
+    surfaces = []
+    for k, obj in enumerate([objects, *extra]):
+        kept = terrain_segments(zmin, obj, jump=jump * max(cell * block, 1.0), raised=raised,
+                                min_cells=min_cells, block=block)
+        if k == 0 and strong is not None:
+            kept = anchored_objects(kept, strong)
+        given = obj & ~kept & filled
+        logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m)",
+                     int(given.sum()), int(obj.sum()), cell * block)
+        if given.any():
+            provisional = np.where(kept | ~filled, np.float32(np.nan), zmin)
+            surfaces.append(inpaint(provisional).astype(np.float64) + base)
+        else:
+            surfaces.append(surface if k == 0 else _inpainted(zmin, obj, base))
+    if also:
+        surfaces.append(surface)
+    return surfaces, spec
+
+
+def _inpainted(zmin, objects, base):
+    """The minimum surface without ``objects``, inpainted, in metres (SMRF's ``ZIpro``)."""
+    return inpaint(np.where(objects, np.float32(np.nan), zmin)).astype(np.float64) + base

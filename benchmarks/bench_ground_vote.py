@@ -1,0 +1,179 @@
+"""The learnt vote of three SMRF surfaces (``smrf_vote``): its rule refitted, leave-one-out, speed.
+
+Usage::
+
+    python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed]
+
+``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
+its tolerance ratios to three provisional surfaces of one SMRF opening
+(:func:`~lidar2city.ground.vote_features`: ``smrf_segments``' surface at
+slope 0.1, the same at 0.3, plain SMRF's at 0.1). This script:
+
+1. computes the ratios of every point of the ISPRS reference samples in
+   ``DIR/isprs/reference`` and of the synthetic terrains of
+   :mod:`lidar2city.synthetic_terrain` (1 m and 2.5 m spacing);
+2. fits a depth-2 decision tree on them (:func:`fit_tree`: each split the
+   threshold, among 48 quantiles of the pooled ratios, that minimises the
+   weighted point error, every sample weighted equally and the synthetic
+   terrains together as one more sample), leaving each ISPRS sample out in
+   turn, and prints the held-out sample's type I / type II / total error,
+   the tree of each fold, their mean and maximum (the leave-one-out figure);
+3. fits it on all seven and prints the tree: its thresholds, rounded to two
+   decimals, are :data:`lidar2city.ground.VOTE_RULE` (the script says
+   whether they still are);
+4. scores ``smrf_vote`` with its defaults against ``smrf_segments`` (the
+   ``ground`` default) on the seven samples, the synthetic terrains and the
+   small tile with a building of ``bench_ground_segments.py``;
+5. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
+   ``DIR/isprs/sites/CSite4_orig-utm.laz`` against reading and writing it
+   with laspy (best of ``--repeat``, interleaved).
+
+About a minute plus the speed runs.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_ground import arg_parser, load, reference_paths, speed, synthetic_scenes  # noqa: E402
+from bench_ground_segments import small_tile  # noqa: E402
+from lidar2city.ground import (  # noqa: E402
+    VOTE_RULE,
+    GroundConfig,
+    smrf_segments,
+    smrf_vote,
+    vote_features,
+)
+from lidar2city.metrics.ground import ground_errors  # noqa: E402
+
+NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
+DEPTH = 2
+QUANTILES = np.linspace(0.01, 0.99, 48)
+
+
+def fit_tree(sets, depth=DEPTH):
+    """Depth-``depth`` tree over the ratios minimising the mean over ``sets`` of the point error.
+
+    ``sets`` is a list of ``(ratios (N, 3), ground (N,), weight)``; each set's
+    points share its ``weight`` equally. A node is a leaf (bool: ground) or
+    ``(feature, threshold, left (<=), right (>))``.
+    """
+    x = np.vstack([np.minimum(r, 1e6) for r, _, _ in sets])
+    y = np.concatenate([g for _, g, _ in sets]).astype(float)
+    w = np.concatenate([np.full(len(g), wt / len(g)) for _, g, wt in sets])
+    edges = [np.unique(np.quantile(x[:, j], QUANTILES)) for j in range(x.shape[1])]
+    return _grow(x, y, w, depth, edges)
+
+
+def _grow(x, y, w, depth, edges):
+    pos, neg = float(w @ y), float(w @ (1 - y))
+    leaf = pos > neg
+    best, split = min(pos, neg), None
+    if depth == 0 or best == 0:
+        return leaf
+    for j, e in enumerate(edges):
+        b = np.searchsorted(e, x[:, j])
+        cp = np.cumsum(np.bincount(b, weights=w * y, minlength=len(e) + 1))[:-1]
+        cn = np.cumsum(np.bincount(b, weights=w * (1 - y), minlength=len(e) + 1))[:-1]
+        err = np.minimum(cp, cn) + np.minimum(pos - cp, neg - cn)
+        k = int(np.argmin(err))
+        if err[k] < best - 1e-12:
+            best, split = err[k], (j, float(e[k]))
+    if split is None:
+        return leaf
+    j, t = split
+    m = x[:, j] <= t
+    return (j, t, _grow(x[m], y[m], w[m], depth - 1, edges),
+            _grow(x[~m], y[~m], w[~m], depth - 1, edges))
+
+
+def predict(tree, ratios):
+    """Ground mask of ``tree`` on ``ratios`` (N, 3)."""
+    if not isinstance(tree, tuple):
+        return np.full(len(ratios), tree)
+    j, t, left, right = tree
+    m = ratios[:, j] <= t
+    out = np.empty(len(ratios), dtype=bool)
+    out[m] = predict(left, ratios[m])
+    out[~m] = predict(right, ratios[~m])
+    return out
+
+
+def show(tree):
+    """One-line form of a tree: ``near<=1.14 ? (steep<=0.92 ? G : O) : (...)``."""
+    if not isinstance(tree, tuple):
+        return "G" if tree else "O"
+    j, t, left, right = tree
+    return f"{NAMES[j]}<={t:.3f} ? {show(left)} : {show(right)}"
+
+
+def rule_of(tree):
+    """The thresholds of :data:`VOTE_RULE` when ``tree`` has the shape of the coded rule."""
+    if (isinstance(tree, tuple) and tree[0] == 0 and isinstance(tree[2], tuple)
+            and isinstance(tree[3], tuple) and tree[2][0] == 1 and tree[3][0] == 2
+            and tree[2][2:] == (True, False) and tree[3][2:] == (True, False)):
+        return {"near": round(tree[1], 2), "steep": round(tree[2][1], 2),
+                "plain": round(tree[3][1], 2)}
+    return None
+
+
+def main():
+    ap = arg_parser(__doc__)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--no-speed", action="store_true")
+    args = ap.parse_args()
+    samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
+    scenes = synthetic_scenes()
+    feats = {n: vote_features(xyz)[0] for n, (xyz, _) in samples.items()}
+    syn = [(vote_features(s.xyz)[0], s.ground) for s in scenes.values()]
+    syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
+
+    print(f"leave-one-out, depth-{DEPTH} tree over the ratios (fitted on the six other samples "
+          f"+ synthetic terrains)")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8}  tree")
+    held = []
+    for name, (_, ref) in samples.items():
+        tree = fit_tree([(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set)
+        e = ground_errors(predict(tree, feats[name]), ref)
+        held.append(e["total"])
+        print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
+              f"{100 * e['total']:>8.2f}  {show(tree)}")
+    print(f"smrf_vote leave-one-out mean total {100 * np.mean(held):.2f} %, "
+          f"max {100 * np.max(held):.2f} %")
+    tree = fit_tree([(feats[n], samples[n][1], 1.0) for n in samples] + syn_set)
+    fitted = rule_of(tree)
+    print(f"fitted on all seven: {show(tree)}; "
+          f"{'VOTE_RULE matches' if fitted == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}")
+
+    methods = {"smrf_segments": lambda xyz: smrf_segments(
+        xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote}
+    print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
+                                         for c in ("I", "II", "total")))
+    rows = []
+    for name, (xyz, ref) in samples.items():
+        row = []
+        for fn in methods.values():
+            e = ground_errors(fn(xyz), ref)
+            row += [e["type_i"], e["type_ii"], e["total"]]
+        rows.append(row)
+        print(f"{name:<8} " + " ".join(f"{100 * v:>20.2f}" for v in row))
+    print(f"{'mean':<8} " + " ".join(f"{100 * v:>20.2f}" for v in np.mean(rows, axis=0)))
+    for m, fn in methods.items():
+        s = np.mean([ground_errors(fn(sc.xyz), sc.ground)["total"] for sc in scenes.values()])
+        xyz, truth = small_tile()
+        print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
+              f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
+    if not args.no_speed:
+        speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat,
+              methods=("smrf_segments", "smrf_vote"))
+
+
+if __name__ == "__main__":
+    main()
