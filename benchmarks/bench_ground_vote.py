@@ -7,18 +7,21 @@ Usage::
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
 (:func:`~lidar2city.ground.vote_features`: ``smrf_segments``' surface at
-slope 0.1, the same at 0.3, plain SMRF's at 0.1). This script:
+slope 0.1, the same at 0.3, plain SMRF's at 0.1) and its distance to the
+nearest wall. This script:
 
-1. computes the ratios of every point of the ISPRS reference samples in
+1. computes the features of every point of the ISPRS reference samples in
    ``DIR/isprs/reference`` and of the synthetic terrains of
    :mod:`lidar2city.synthetic_terrain` (1 m and 2.5 m spacing);
-2. fits a depth-2 decision tree on them (:func:`fit_tree`: each split the
-   threshold, among 48 quantiles of the pooled ratios, that minimises the
-   weighted point error, every sample weighted equally and the synthetic
-   terrains together as one more sample), leaving each ISPRS sample out in
-   turn, and prints the held-out sample's type I / type II / total error,
-   the tree of each fold, their mean and maximum (the leave-one-out figure);
-3. fits it on all seven and prints the tree: its thresholds, rounded to two
+2. fits the rule (:func:`fit_rule`): a depth-2 decision tree on the three
+   ratios (:func:`fit_tree`: each split the threshold, among 48 quantiles of
+   the pooled ratios, that minimises the weighted point error, every sample
+   weighted equally and the synthetic terrains together as one more sample),
+   then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
+   objective, leaving each ISPRS sample out in turn; it prints the held-out
+   sample's type I / type II / total error, the rule of each fold, their
+   mean and maximum (the leave-one-out figure);
+3. fits it on all seven and prints the rule: its thresholds, rounded to two
    decimals, are :data:`lidar2city.ground.VOTE_RULE` (the script says
    whether they still are);
 4. scores ``smrf_vote`` with its defaults against ``smrf_segments`` (the
@@ -51,11 +54,37 @@ from lidar2city.ground import (  # noqa: E402
     smrf_vote,
     vote_features,
 )
+from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
 
 NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
 DEPTH = 2
 QUANTILES = np.linspace(0.01, 0.99, 48)
+#: wall distances (m) tried for ``clear``; inf: the lenient surface never decides alone.
+CLEAR = (5.0, 8.0, 10.0, 15.0, 20.0, 30.0, np.inf)
+
+
+def fit_rule(sets):
+    """:data:`VOTE_RULE` fitted on ``sets`` (as :func:`fit_tree`): the tree, then ``clear``.
+
+    Returns the rule (dict, thresholds rounded to two decimals), or None when
+    the tree has not the shape of the coded rule (its one-line form is then
+    printed by the caller).
+    """
+    tree = fit_tree([(f[:, :3], g, w) for f, g, w in sets])
+    rule = rule_of(tree)
+    if rule is None:
+        return None, tree
+    total = sum(w for _, _, w in sets)
+
+    def objective(clear):
+        return sum(w * np.mean(vote_rule(f, **rule, clear=clear) != g) for f, g, w in sets) / total
+
+    return dict(rule, clear=float(min(CLEAR, key=objective))), tree
+
+
+def show_rule(rule):
+    return ", ".join(f"{k}={v:g}" for k, v in rule.items())
 
 
 def fit_tree(sets, depth=DEPTH):
@@ -135,22 +164,23 @@ def main():
     syn = [(vote_features(s.xyz)[0], s.ground) for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
 
-    print(f"leave-one-out, depth-{DEPTH} tree over the ratios (fitted on the six other samples "
-          f"+ synthetic terrains)")
-    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8}  tree")
+    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance "
+          f"(fitted on the six other samples + synthetic terrains)")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8}  rule")
     held = []
     for name, (_, ref) in samples.items():
-        tree = fit_tree([(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set)
-        e = ground_errors(predict(tree, feats[name]), ref)
+        rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples if n != name]
+                              + syn_set)
+        pred = predict(tree, feats[name][:, :3]) if rule is None else vote_rule(feats[name], **rule)
+        e = ground_errors(pred, ref)
         held.append(e["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f}  {show(tree)}")
+              f"{100 * e['total']:>8.2f}  {show(tree) if rule is None else show_rule(rule)}")
     print(f"smrf_vote leave-one-out mean total {100 * np.mean(held):.2f} %, "
           f"max {100 * np.max(held):.2f} %")
-    tree = fit_tree([(feats[n], samples[n][1], 1.0) for n in samples] + syn_set)
-    fitted = rule_of(tree)
-    print(f"fitted on all seven: {show(tree)}; "
-          f"{'VOTE_RULE matches' if fitted == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}")
+    rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples] + syn_set)
+    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}; "
+          f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote}

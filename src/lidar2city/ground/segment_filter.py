@@ -54,13 +54,21 @@ def _fill_from_neighbours(grid):
     return z
 
 
-def _components(n, a, b):
-    """Connected-component label (the smallest node index of its component) of nodes
-    ``0..n-1`` joined by the edges ``a[i] - b[i]``."""
-    comp = component_labels(n, a, b)
-    smallest = np.full(int(comp.max()) + 1 if n else 0, n, dtype=np.int64)
-    np.minimum.at(smallest, comp, np.arange(n))
-    return smallest[comp]
+def _grid_labels(hjoin, vjoin):
+    """A component id (< H * W) of every cell of a grid whose 4-neighbour cells are joined
+    where ``hjoin`` (H, W-1: a cell and the one east of it) and ``vjoin`` (H-1, W: a cell
+    and the one south of it) are True.
+
+    Each row is cut into runs of horizontally joined cells first, so
+    :func:`component_labels` only joins runs (several times fewer nodes, and
+    no steps along a run).
+    """
+    h, w = vjoin.shape[0] + 1, hjoin.shape[1] + 1
+    start = np.ones((h, w), dtype=bool)
+    start[:, 1:] = ~hjoin
+    run = np.cumsum(start.ravel()) - 1
+    down = vjoin.ravel()
+    return component_labels(int(run[-1]) + 1, run[:-w][down], run[w:][down])[run]
 
 
 def anchored_objects(objects, strong) -> np.ndarray:
@@ -83,11 +91,7 @@ def anchored_objects(objects, strong) -> np.ndarray:
     """
     h, w = objects.shape
     o = objects.ravel()
-    idx = np.arange(h * w).reshape(h, w)
-    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
-    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
-    join = o[a] & o[b]
-    label = _components(h * w, a[join], b[join])
+    label = _grid_labels(objects[:, :-1] & objects[:, 1:], objects[:-1, :] & objects[1:, :]).ravel()
     anchored = np.zeros(h * w, dtype=bool)
     anchored[label[o & strong.ravel()]] = True
     return (o & anchored[label]).reshape(h, w)
@@ -152,7 +156,9 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
     obj = objects.ravel()
     n = z.size
     join = (np.abs(dz) < jump) & obj[a] & obj[b]
-    label = _components(n, a[join], b[join])
+    h, w = zmin.shape
+    label = _grid_labels(join[:h * (w - 1)].reshape(h, w - 1),
+                         join[h * (w - 1):].reshape(h - 1, w)).ravel()
     edges, high = np.zeros(n), np.zeros(n)
     for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
         m = obj[side] & ~obj[other] & filled[a] & filled[b]
@@ -264,13 +270,14 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
 
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
-                      strong_slope=None, also=()):
+                      strong_slope=None, also=(), marks=()):
     """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
-    SMRF's own surface at ``slope`` (no segments given back); and the grid."""
+    SMRF's own surface at ``slope`` (no segments given back); the grid; and, when ``marks``
+    are given, the cells judged object at each of those slopes (a list of masks)."""
     pts = xyz[~out]
-    more = tuple(also) if strong_slope is None else (strong_slope, *also)
+    more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
                                                 exclude=out, extend=extend, more=more)
     base = float(np.min(pts[:, 2]))
@@ -287,6 +294,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
             surface, objects, _, extra = plain
+    marked, extra = extra[:len(marks)], extra[len(marks):]
     strong = None if strong_slope is None else extra.pop(0)
     # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
     coarse = max(1, int(round(5.0 / cell)))
@@ -310,7 +318,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
             surfaces.append(surface if k == 0 else _inpainted(zmin, obj, base))
     if also:
         surfaces.append(surface)
-    return surfaces, spec
+    return (surfaces, spec, marked) if marks else (surfaces, spec)
 
 
 def _inpainted(zmin, objects, base):
