@@ -177,7 +177,7 @@ def best_time(cmd, env, repeat):
     return min(times)
 
 
-def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments")):
+def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote")):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / ("out" + site.suffix))

@@ -14,7 +14,7 @@ METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments", "smrf_vote")  # keys 
 @click.option("-o", "--output", required=True, type=click.Path(),
               help="Output file; an output folder when INPUT is a folder or glob of tiles.")
 @click.option("--method", "--ground-method", "method", type=click.Choice(METHODS), default=None,
-              show_default="smrf_segments, or ground.method of --config",
+              show_default="smrf_vote, or ground.method of --config",
               help="Ground filter (also spelt --ground-method, as in classify).")
 @click.option("--dtm", "dtm", type=click.Path(), default=None,
               help="Also write a DTM GeoTIFF interpolated from the ground points (holes filled); "

@@ -1,15 +1,17 @@
 """Ground filtering: which points are bare earth, and terrain models from them.
 
-Methods (:data:`GROUND_METHODS`): ``"smrf"`` (Pingel et al. 2013, the
-default), ``"smrf_refined"`` (SMRF with the surface continued across the
+Methods (:data:`GROUND_METHODS`): ``"smrf"`` (Pingel et al. 2013),
+``"smrf_refined"`` (SMRF with the surface continued across the
 tile edges by point reflection, optional surface-based cleanup: lower
 leave-one-sample-out error on the ISPRS samples, but a building at the edge
 of a small tile is reflected into a pit that can take all the ground away,
 so it is not the default), ``"smrf_segments"`` (that surface with the
 object segments that join the terrain smoothly - terrace tops, embankments -
 given back; the same edge caveat), ``"smrf_vote"`` (each point judged from its
-heights off three of those surfaces by a rule fitted on the ISPRS samples) and
-``"pmf"`` (Zhang et al. 2003). All set low
+heights off three of those surfaces and its distance to walls by a rule fitted
+on the ISPRS samples and synthetic terrains; the default of
+:class:`GroundConfig`, lowest on leave-one-sample-out and on the synthetic
+terrains) and ``"pmf"`` (Zhang et al. 2003). All set low
 outliers aside first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
 into a gap-free terrain model and :func:`height_above_ground` reads it back
 at points.
@@ -95,7 +97,7 @@ class GroundConfig:
     """Configuration of the ``ground`` stage (``[ground]`` in a run TOML)."""
 
     method: Literal["smrf", "smrf_refined", "smrf_segments", "smrf_vote", "pmf"] = field(
-        "smrf_segments", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
+        "smrf_vote", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
         "optional surface cleanup), smrf_segments (SMRF + edge extension, terrain-like object "
         "segments given back), smrf_vote (a learnt vote over three SMRF surfaces: slopes 0.1 and "
         "0.3 with segments given back, 0.1 plain) or pmf (Zhang 2003)")
