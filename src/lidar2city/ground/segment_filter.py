@@ -137,36 +137,52 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
     ndarray of bool, shape (H, W)
         ``objects`` without the cells given back.
     """
+    return _terrain_segments(zmin, [objects], jump=jump, raised=raised, min_cells=min_cells,
+                             block=block)[0]
+
+
+def _terrain_segments(zmin, masks, *, jump, raised, min_cells, block=1):
+    """:func:`terrain_segments` of each object mask of ``masks`` on the same ``zmin`` (its
+    filled heights and their steps computed once)."""
     if not (isinstance(block, (int, np.integer)) and block >= 1):
         raise InputError(f"block must be an integer >= 1, got {block!r}")
+    h, w = zmin.shape
     if block > 1:
-        zc, oc = _block_lowest(zmin, objects, block)
-        given = oc & ~terrain_segments(zc, oc, jump=jump, raised=raised, min_cells=min_cells)
-        back = np.repeat(np.repeat(given, block, axis=0), block, axis=1)
-        return objects & ~back[:zmin.shape[0], :zmin.shape[1]]
+        coarse = [_block_lowest(zmin, objects, block) for objects in masks]
+        kept = _terrain_segments(coarse[0][0], [oc for _, oc in coarse], jump=jump,
+                                 raised=raised, min_cells=min_cells)
+        out = []
+        for objects, (_, oc), k in zip(masks, coarse, kept):
+            back = np.repeat(np.repeat(oc & ~k, block, axis=0), block, axis=1)
+            out.append(objects & ~back[:h, :w])
+        return out
     empty = np.isnan(zmin)
-    if empty.all() or not objects.any():
-        return objects.copy()
+    if empty.all() or not any(objects.any() for objects in masks):
+        return [objects.copy() for objects in masks]
     z = _fill_from_neighbours(zmin).ravel()
     filled = ~empty.ravel()
     idx = np.arange(z.size).reshape(zmin.shape)
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
     b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
     dz = z[a] - z[b]
-    obj = objects.ravel()
+    smooth = np.abs(dz) < jump
+    both = filled[a] & filled[b]
     n = z.size
-    join = (np.abs(dz) < jump) & obj[a] & obj[b]
-    h, w = zmin.shape
-    label = _grid_labels(join[:h * (w - 1)].reshape(h, w - 1),
-                         join[h * (w - 1):].reshape(h - 1, w)).ravel()
-    edges, high = np.zeros(n), np.zeros(n)
-    for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
-        m = obj[side] & ~obj[other] & filled[a] & filled[b]
-        edges += np.bincount(label[side[m]], minlength=n)
-        high += np.bincount(label[side[m]], weights=sign * dz[m] >= jump, minlength=n)
-    cells = np.bincount(label[obj & filled], minlength=n)
-    terrain = (edges > 0) & (high < raised * edges) & (cells >= min_cells)
-    return (obj & ~terrain[label]).reshape(zmin.shape)
+    out = []
+    for objects in masks:
+        obj = objects.ravel()
+        join = smooth & obj[a] & obj[b]
+        label = _grid_labels(join[:h * (w - 1)].reshape(h, w - 1),
+                             join[h * (w - 1):].reshape(h - 1, w)).ravel()
+        edges, high = np.zeros(n), np.zeros(n)
+        for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
+            m = obj[side] & ~obj[other] & both
+            edges += np.bincount(label[side[m]], minlength=n)
+            high += np.bincount(label[side[m]], weights=sign * dz[m] >= jump, minlength=n)
+        cells = np.bincount(label[obj & filled], minlength=n)
+        terrain = (edges > 0) & (high < raised * edges) & (cells >= min_cells)
+        out.append((obj & ~terrain[label]).reshape(zmin.shape))
+    return out
 
 
 def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
@@ -303,9 +319,10 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
     block = max(1, int(np.floor(spacing / cell + 0.5)))
     surfaces = []
-    for k, obj in enumerate([objects, *extra]):
-        kept = terrain_segments(zmin, obj, jump=jump * max(cell * block, 1.0), raised=raised,
-                                min_cells=min_cells, block=block)
+    masks = [objects, *extra]
+    kept_all = _terrain_segments(zmin, masks, jump=jump * max(cell * block, 1.0), raised=raised,
+                                 min_cells=min_cells, block=block)
+    for k, (obj, kept) in enumerate(zip(masks, kept_all)):
         if k == 0 and strong is not None:
             kept = anchored_objects(kept, strong)
         given = obj & ~kept & filled
