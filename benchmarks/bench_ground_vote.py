@@ -27,13 +27,16 @@ nearest wall. This script:
 4. scores ``smrf_vote`` with its defaults against ``smrf_segments`` (the
    ``ground`` default) on the seven samples, the synthetic terrains and the
    small tile with a building of ``bench_ground_segments.py``;
-5. with ``--pairs``, the same leave-one-out with the two SMRF slopes chosen
+5. the bound of any per-point rule over such surfaces: the share of points
+   that every one of ``smrf_segments`` at the slopes of :data:`ORACLE_SLOPES`
+   and plain SMRF at 0.1 classifies wrongly, per sample;
+6. with ``--pairs``, the same leave-one-out with the two SMRF slopes chosen
    too, per fold, among :data:`PAIRS` (the pair whose fitted rule has the
    lowest objective on the six other samples + synthetic terrains): the
    default pair (0.1, 0.3) was chosen among these by looking at all seven
    samples' leave-one-out, so this nested figure is the honest one for the
    whole procedure (a few minutes more);
-6. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
+7. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
    ``DIR/isprs/sites/CSite4_orig-utm.laz`` against reading and writing it
    with laspy (best of ``--repeat``, interleaved).
 
@@ -68,6 +71,8 @@ DEPTH = 2
 QUANTILES = np.linspace(0.01, 0.99, 48)
 #: (strict, lenient) SMRF slope pairs of the ``--pairs`` check.
 PAIRS = ((0.1, 0.2), (0.1, 0.25), (0.1, 0.3), (0.1, 0.4), (0.15, 0.3), (0.15, 0.4))
+#: slopes of the smrf_segments surfaces of the per-point bound.
+ORACLE_SLOPES = (0.1, 0.15, 0.2, 0.3, 0.4)
 #: wall distances (m) tried for ``clear``; inf: the lenient surface never decides alone.
 CLEAR = (5.0, 8.0, 10.0, 15.0, 20.0, 30.0, np.inf)
 
@@ -118,6 +123,20 @@ def nested_pairs(samples, scenes):
         print(f"{name:<8} held-out total {100 * held[-1]:5.2f} %  slopes {best[1]}")
     print(f"smrf_vote leave-one-out with the slopes chosen per fold: mean total "
           f"{100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %")
+
+
+def oracle(samples, feats):
+    """Print the share of points every candidate surface gets wrong (see step 5)."""
+    print(f"\nper-point bound: points wrong on all of smrf_segments at slopes "
+          f"{', '.join(f'{v:g}' for v in ORACLE_SLOPES)} and plain SMRF at 0.1 (total error %)")
+    for name, (xyz, ref) in samples.items():
+        right = feats[name][:, 2] <= 1.0
+        right = np.where(ref, right, ~right)
+        for slope in ORACLE_SLOPES:
+            pred = smrf_segments(xyz, **dict(GroundConfig(method="smrf_segments").method_params(),
+                                              slope=slope))
+            right |= pred == ref
+        print(f"{name:<8} {100 * np.mean(~right):5.2f}")
 
 
 def show_rule(rule):
@@ -237,6 +256,7 @@ def main():
         xyz, truth = small_tile()
         print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
               f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
+    oracle(samples, feats)
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:
