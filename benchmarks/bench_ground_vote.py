@@ -129,6 +129,7 @@ def oracle(samples, feats):
     """Print the share of points every candidate surface gets wrong (see step 5)."""
     print(f"\nper-point bound: points wrong on all of smrf_segments at slopes "
           f"{', '.join(f'{v:g}' for v in ORACLE_SLOPES)} and plain SMRF at 0.1 (total error %)")
+    wrong = []
     for name, (xyz, ref) in samples.items():
         right = feats[name][:, 2] <= 1.0
         right = np.where(ref, right, ~right)
@@ -136,7 +137,9 @@ def oracle(samples, feats):
             pred = smrf_segments(xyz, **dict(GroundConfig(method="smrf_segments").method_params(),
                                               slope=slope))
             right |= pred == ref
-        print(f"{name:<8} {100 * np.mean(~right):5.2f}")
+        wrong.append(np.mean(~right))
+        print(f"{name:<8} {100 * wrong[-1]:5.2f}")
+    print(f"{'mean':<8} {100 * np.mean(wrong):5.2f}")
 
 
 def show_rule(rule):

@@ -99,8 +99,9 @@ class GroundConfig:
     method: Literal["smrf", "smrf_refined", "smrf_segments", "smrf_vote", "pmf"] = field(
         "smrf_vote", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
         "optional surface cleanup), smrf_segments (SMRF + edge extension, terrain-like object "
-        "segments given back), smrf_vote (a learnt vote over three SMRF surfaces: slopes 0.1 and "
-        "0.3 with segments given back, 0.1 plain) or pmf (Zhang 2003)")
+        "segments given back), smrf_vote (a rule learnt on labelled samples over a point's heights "
+        "off three SMRF surfaces - slopes 0.1 and 0.3 with segments given back, 0.1 plain - and "
+        "its distance to walls) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
     slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for "
                                       "smrf, smrf_refined and smrf_segments, 0.3 for pmf")

@@ -264,10 +264,7 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     >>> bool(ground[~box].all()), bool(ground[box].any())
     (True, False)
     """
-    if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
-        raise InputError(f"raised must be in (0, 1], got {raised!r}")
-    if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
-        raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
+    _check_segment_params(raised=raised, min_cells=min_cells)
     if strong_slope is not None and not (
             isinstance(strong_slope, (int, float, np.integer, np.floating)) and strong_slope > 0):
         raise InputError(f"strong_slope must be a number > 0 or None, got {strong_slope!r}")
@@ -283,6 +280,13 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     ground = _near_surface(xyz, surfaces[0], spec, threshold=threshold, scalar=scalar) & ~out
     logger.debug("smrf_segments: %d of %d points ground", int(ground.sum()), n)
     return ground
+
+
+def _check_segment_params(*, raised, min_cells):
+    if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
+        raise InputError(f"raised must be in (0, 1], got {raised!r}")
+    if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
+        raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
 
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
