@@ -168,16 +168,22 @@ def leave_one_out_method(method, fn, base, grid, samples, scenes):
           f"{100 * best[2]:.2f} %)")
 
 
-def best_time(cmd, env, repeat):
-    times = []
+def best_times(cmd, env, repeat):
+    """Best wall time and best CPU time (user + system of the child) of ``repeat`` runs."""
+    import resource
+
+    wall, cpu = [], []
     for _ in range(repeat):
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t = time.perf_counter()
         subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        times.append(time.perf_counter() - t)
-    return min(times)
+        wall.append(time.perf_counter() - t)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
+    return min(wall), min(cpu)
 
 
-def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments")):
+def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote")):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / ("out" + site.suffix))
@@ -186,15 +192,18 @@ def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments")):
         cli_cmds = {m: [sys.executable, "-m", "lidar2city.cli.main", "ground", str(site), "-o", out,
                         "--method", m] for m in methods}
         # interleave to share the machine load fairly
-        base = float("inf")
-        cli = dict.fromkeys(methods, float("inf"))
+        base = (float("inf"),) * 2
+        cli = dict.fromkeys(methods, (float("inf"),) * 2)
         for _ in range(repeat):
-            base = min(base, best_time(base_cmd, env, 1))
+            base = tuple(map(min, base, best_times(base_cmd, env, 1)))
             for m, cmd in cli_cmds.items():
-                cli[m] = min(cli[m], best_time(cmd, env, 1))
+                cli[m] = tuple(map(min, cli[m], best_times(cmd, env, 1)))
+    load = os.getloadavg()[0]
     for m in methods:
-        print(f"\nspeed on {site.name}: laspy read+write {base:.2f} s, lidar2city ground --method {m} "
-              f"{cli[m]:.2f} s, ratio {cli[m] / base:.2f} (best of {repeat})")
+        print(f"\nspeed on {site.name}: laspy read+write {base[0]:.2f} s, lidar2city ground --method {m} "
+              f"{cli[m][0]:.2f} s, ratio {cli[m][0] / base[0]:.2f} (best of {repeat}); CPU seconds "
+              f"{base[1]:.2f} and {cli[m][1]:.2f}, ratio {cli[m][1] / base[1]:.2f} "
+              f"(load average {load:.1f})")
 
 
 def main():

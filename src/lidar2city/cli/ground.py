@@ -6,7 +6,7 @@ import click
 
 from ._options import check_not_input, crs_option, engine_options, neighbours_options, run_on_tiles
 
-METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
+METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments", "smrf_vote")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
 
 @click.command("ground")
@@ -14,7 +14,7 @@ METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments")  # keys of lidar2city
 @click.option("-o", "--output", required=True, type=click.Path(),
               help="Output file; an output folder when INPUT is a folder or glob of tiles.")
 @click.option("--method", "--ground-method", "method", type=click.Choice(METHODS), default=None,
-              show_default="smrf_segments, or ground.method of --config",
+              show_default="smrf_vote, or ground.method of --config",
               help="Ground filter (also spelt --ground-method, as in classify).")
 @click.option("--dtm", "dtm", type=click.Path(), default=None,
               help="Also write a DTM GeoTIFF interpolated from the ground points (holes filled); "

@@ -54,13 +54,21 @@ def _fill_from_neighbours(grid):
     return z
 
 
-def _components(n, a, b):
-    """Connected-component label (the smallest node index of its component) of nodes
-    ``0..n-1`` joined by the edges ``a[i] - b[i]``."""
-    comp = component_labels(n, a, b)
-    smallest = np.full(int(comp.max()) + 1 if n else 0, n, dtype=np.int64)
-    np.minimum.at(smallest, comp, np.arange(n))
-    return smallest[comp]
+def _grid_labels(hjoin, vjoin):
+    """A component id (< H * W) of every cell of a grid whose 4-neighbour cells are joined
+    where ``hjoin`` (H, W-1: a cell and the one east of it) and ``vjoin`` (H-1, W: a cell
+    and the one south of it) are True.
+
+    Each row is cut into runs of horizontally joined cells first, so
+    :func:`component_labels` only joins runs (several times fewer nodes, and
+    no steps along a run).
+    """
+    h, w = vjoin.shape[0] + 1, hjoin.shape[1] + 1
+    start = np.ones((h, w), dtype=bool)
+    start[:, 1:] = ~hjoin
+    run = np.cumsum(start.ravel()) - 1
+    down = vjoin.ravel()
+    return component_labels(int(run[-1]) + 1, run[:-w][down], run[w:][down])[run]
 
 
 def anchored_objects(objects, strong) -> np.ndarray:
@@ -83,11 +91,7 @@ def anchored_objects(objects, strong) -> np.ndarray:
     """
     h, w = objects.shape
     o = objects.ravel()
-    idx = np.arange(h * w).reshape(h, w)
-    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
-    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
-    join = o[a] & o[b]
-    label = _components(h * w, a[join], b[join])
+    label = _grid_labels(objects[:, :-1] & objects[:, 1:], objects[:-1, :] & objects[1:, :]).ravel()
     anchored = np.zeros(h * w, dtype=bool)
     anchored[label[o & strong.ravel()]] = True
     return (o & anchored[label]).reshape(h, w)
@@ -133,34 +137,52 @@ def terrain_segments(zmin, objects, *, jump: float = 0.6, raised: float = 0.6,
     ndarray of bool, shape (H, W)
         ``objects`` without the cells given back.
     """
+    return _terrain_segments(zmin, [objects], jump=jump, raised=raised, min_cells=min_cells,
+                             block=block)[0]
+
+
+def _terrain_segments(zmin, masks, *, jump, raised, min_cells, block=1):
+    """:func:`terrain_segments` of each object mask of ``masks`` on the same ``zmin`` (its
+    filled heights and their steps computed once)."""
     if not (isinstance(block, (int, np.integer)) and block >= 1):
         raise InputError(f"block must be an integer >= 1, got {block!r}")
+    h, w = zmin.shape
     if block > 1:
-        zc, oc = _block_lowest(zmin, objects, block)
-        given = oc & ~terrain_segments(zc, oc, jump=jump, raised=raised, min_cells=min_cells)
-        back = np.repeat(np.repeat(given, block, axis=0), block, axis=1)
-        return objects & ~back[:zmin.shape[0], :zmin.shape[1]]
+        coarse = [_block_lowest(zmin, objects, block) for objects in masks]
+        kept = _terrain_segments(coarse[0][0], [oc for _, oc in coarse], jump=jump,
+                                 raised=raised, min_cells=min_cells)
+        out = []
+        for objects, (_, oc), k in zip(masks, coarse, kept):
+            back = np.repeat(np.repeat(oc & ~k, block, axis=0), block, axis=1)
+            out.append(objects & ~back[:h, :w])
+        return out
     empty = np.isnan(zmin)
-    if empty.all() or not objects.any():
-        return objects.copy()
+    if empty.all() or not any(objects.any() for objects in masks):
+        return [objects.copy() for objects in masks]
     z = _fill_from_neighbours(zmin).ravel()
     filled = ~empty.ravel()
     idx = np.arange(z.size).reshape(zmin.shape)
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
     b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
     dz = z[a] - z[b]
-    obj = objects.ravel()
+    smooth = np.abs(dz) < jump
+    both = filled[a] & filled[b]
     n = z.size
-    join = (np.abs(dz) < jump) & obj[a] & obj[b]
-    label = _components(n, a[join], b[join])
-    edges, high = np.zeros(n), np.zeros(n)
-    for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
-        m = obj[side] & ~obj[other] & filled[a] & filled[b]
-        edges += np.bincount(label[side[m]], minlength=n)
-        high += np.bincount(label[side[m]], weights=sign * dz[m] >= jump, minlength=n)
-    cells = np.bincount(label[obj & filled], minlength=n)
-    terrain = (edges > 0) & (high < raised * edges) & (cells >= min_cells)
-    return (obj & ~terrain[label]).reshape(zmin.shape)
+    out = []
+    for objects in masks:
+        obj = objects.ravel()
+        join = smooth & obj[a] & obj[b]
+        label = _grid_labels(join[:h * (w - 1)].reshape(h, w - 1),
+                             join[h * (w - 1):].reshape(h - 1, w)).ravel()
+        edges, high = np.zeros(n), np.zeros(n)
+        for side, other, sign in ((a, b, 1.0), (b, a, -1.0)):
+            m = obj[side] & ~obj[other] & both
+            edges += np.bincount(label[side[m]], minlength=n)
+            high += np.bincount(label[side[m]], weights=sign * dz[m] >= jump, minlength=n)
+        cells = np.bincount(label[obj & filled], minlength=n)
+        terrain = (edges > 0) & (high < raised * edges) & (cells >= min_cells)
+        out.append((obj & ~terrain[label]).reshape(zmin.shape))
+    return out
 
 
 def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
@@ -242,10 +264,7 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     >>> bool(ground[~box].all()), bool(ground[box].any())
     (True, False)
     """
-    if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
-        raise InputError(f"raised must be in (0, 1], got {raised!r}")
-    if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
-        raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
+    _check_segment_params(raised=raised, min_cells=min_cells)
     if strong_slope is not None and not (
             isinstance(strong_slope, (int, float, np.integer, np.floating)) and strong_slope > 0):
         raise InputError(f"strong_slope must be a number > 0 or None, got {strong_slope!r}")
@@ -255,10 +274,32 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
     n = len(xyz)
     if n == 0 or out.all():
         return np.zeros(n, dtype=bool)
+    surfaces, spec = _segment_surfaces(xyz, out, cell=cell, slope=slope, window=window,
+                                       extend=extend, jump=jump, raised=raised,
+                                       min_cells=min_cells, strong_slope=strong_slope)
+    ground = _near_surface(xyz, surfaces[0], spec, threshold=threshold, scalar=scalar) & ~out
+    logger.debug("smrf_segments: %d of %d points ground", int(ground.sum()), n)
+    return ground
+
+
+def _check_segment_params(*, raised, min_cells):
+    if not (isinstance(raised, (int, float, np.integer, np.floating)) and 0 < raised <= 1):
+        raise InputError(f"raised must be in (0, 1], got {raised!r}")
+    if not (isinstance(min_cells, (int, np.integer)) and min_cells >= 1):
+        raise InputError(f"min_cells must be an integer >= 1, got {min_cells!r}")
+
+
+def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
+                      strong_slope=None, also=(), marks=()):
+    """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
+    at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
+    ``also``, the surface with the object cells at that slope given back likewise and then
+    SMRF's own surface at ``slope`` (no segments given back); the grid; and, when ``marks``
+    are given, the cells judged object at each of those slopes (a list of masks)."""
     pts = xyz[~out]
-    surface, objects, spec, strong = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
-                                                 exclude=out, extend=extend,
-                                                 strong_slope=strong_slope)
+    more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
+    surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
+                                                exclude=out, extend=extend, more=more)
     base = float(np.min(pts[:, 2]))
     zmin = min_surface(pts, spec, base=base, dtype=np.float32)
     filled = ~np.isnan(zmin)
@@ -268,27 +309,39 @@ def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float 
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            strong_slope=strong_slope)
+                            more=more)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
-            surface, objects, _, strong = plain
+            surface, objects, _, extra = plain
+    marked, extra = extra[:len(marks)], extra[len(marks):]
+    strong = None if strong_slope is None else extra.pop(0)
     # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
     coarse = max(1, int(round(5.0 / cell)))
     occupied = np.count_nonzero(filled) if coarse == 1 else np.count_nonzero(
         ~np.isnan(_block_lowest(zmin, objects, coarse)[0]))
     spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
     block = max(1, int(np.floor(spacing / cell + 0.5)))
-    kept = terrain_segments(zmin, objects, jump=jump * max(cell * block, 1.0), raised=raised,
-                            min_cells=min_cells, block=block)
-    if strong is not None:
-        kept = anchored_objects(kept, strong)
-    given = objects & ~kept & ~np.isnan(zmin)
-    if given.any():
-        provisional = np.where(kept | np.isnan(zmin), np.float32(np.nan), zmin)
-        surface = inpaint(provisional).astype(np.float64) + base
-    ground = _near_surface(xyz, surface, spec, threshold=threshold, scalar=scalar) & ~out
-    logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m); "
-                 "%d of %d points ground", int(given.sum()), int(objects.sum()), cell * block,
-                 int(ground.sum()), n)
-    return ground
+    surfaces = []
+    masks = [objects, *extra]
+    kept_all = _terrain_segments(zmin, masks, jump=jump * max(cell * block, 1.0), raised=raised,
+                                 min_cells=min_cells, block=block)
+    for k, (obj, kept) in enumerate(zip(masks, kept_all)):
+        if k == 0 and strong is not None:
+            kept = anchored_objects(kept, strong)
+        given = obj & ~kept & filled
+        logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m)",
+                     int(given.sum()), int(obj.sum()), cell * block)
+        if given.any():
+            provisional = np.where(kept | ~filled, np.float32(np.nan), zmin)
+            surfaces.append(inpaint(provisional).astype(np.float64) + base)
+        else:
+            surfaces.append(surface if k == 0 else _inpainted(zmin, obj, base))
+    if also:
+        surfaces.append(surface)
+    return (surfaces, spec, marked) if marks else (surfaces, spec)
+
+
+def _inpainted(zmin, objects, base):
+    """The minimum surface without ``objects``, inpainted, in metres (SMRF's ``ZIpro``)."""
+    return inpaint(np.where(objects, np.float32(np.nan), zmin)).astype(np.float64) + base

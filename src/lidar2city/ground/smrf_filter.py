@@ -65,9 +65,9 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
 
 
 def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0.0,
-                strong_slope=None):
+                more=()):
     """:func:`smrf_surface` and, from the same opening series, the cells judged object
-    at ``strong_slope`` (None when not given)."""
+    at each slope of ``more`` (a list of masks)."""
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window)
     if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
@@ -86,18 +86,18 @@ def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0
     if pad > 0:
         zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
     objects = np.zeros(zfilled.shape, dtype=bool)
-    strong = None if strong_slope is None else np.zeros(zfilled.shape, dtype=bool)
+    extra = [np.zeros(zfilled.shape, dtype=bool) for _ in more]
     last = zfilled
     for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
         step = last - opened
         objects |= step > np.float32(slope * radius * cell)
-        if strong is not None:
-            strong |= step > np.float32(strong_slope * radius * cell)
+        for mask, s in zip(extra, more):
+            mask |= step > np.float32(s * radius * cell)
         last = opened
     if pad > 0:
         objects = objects[pad:-pad, pad:-pad]
         last = last[pad:-pad, pad:-pad]
-        strong = None if strong is None else strong[pad:-pad, pad:-pad]
+        extra = [mask[pad:-pad, pad:-pad] for mask in extra]
     provisional = np.where(objects | empty, np.float32(np.nan), zmin)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
@@ -106,7 +106,7 @@ def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0
     else:
         surface = inpaint(provisional)
     surface = surface.astype(np.float64) + base
-    return surface, objects, spec, strong
+    return surface, objects, spec, extra
 
 
 def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
