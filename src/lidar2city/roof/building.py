@@ -15,7 +15,7 @@ from .arrangement import arrangement_partition, collapse_short_edges, restore_fa
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import on_grid, partition_solid, split_saddles
+from .solid import nudge_on_grid, on_grid, partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -410,9 +410,13 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
             written = on_grid(solid, precision)
             if method == methods[-1]:
                 found = check_solid(written) if precision else None
+                if found:
+                    solid, found = _nudged(solid, written, found, precision)
                 break
             if _closed_shell(solid):
                 found = check_solid(written)
+                if found:  # a crossing vertex rounded off its edge: moved by a grid step
+                    solid, found = _nudged(solid, written, found, precision)
                 if not found:
                     break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
@@ -450,6 +454,13 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     if precision:
         return Lod22Result([on_grid(s, precision) for s in solids], attrs, issues)
     return Lod22Result(solids, attrs)
+
+
+def _nudged(solid, written, found, precision):
+    """``(solid, issues)``: the solid on the grid with a crossing vertex moved by one grid
+    step when that validates it (:func:`.solid.nudge_on_grid`), else as it was."""
+    moved, left = nudge_on_grid(written, found, precision)
+    return (solid, found) if left else (moved, left)
 
 
 def _closed_shell(solid) -> bool:
