@@ -34,7 +34,7 @@ def on_grid(solid, precision):
 _NUDGES = ((1, 0), (0, 1), (-1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
 
 
-def nudge_on_grid(solid, issues, precision, *, max_checks=8):
+def nudge_on_grid(solid, issues, precision, *, max_checks=12):
     """Repair a solid on the output grid whose only error is two faces crossing (306).
 
     Rounding to ``precision`` moves a vertex inserted where two roof planes
@@ -42,9 +42,9 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=8):
     a fraction of a grid step; the face bent inward can then be triangulated
     across the bend and cut the other face in a sliver. Moving a vertex the two
     faces share by one grid step (in a fixed order: the 4 axis steps, then the
-    diagonals) bends that edge the other way; the first move after which
-    :func:`~lidar2city.validate.solid.check_solid` finds nothing is kept. The
-    move is one grid step, far below the planarity tolerance.
+    diagonals, each tried on every shared vertex) bends that edge the other way; the
+    first move after which :func:`~lidar2city.validate.solid.check_solid` finds
+    nothing is kept. The move is one grid step, far below the planarity tolerance.
 
     Parameters
     ----------
@@ -77,8 +77,8 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=8):
            for f in (a, b)]
     shared = np.intersect1d(ids[0], ids[1])
     checks = 0
-    for v in shared.tolist():
-        for dx, dy in _NUDGES:
+    for dx, dy in _NUDGES:  # each step tried on every shared vertex before the next step
+        for v in shared.tolist():
             if checks >= max_checks:
                 return solid, issues
             moved = np.array(solid.vertices, copy=True)
