@@ -163,7 +163,7 @@ def _clean_faces(faces, labels, precision=5e-3):
             out_l += [lab] * len(parts)
             continue
         rings = [f.exterior, *f.interiors]
-        pinched = any(len({tuple(np.round(c, 4)) for c in r.coords[:-1]}) != len(r.coords) - 1 for r in rings)
+        pinched = any(_repeats_a_vertex(r) for r in rings)
         if f.is_valid and not pinched:
             out_f.append(f)
             out_l.append(lab)
@@ -174,6 +174,12 @@ def _clean_faces(faces, labels, precision=5e-3):
                 out_f.append(g)
                 out_l.append(lab)
     return _absorb_slivers(out_f, np.asarray(out_l, dtype=np.int64))
+
+
+def _repeats_a_vertex(ring) -> bool:
+    """Whether a ring passes twice through one vertex (to 0.1 mm), its closing vertex aside."""
+    c = np.round(np.asarray(ring.coords)[:-1], 4).tolist()  # one rounding for the whole ring
+    return len(set(map(tuple, c))) != len(c)
 
 
 def _absorb_slivers(faces, labels, *, min_width=0.01):
@@ -415,7 +421,10 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                 break
             if _closed_shell(solid):
                 found = check_solid(written)
-                if found:  # a crossing vertex rounded off its edge: moved by a grid step
+                if found and method != "rims":
+                    # a crossing vertex rounded off its edge: moved by a grid step rather
+                    # than the roof redone by the coarser grid partition (a rim partition
+                    # that does not validate as it is gives way to the one without rims)
                     solid, found = _nudged(solid, written, found, precision)
                 if not found:
                     break
