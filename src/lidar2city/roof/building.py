@@ -17,7 +17,7 @@ from .arrangement import (arrangement_partition, collapse_short_edges, raised_pa
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import on_grid, partition_solid, split_saddles
+from .solid import nudge_on_grid, on_grid, partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -174,7 +174,7 @@ def _clean_faces(faces, labels, precision=5e-3):
             out_l += [lab] * len(parts)
             continue
         rings = [f.exterior, *f.interiors]
-        pinched = any(len({tuple(np.round(c, 4)) for c in r.coords[:-1]}) != len(r.coords) - 1 for r in rings)
+        pinched = any(_repeats_a_vertex(r) for r in rings)
         if f.is_valid and not pinched:
             out_f.append(f)
             out_l.append(lab)
@@ -185,6 +185,12 @@ def _clean_faces(faces, labels, precision=5e-3):
                 out_f.append(g)
                 out_l.append(lab)
     return _absorb_slivers(out_f, np.asarray(out_l, dtype=np.int64))
+
+
+def _repeats_a_vertex(ring) -> bool:
+    """Whether a ring passes twice through one vertex (to 0.1 mm), its closing vertex aside."""
+    c = np.round(np.asarray(ring.coords)[:-1], 4).tolist()  # one rounding for the whole ring
+    return len(set(map(tuple, c))) != len(c)
 
 
 def _absorb_slivers(faces, labels, *, min_width=0.01):
@@ -428,9 +434,16 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
             written = on_grid(solid, precision)
             if method == methods[-1]:
                 found = check_solid(written) if precision else None
+                if found:
+                    solid, found = _nudged(solid, written, found, precision)
                 break
             if _closed_shell(solid):
                 found = check_solid(written)
+                if found and method != "rims":
+                    # a crossing vertex rounded off its edge: moved by a grid step rather
+                    # than the roof redone by the coarser grid partition (a rim partition
+                    # that does not validate as it is gives way to the one without rims)
+                    solid, found = _nudged(solid, written, found, precision)
                 if not found:
                     break
             logger.debug("%s roof topology gave an invalid solid; trying the next", method)
@@ -532,6 +545,13 @@ def _select_model(footprint, building_xyz, ground_z, *, cfg, direction, precisio
     _, name, res = best
     res.attributes.update(roof_model=name, lod22_time=round(time.perf_counter() - t0, 4))
     return res
+
+
+def _nudged(solid, written, found, precision):
+    """``(solid, issues)``: the solid on the grid with a crossing vertex moved by one grid
+    step when that validates it (:func:`.solid.nudge_on_grid`), else as it was."""
+    moved, left = nudge_on_grid(written, found, precision)
+    return (solid, found) if left else (moved, left)
 
 
 def _closed_shell(solid) -> bool:

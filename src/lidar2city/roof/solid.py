@@ -16,7 +16,7 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["on_grid", "partition_solid", "split_crossings", "split_saddles"]
+__all__ = ["nudge_on_grid", "on_grid", "partition_solid", "split_crossings", "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
 
@@ -28,6 +28,67 @@ def on_grid(solid, precision):
     if not precision:
         return solid
     return Solid(np.round(solid.vertices / precision) * precision, solid.surfaces)
+
+
+#: the grid steps a vertex is moved by, in the order tried, by :func:`nudge_on_grid`
+_NUDGES = ((1, 0), (0, 1), (-1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
+
+
+def nudge_on_grid(solid, issues, precision, *, max_checks=12):
+    """Repair a solid on the output grid whose only error is two faces crossing (306).
+
+    Rounding to ``precision`` moves a vertex inserted where two roof planes
+    cross (:func:`split_crossings`) off the straight edge the two faces share, by
+    a fraction of a grid step; the face bent inward can then be triangulated
+    across the bend and cut the other face in a sliver. Moving a vertex the two
+    faces share by one grid step (in a fixed order: the 4 axis steps, then the
+    diagonals, each tried on every shared vertex) bends that edge the other way; the
+    first move after which :func:`~lidar2city.validate.solid.check_solid` finds
+    nothing is kept. The move is one grid step, far below the planarity tolerance.
+
+    Parameters
+    ----------
+    solid : Solid
+        Vertices already on the grid.
+    issues : list of Issue
+        Its ``check_solid`` issues.
+    precision : float
+        The grid step (m).
+    max_checks : int
+        Most full checks tried.
+
+    Returns
+    -------
+    (Solid, list of Issue)
+        The moved solid and no issue, or ``solid`` and ``issues`` unchanged.
+    """
+    from ..validate.solid import check_solid
+
+    if not precision or len(issues) != 1 or issues[0].code != 306:
+        return solid, issues
+    # the first pair reported: "N intersecting face pair(s): a-b, ..."
+    try:
+        a, b = (int(s) for s in issues[0].detail.split(": ", 1)[1].split(",")[0].split("-"))
+    except (IndexError, ValueError):
+        return solid, issues
+    if max(a, b) >= len(solid.surfaces):
+        return solid, issues
+    ids = [np.concatenate([np.asarray(r, dtype=np.int64).ravel() for r in solid.surfaces[f].rings])
+           for f in (a, b)]
+    shared = np.intersect1d(ids[0], ids[1])
+    checks = 0
+    for dx, dy in _NUDGES:  # each step tried on every shared vertex before the next step
+        for v in shared.tolist():
+            if checks >= max_checks:
+                return solid, issues
+            moved = np.array(solid.vertices, copy=True)
+            moved[v, 0] = np.round(moved[v, 0] / precision + dx) * precision
+            moved[v, 1] = np.round(moved[v, 1] / precision + dy) * precision
+            out = Solid(moved, solid.surfaces)
+            checks += 1
+            if not check_solid(out):
+                return out, []
+    return solid, issues
 
 
 def _key(p):
