@@ -960,6 +960,19 @@ def _version():
     return __version__
 
 
+def check_area(reader) -> None:
+    """Raise :class:`EmptyInputError` when the tiles' points cover no area.
+
+    One point, or points on a line, hold no building: say so before any
+    footprint is matched against the extent (which would blame the CRSs).
+    """
+    wb = reader.world_bounds()
+    size = (wb[2:] - wb[:2]) * reader.xy_unit
+    if not (size > 0).all():
+        raise EmptyInputError(f"the input's {reader.count} point(s) cover {size[0]:.1f} m x "
+                              f"{size[1]:.1f} m: no area to reconstruct buildings in")
+
+
 @dataclass(eq=False)
 class ReconstructPlan:
     """A planned run: the ordered block specs, the options every block gets, the output's frame."""
@@ -1015,6 +1028,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            "EPSG:xxxx to choose one)", fp_crs.name)
             tiles = scan_tiles(inputs, crs=fp_crs)
     reader = TileReader(tiles)
+    check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
     classified = reader.has_classes(cfg.building_classes)

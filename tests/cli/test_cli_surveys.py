@@ -1,0 +1,68 @@
+"""Surveys unlike Delft, run as a new user would (session 7's sweep).
+
+Each test is a problem the sweep found: a tile or a footprint file of a kind
+the shared data does not hold, made here in a few hundred points. A bad input
+must give one ``Error:`` line and a non-zero exit; a good one a sensible model.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from shapely.geometry import box
+
+
+def _error_line(res):
+    """The single ``Error:`` line of a failed run (asserts there is nothing else)."""
+    lines = [ln for ln in res.output.splitlines() if ln.strip() and not ln.startswith("WARNING")]
+    assert res.exit_code not in (0, None), res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+    assert len(lines) == 1 and lines[0].startswith("Error: "), res.output
+    return lines[0]
+
+
+ORIGIN = np.array([85000.0, 447000.0])
+
+
+def _tile(path, xyz, cls, *, crs=28992):
+    """A LAS/LAZ tile of world points ``xyz`` with classes ``cls``."""
+    from pyproj import CRS
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.io.las import write_points
+
+    cloud = PointCloud.from_world(np.asarray(xyz, dtype=np.float64),
+                                  crs=None if crs is None else CRS.from_epsg(crs),
+                                  attributes={"classification": np.asarray(cls, dtype=np.uint8)})
+    write_points(path, cloud)
+    return path
+
+
+def _footprints(path, polys, *, crs=28992):
+    from pyproj import CRS
+
+    from lidar2city.io.vector import write_polygons
+
+    write_polygons(path, polys, {"id": [f"F{i}" for i in range(len(polys))]}, origin=ORIGIN,
+                   crs=CRS.from_epsg(crs))
+    return path
+
+
+# --- a tile of one point ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("footprint", [box(5, 5, 15, 15), box(30, 30, 40, 40), None])
+def test_one_point_tile_says_it_has_no_area(runner, tmp_path, footprint):
+    """One point (or points on a line) has no area: say so, not that the footprints
+    miss the tile (which sent the user checking CRSs) nor an empty success."""
+    from lidar2city.cli.main import cli
+
+    tile = _tile(tmp_path / "one.laz", [[*ORIGIN + 10.0, 8.0]], [6])
+    args = ["reconstruct", str(tile), "-o", str(tmp_path / "out.city.json")]
+    if footprint is not None:
+        args += ["--footprints", str(_footprints(tmp_path / "f.gpkg", [footprint]))]
+    line = _error_line(runner.invoke(cli, args))
+    assert "1 point" in line and "no area" in line, line
+    assert "footprints" not in line or "CRS" not in line
+    assert not (tmp_path / "out.city.json").exists()
