@@ -66,3 +66,57 @@ def test_one_point_tile_says_it_has_no_area(runner, tmp_path, footprint):
     assert "1 point" in line and "no area" in line, line
     assert "footprints" not in line or "CRS" not in line
     assert not (tmp_path / "out.city.json").exists()
+
+
+# --- a tile whose header bounds are wrong --------------------------------------------------
+
+def _block_scene(n=4000, seed=1):
+    """Flat ground 40 x 40 m with a 10 x 8 m building 6 m tall (classified), world points."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 40, (n, 2))
+    inside = (xy[:, 0] > 10) & (xy[:, 0] < 20) & (xy[:, 1] > 10) & (xy[:, 1] < 18)
+    z = np.where(inside, 6.0, 0.0) + rng.normal(0, 0.02, n)
+    return np.column_stack([xy + ORIGIN, z]), np.where(inside, 6, 2), [box(10, 10, 20, 18)]
+
+
+def _wrong_header(path, shift=5000.0):
+    """Write the header's bounds ``shift`` units off its points (LAS 1.2 offsets 179-226)."""
+    import struct
+
+    import laspy
+
+    with laspy.open(path) as f:
+        mins, maxs = np.array(f.header.mins), np.array(f.header.maxs)
+    with open(path, "r+b") as f:
+        f.seek(179)
+        f.write(struct.pack("<6d", maxs[0] + shift, mins[0] + shift, maxs[1] + shift,
+                            mins[1] + shift, maxs[2], mins[2]))
+
+
+@pytest.mark.parametrize("with_footprints", [True, False])
+def test_wrong_header_bounds_are_named(runner, tmp_path, with_footprints):
+    """The planner trusts the headers' bounds: a header off its points read as 'no
+    footprint meets the extent (check both CRSs)' or 'no building found'. Say the
+    header is wrong, naming the file."""
+    from lidar2city.cli.main import cli
+
+    xyz, cls, fps = _block_scene()
+    tile = _tile(tmp_path / "t.las", xyz, cls)
+    _wrong_header(tile)
+    args = ["reconstruct", str(tile), "-o", str(tmp_path / "out.city.json")]
+    if with_footprints:
+        args += ["--footprints", str(_footprints(tmp_path / "f.gpkg", fps))]
+    line = _error_line(runner.invoke(cli, args))
+    assert "header" in line and "t.las" in line, line
+    assert not (tmp_path / "out.city.json").exists()
+
+
+def test_wrong_header_bounds_are_named_by_footprints_on_a_folder(runner, tmp_path):
+    from lidar2city.cli.main import cli
+
+    xyz, cls, _ = _block_scene()
+    (tmp_path / "tiles").mkdir()
+    _wrong_header(_tile(tmp_path / "tiles" / "t.las", xyz, cls))
+    line = _error_line(runner.invoke(cli, ["footprints", str(tmp_path / "tiles"), "-o",
+                                           str(tmp_path / "f.gpkg")]))
+    assert "header" in line and "t.las" in line, line

@@ -860,6 +860,10 @@ class InOrder:
     def check(self) -> None:
         """Raise when the run found no building point at all."""
         if not self.points:
+            from ..io.las import check_header_bounds
+
+            # blocks are planned on the headers' bounds: a wrong one hides its points
+            check_header_bounds({t.path: t for s in self.plan.specs for t in s.tiles}.values())
             raise EmptyInputError("no building point found in the input, even after "
                                   "classification" if not self.plan.traced
                                   else "no building footprint found in the points")
@@ -994,7 +998,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
 
     Keywords as :func:`reconstruct`.
     """
-    from ..io.las import TileReader, scan_tiles
+    from ..io.las import TileReader, check_header_bounds, scan_tiles
     from .blocks import FootprintRef, Frame, footprint_blocks, traced_blocks
     from .task import BlockOptions
 
@@ -1070,8 +1074,12 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         wb = reader.world_bounds()
         lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
         hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-        fids, ids, bounds = index_footprints(footprints, frame, id_field=id_field, layer=layer,
-                                             extent=(*lo, *hi))
+        try:
+            fids, ids, bounds = index_footprints(footprints, frame, id_field=id_field,
+                                                 layer=layer, extent=(*lo, *hi))
+        except EmptyInputError:
+            check_header_bounds(tiles)  # the extent is the headers': are they right?
+            raise
 
         def ref(idx):
             return FootprintRef(str(footprints), layer, id_field, tuple(fids[i] for i in idx),
