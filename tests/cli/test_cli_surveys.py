@@ -120,3 +120,37 @@ def test_wrong_header_bounds_are_named_by_footprints_on_a_folder(runner, tmp_pat
     line = _error_line(runner.invoke(cli, ["footprints", str(tmp_path / "tiles"), "-o",
                                            str(tmp_path / "f.gpkg")]))
     assert "header" in line and "t.las" in line, line
+
+
+# --- a tile in a geographic CRS ------------------------------------------------------------
+
+def test_info_describes_a_geographic_tile(runner, tmp_path):
+    """``info`` is what a user runs to learn what a file holds: on a tile in degrees
+    (EPSG:4326) it failed like the commands that need metres. It now describes the
+    file, bounds in degrees, and says why the other commands refuse it; those still
+    give their one-line error, never metres taken for degrees."""
+    import laspy
+    from pyproj import CRS
+
+    from lidar2city.cli.main import cli
+
+    rng = np.random.default_rng(0)
+    h = laspy.LasHeader(point_format=6, version="1.4")
+    h.scales, h.offsets = [1e-7, 1e-7, 0.001], [4.0, 52.0, 0.0]
+    h.add_crs(CRS.from_epsg(4326))
+    las = laspy.LasData(h)
+    las.x = 4.36 + rng.uniform(0, 0.001, 500)
+    las.y = 52.01 + rng.uniform(0, 0.001, 500)
+    las.z = rng.uniform(0, 10, 500)
+    las.classification = np.full(500, 2, np.uint8)
+    path = tmp_path / "geo.laz"
+    las.write(path)
+    res = runner.invoke(cli, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "WGS 84" in res.output and "degree" in res.output and "reproject the points" in res.output
+    assert "4.36" in res.output and "52.01" in res.output
+    res = runner.invoke(cli, ["info", str(path), "--json"])
+    info = json.loads(res.output)
+    assert info["xy_unit_m"] is None and info["density_pts_m2"] is None and info["points"] == 500
+    line = _error_line(runner.invoke(cli, ["classify", str(path), "-o", str(tmp_path / "c.laz")]))
+    assert "geographic" in line
