@@ -154,3 +154,49 @@ def test_info_describes_a_geographic_tile(runner, tmp_path):
     assert info["xy_unit_m"] is None and info["density_pts_m2"] is None and info["points"] == 500
     line = _error_line(runner.invoke(cli, ["classify", str(path), "-o", str(tmp_path / "c.laz")]))
     assert "geographic" in line
+
+
+# --- footprint files: formats, CRSs ---------------------------------------------------------
+
+def test_footprint_table_without_geometry_says_so(runner, tmp_path):
+    """A CSV of ids and coordinates (no geometry column) was 'holds no footprints',
+    although it holds rows: say it has no geometry and what to give instead."""
+    from lidar2city.cli.main import cli
+
+    xyz, cls, _ = _block_scene()
+    tile = _tile(tmp_path / "t.laz", xyz, cls)
+    csv = tmp_path / "f.csv"
+    csv.write_text("id,x,y\nA,85015,447014\n")
+    line = _error_line(runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(csv),
+                                           "-o", str(tmp_path / "out.city.json")]))
+    assert "no geometry" in line and "WKT" in line, line
+
+
+def test_footprints_in_wkt_csv_and_other_crs_give_the_same_models(runner, tmp_path):
+    """A CSV with a WKT column (read by GDAL), and the same footprints in EPSG:3857,
+    are reprojected onto the tile: the same model as from the GeoPackage."""
+    from pyproj import Transformer
+
+    from lidar2city.cli.main import cli
+
+    xyz, cls, fps = _block_scene()
+    tile = _tile(tmp_path / "t.laz", xyz, cls)
+    csv = tmp_path / "f.csv"
+    world = [(x + ORIGIN[0], y + ORIGIN[1]) for x, y in fps[0].exterior.coords]
+    csv.write_text("id,wkt\nF0,\"POLYGON ((" + ", ".join(f"{x} {y}" for x, y in world)
+                   + "))\"\n")
+    tr = Transformer.from_crs(28992, 3857, always_xy=True)
+    import shapely
+
+    merc = shapely.transform(fps[0], lambda c: np.column_stack(
+        tr.transform(c[:, 0] + ORIGIN[0], c[:, 1] + ORIGIN[1])) - ORIGIN)
+    roofs = []
+    for name, f in (("gpkg", _footprints(tmp_path / "f.gpkg", fps)), ("csv", csv),
+                    ("3857", _footprints(tmp_path / "m.gpkg", [merc], crs=3857))):
+        out = tmp_path / f"{name}.city.json"
+        res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(f), "-o",
+                                  str(out)])
+        assert res.exit_code == 0, res.output
+        b = json.loads(out.read_text())["CityObjects"]["F0"]["attributes"]
+        roofs.append((b["roof_height"], b["ground_height"], b["point_count"]))
+    assert roofs[0] == roofs[1] == roofs[2] and roofs[0][0] == pytest.approx(6.0, abs=0.05)
