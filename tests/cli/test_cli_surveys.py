@@ -200,3 +200,24 @@ def test_footprints_in_wkt_csv_and_other_crs_give_the_same_models(runner, tmp_pa
         b = json.loads(out.read_text())["CityObjects"]["F0"]["attributes"]
         roofs.append((b["roof_height"], b["ground_height"], b["point_count"]))
     assert roofs[0] == roofs[1] == roofs[2] and roofs[0][0] == pytest.approx(6.0, abs=0.05)
+
+
+def test_footprints_without_crs_are_said_to_be_taken_in_the_tiles(runner, tmp_path, caplog):
+    """Footprints without a CRS were silently taken to be in the tiles' CRS: right
+    when they are, a puzzle when not; say so once."""
+    import pyogrio.raw
+    import shapely
+
+    from lidar2city.cli.main import cli
+
+    xyz, cls, fps = _block_scene()
+    tile = _tile(tmp_path / "t.laz", xyz, cls)
+    f = tmp_path / "f.gpkg"
+    world = shapely.transform(fps[0], lambda c: c + ORIGIN)
+    with pytest.warns(UserWarning, match="crs"):
+        pyogrio.raw.write(str(f), shapely.to_wkb(np.array([world], dtype=object)),
+                          [np.array(["F0"], dtype=object)], ["id"], geometry_type="Polygon")
+    res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(f), "-o",
+                              str(tmp_path / "o.city.json")])
+    assert res.exit_code == 0, res.output
+    assert "no CRS" in caplog.text and "Amersfoort" in caplog.text, caplog.text

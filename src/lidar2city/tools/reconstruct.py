@@ -308,10 +308,13 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
     outlines, repeated = set(), 0  # a footprint repeated exactly: two overlapping models
     while True:
-        part, _ = read_footprints(path, layer=layer, id_field=id_field, origin=frame.origin[:2],
-                                  xy_unit=frame.xy_unit, target_crs=frame.crs,
-                                  skip_features=len(all_ids), max_features=chunk,
-                                  unique_ids=False, with_fids=True)
+        part, src_crs = read_footprints(path, layer=layer, id_field=id_field,
+                                        origin=frame.origin[:2], xy_unit=frame.xy_unit,
+                                        target_crs=frame.crs, skip_features=len(all_ids),
+                                        max_features=chunk, unique_ids=False, with_fids=True)
+        if not all_ids and len(part) and src_crs is None and frame.crs is not None:
+            logger.warning("the footprints of %r have no CRS: taken to be in the input's (%s)",
+                           str(path), frame.crs.name)
         # the geometries only as far as "is there one": for the error when none is usable
         geoms += [None if g is None else True for g in part.geometries]
         notes += part.attributes.get("_note", [""] * len(part))
