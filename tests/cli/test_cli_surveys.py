@@ -221,3 +221,36 @@ def test_footprints_without_crs_are_said_to_be_taken_in_the_tiles(runner, tmp_pa
                               str(tmp_path / "o.city.json")])
     assert res.exit_code == 0, res.output
     assert "no CRS" in caplog.text and "Amersfoort" in caplog.text, caplog.text
+
+
+# --- a tile with a few stray returns kilometres away ------------------------------------------
+
+@pytest.mark.parametrize("command", ["classify", "ground"])
+def test_stray_far_points_do_not_stop_classify_or_ground(runner, tmp_path, command, caplog):
+    """Three returns 1000 km, 200 km and 30 km off the survey made the ground grid
+    10^12 cells: 'grid too large; use a larger cell size', which no cell size
+    fixes. They are left out as noise and the survey filtered as without them."""
+    import laspy
+
+    from lidar2city.cli.main import cli
+
+    xyz, cls, _ = _block_scene()
+    far = np.array([[1e6, 0, 5.0], [0, -2e5, 5.0], [3e4, 3e4, 5.0]]) + [*ORIGIN, 0]
+    clean = _tile(tmp_path / "clean.laz", xyz, np.ones(len(xyz)))
+    dirty = _tile(tmp_path / "dirty.laz", np.vstack([xyz, far]), np.ones(len(xyz) + 3))
+    outs = []
+    for t in (clean, dirty):
+        out = tmp_path / f"{t.stem}_out.laz"
+        dtm = ["--dtm", str(tmp_path / f"{t.stem}.tif")] if command == "ground" else []
+        res = runner.invoke(cli, [command, str(t), "-o", str(out), *dtm])
+        assert res.exit_code == 0, res.output
+        outs.append(np.asarray(laspy.read(out).classification))
+    assert np.array_equal(outs[0], outs[1][:-3])
+    assert (outs[1][-3:] == (7 if command == "classify" else 1)).all()
+    assert "3 point(s)" in caplog.text
+    if command == "ground":  # the DTM covers the survey only
+        from lidar2city.io.raster import read_raster
+
+        a, b = read_raster(tmp_path / "clean.tif"), read_raster(tmp_path / "dirty.tif")
+        assert a.array.shape == b.array.shape and a.transform == b.transform
+        assert np.allclose(a.array, b.array, atol=1e-6, equal_nan=True)
