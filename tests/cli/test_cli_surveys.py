@@ -254,3 +254,22 @@ def test_stray_far_points_do_not_stop_classify_or_ground(runner, tmp_path, comma
         a, b = read_raster(tmp_path / "clean.tif"), read_raster(tmp_path / "dirty.tif")
         assert a.array.shape == b.array.shape and a.transform == b.transform
         assert np.allclose(a.array, b.array, atol=1e-6, equal_nan=True)
+
+
+def test_stray_far_points_do_not_plan_a_block_per_empty_square_km(runner, tmp_path):
+    """Without footprints every cell of the tiles' header extent was a block: two stray
+    returns 1000 km off made 10^6 blocks (a run that never ends). A tile whose header
+    extent is almost empty is planned on the cells its points occupy."""
+    from lidar2city.cli.main import cli
+    from lidar2city.tools.reconstruct import plan_reconstruct
+
+    xyz, cls, _ = _block_scene()
+    far = np.array([[2e5, 0, 5.0], [0, -2e5, 5.0]]) + [*ORIGIN, 0]
+    dirty = _tile(tmp_path / "dirty.laz", np.vstack([xyz, far]), np.r_[cls, 1, 1])
+    out = tmp_path / "o.city.json"
+    plan = plan_reconstruct([str(dirty)], out, crs="EPSG:28992")
+    assert len(plan.specs) <= 3 * 9, len(plan.specs)
+    res = runner.invoke(cli, ["reconstruct", str(dirty), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    objs = json.loads(out.read_text())["CityObjects"]
+    assert [o["attributes"]["roof_height"] for o in objs.values()] == [pytest.approx(6.0, abs=0.1)]

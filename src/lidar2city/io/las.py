@@ -16,7 +16,7 @@ from ._atomic import atomic_path, check_input_file
 logger = logging.getLogger(__name__)
 
 __all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las",
-           "read_tile", "read_points", "scan_tiles", "check_header_bounds",
+           "read_tile", "read_points", "scan_tiles", "check_header_bounds", "occupied_cells",
            "with_neighbours",
            "write_las", "write_points", "POINT_ATTRIBUTES"]
 
@@ -249,6 +249,23 @@ def check_header_bounds(tiles, *, limit: int = 100) -> None:
                 f"{t.mins[1]:.2f}..{t.maxs[1]:.2f}, z {t.mins[2]:.2f}..{t.maxs[2]:.2f}) do not "
                 f"hold its points (first point {xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}): "
                 "rewrite the header (e.g. pdal translate or las2las) and run again")
+
+
+def occupied_cells(path, step: float) -> np.ndarray:
+    """``(col, row)`` of the cells of side ``step`` (CRS units, on the CRS origin) that
+    hold points of the tile ``path``, sorted, decoded chunk by chunk.
+
+    For tiles whose header box is nearly empty (a few stray returns far off):
+    the cells the points occupy, not every cell of the box.
+    """
+    import laspy
+
+    parts = [np.zeros((0, 2), dtype=np.int64)]
+    with _reading(path), laspy.open(path) as f:
+        for chunk in f.chunk_iterator(READ_CHUNK):
+            ij = np.floor(np.column_stack([np.asarray(chunk.x), np.asarray(chunk.y)]) / step)
+            parts.append(np.unique(ij.astype(np.int64), axis=0))
+    return np.unique(np.concatenate(parts), axis=0)
 
 
 class TileReader:
