@@ -273,3 +273,27 @@ def test_stray_far_points_do_not_plan_a_block_per_empty_square_km(runner, tmp_pa
     assert res.exit_code == 0, res.output
     objs = json.loads(out.read_text())["CityObjects"]
     assert [o["attributes"]["roof_height"] for o in objs.values()] == [pytest.approx(6.0, abs=0.1)]
+
+
+def test_stray_far_points_do_not_stop_rasterize_nor_thin_info(runner, tmp_path, caplog):
+    """rasterize asked for a 10^12-cell grid ('use a larger cell size'), and info gave a
+    density of 0.00 pts/m2: both now work on the survey, the strays said."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.raster import read_raster
+
+    xyz, cls, _ = _block_scene()
+    far = np.array([[1e6, 0, 5.0], [0, -2e5, 5.0]]) + [*ORIGIN, 0]
+    clean = _tile(tmp_path / "clean.laz", xyz, cls)
+    dirty = _tile(tmp_path / "dirty.laz", np.vstack([xyz, far]), np.r_[cls, 1, 1])
+    rasters, densities = [], []
+    for t in (clean, dirty):
+        out = tmp_path / f"{t.stem}.tif"
+        res = runner.invoke(cli, ["rasterize", str(t), "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        rasters.append(read_raster(out))
+        res = runner.invoke(cli, ["info", str(t), "--json"])
+        densities.append(json.loads(res.output)["density_pts_m2"])
+    assert rasters[0].transform == rasters[1].transform
+    assert np.allclose(rasters[0].array, rasters[1].array, equal_nan=True)
+    assert "2 point(s)" in caplog.text
+    assert densities[1] == pytest.approx(densities[0], rel=0.01) and densities[0] > 1

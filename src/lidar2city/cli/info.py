@@ -38,7 +38,9 @@ def command(file, crs, as_json):
     else:
         click.echo(f"  units    {info['xy_unit_m']:g} m per horizontal unit, "
                    f"{info['z_unit_m']:g} m per vertical unit")
-        click.echo(f"  density  {info['density_pts_m2']:.2f} pts/m2")
+        far = (f" ({info['far_points']:,} point(s) far from the rest left out)"
+               if info.get("far_points") else "")
+        click.echo(f"  density  {info['density_pts_m2']:.2f} pts/m2{far}")
     if info["classes"]:
         click.echo("  classes  " + ", ".join(
             f"{k} {ASPRS_NAMES.get(k, '?')}: {v:,}" for k, v in info["classes"].items()))

@@ -74,8 +74,14 @@ def las_info(path, *, crs=None) -> dict:
     if n:
         world = cloud.to_world(cloud.bounds.reshape(2, 3))
         out["bounds"] = [float(v) for v in world.ravel()]
-        if note is None:
-            out["density_pts_m2"] = round(point_density(cloud.xyz[:, :2]), 3)
+        if note is None:  # over the survey, not over its stray returns' extent
+            from ..classify.outliers import far_points
+
+            xy = cloud.xyz[:, :2]
+            far = far_points(xy)
+            out["density_pts_m2"] = round(point_density(xy[~far] if far.any() else xy), 3)
+            if far.any():
+                out["far_points"] = int(far.sum())
         cls = cloud.get("classification")
         if cls is not None:
             values, counts = np.unique(cls, return_counts=True)

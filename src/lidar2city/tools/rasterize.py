@@ -193,6 +193,13 @@ def rasterize_files(paths, output, *, product="dsm", cell=0.5, crs=None, ground=
                            "the raster without one")
         logger.warning("the input has no CRS: the raster will have none (cells and heights "
                        "taken as metres; pass --crs EPSG:xxxx to set one)")
+    from ..classify.outliers import far_points
+
+    far = far_points(cloud.xyz[:, :2])
+    if far.any():  # a few stray returns far away: the raster covers the survey
+        logger.warning("%d point(s) far from the rest of the survey left out of the raster",
+                       int(far.sum()))
+        cloud = cloud.subset(~far)
     res = rasterize_points(cloud, product=product, cell=cell, ground=ground, max_gap=max_gap)
     arr = res["array"]
     if product == "rgb":
