@@ -441,11 +441,14 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
 def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> None:
     """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
 
-    The LoD1.2 ground height is the floor. When no roof can be fitted the LoD1.2
-    prism stands in for LoD2.2 and ``lod22_fallback`` says why: every footprint
-    keeps a valid solid.
+    The LoD1.2 ground height is the floor. When no roof can be fitted, or the
+    roof fits its points worse than the LoD1.2 prism's by more than a step
+    (``2 * elevation_error``, :func:`lidar2city.lod.roofcheck.worse_than_prism`),
+    the LoD1.2 prism stands in for LoD2.2 and ``lod22_fallback`` says why: every
+    footprint keeps a valid solid, the better founded of the two.
     """
     from ..errors import AlgorithmError
+    from ..lod.roofcheck import worse_than_prism
     from ..roof.building import reconstruct_lod22
 
     ground_z = result.attributes.get("ground_height")
@@ -454,6 +457,12 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
                                 precision=precision)
     except AlgorithmError as exc:
         set_lod22(result, None, {}, str(exc))
+        return
+    lod12 = result.solids.get("1.2")
+    worse = "" if lod12 is None else worse_than_prism(
+        out.solids, lod12, building_xyz, margin=2.0 * config.elevation_error)
+    if worse:
+        set_lod22(result, None, {}, worse)
         return
     set_lod22(result, out.solids, out.attributes, precision=precision, checked=out.issues)
 
