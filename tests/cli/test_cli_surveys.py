@@ -297,3 +297,35 @@ def test_stray_far_points_do_not_stop_rasterize_nor_thin_info(runner, tmp_path, 
     assert np.allclose(rasters[0].array, rasters[1].array, equal_nan=True)
     assert "2 point(s)" in caplog.text
     assert densities[1] == pytest.approx(densities[0], rel=0.01) and densities[0] > 1
+
+
+def test_tile_without_crs_and_footprints_in_degrees_asks_for_the_tiles_crs(runner, tmp_path):
+    """A tile without a CRS takes its footprints' CRS: footprints in EPSG:4326 made the
+    tile 'geographic' and the error said to reproject the points, which are in metres.
+    Ask for the tiles' CRS instead (the footprints are then reprojected onto it)."""
+    from pyproj import Transformer
+
+    from lidar2city.cli.main import cli
+
+    xyz, cls, fps = _block_scene()
+    tile = _tile(tmp_path / "t.laz", xyz, cls, crs=None)
+    tr = Transformer.from_crs(28992, 4326, always_xy=True)
+    import shapely
+
+    deg = shapely.transform(fps[0], lambda c: np.column_stack(
+        tr.transform(c[:, 0] + ORIGIN[0], c[:, 1] + ORIGIN[1])))
+    f = tmp_path / "f.gpkg"
+    import pyogrio.raw
+
+    pyogrio.raw.write(str(f), shapely.to_wkb(np.array([deg], dtype=object)),
+                      [np.array(["F0"], dtype=object)], ["id"], geometry_type="Polygon",
+                      crs="EPSG:4326")
+    out = tmp_path / "o.city.json"
+    line = _error_line(runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(f),
+                                           "-o", str(out)]))
+    assert "--crs" in line and "footprints" in line and "reproject the points" not in line, line
+    res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(f), "-o", str(out),
+                              "--crs", "EPSG:28992"])
+    assert res.exit_code == 0, res.output
+    b = json.loads(out.read_text())["CityObjects"]["F0"]["attributes"]
+    assert b["roof_height"] == pytest.approx(6.0, abs=0.05)

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import EmptyInputError, InputError
+from ..errors import CRSError, EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -1039,6 +1039,12 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         from ..io.vector import vector_crs
 
         fp_crs = vector_crs(footprints, layer=layer)
+        if fp_crs is not None and (fp_crs.is_geographic or fp_crs.is_compound
+                                   and fp_crs.sub_crs_list[0].is_geographic):
+            # points in degrees cannot be modelled: the tiles' CRS is another one
+            raise CRSError(f"the input has no CRS and its footprints' ({fp_crs.name}) is "
+                           "geographic: pass --crs EPSG:xxxx, the tiles' CRS (the footprints "
+                           "are reprojected onto it)")
         if fp_crs is not None:
             logger.warning("the input has no CRS: taking the footprints' (%s; pass --crs "
                            "EPSG:xxxx to choose one)", fp_crs.name)
