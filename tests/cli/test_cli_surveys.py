@@ -330,3 +330,34 @@ def test_tile_without_crs_and_footprints_in_degrees_asks_for_the_tiles_crs(runne
     assert res.exit_code == 0, res.output
     b = json.loads(out.read_text())["CityObjects"]["F0"]["attributes"]
     assert b["roof_height"] == pytest.approx(6.0, abs=0.05)
+
+
+def test_evaluate_footprints_against_a_reference_in_degrees(runner, tmp_path):
+    """reconstruct reprojects footprints in EPSG:4326, evaluate footprints refused a
+    reference in degrees; it now scores in the prediction's projected CRS, as with the
+    same reference in metres."""
+    import pyogrio.raw
+    import shapely
+    from pyproj import Transformer
+
+    from lidar2city.cli.main import cli
+
+    ref = [box(0, 0, 10, 10), box(20, 0, 30, 10)]
+    pred = [box(1, 0, 11, 10), box(40, 40, 45, 45)]
+    _footprints(tmp_path / "pred.gpkg", pred)
+    _footprints(tmp_path / "ref.gpkg", ref)
+    tr = Transformer.from_crs(28992, 4326, always_xy=True)
+    deg = [shapely.transform(g, lambda c: np.column_stack(
+        tr.transform(c[:, 0] + ORIGIN[0], c[:, 1] + ORIGIN[1]))) for g in ref]
+    pyogrio.raw.write(str(tmp_path / "ref4326.gpkg"), shapely.to_wkb(np.array(deg, dtype=object)),
+                      [np.array(["a", "b"], dtype=object)], ["id"], geometry_type="Polygon",
+                      crs="EPSG:4326")
+    reps = []
+    for r in ("ref.gpkg", "ref4326.gpkg"):
+        res = runner.invoke(cli, ["evaluate", "footprints", str(tmp_path / "pred.gpkg"),
+                                  "--reference", str(tmp_path / r), "--json"])
+        assert res.exit_code == 0, res.output
+        reps.append(json.loads(res.output))
+    # the round trip through degrees moves vertices by millimetres
+    assert reps[1]["area"]["quality"] == pytest.approx(reps[0]["area"]["quality"], abs=1e-3)
+    assert reps[1]["objects"]["matched"] == reps[0]["objects"]["matched"] == 1
