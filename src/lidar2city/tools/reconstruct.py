@@ -976,7 +976,7 @@ def _version():
     return __version__
 
 
-def check_area(reader) -> None:
+def _check_area(reader) -> None:
     """Raise :class:`EmptyInputError` when the tiles' points cover no area.
 
     One point, or points on a line, hold no building: say so before any
@@ -1050,7 +1050,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            "EPSG:xxxx to choose one)", fp_crs.name)
             tiles = scan_tiles(inputs, crs=fp_crs)
     reader = TileReader(tiles)
-    check_area(reader)
+    _check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
     classified = reader.has_classes(cfg.building_classes)
