@@ -63,7 +63,8 @@ def unit_factors(crs) -> tuple[float, float]:
     if crs.is_geographic and not crs.is_compound:
         raise CRSError(
             f"CRS {crs.name!r} is geographic (degrees); lidar2city needs a projected CRS in "
-            "metres or feet: reproject the data or pass --crs"
+            "metres or feet: reproject the points (e.g. PDAL filters.reprojection; --crs only "
+            "relabels them)"
         )
     if crs.is_compound:
         horizontal, vertical = crs.sub_crs_list[0], crs.sub_crs_list[-1]

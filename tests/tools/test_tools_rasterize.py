@@ -105,6 +105,57 @@ def test_cli_rasterize(runner, tmp_path):
         assert not bad.exists()
 
 
+def test_cli_rasterize_a_tile_without_crs(runner, tmp_path, caplog):
+    """A tile without a CRS (AHN, a local survey): refused in one line naming both ways
+    out; --no-crs writes the raster without one, with a warning; --crs sets it."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.io.raster import read_raster
+
+    c = _block()
+    write_points(tmp_path / "t.laz", PointCloud(c.xyz, origin=c.origin, crs=None,
+                                                attributes=c.attributes))
+    out = tmp_path / "dsm.tif"
+    res = runner.invoke(cli, ["rasterize", str(tmp_path / "t.laz"), "-o", str(out)])
+    assert res.exit_code != 0 and not out.exists()
+    line = res.output.strip()
+    assert len(line.splitlines()) == 1 and "--crs" in line and "--no-crs" in line, res.output
+    res = runner.invoke(cli, ["rasterize", str(tmp_path / "t.laz"), "-o", str(out), "--no-crs"])
+    assert res.exit_code == 0, res.output
+    assert "no CRS" in caplog.text  # the warning
+    r = read_raster(out)
+    assert r.crs is None and np.nanmax(r.array) == pytest.approx(7.0)
+    res = runner.invoke(cli, ["rasterize", str(tmp_path / "t.laz"), "-o", str(out),
+                              "--crs", "EPSG:28992"])
+    assert res.exit_code == 0 and read_raster(out).crs.to_epsg() == 28992
+    res = runner.invoke(cli, ["rasterize", str(tmp_path / "t.laz"), "-o", str(out),
+                              "--crs", "EPSG:28992", "--no-crs"])
+    assert res.exit_code != 0 and "--no-crs" in res.output
+
+
+def test_a_compound_crs_is_written_by_its_code(runner, tmp_path):
+    """EPSG:7415 (RD New + NAP height) was written from its WKT, which GDAL stored as
+    RD New + a vertical datum named 'Ibiza' with no EPSG code: a GIS read the heights
+    on the wrong datum. A CRS with an EPSG code is written by its code."""
+    import rasterio
+    from pyproj import CRS as PCRS
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+
+    c = _block()
+    write_points(tmp_path / "t.laz", PointCloud(c.xyz, origin=c.origin, crs=None,
+                                                attributes=c.attributes))
+    out = tmp_path / "dsm.tif"
+    res = runner.invoke(cli, ["rasterize", str(tmp_path / "t.laz"), "-o", str(out),
+                              "--crs", "EPSG:7415"])
+    assert res.exit_code == 0, res.output
+    with rasterio.open(out) as ds:
+        assert ds.crs.to_epsg() == 7415
+        crs = PCRS.from_wkt(ds.crs.to_wkt(version="WKT2_2019"))
+    assert crs.sub_crs_list[1].datum.name == "Normaal Amsterdams Peil"
+
+
 @pytest.mark.slow
 def test_delft_dsm_equals_the_shared_one(data, tmp_path):
     from lidar2city.io.raster import read_raster

@@ -29,12 +29,18 @@ def command(file, crs, as_json):
     click.echo(f"  points   {info['points']:,}")
     if info["bounds"]:
         b = info["bounds"]
-        click.echo(f"  bounds   x {b[0]:.2f} .. {b[3]:.2f}   y {b[1]:.2f} .. {b[4]:.2f}   "
-                   f"z {b[2]:.2f} .. {b[5]:.2f}")
+        xy = 7 if info.get("note") else 2  # degrees: 1e-7 is about a centimetre
+        click.echo(f"  bounds   x {b[0]:.{xy}f} .. {b[3]:.{xy}f}   y {b[1]:.{xy}f} .. "
+                   f"{b[4]:.{xy}f}   z {b[2]:.2f} .. {b[5]:.2f}")
     click.echo(f"  crs      {info['crs_name'] or 'none (pass --crs)'}")
-    click.echo(f"  units    {info['xy_unit_m']:g} m per horizontal unit, "
-               f"{info['z_unit_m']:g} m per vertical unit")
-    click.echo(f"  density  {info['density_pts_m2']:.2f} pts/m2")
+    if info.get("note"):
+        click.echo(f"  units    degrees: {info['note']}")
+    else:
+        click.echo(f"  units    {info['xy_unit_m']:g} m per horizontal unit, "
+                   f"{info['z_unit_m']:g} m per vertical unit")
+        far = (f" ({info['far_points']:,} point(s) far from the rest left out)"
+               if info.get("far_points") else "")
+        click.echo(f"  density  {info['density_pts_m2']:.2f} pts/m2{far}")
     if info["classes"]:
         click.echo("  classes  " + ", ".join(
             f"{k} {ASPRS_NAMES.get(k, '?')}: {v:,}" for k, v in info["classes"].items()))

@@ -24,7 +24,10 @@ PRODUCTS = ("dsm", "dtm", "ndsm", "intensity", "rgb")  # keys of tools.rasterize
               show_default="none: all filled from the nearest",
               help="Empty cells farther than this (m) from a filled one stay nodata.")
 @crs_option
-def command(inputs, output, product, cell, ground, max_gap, crs):
+@click.option("--no-crs", "allow_no_crs", is_flag=True,
+              help="Tiles without a CRS and no --crs: write the raster without one (cells and "
+                   "heights taken as metres) instead of stopping.")
+def command(inputs, output, product, cell, ground, max_gap, crs, allow_no_crs):
     """Grid the points of INPUTS (tiles of one area) into one GeoTIFF product."""
     from ..tools.rasterize import rasterize_files
 
@@ -34,7 +37,7 @@ def command(inputs, output, product, cell, ground, max_gap, crs):
     if max_gap is not None and not max_gap >= 0:
         raise click.BadParameter("must be >= 0", param_hint="--max-gap")
     s = rasterize_files(list(inputs), output, product=product, cell=cell, crs=crs, ground=ground,
-                        max_gap=max_gap)
+                        max_gap=max_gap, allow_no_crs=allow_no_crs)
     h, w = s["shape"]
     extra = f", ground from {s['ground']}" if s["ground"] else ""
     click.echo(f"{output}: {product} {w} x {h} cells of {cell:g} m from {s['points']:,} points{extra}",

@@ -16,7 +16,7 @@ from ._atomic import atomic_path, check_input_file
 logger = logging.getLogger(__name__)
 
 __all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las",
-           "read_tile", "read_points", "scan_tiles",
+           "read_tile", "read_points", "scan_tiles", "check_header_bounds", "occupied_cells",
            "with_neighbours",
            "write_las", "write_points", "POINT_ATTRIBUTES"]
 
@@ -223,6 +223,49 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     if not allow_empty and not any(t.count for t in out):
         raise EmptyInputError("the input files hold no points")
     return out
+
+
+def check_header_bounds(tiles, *, limit: int = 100) -> None:
+    """Raise :class:`FileFormatError` naming a tile whose first point lies outside its
+    header's bounds.
+
+    Planning trusts the headers (no point is read), so a header whose bounds are
+    wrong hides its tile: a run would find no footprint over it, or no building.
+    Reading a point costs a LAZ chunk's decoding (~10 ms), so this is for the
+    paths where a run found nothing, and looks at the first ``limit`` tiles.
+    """
+    import laspy
+
+    for t in [t for t in tiles if t.count][:limit]:
+        with _reading(t.path), laspy.open(t.path) as f:
+            pts = f.read_points(1)
+            if not len(pts):
+                continue
+            xyz = np.array([float(pts.x[0]), float(pts.y[0]), float(pts.z[0])])
+            tol = np.asarray(f.header.scales, dtype=np.float64)
+        if np.any(xyz < t.mins - tol) or np.any(xyz > t.maxs + tol):
+            raise FileFormatError(
+                f"{t.path!r}: its header's bounds (x {t.mins[0]:.2f}..{t.maxs[0]:.2f}, y "
+                f"{t.mins[1]:.2f}..{t.maxs[1]:.2f}, z {t.mins[2]:.2f}..{t.maxs[2]:.2f}) do not "
+                f"hold its points (first point {xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}): "
+                "rewrite the header (e.g. pdal translate or las2las) and run again")
+
+
+def occupied_cells(path, step: float) -> np.ndarray:
+    """``(col, row)`` of the cells of side ``step`` (CRS units, on the CRS origin) that
+    hold points of the tile ``path``, sorted, decoded chunk by chunk.
+
+    For tiles whose header box is nearly empty (a few stray returns far off):
+    the cells the points occupy, not every cell of the box.
+    """
+    import laspy
+
+    parts = [np.zeros((0, 2), dtype=np.int64)]
+    with _reading(path), laspy.open(path) as f:
+        for chunk in f.chunk_iterator(READ_CHUNK):
+            ij = np.floor(np.column_stack([np.asarray(chunk.x), np.asarray(chunk.y)]) / step)
+            parts.append(np.unique(ij.astype(np.int64), axis=0))
+    return np.unique(np.concatenate(parts), axis=0)
 
 
 class TileReader:

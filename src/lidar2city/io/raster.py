@@ -152,6 +152,20 @@ def check_same_grid(ref: Raster, other: Raster, what) -> None:
         raise InputError(f"{what} is in {other.crs.name}, the DSM in {ref.crs.name}")
 
 
+def _gdal_crs(crs):
+    """The CRS as GDAL should get it: ``EPSG:code`` when it is one, else its WKT.
+
+    From the WKT of a compound CRS (EPSG:7415, RD New + NAP height) GDAL writes
+    GeoTIFF keys that read back as a vertical datum named 'Ibiza' and no code.
+    """
+    if crs is None:
+        return None
+    auth = crs.to_authority(min_confidence=100)
+    if auth is not None and auth[0] == "EPSG":
+        return f"EPSG:{auth[1]}"
+    return crs.to_wkt()
+
+
 def write_raster(path, raster: Raster, *, nodata=-9999.0, dtype="float32") -> None:
     """Write a raster as a tiled, deflate-compressed GeoTIFF (temp name, then rename).
 
@@ -173,7 +187,7 @@ def write_raster(path, raster: Raster, *, nodata=-9999.0, dtype="float32") -> No
     profile = {
         "driver": "GTiff", "height": h, "width": w, "count": out.shape[0], "dtype": dtype,
         "transform": raster.transform, "nodata": nodata, "compress": "deflate",
-        "crs": raster.crs.to_wkt() if raster.crs is not None else None,
+        "crs": _gdal_crs(raster.crs),
     }
     if h >= 256 and w >= 256:
         profile.update(tiled=True, blockxsize=256, blockysize=256)

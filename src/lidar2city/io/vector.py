@@ -214,6 +214,10 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         raw = _read_ogr(p, layer=layer, bbox=bbox, fids=fids, skip_features=skip_features,
                         max_features=max_features)
     meta, fids, wkb, field_data = raw
+    if wkb is None and not meta.get("geometry_type"):
+        raise FileFormatError(
+            f"{str(p)!r} has no geometry: footprints are polygons (GeoPackage, Shapefile, "
+            "GeoJSON, FlatGeobuf, or a CSV with a WKT column)")
     n = len(wkb) if wkb is not None else 0
     if n == 0:
         if skip_features or max_features is not None:

@@ -153,18 +153,62 @@ def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: flo
     return specs
 
 
+#: points per square metre of a tile's header box under which the box is taken
+#: to be blown up by stray returns: its blocks are the cells its points occupy
+SPARSE_HEADER_DENSITY = 1e-3
+
+
 def traced_blocks(tiles, frame: Frame, world_bounds, block_size: float, buffer: float) -> list:
     """Specs of every cell of the tiles' extent, row by row, to trace footprints in
-    (the cell plus ``buffer`` metres is read; those centred in the cell are kept)."""
+    (the cell plus ``buffer`` metres is read; those centred in the cell are kept).
+
+    A tile whose header box spans several cells with fewer than
+    :data:`SPARSE_HEADER_DENSITY` points per square metre (a few stray returns
+    kilometres off) gives only the cells its points occupy and their neighbours
+    (its points are read for this), not every cell of its box.
+    """
     step = block_size / frame.xy_unit
     k0 = np.floor(np.asarray(world_bounds[:2]) / step).astype(np.int64)
     k1 = np.floor(np.asarray(world_bounds[2:]) / step).astype(np.int64)
     pad = buffer / frame.xy_unit
+    cells = _sparse_cells(tiles, frame, step)
+    if cells is None:
+        cells = ((row, col) for row in range(k0[1], k1[1] + 1) for col in range(k0[0], k1[0] + 1))
     specs = []
-    for row in range(k0[1], k1[1] + 1):
-        for col in range(k0[0], k1[0] + 1):
-            world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
-                     (row + 1) * step + pad)
-            specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
-                                   _tiles_meeting(tiles, world), frame))
+    for row, col in cells:
+        world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
+                 (row + 1) * step + pad)
+        specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
+                               _tiles_meeting(tiles, world), frame))
     return specs
+
+
+def _sparse_cells(tiles, frame, step):
+    """``(row, col)`` of the cells to trace when a tile's header box is nearly empty, in
+    row order; None when no tile is (every cell of the extent is traced)."""
+    from ..io.las import occupied_cells
+
+    def box_cells(t):
+        lo = np.floor(np.asarray(t.mins[:2]) / step).astype(np.int64)
+        hi = np.floor(np.asarray(t.maxs[:2]) / step).astype(np.int64)
+        return lo, hi
+
+    full = [t for t in tiles if t.count]
+    sparse = []
+    for t in full:
+        lo, hi = box_cells(t)
+        area = float(np.prod((np.asarray(t.maxs[:2]) - t.mins[:2]) * frame.xy_unit))
+        if np.prod(hi - lo + 1) > 4 and t.count < SPARSE_HEADER_DENSITY * area:
+            sparse.append(t)
+    if not sparse:
+        return None
+    cells = set()
+    for t in full:
+        if any(t is u for u in sparse):
+            near = occupied_cells(t.path, step)
+            ring = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+            cells.update(map(tuple, (near[:, None, :] + ring[None]).reshape(-1, 2)[:, ::-1]))
+        else:
+            lo, hi = box_cells(t)
+            cells.update((r, c) for r in range(lo[1], hi[1] + 1) for c in range(lo[0], hi[0] + 1))
+    return sorted((int(r), int(c)) for r, c in cells)

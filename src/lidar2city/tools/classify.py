@@ -50,8 +50,17 @@ def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str 
     ``classify``, ``footprints`` and ``reconstruct`` run on a raw tile.
     """
     from ..classify import classify_points
+    from ..classify.outliers import far_points
 
     cfg = config if config is not None else classify_config(None)
+    far = far_points(cloud.xyz[:, :2])
+    if far.any():  # stray returns far away: noise, and the survey classified without them
+        logger.warning("%d point(s) far from the rest of the survey: classified noise (7)",
+                       int(far.sum()))
+        out = np.full(len(cloud), ASPRS.NOISE, dtype=np.uint8)
+        out[~far] = classify_cloud(cloud.subset(~far), ground_from_file=ground_from_file,
+                                   ground_method=ground_method, config=cfg)
+        return out
     ground = _ground(cloud, ground_from_file=ground_from_file, method=ground_method)
     rgb = None
     if all(k in cloud.attributes for k in ("red", "green", "blue")):

@@ -148,12 +148,22 @@ def evaluate_footprints(pred_path, ref_path, *, crs=None, min_iou: float = 0.5,
     user_crs = parse_crs(crs)
     ref, ref_crs = _read(ref_path, crs=None, target_crs=None)
     ref_crs = ref_crs or user_crs
+    if ref_crs is not None and ref_crs.is_geographic:
+        # a reference in degrees: scored in the prediction's projected CRS, onto which
+        # it is reprojected (as reconstruct reprojects footprints)
+        from ..io.vector import vector_crs
+
+        pred_crs = vector_crs(pred_path) or user_crs
+        if pred_crs is not None and not pred_crs.is_geographic:
+            ref, _ = _read(ref_path, crs=None, target_crs=pred_crs)
+            ref_crs = pred_crs
     pred, pred_crs = _read(pred_path, crs=user_crs, target_crs=ref_crs)
     if (pred_crs is None) != (ref_crs is None) and user_crs is None:
         logger.warning("one input has no CRS: assuming both are in %s",
                        (ref_crs or pred_crs).name)
     if ref_crs is not None and ref_crs.is_geographic:
-        raise CRSError("the reference is in geographic coordinates; reproject it to a projected CRS")
+        raise CRSError("the reference and the prediction are in geographic coordinates; "
+                       "reproject one to a projected CRS")
     r = [g for g in ref.geometries if g is not None]
     p = [g for g in pred.geometries if g is not None]
     if not r:

@@ -200,6 +200,9 @@ def footprints_on_tiles(inputs, output, *, crs=None, config=None, block_size=100
     polygons = [p for b in blocks for p in b.polygons]
     rows = [f for b in blocks for f in b.fields]
     if not polygons:
+        from ..io.las import check_header_bounds
+
+        check_header_bounds(tiles)  # blocks are planned on the headers' bounds
         raise InputError("no building footprint found (all regions below min_area?)")
     import shapely
 

@@ -83,6 +83,7 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     InputError
         NaN coordinates, bad options.
     """
+    from ..classify.outliers import far_points
     from ..ground import dtm_from_ground, ground_mask
     from ..io.las import read_las, with_neighbours
 
@@ -92,7 +93,15 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     cloud = tile.point_cloud()
     cloud.require_points(repr(tile.path))
     wide = with_neighbours(cloud, neighbours, buffer=buffer, crs=crs)
-    mask = ground_mask(wide.xyz, method=cfg.method, **cfg.method_params())[:len(cloud)]
+    far = far_points(wide.xyz[:, :2])
+    if far.any():  # stray returns far away: not ground, and the survey filtered without them
+        logger.warning("%d point(s) far from the survey left out of the ground filter "
+                       "(class 1)", int(far.sum()))
+        mask = np.zeros(len(wide), dtype=bool)
+        mask[~far] = ground_mask(wide.xyz[~far], method=cfg.method, **cfg.method_params())
+        mask = mask[:len(cloud)]
+    else:
+        mask = ground_mask(wide.xyz, method=cfg.method, **cfg.method_params())[:len(cloud)]
     n_ground = int(mask.sum())
     if n_ground == 0:
         raise EmptyInputError(f"{tile.path!r}: no ground point found (method {cfg.method})")
@@ -105,7 +114,9 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
         if cloud.crs is None:
             logger.warning("%s has no CRS: the DTM is written without one (pass --crs)",
                            tile.path)
-        dtm = dtm_from_ground(cloud.xyz, mask, cell=cfg.dtm_cell)
+        near = ~far[:len(cloud)]  # the DTM covers the survey, not its stray returns
+        dtm = (dtm_from_ground(cloud.xyz[near], mask[near], cell=cfg.dtm_cell) if far.any()
+               else dtm_from_ground(cloud.xyz, mask, cell=cfg.dtm_cell))
         write_raster(dtm_path, Raster(dtm.world_heights(cloud.origin[2], cloud.z_unit),
                                       dtm.world_transform(cloud.origin, cloud.xy_unit), cloud.crs))
         summary.update(dtm_shape=list(dtm.shape), dtm_cell=cfg.dtm_cell)

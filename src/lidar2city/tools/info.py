@@ -36,11 +36,24 @@ def point_density(xy, *, cell=None) -> float:
 
 
 def las_info(path, *, crs=None) -> dict:
-    """Points, bounds, CRS, units, density, classes and returns of a LAS/LAZ file."""
+    """Points, bounds, CRS, units, density, classes and returns of a LAS/LAZ file.
+
+    A file in a geographic CRS (degrees), which the other commands refuse, is
+    described too: bounds in degrees, no units or density, and ``note`` says why.
+    """
+    from ..crs import unit_factors
+    from ..errors import CRSError
+    from ..io.las import LasTile
+
     tile = read_las(path, crs=crs)
     las = tile.data
     header = las.header
-    cloud = tile.point_cloud()
+    note = None
+    try:
+        unit_factors(tile.crs)
+    except CRSError as exc:  # degrees: described in its own units, not used
+        note = str(exc)
+    cloud = (tile if note is None else LasTile(tile.path, las, None)).point_cloud()
     n = len(cloud)
     out = {
         "path": tile.path,
@@ -56,10 +69,19 @@ def las_info(path, *, crs=None) -> dict:
         "classes": {},
         "returns": {},
     }
+    if note is not None:
+        out.update(xy_unit_m=None, z_unit_m=None, density_pts_m2=None, note=note)
     if n:
         world = cloud.to_world(cloud.bounds.reshape(2, 3))
         out["bounds"] = [float(v) for v in world.ravel()]
-        out["density_pts_m2"] = round(point_density(cloud.xyz[:, :2]), 3)
+        if note is None:  # over the survey, not over its stray returns' extent
+            from ..classify.outliers import far_points
+
+            xy = cloud.xyz[:, :2]
+            far = far_points(xy)
+            out["density_pts_m2"] = round(point_density(xy[~far] if far.any() else xy), 3)
+            if far.any():
+                out["far_points"] = int(far.sum())
         cls = cloud.get("classification")
         if cls is not None:
             values, counts = np.unique(cls, return_counts=True)

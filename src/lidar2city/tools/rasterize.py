@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from ..datamodel import ASPRS
-from ..errors import EmptyInputError, InputError
+from ..errors import CRSError, EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -146,7 +146,7 @@ def rasterize_points(cloud, *, product="dsm", cell=0.5, ground="auto", max_gap=N
 
 
 def rasterize_files(paths, output, *, product="dsm", cell=0.5, crs=None, ground="auto",
-                    max_gap=None) -> dict:
+                    max_gap=None, allow_no_crs=False) -> dict:
     """Read LAS/LAZ tiles as one area and write one product as a GeoTIFF.
 
     Parameters
@@ -158,7 +158,13 @@ def rasterize_files(paths, output, *, product="dsm", cell=0.5, crs=None, ground=
         Heights and intensity are float32 with nodata -9999; colour is
         uint16 with nodata 0.
     crs : str, optional
-        Supplies or overrides the tiles' CRS; a CRS is required.
+        Supplies or overrides the tiles' CRS; a CRS is required unless
+        ``allow_no_crs``.
+    allow_no_crs : bool
+        Tiles without a CRS (and no ``crs``) give a raster without one, with a
+        warning (cells and heights taken as metres), instead of a
+        :class:`CRSError`: a raster is read into other tools, which would
+        otherwise place it nowhere without telling.
     product, cell, ground, max_gap
         See :func:`rasterize_points`.
 
@@ -178,7 +184,22 @@ def rasterize_files(paths, output, *, product="dsm", cell=0.5, crs=None, ground=
     t0 = time.perf_counter()
     if product not in PRODUCTS:
         raise InputError(f"product must be one of {', '.join(PRODUCTS)}, got {product!r}")
-    cloud = read_points(paths, crs=crs, require_crs=True)
+    if allow_no_crs and crs is not None:
+        raise InputError("--crs and --no-crs exclude each other")
+    cloud = read_points(paths, crs=crs)
+    if cloud.crs is None:
+        if not allow_no_crs:
+            raise CRSError("the input has no CRS: pass --crs EPSG:xxxx, or --no-crs to write "
+                           "the raster without one")
+        logger.warning("the input has no CRS: the raster will have none (cells and heights "
+                       "taken as metres; pass --crs EPSG:xxxx to set one)")
+    from ..classify.outliers import far_points
+
+    far = far_points(cloud.xyz[:, :2])
+    if far.any():  # a few stray returns far away: the raster covers the survey
+        logger.warning("%d point(s) far from the rest of the survey left out of the raster",
+                       int(far.sum()))
+        cloud = cloud.subset(~far)
     res = rasterize_points(cloud, product=product, cell=cell, ground=ground, max_gap=max_gap)
     arr = res["array"]
     if product == "rgb":

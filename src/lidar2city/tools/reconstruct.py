@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import EmptyInputError, InputError
+from ..errors import CRSError, EmptyInputError, InputError
 
 logger = logging.getLogger(__name__)
 
@@ -308,10 +308,13 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
     outlines, repeated = set(), 0  # a footprint repeated exactly: two overlapping models
     while True:
-        part, _ = read_footprints(path, layer=layer, id_field=id_field, origin=frame.origin[:2],
-                                  xy_unit=frame.xy_unit, target_crs=frame.crs,
-                                  skip_features=len(all_ids), max_features=chunk,
-                                  unique_ids=False, with_fids=True)
+        part, src_crs = read_footprints(path, layer=layer, id_field=id_field,
+                                        origin=frame.origin[:2], xy_unit=frame.xy_unit,
+                                        target_crs=frame.crs, skip_features=len(all_ids),
+                                        max_features=chunk, unique_ids=False, with_fids=True)
+        if not all_ids and len(part) and src_crs is None and frame.crs is not None:
+            logger.warning("the footprints of %r have no CRS: taken to be in the input's (%s)",
+                           str(path), frame.crs.name)
         # the geometries only as far as "is there one": for the error when none is usable
         geoms += [None if g is None else True for g in part.geometries]
         notes += part.attributes.get("_note", [""] * len(part))
@@ -438,11 +441,14 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
 def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> None:
     """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
 
-    The LoD1.2 ground height is the floor. When no roof can be fitted the LoD1.2
-    prism stands in for LoD2.2 and ``lod22_fallback`` says why: every footprint
-    keeps a valid solid.
+    The LoD1.2 ground height is the floor. When no roof can be fitted, or the
+    roof fits its points worse than the LoD1.2 prism's by more than a step
+    (``2 * elevation_error``, :func:`lidar2city.lod.roofcheck.worse_than_prism`),
+    the LoD1.2 prism stands in for LoD2.2 and ``lod22_fallback`` says why: every
+    footprint keeps a valid solid, the better founded of the two.
     """
     from ..errors import AlgorithmError
+    from ..lod.roofcheck import worse_than_prism
     from ..roof.building import reconstruct_lod22
 
     ground_z = result.attributes.get("ground_height")
@@ -451,6 +457,12 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
                                 precision=precision)
     except AlgorithmError as exc:
         set_lod22(result, None, {}, str(exc))
+        return
+    lod12 = result.solids.get("1.2")
+    worse = "" if lod12 is None else worse_than_prism(
+        out.solids, lod12, building_xyz, margin=2.0 * config.elevation_error)
+    if worse:
+        set_lod22(result, None, {}, worse)
         return
     set_lod22(result, out.solids, out.attributes, precision=precision, checked=out.issues)
 
@@ -860,6 +872,10 @@ class InOrder:
     def check(self) -> None:
         """Raise when the run found no building point at all."""
         if not self.points:
+            from ..io.las import check_header_bounds
+
+            # blocks are planned on the headers' bounds: a wrong one hides its points
+            check_header_bounds({t.path: t for s in self.plan.specs for t in s.tiles}.values())
             raise EmptyInputError("no building point found in the input, even after "
                                   "classification" if not self.plan.traced
                                   else "no building footprint found in the points")
@@ -960,6 +976,19 @@ def _version():
     return __version__
 
 
+def _check_area(reader) -> None:
+    """Raise :class:`EmptyInputError` when the tiles' points cover no area.
+
+    One point, or points on a line, hold no building: say so before any
+    footprint is matched against the extent (which would blame the CRSs).
+    """
+    wb = reader.world_bounds()
+    size = (wb[2:] - wb[:2]) * reader.xy_unit
+    if not (size > 0).all():
+        raise EmptyInputError(f"the input's {reader.count} point(s) cover {size[0]:.1f} m x "
+                              f"{size[1]:.1f} m: no area to reconstruct buildings in")
+
+
 @dataclass(eq=False)
 class ReconstructPlan:
     """A planned run: the ordered block specs, the options every block gets, the output's frame."""
@@ -981,7 +1010,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
 
     Keywords as :func:`reconstruct`.
     """
-    from ..io.las import TileReader, scan_tiles
+    from ..io.las import TileReader, check_header_bounds, scan_tiles
     from .blocks import FootprintRef, Frame, footprint_blocks, traced_blocks
     from .task import BlockOptions
 
@@ -1010,11 +1039,18 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         from ..io.vector import vector_crs
 
         fp_crs = vector_crs(footprints, layer=layer)
+        if fp_crs is not None and (fp_crs.is_geographic or fp_crs.is_compound
+                                   and fp_crs.sub_crs_list[0].is_geographic):
+            # points in degrees cannot be modelled: the tiles' CRS is another one
+            raise CRSError(f"the input has no CRS and its footprints' ({fp_crs.name}) is "
+                           "geographic: pass --crs EPSG:xxxx, the tiles' CRS (the footprints "
+                           "are reprojected onto it)")
         if fp_crs is not None:
             logger.warning("the input has no CRS: taking the footprints' (%s; pass --crs "
                            "EPSG:xxxx to choose one)", fp_crs.name)
             tiles = scan_tiles(inputs, crs=fp_crs)
     reader = TileReader(tiles)
+    _check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
     classified = reader.has_classes(cfg.building_classes)
@@ -1056,8 +1092,12 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         wb = reader.world_bounds()
         lo = (wb[:2] - reader.origin[:2]) * reader.xy_unit
         hi = (wb[2:] - reader.origin[:2]) * reader.xy_unit
-        fids, ids, bounds = index_footprints(footprints, frame, id_field=id_field, layer=layer,
-                                             extent=(*lo, *hi))
+        try:
+            fids, ids, bounds = index_footprints(footprints, frame, id_field=id_field,
+                                                 layer=layer, extent=(*lo, *hi))
+        except EmptyInputError:
+            check_header_bounds(tiles)  # the extent is the headers': are they right?
+            raise
 
         def ref(idx):
             return FootprintRef(str(footprints), layer, id_field, tuple(fids[i] for i in idx),

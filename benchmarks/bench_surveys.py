@@ -1,0 +1,137 @@
+"""Surveys unlike Delft, made from it: does reconstruct give the same buildings?
+
+Usage: ``PYTHONPATH=src python benchmarks/bench_surveys.py [DATA_DIR]``
+
+A 100 m x 120 m crop of the Delft AHN3 tile (x 84880-84980, y 447480-447600)
+and the 78 BGT footprints wholly inside it are written again as other surveys
+would deliver them: LAS 1.4 point formats 6 / 7 / 8, extra-bytes dimensions,
+a 0.01 scale, z + 1000 m (a mountain town), coordinates near 0 and near 1e7
+(footprints moved with them), a few stray returns 1000 km off, and thinned at
+random (seed 0) to 4 and 2 pts/m2. Each is reconstructed at LoD1.2 + LoD2.2
+(in this process, in a temporary folder) and compared with the crop as it is:
+buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
+(and why), the largest difference of ``roof_height`` (LoD1.2) and
+``ridge_height`` (LoD2.2, the highest vertex), and whether the file validates.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+X0, Y0, X1, Y1 = 84880.0, 447480.0, 84980.0, 447600.0
+
+
+def _write_like(src, path, *, version="1.2", fmt=1, scale=None, shift=(0.0, 0.0, 0.0),
+                extra=False, keep=None, strays=False):
+    import laspy
+
+    keep = np.ones(len(src.points), bool) if keep is None else keep
+    h = laspy.LasHeader(point_format=fmt, version=version)
+    h.scales = np.array(scale or src.header.scales)
+    xyz = np.column_stack([np.asarray(src.x), np.asarray(src.y), np.asarray(src.z)])[keep]
+    xyz = xyz + shift
+    if strays:  # three returns 1000 km east, 1000 km south and 100 km up
+        keep = np.r_[np.flatnonzero(keep), 0, 1, 2]
+        xyz = np.vstack([xyz, [[X0 + 1e6, Y0, 5.0], [X0, Y0 - 1e6, 5.0], [X0 + 50, Y0 + 50, 1e5]]])
+    h.offsets = np.floor(xyz.min(axis=0))
+    if extra:
+        h.add_extra_dims([laspy.ExtraBytesParams(name="height_above", type=np.float32),
+                          laspy.ExtraBytesParams(name="flags3", type="3u1")])
+    out = laspy.LasData(h)
+    for dim in ("intensity", "return_number", "number_of_returns", "classification", "gps_time"):
+        out[dim] = np.asarray(src[dim])[keep]
+    out.x, out.y, out.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    if extra:
+        out.height_above = xyz[:, 2].astype(np.float32)
+    out.write(path)
+
+
+def _footprints(src_gpkg, path, shift=(0.0, 0.0)):
+    import pyogrio.raw
+    import shapely
+
+    meta, _, wkb, fields = pyogrio.raw.read(str(src_gpkg))
+    g = shapely.from_wkb(wkb)
+    inside = shapely.within(g, shapely.box(X0, Y0, X1, Y1))
+    g = shapely.transform(g[inside], lambda c: c + shift)
+    pyogrio.raw.write(str(path), shapely.to_wkb(g), [np.asarray(f)[inside] for f in fields],
+                      list(meta["fields"]), crs="EPSG:28992", geometry_type="Polygon")
+
+
+def _attributes(path):
+    d = json.loads(Path(path).read_text())
+    return {k: o.get("attributes", {}) for k, o in d["CityObjects"].items()
+            if o["type"] == "Building"}
+
+
+def main():
+    import laspy
+
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.tools.validate import validate_file
+
+    data = Path(sys.argv[1] if len(sys.argv) > 1 else
+                Path(__file__).resolve().parents[2] / "shared" / "data")
+    tile = laspy.read(data / "delft" / "ahn3_cropped_1.laz")
+    m = ((np.asarray(tile.x) >= X0) & (np.asarray(tile.x) < X1)
+         & (np.asarray(tile.y) >= Y0) & (np.asarray(tile.y) < Y1))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        crop = laspy.LasData(tile.header)
+        crop.points = tile.points[m].copy()
+        crop.write(tmp / "crop.laz")
+        crop = laspy.read(tmp / "crop.laz")
+        n, area = len(crop.points), (X1 - X0) * (Y1 - Y0)
+        rng = np.random.default_rng(0)
+        draw = rng.random(n)
+        _footprints(data / "delft" / "footprints_bgt.gpkg", tmp / "fp.gpkg")
+        variants = {  # name: (tile writer keywords, footprint shift, z shift)
+            "crop (LAS 1.2 format 1)": ({}, None, 0.0),
+            "LAS 1.4 format 6": ({"version": "1.4", "fmt": 6}, None, 0.0),
+            "LAS 1.4 format 7": ({"version": "1.4", "fmt": 7}, None, 0.0),
+            "LAS 1.4 format 8": ({"version": "1.4", "fmt": 8}, None, 0.0),
+            "extra bytes": ({"extra": True}, None, 0.0),
+            "scale 0.01": ({"scale": [0.01, 0.01, 0.01]}, None, 0.0),
+            "z + 1000 m": ({"shift": (0.0, 0.0, 1000.0)}, None, 1000.0),
+            "near 0": ({"shift": (-X0, -Y0, 0.0)}, (-X0, -Y0), 0.0),
+            "near 1e7": ({"shift": (1e7 - X0, 1e7 - Y0, 0.0)}, (1e7 - X0, 1e7 - Y0), 0.0),
+            "3 stray returns": ({"strays": True}, None, 0.0),
+            "4 pts/m2": ({"keep": draw < 4 * area / n}, None, 0.0),
+            "2 pts/m2": ({"keep": draw < 2 * area / n}, None, 0.0),
+        }
+        base = None
+        print(f"crop: {n:,} points ({n / area:.1f} pts/m2); LoD1.2 + LoD2.2 with the BGT "
+              "footprints inside it")
+        for name, (kw, fshift, dz) in variants.items():
+            path = tmp / "v.laz"
+            _write_like(crop, path, **kw)
+            fp = tmp / "fp.gpkg"
+            if fshift is not None:
+                fp = tmp / "fp_shift.gpkg"
+                _footprints(data / "delft" / "footprints_bgt.gpkg", fp, fshift)
+            out = tmp / "v.city.json"
+            s = reconstruct([path], out, footprints=fp, crs="EPSG:7415", lods=("1.2", "2.2"))
+            attrs = _attributes(out)
+            valid = validate_file(out).valid
+            if base is None:
+                base = attrs
+            why = sorted({a["lod22_fallback"] for a in attrs.values() if "lod22_fallback" in a})
+            diffs = []
+            for key, shift in (("roof_height", dz), ("ridge_height", dz)):
+                d = [abs(a[key] - shift - base[k][key]) for k, a in attrs.items()
+                     if a.get(key) is not None and base.get(k, {}).get(key) is not None]
+                diffs.append(max(d) if d else float("nan"))
+            fb = sum("lod22_fallback" in a for a in attrs.values())
+            print(f"{name:24s} {s.done}/{s.total} modelled, {s.failed} failed, {fb} LoD1.2 "
+                  f"fallback(s); max |d| roof_height {diffs[0]:.3f} m, ridge_height "
+                  f"{diffs[1]:.3f} m; {'valid' if valid else 'INVALID'}"
+                  + (f"; {'; '.join(why)}" if why else ""))
+
+
+if __name__ == "__main__":
+    main()
