@@ -97,7 +97,8 @@ def label_grid(footprint, xy, labels, *, cell=0.5, min_cells=4) -> LabelGrid:
         grid[inside] = 0
         return LabelGrid(grid, x0, y0, cell)
     # empty cells inside take the label of the nearest labelled cell
-    _, (ni, nj) = ndimage.distance_transform_edt(~known, return_indices=True)
+    # (the feature transform only: its distances are not needed)
+    ni, nj = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
     grid = np.where(inside, grid[ni, nj], -1)
     grid = _merge_small_regions(grid, inside, min_cells)
     return LabelGrid(grid, x0, y0, cell)
