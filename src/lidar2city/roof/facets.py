@@ -256,8 +256,10 @@ def _union_rms(xyz, labels, n_labels, ii, jj):
     on = labels >= 0
     x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
     cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
-    mom = np.zeros((n_labels, 10))
-    np.add.at(mom, labels[on], cols)
+    # the moments of each facet: one weighted bincount over (facet, column) keys adds
+    # every point's row in point order, as np.add.at does, at a fraction of its cost
+    key = (labels[on][:, None] * 10 + np.arange(10)).ravel()
+    mom = np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
     n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = (mom[ii] + mom[jj]).T
     mx, my, mz = sx / n, sy / n, sz / n
     cxx, cxy, cxz = sxx / n - mx * mx, sxy / n - mx * my, sxz / n - mx * mz
