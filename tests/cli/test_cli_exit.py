@@ -13,14 +13,17 @@ def test_a_run_leaves_the_final_collection_nothing_to_walk(data):
         "atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0))\n"
         "from lidar2city.cli.main import cli, _freeze_at_exit, _frozen_at_exit\n"
         f"cli.main(['info', {str(data / 'misc' / 'simple.laz')!r}], standalone_mode=False)\n"
-        "cli.main(['--help'], standalone_mode=False)\n"
+        "after_run = len(_frozen_at_exit)\n"
+        "cli.main(['info', '--help'], standalone_mode=False)\n"
         "_freeze_at_exit()\n"
-        "print('registered', len(_frozen_at_exit), 'frozen now', gc.get_freeze_count() > 0)\n"
+        "print('registered', after_run, len(_frozen_at_exit), 'frozen now',"
+        " gc.get_freeze_count() > 0)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().splitlines()[-2:] == ["registered 1 frozen now False", "frozen True"]
+    assert proc.stdout.strip().splitlines()[-2:] == ["registered 1 1 frozen now False",
+                                                          "frozen True"]
 
 
 def test_a_command_in_this_process_freezes_nothing_now(runner, data):
