@@ -22,8 +22,8 @@ def test_a_run_leaves_the_final_collection_nothing_to_walk(data):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().splitlines()[-2:] == ["registered 1 1 frozen now False",
-                                                          "frozen True"]
+    assert proc.stdout.strip().splitlines()[-2:] == [
+        "registered 1 1 frozen now False", "frozen True"]
 
 
 def test_a_command_in_this_process_freezes_nothing_now(runner, data):
