@@ -698,8 +698,11 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
     if len(chain) < 4:
         return None
     def med3(a):
+        # the median of each vertex and its two neighbours (ends repeated), picked by
+        # min / max: the value np.median returns (NaN where one is NaN), without its set-up
         a = np.abs(np.asarray(a, dtype=float))
-        return np.median(np.stack([np.r_[a[:1], a[:-1]], a, np.r_[a[1:], a[-1:]]]), axis=0)
+        prev, nxt = np.concatenate([a[:1], a[:-1]]), np.concatenate([a[1:], a[-1:]])
+        return np.maximum(np.minimum(prev, a), np.minimum(np.maximum(prev, a), nxt))
 
     step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
     along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
