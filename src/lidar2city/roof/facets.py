@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .._stats import median
 from ..errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -315,15 +316,15 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         def points_of(k):
             if k not in facet:
                 p = xyz[order[bounds[k]:bounds[k + 1]]]
-                zk = np.median(p[:, 2])
+                zk = median(p[:, 2])
                 facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
             return facet[k]
 
         for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
             (pi, zi, si), (pj, zj, sj) = points_of(i), points_of(j)
             level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
-            ok[m] = level or min(np.median(_point_plane_dist(pi, planes[j:j + 1])),
-                                 np.median(_point_plane_dist(pj, planes[i:i + 1]))) <= dist_tol / 2
+            ok[m] = level or min(median(_point_plane_dist(pi, planes[j:j + 1]).ravel()),
+                                 median(_point_plane_dist(pj, planes[i:i + 1]).ravel())) <= dist_tol / 2
         far, rms = far[ok], rms[ok]
         pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
         cos = np.concatenate([cos, cos_merge - 1.0 - rms])
