@@ -22,6 +22,14 @@ def test_cube_is_valid():
     assert check_solid(cube()) == []
 
 
+def test_vertex_index_out_of_range_names_each_face():
+    s = cube()
+    n = len(s.vertices)
+    bad = replace_surface(replace_surface(s, 2, [np.array([0, 1, n])]), 4, [np.array([-1, 0, 1])])
+    issues = check_solid(bad)
+    assert [(i.code, i.surface) for i in issues] == [(901, 2), (901, 4)]
+
+
 def test_flipped_face_is_wrongly_oriented():
     s = cube()
     flipped = replace_surface(s, 3, [s.surfaces[3].rings[0][::-1]])

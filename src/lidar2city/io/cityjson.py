@@ -96,7 +96,7 @@ def _solid_boundaries(solid: Solid, index: np.ndarray):
 
 def _remap(boundaries, inverse):
     if isinstance(boundaries, np.ndarray):
-        return [int(i) for i in inverse[boundaries]]
+        return inverse[boundaries].tolist()  # Python ints
     return [_remap(b, inverse) for b in boundaries]
 
 

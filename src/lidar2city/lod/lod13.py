@@ -205,7 +205,7 @@ def _height_labels(footprint, xyz, *, cell, step, min_area):
     if not have.any():
         return np.where(mask, 0, -1), x0, y_top
     # empty cells take the height of the nearest cell with points
-    _, (ir, ic) = ndimage.distance_transform_edt(~have, return_indices=True)
+    ir, ic = ndimage.distance_transform_edt(~have, return_distances=False, return_indices=True)
     h = h[ir, ic]
     pairs = _neighbour_pairs((rows, cols), mask)
     hv = h.ravel()

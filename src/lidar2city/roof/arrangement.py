@@ -43,6 +43,7 @@ import logging
 
 import numpy as np
 
+from .._stats import median
 from ..errors import AlgorithmError, InputError
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
@@ -485,8 +486,8 @@ def _refit_lines(polys, raws, *, max_shift):
     shift = {}
     for key, (c0, parts) in offsets.items():
         proj = np.concatenate(parts)
-        shift[key] = float(np.median(proj)) if len(proj) >= 2 and abs(np.median(proj) - c0) <= max_shift \
-            else float(c0)
+        mid = median(proj) if len(proj) >= 2 else None
+        shift[key] = float(mid) if mid is not None and abs(mid - c0) <= max_shift else float(c0)
     out = []
     for poly, raw, g in zip(polys, raws, geo, strict=True):
         if g is None:
@@ -698,8 +699,11 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
     if len(chain) < 4:
         return None
     def med3(a):
+        # the median of each vertex and its two neighbours (ends repeated), picked by
+        # min / max: the value np.median returns (NaN where one is NaN), without its set-up
         a = np.abs(np.asarray(a, dtype=float))
-        return np.median(np.stack([np.r_[a[:1], a[:-1]], a, np.r_[a[1:], a[-1:]]]), axis=0)
+        prev, nxt = np.concatenate([a[:1], a[:-1]]), np.concatenate([a[1:], a[-1:]])
+        return np.maximum(np.minimum(prev, a), np.minimum(np.maximum(prev, a), nxt))
 
     step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
     along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
@@ -971,7 +975,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
                 continue
             z = xyz[cand, 2]
             support = (np.abs(z[:, None] - z[None, :]) <= level_tol).sum(axis=1)
-            z0 = float(np.median(z[np.abs(z - z[np.lexsort((-z, -support))[0]]) <= level_tol]))
+            z0 = float(median(z[np.abs(z - z[np.lexsort((-z, -support))[0]]) <= level_tol]))
             members = cand[np.abs(z - z0) <= level_tol]
             members = members[np.argsort(t[members], kind="stable")]
             gaps = np.flatnonzero(np.diff(t[members]) > 3 * cell)
@@ -986,7 +990,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
                     continue
                 inner_label = np.bincount(labels[inner]).argmax()
                 pl = planes[inner_label]
-                if np.median(xyz[run, 2] - xy[run] @ pl[:2] - pl[2]) < t_step:
+                if median(xyz[run, 2] - xy[run] @ pl[:2] - pl[2]) < t_step:
                     continue
                 # the segmentation's own rim facet: most of the run on one facet other than the
                 # roof inside, that facet's points along the outline

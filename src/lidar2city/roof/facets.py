@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .._stats import median
 from ..errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -256,8 +257,10 @@ def _union_rms(xyz, labels, n_labels, ii, jj):
     on = labels >= 0
     x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
     cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
-    mom = np.zeros((n_labels, 10))
-    np.add.at(mom, labels[on], cols)
+    # the moments of each facet: one weighted bincount over (facet, column) keys adds
+    # every point's row in point order, as np.add.at does, at a fraction of its cost
+    key = (labels[on][:, None] * 10 + np.arange(10)).ravel()
+    mom = np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
     n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = (mom[ii] + mom[jj]).T
     mx, my, mz = sx / n, sy / n, sz / n
     cxx, cxy, cxz = sxx / n - mx * mx, sxy / n - mx * my, sxz / n - mx * mz
@@ -313,15 +316,15 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         def points_of(k):
             if k not in facet:
                 p = xyz[order[bounds[k]:bounds[k + 1]]]
-                zk = np.median(p[:, 2])
+                zk = median(p[:, 2])
                 facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
             return facet[k]
 
         for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
             (pi, zi, si), (pj, zj, sj) = points_of(i), points_of(j)
             level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
-            ok[m] = level or min(np.median(_point_plane_dist(pi, planes[j:j + 1])),
-                                 np.median(_point_plane_dist(pj, planes[i:i + 1]))) <= dist_tol / 2
+            ok[m] = level or min(median(_point_plane_dist(pi, planes[j:j + 1]).ravel()),
+                                 median(_point_plane_dist(pj, planes[i:i + 1]).ravel())) <= dist_tol / 2
         far, rms = far[ok], rms[ok]
         pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
         cos = np.concatenate([cos, cos_merge - 1.0 - rms])

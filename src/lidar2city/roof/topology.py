@@ -97,7 +97,8 @@ def label_grid(footprint, xy, labels, *, cell=0.5, min_cells=4) -> LabelGrid:
         grid[inside] = 0
         return LabelGrid(grid, x0, y0, cell)
     # empty cells inside take the label of the nearest labelled cell
-    _, (ni, nj) = ndimage.distance_transform_edt(~known, return_indices=True)
+    # (the feature transform only: its distances are not needed)
+    ni, nj = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
     grid = np.where(inside, grid[ni, nj], -1)
     grid = _merge_small_regions(grid, inside, min_cells)
     return LabelGrid(grid, x0, y0, cell)
@@ -115,30 +116,50 @@ def _cross_dilation(m):
     return out
 
 
+def _same_label_components(grid):
+    """``(components, n)``: the 4-connected regions of equal labels >= 0 of ``grid``
+    numbered 1..n (0 elsewhere), as ``ndimage.label(grid == lab)`` finds them label by
+    label, in one call: cells sit on the even rows and columns of a lattice twice the
+    size, and the lattice point between two 4-neighbours is set when they carry the
+    same label, so lattice components are exactly the regions."""
+    from scipy import ndimage
+
+    h, w = grid.shape
+    valid = grid >= 0
+    lattice = np.zeros((2 * h - 1, 2 * w - 1), dtype=bool)
+    lattice[::2, ::2] = valid
+    lattice[::2, 1::2] = valid[:, 1:] & (grid[:, 1:] == grid[:, :-1])
+    lattice[1::2, ::2] = valid[1:] & (grid[1:] == grid[:-1])
+    comp, n = ndimage.label(lattice)
+    return comp[::2, ::2], n
+
+
 def _merge_small_regions(grid, inside, min_cells):
     from scipy import ndimage
 
     for _ in range(4):
         changed = False
         out = grid.copy()
-        for lab in np.unique(grid[inside]):
-            comp, n = ndimage.label(grid == lab)
-            if n == 0:
-                continue
-            sizes = np.bincount(comp.ravel())
-            small = np.flatnonzero(sizes[1:] < min_cells) + 1
-            objects = ndimage.find_objects(comp) if len(small) else []
-            for c in small:
-                # the region's box and one cell around it hold its whole ring
-                rs, cs = objects[c - 1]
-                win = (slice(max(rs.start - 1, 0), rs.stop + 1), slice(max(cs.start - 1, 0), cs.stop + 1))
-                m = comp[win] == c
-                ring = _cross_dilation(m) & ~m & inside[win]
-                neigh = grid[win][ring]
-                neigh = neigh[neigh != lab]
-                if len(neigh):
-                    out[win][m] = np.bincount(neigh).argmax()
-                    changed = True
+        # every region of every label at once (each small region changes only its own
+        # cells and reads the grid before this pass: the order does not matter)
+        comp, n = _same_label_components(grid)
+        if n == 0:
+            break
+        sizes = np.bincount(comp.ravel(), minlength=n + 1)
+        small = np.flatnonzero(sizes[1:] < min_cells) + 1
+        objects = ndimage.find_objects(comp) if len(small) else []
+        for c in small:
+            # the region's box and one cell around it hold its whole ring
+            rs, cs = objects[c - 1]
+            lab = grid[rs.start, cs.start:cs.stop][comp[rs.start, cs.start:cs.stop] == c][0]
+            win = (slice(max(rs.start - 1, 0), rs.stop + 1), slice(max(cs.start - 1, 0), cs.stop + 1))
+            m = comp[win] == c
+            ring = _cross_dilation(m) & ~m & inside[win]
+            neigh = grid[win][ring]
+            neigh = neigh[neigh != lab]
+            if len(neigh):
+                out[win][m] = np.bincount(neigh).argmax()
+                changed = True
         grid = out
         if not changed:
             break

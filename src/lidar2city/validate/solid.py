@@ -452,9 +452,11 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
     raw = [[np.asarray(r, dtype=np.int64).reshape(-1) for r in (s.rings if hasattr(s, "rings") else s)]
            for s in solid.surfaces]
-    for i, rings in enumerate(raw):
-        if any(len(r) and (r.min() < 0 or r.max() >= len(verts_in)) for r in rings):
-            issues.append(Issue(901, i, "vertex index out of range"))
+    flat = np.concatenate([r for rings in raw for r in rings]) if any(raw) else np.zeros(0, int)
+    if len(flat) and (flat.min() < 0 or flat.max() >= len(verts_in)):  # then find the faces
+        for i, rings in enumerate(raw):
+            if any(len(r) and (r.min() < 0 or r.max() >= len(verts_in)) for r in rings):
+                issues.append(Issue(901, i, "vertex index out of range"))
     if issues:
         return issues
     faces = [[remap[r] for r in rings] for rings in raw]
