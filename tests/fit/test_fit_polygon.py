@@ -228,3 +228,23 @@ def test_oblique_legs_are_charged():
     assert select_outline(rasterise(v2))[1] == "right_trapezoid"
     with pytest.raises(InputError):
         select_outline(mask, oblique_leg=-1.0)
+
+
+def test_large_regions_afford_more_edges():
+    """The regular shapes' weight shrinks as sqrt(regular_cells / cells) on large regions."""
+    # 40 x 50 cells with a 4 x 8 notch (1.6 % of the area): worth two more edges on a block of
+    # 2,000 cells (weight 0.02 x sqrt(40 / 1960)), not at a flat 0.02 per edge
+    v = np.array([[10, 8], [60, 8], [60, 40], [56, 40], [56, 48], [10, 48.0]])
+    mask = rasterise(v, shape=(60, 72))
+    _, kind, info = fit_building_outline(mask, cell=0.5)
+    assert kind == "composite"
+    assert info["error"] < 0.005
+    _, kind0, info0 = fit_building_outline(mask, cell=0.5, regular_cells=0.0)
+    assert kind0 == "rectangle"
+    assert info0["error"] > 0.015
+    # the same shape at a fifth of the size (80 cells) keeps the flat weight's choice
+    small = rasterise(v / 5.0 + 2.0, shape=(16, 16))
+    assert fit_building_outline(small, cell=0.5)[1] == fit_building_outline(
+        small, cell=0.5, regular_cells=0.0)[1]
+    with pytest.raises(InputError):
+        fit_building_outline(mask, cell=0.5, regular_cells=-1.0)

@@ -21,7 +21,12 @@ candidate with the lowest ``error / region area + weight x complexity`` wins,
 the complexity being the number of edges (non-regular and composite) or the
 degrees of freedom 4 / 5 / 6 (rectangle / right trapezoid / trapezoid) plus
 ``oblique_leg`` per leg that is not square to the bases (an edge off the
-building's two main axes), with a lower weight for regular shapes.
+building's two main axes), with a lower weight for regular shapes. The weight
+of the regular shapes shrinks as ``sqrt(regular_cells / cells)`` on regions of
+more than ``regular_cells`` cells: the error of a well-placed straight edge
+through a pixel staircase grows with the perimeter (about a quarter of a cell
+per cell of outline), so the error share a degree of freedom must remove falls
+as one over the building's size in cells.
 Courtyards (holes of the region) are fitted the same way and cut out of the
 outline.
 
@@ -93,6 +98,22 @@ class PolygonFitConfig:
                                     "(most buildings are right-angled; 0: the plain dof count)")
     min_courtyard_area: float = field(16.0, "holes of at least this area (m2) are kept as "
                                             "courtyards")
+    regular_cells: float = field(40.0, "regular_weight applies as given to regions of up to "
+                                       "this many cells and shrinks with the square root of "
+                                       "the cell count beyond it: the overlap error of a "
+                                       "straight edge through a pixel staircase grows with "
+                                       "the perimeter in cells, not the area, so a large "
+                                       "block affords the composite edges a small one does "
+                                       "not (40 cells: 10 m2 at 0.5 m; 0: the same weight "
+                                       "at every size)")
+    shared_margin: float = field(0.5, "when a region touches other regions (row houses split "
+                                      "at a height step), their pixels within this distance "
+                                      "(m, rounded to the nearest whole number of cells: one "
+                                      "cell at 0.5 and 1 m, none at 2 m) count as its own in "
+                                      "the fit: each side may place the shared wall up to a "
+                                      "cell beyond the pixel staircase, so no gap opens "
+                                      "between the two outlines (they may overlap by that "
+                                      "much); 0: off")
 
 
 # --------------------------------------------------------------------------- geometry
@@ -773,6 +794,13 @@ def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
     return poly, kind, info
 
 
+def _size_weight(weight, regular_cells, cells):
+    """``weight`` scaled by ``sqrt(regular_cells / cells)`` for regions of more cells."""
+    if regular_cells <= 0 or cells <= regular_cells:
+        return weight
+    return weight * float(np.sqrt(regular_cells / cells))
+
+
 def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, **options):
     """Regular outline of one building region, in metres.
 
@@ -837,7 +865,12 @@ def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, *
         sizes[0] = 0
         sub = lab == int(np.argmax(sizes))
     filled = ndimage.binary_fill_holes(sub)
-    kw = dict(regular_weight=cfg.regular_weight, polygon_weight=cfg.polygon_weight,
+    if cfg.regular_cells < 0 or cfg.shared_margin < 0:
+        raise InputError(f"regular_cells and shared_margin must be >= 0, got "
+                         f"{cfg.regular_cells} and {cfg.shared_margin}")
+    kw = dict(regular_weight=_size_weight(cfg.regular_weight, cfg.regular_cells,
+                                          float(filled.sum())),
+              polygon_weight=cfg.polygon_weight,
               shapes=tuple(cfg.shapes), step=cfg.step, max_iterations=cfg.max_iterations,
               max_rotation_deg=cfg.max_rotation_deg, min_rotation_deg=cfg.min_rotation_deg,
               max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=cfg.oblique_leg)
