@@ -868,12 +868,14 @@ def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, *
     if cfg.regular_cells < 0 or cfg.shared_margin < 0:
         raise InputError(f"regular_cells and shared_margin must be >= 0, got "
                          f"{cfg.regular_cells} and {cfg.shared_margin}")
-    kw = dict(regular_weight=_size_weight(cfg.regular_weight, cfg.regular_cells,
-                                          float(filled.sum())),
-              polygon_weight=cfg.polygon_weight,
+    weight = _size_weight(cfg.regular_weight, cfg.regular_cells, float(filled.sum()))
+    # an oblique leg is charged at the unscaled weight: it is a preference for the
+    # building's axes, not a share of the pixel noise
+    oblique = cfg.oblique_leg * (cfg.regular_weight / weight if weight > 0 else 1.0)
+    kw = dict(regular_weight=weight, polygon_weight=cfg.polygon_weight,
               shapes=tuple(cfg.shapes), step=cfg.step, max_iterations=cfg.max_iterations,
               max_rotation_deg=cfg.max_rotation_deg, min_rotation_deg=cfg.min_rotation_deg,
-              max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=cfg.oblique_leg)
+              max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=oblique)
     poly, kind, info = select_outline(filled, **kw)
     holes = filled & ~sub
     hl, nh = ndimage.label(holes)
