@@ -248,3 +248,17 @@ def test_large_regions_afford_more_edges():
         small, cell=0.5, regular_cells=0.0)[1]
     with pytest.raises(InputError):
         fit_building_outline(mask, cell=0.5, regular_cells=-1.0)
+
+
+def test_oblique_legs_keep_their_charge_on_large_regions():
+    """The size scaling spares the oblique-leg charge: weight x oblique_leg at any size."""
+    v = np.array([[10, 8], [60, 8], [60 - 40 * np.tan(np.deg2rad(10.0)), 48], [10, 48.0]])
+    mask = rasterise(v, shape=(60, 72))
+    _, kind, info = fit_building_outline(mask, cell=0.5)
+    assert kind == "right_trapezoid"
+    cells = float(mask.sum())
+    w = 0.02 * np.sqrt(40.0 / cells)  # the scaled weight per degree of freedom
+    cost, err, _ = info["candidates"]["right_trapezoid"]
+    assert cost - err == pytest.approx(5 * w + 0.5 * 0.02)
+    cost, err, _ = info["candidates"]["rectangle"]
+    assert cost - err == pytest.approx(4 * w)
