@@ -18,6 +18,7 @@ from lidar2city.fit.polygon import (
     region_contours,
     region_polygon,
     select_outline,
+    split_overlaps,
 )
 
 
@@ -262,3 +263,28 @@ def test_oblique_legs_keep_their_charge_on_large_regions():
     assert cost - err == pytest.approx(5 * w + 0.5 * 0.02)
     cost, err, _ = info["candidates"]["rectangle"]
     assert cost - err == pytest.approx(4 * w)
+
+
+@pytest.mark.parametrize("angle", [0.0, 23.0, -37.0])
+def test_split_overlaps_on_a_common_axis(angle):
+    """Two row houses overlapping at their wall end on one straight wall; other axes stay."""
+    import shapely.affinity
+
+    c = (84900.0, 447500.0)  # world-sized coordinates: the cut must survive them
+    a = shapely.affinity.rotate(shapely.box(84890.0, 447495.0, 84900.6, 447505.0), angle, c)
+    b = shapely.affinity.rotate(shapely.box(84899.5, 447496.0, 84910.0, 447504.0), angle, c)
+    pa, pb = split_overlaps([a, b])
+    assert pa.is_valid and pb.is_valid
+    assert pa.intersection(pb).area < 1e-3
+    assert pa.union(pb).area == pytest.approx(a.union(b).area, abs=1e-2)
+    # each keeps the half of the overlap on its side, cut along the shared axis
+    assert pa.area == pytest.approx(a.area - 0.55 * 8.0, abs=1e-2)
+    assert pb.area == pytest.approx(b.area - 0.55 * 8.0, abs=1e-2)
+    from lidar2city.metrics.footprints import axis_alignment
+
+    assert axis_alignment([pa, pb], tolerance_deg=0.1)["aligned_share"] == pytest.approx(1.0)
+    # a neighbour 20 degrees off the first one's axes keeps its overlap
+    d = shapely.affinity.rotate(b, 20.0, b.centroid)
+    qa, qd = split_overlaps([a, d])
+    assert qa.equals(a) and qd.equals(d)
+    assert split_overlaps([a]) == [a]

@@ -20,7 +20,12 @@ import numpy as np
 from ..config import field
 from ..datamodel import BuildingResult
 from ..errors import EmptyInputError, FitError, InputError
-from ..fit.polygon import PolygonFitConfig, fit_building_outline, region_polygon
+from ..fit.polygon import (
+    PolygonFitConfig,
+    fit_building_outline,
+    region_polygon,
+    split_overlaps,
+)
 from ..io.raster import Raster, check_same_grid, check_surface, read_raster, write_raster
 from ..lod.prism import lod12_solids
 from ..segment.dsm import (
@@ -288,7 +293,9 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     continues. With ``regularize="fit"`` a region touching other regions is
     fitted together with their pixels within ``fit_config.shared_margin``
     (rounded to the nearest whole number of cells): the shared wall of two row houses split at a
-    height step is placed by both fits, without a gap between the outlines.
+    height step is placed by both fits, without a gap between the outlines;
+    where two such outlines share their main axis (within 3 degrees) their
+    overlap is then split along it (:func:`~lidar2city.fit.polygon.split_overlaps`).
 
     Returns
     -------
@@ -347,7 +354,25 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
         out.append(res)
         if progress is not None:
             progress(i, total)
+    if grow:
+        _split_shared_walls(out, ndsm, cell=cell, lod1_config=lc)
     return out
+
+
+def _split_shared_walls(results, ndsm, *, cell, lod1_config):
+    """Split the overlaps the shared-wall margin leaves between outlines on one axis."""
+    from shapely.geometry.polygon import orient
+
+    ok = [r for r in results if r.ok]
+    for r, poly in zip(ok, split_overlaps([r.footprint for r in ok]), strict=True):
+        if poly is r.footprint:
+            continue
+        poly = orient(poly, 1.0)
+        r.footprint = poly
+        r.attributes.update(
+            area=float(poly.area), n_vertices=int(len(poly.exterior.coords) - 1),
+            height=building_height(ndsm, poly, cell=cell, roof_stat=lod1_config.roof_stat,
+                                   inner_margin=lod1_config.inner_margin))
 
 
 def _world_geoms(results, origin, xy_unit):
