@@ -16,6 +16,11 @@ Protocol (the BGT footprints cover only the two central blocks of the tile):
   IoU >= 0.5 matching;
 * aligned: the share of the outline length of those predictions within 3
   degrees of each polygon's own main axes;
+* halves: quality on the north and south halves of the references' rows (the
+  split of ``bench_active_contour.py``: options are chosen on the north half)
+  and the signed edge offset (false positives minus false negatives within
+  1.5 m of the references' outer edges, per metre of edge: > 0 outward), and
+  the area where outlines overlap each other;
 * pixel kappa of the fitted outlines on the reference-neighbourhood domain
   of ``bench_active_contour.py`` (10 m around the references, minus
   above-ground pieces holding no reference pixel);
@@ -60,6 +65,45 @@ def score(pred, ref, hull, tree):
     return (f"quality {am['quality']:.3f} (completeness {am['completeness']:.3f}, correctness "
             f"{am['correctness']:.3f}), matched IoU>=0.5 {mo['matched']}/{len(ref)}, aligned "
             f"{100 * al['aligned_share']:.1f} % ({len(touching)} predictions touching a reference)")
+
+
+def halves(pred, ref, hull, tree, y_split):
+    """Quality, aligned share and signed edge offset on the north and south halves.
+
+    The halves split the references' rows as ``bench_active_contour.py`` does
+    (world y of the split row). The signed edge offset is the area of false
+    positives minus false negatives within 1.5 m of the references' outer
+    edges, per metre of those edges (m, > 0: the outlines sit outward).
+    """
+    import shapely
+
+    ru = shapely.union_all(ref)
+    out = []
+    for name, box in (("north", shapely.box(-1e12, y_split, 1e12, 1e12)),
+                      ("south", shapely.box(-1e12, -1e12, 1e12, y_split))):
+        clip = hull.intersection(box)
+        r = [g.intersection(box) for g in ref if g.intersects(box)]
+        r = [g for g in r if g.area > 0]
+        hits = np.unique(tree.query(pred, predicate="intersects")[0]) if pred else []
+        p = [pred[i].intersection(clip) for i in hits]
+        p = [g for g in p if not g.is_empty]
+        from lidar2city.metrics.footprints import area_metrics
+
+        q = area_metrics(p, r)["quality"]
+        pu, rb = shapely.union_all(p), ru.intersection(box)
+        edge = rb.boundary.intersection(clip)
+        band = edge.buffer(1.5)
+        off = (pu.difference(rb).intersection(band).area
+               - rb.difference(pu).intersection(band).area) / max(edge.length, 1e-9)
+        out.append(f"{name} quality {q:.4f}, signed edge offset {off:+.3f} m")
+    return "; ".join(out)
+
+
+def overlap(pred):
+    """Area (m2) covered by more than one outline: sum of the areas minus their union's."""
+    import shapely
+
+    return sum(g.area for g in pred) - shapely.union_all(pred).area
 
 
 def on_reference(pred, ref_union, share=0.3):
@@ -150,6 +194,12 @@ def main(argv):
         print(f"footprints --dsm: {summary['buildings']} outlines in {el:.1f} s "
               f"({summary['failed']} failed), shape types {summary['shape_types']}")
         print(f"  restricted: {score(pred, ref, hull, tree)}")
+        rows = np.nonzero(refm.any(axis=1))[0]
+        y_split = d.transform.f - int((rows.min() + rows.max() + 1) // 2) * d.cell_size
+        print(f"  halves: {halves(pred, ref, hull, tree, y_split)}")
+        near = [pred[i] for i in np.unique(tree.query(pred, predicate="intersects")[0])]
+        print(f"  outlines touching a reference overlap each other on {overlap(near):.0f} m2 "
+              f"(of {sum(g.area for g in near):.0f} m2)")
         pm = features.rasterize([(g, 1) for g in pred], out_shape=d.shape, transform=d.transform,
                                 fill=0, dtype="uint8").astype(bool)
         m = pixel_metrics(pm[dom], refm[dom])
@@ -169,6 +219,7 @@ def main(argv):
         rpred = [max(shapely.get_parts(g), key=lambda p: p.area) for g in g3]
         print(f"segmentation alone (the same regions' pixel outlines, not fitted): "
               f"{score(rpred, ref, hull, tree)}")
+        print(f"  halves: {halves(rpred, ref, hull, tree, y_split)}")
         print(f"  object-level ceiling (outlines with >= 30 % of their area on a reference): "
               f"{score(on_reference(rpred, ref_union), ref, hull, tree)}")
 

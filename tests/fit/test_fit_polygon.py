@@ -18,6 +18,7 @@ from lidar2city.fit.polygon import (
     region_contours,
     region_polygon,
     select_outline,
+    split_overlaps,
 )
 
 
@@ -228,3 +229,62 @@ def test_oblique_legs_are_charged():
     assert select_outline(rasterise(v2))[1] == "right_trapezoid"
     with pytest.raises(InputError):
         select_outline(mask, oblique_leg=-1.0)
+
+
+def test_large_regions_afford_more_edges():
+    """The regular shapes' weight shrinks as sqrt(regular_cells / cells) on large regions."""
+    # 40 x 50 cells with a 4 x 8 notch (1.6 % of the area): worth two more edges on a block of
+    # 2,000 cells (weight 0.02 x sqrt(40 / 1960)), not at a flat 0.02 per edge
+    v = np.array([[10, 8], [60, 8], [60, 40], [56, 40], [56, 48], [10, 48.0]])
+    mask = rasterise(v, shape=(60, 72))
+    _, kind, info = fit_building_outline(mask, cell=0.5)
+    assert kind == "composite"
+    assert info["error"] < 0.005
+    _, kind0, info0 = fit_building_outline(mask, cell=0.5, regular_cells=0.0)
+    assert kind0 == "rectangle"
+    assert info0["error"] > 0.015
+    # the same shape at a fifth of the size (80 cells) keeps the flat weight's choice
+    small = rasterise(v / 5.0 + 2.0, shape=(16, 16))
+    assert fit_building_outline(small, cell=0.5)[1] == fit_building_outline(
+        small, cell=0.5, regular_cells=0.0)[1]
+    with pytest.raises(InputError):
+        fit_building_outline(mask, cell=0.5, regular_cells=-1.0)
+
+
+def test_oblique_legs_keep_their_charge_on_large_regions():
+    """The size scaling spares the oblique-leg charge: weight x oblique_leg at any size."""
+    v = np.array([[10, 8], [60, 8], [60 - 40 * np.tan(np.deg2rad(10.0)), 48], [10, 48.0]])
+    mask = rasterise(v, shape=(60, 72))
+    _, kind, info = fit_building_outline(mask, cell=0.5)
+    assert kind == "right_trapezoid"
+    cells = float(mask.sum())
+    w = 0.02 * np.sqrt(40.0 / cells)  # the scaled weight per degree of freedom
+    cost, err, _ = info["candidates"]["right_trapezoid"]
+    assert cost - err == pytest.approx(5 * w + 0.5 * 0.02)
+    cost, err, _ = info["candidates"]["rectangle"]
+    assert cost - err == pytest.approx(4 * w)
+
+
+@pytest.mark.parametrize("angle", [0.0, 23.0, -37.0])
+def test_split_overlaps_on_a_common_axis(angle):
+    """Two row houses overlapping at their wall end on one straight wall; other axes stay."""
+    import shapely.affinity
+
+    c = (84900.0, 447500.0)  # world-sized coordinates: the cut must survive them
+    a = shapely.affinity.rotate(shapely.box(84890.0, 447495.0, 84900.6, 447505.0), angle, c)
+    b = shapely.affinity.rotate(shapely.box(84899.5, 447496.0, 84910.0, 447504.0), angle, c)
+    pa, pb = split_overlaps([a, b])
+    assert pa.is_valid and pb.is_valid
+    assert pa.intersection(pb).area < 1e-3
+    assert pa.union(pb).area == pytest.approx(a.union(b).area, abs=1e-2)
+    # each keeps the half of the overlap on its side, cut along the shared axis
+    assert pa.area == pytest.approx(a.area - 0.55 * 8.0, abs=1e-2)
+    assert pb.area == pytest.approx(b.area - 0.55 * 8.0, abs=1e-2)
+    from lidar2city.metrics.footprints import axis_alignment
+
+    assert axis_alignment([pa, pb], tolerance_deg=0.1)["aligned_share"] == pytest.approx(1.0)
+    # a neighbour 20 degrees off the first one's axes keeps its overlap
+    d = shapely.affinity.rotate(b, 20.0, b.centroid)
+    qa, qd = split_overlaps([a, d])
+    assert qa.equals(a) and qd.equals(d)
+    assert split_overlaps([a]) == [a]

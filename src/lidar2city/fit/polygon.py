@@ -21,7 +21,12 @@ candidate with the lowest ``error / region area + weight x complexity`` wins,
 the complexity being the number of edges (non-regular and composite) or the
 degrees of freedom 4 / 5 / 6 (rectangle / right trapezoid / trapezoid) plus
 ``oblique_leg`` per leg that is not square to the bases (an edge off the
-building's two main axes), with a lower weight for regular shapes.
+building's two main axes), with a lower weight for regular shapes. The weight
+of the regular shapes shrinks as ``sqrt(regular_cells / cells)`` on regions of
+more than ``regular_cells`` cells: the error of a well-placed straight edge
+through a pixel staircase grows with the perimeter (about a quarter of a cell
+per cell of outline), so the error share a degree of freedom must remove falls
+as one over the building's size in cells.
 Courtyards (holes of the region) are fitted the same way and cut out of the
 outline.
 
@@ -63,6 +68,7 @@ __all__ = [
     "fit_composite",
     "select_outline",
     "fit_building_outline",
+    "split_overlaps",
 ]
 
 #: shape type -> degrees of freedom used as its complexity (None: number of edges)
@@ -93,6 +99,22 @@ class PolygonFitConfig:
                                     "(most buildings are right-angled; 0: the plain dof count)")
     min_courtyard_area: float = field(16.0, "holes of at least this area (m2) are kept as "
                                             "courtyards")
+    regular_cells: float = field(40.0, "regular_weight applies as given to regions of up to "
+                                       "this many cells and shrinks with the square root of "
+                                       "the cell count beyond it: the overlap error of a "
+                                       "straight edge through a pixel staircase grows with "
+                                       "the perimeter in cells, not the area, so a large "
+                                       "block affords the composite edges a small one does "
+                                       "not (40 cells: 10 m2 at 0.5 m; 0: the same weight "
+                                       "at every size)")
+    shared_margin: float = field(0.5, "when a region touches other regions (row houses split "
+                                      "at a height step), their pixels within this distance "
+                                      "(m, rounded to the nearest whole number of cells: one "
+                                      "cell at 0.5 and 1 m, none at 2 m) count as its own in "
+                                      "the fit: each side may place the shared wall up to a "
+                                      "cell beyond the pixel staircase, so no gap opens "
+                                      "between the two outlines (they may overlap by that "
+                                      "much); 0: off")
 
 
 # --------------------------------------------------------------------------- geometry
@@ -773,6 +795,13 @@ def select_outline(mask, *, regular_weight=0.02, polygon_weight=0.04,
     return poly, kind, info
 
 
+def _size_weight(weight, regular_cells, cells):
+    """``weight`` scaled by ``sqrt(regular_cells / cells)`` for regions of more cells."""
+    if regular_cells <= 0 or cells <= regular_cells:
+        return weight
+    return weight * float(np.sqrt(regular_cells / cells))
+
+
 def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, **options):
     """Regular outline of one building region, in metres.
 
@@ -837,10 +866,17 @@ def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, *
         sizes[0] = 0
         sub = lab == int(np.argmax(sizes))
     filled = ndimage.binary_fill_holes(sub)
-    kw = dict(regular_weight=cfg.regular_weight, polygon_weight=cfg.polygon_weight,
+    if cfg.regular_cells < 0 or cfg.shared_margin < 0:
+        raise InputError(f"regular_cells and shared_margin must be >= 0, got "
+                         f"{cfg.regular_cells} and {cfg.shared_margin}")
+    weight = _size_weight(cfg.regular_weight, cfg.regular_cells, float(filled.sum()))
+    # an oblique leg is charged at the unscaled weight: it is a preference for the
+    # building's axes, not a share of the pixel noise
+    oblique = cfg.oblique_leg * (cfg.regular_weight / weight if weight > 0 else 1.0)
+    kw = dict(regular_weight=weight, polygon_weight=cfg.polygon_weight,
               shapes=tuple(cfg.shapes), step=cfg.step, max_iterations=cfg.max_iterations,
               max_rotation_deg=cfg.max_rotation_deg, min_rotation_deg=cfg.min_rotation_deg,
-              max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=cfg.oblique_leg)
+              max_polygon_vertices=cfg.max_polygon_vertices, oblique_leg=oblique)
     poly, kind, info = select_outline(filled, **kw)
     holes = filled & ~sub
     hl, nh = ndimage.label(holes)
@@ -869,3 +905,100 @@ def fit_building_outline(region_mask, *, cell, offset=(0.0, 0.0), config=None, *
 
     out = orient(shapely.transform(poly, to_m), sign=1.0)
     return out, kind, info
+
+
+def _main_axis(polygon) -> float:
+    """Direction (radians, modulo 90 degrees) holding the most exterior edge length within 3 deg."""
+    c = np.asarray(polygon.exterior.coords)
+    d = np.diff(c, axis=0)
+    length = np.hypot(d[:, 0], d[:, 1])
+    keep = length > 1e-9
+    d, length = d[keep], length[keep]
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi / 2)
+    diff = np.abs(ang[:, None] - ang[None, :])
+    diff = np.minimum(diff, np.pi / 2 - diff)
+    score = ((diff <= np.deg2rad(3.0)) * length[None, :]).sum(axis=1)
+    return float(ang[int(np.argmax(score))])
+
+
+def split_overlaps(polygons, *, tolerance_deg=3.0) -> list:
+    """Outlines whose pairwise overlaps are split along their common axis.
+
+    Two outlines fitted on either side of a shared wall (see
+    ``PolygonFitConfig.shared_margin``) overlap by up to a cell. When their
+    main axes agree within ``tolerance_deg``, the overlap is cut in two by a
+    line through its centroid along the common axis nearest to the overlap's
+    long side, and each outline keeps the half on its own side: both then end
+    on one straight wall, still on their own axes. Overlaps of outlines on
+    different axes are left as they are (a cut would leave an edge off one
+    polygon's axes). Pairs are taken in index order; the union of the outlines
+    does not change.
+
+    Parameters
+    ----------
+    polygons : sequence of shapely Polygon
+    tolerance_deg : float
+        Largest difference (degrees, modulo 90) between the two main axes.
+
+    Returns
+    -------
+    list of shapely Polygon
+        Same length and order; an outline whose split would leave nothing (or
+        only slivers) keeps its shape.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> a, b = shapely.box(0, 0, 10.5, 8), shapely.box(10, 0, 20, 8)
+    >>> [round(p.area, 2) for p in split_overlaps([a, b])]
+    [82.0, 78.0]
+    """
+    import shapely
+
+    polys = list(polygons)
+    if len(polys) < 2:
+        return polys
+    tol = np.deg2rad(float(tolerance_deg))
+    tree = shapely.STRtree(polys)
+    left, right = tree.query(polys, predicate="intersects")
+    pairs = sorted({(int(a), int(b)) for a, b in zip(left, right, strict=True) if a < b})
+    big = 1e6
+    for a, b in pairs:
+        pa, pb = polys[a], polys[b]
+        over = pa.intersection(pb)
+        if over.area <= 1e-9:
+            continue
+        ta, tb = _main_axis(pa), _main_axis(pb)
+        dd = abs(ta - tb)
+        if min(dd, np.pi / 2 - dd) > tol:
+            continue
+        corners = np.asarray(over.minimum_rotated_rectangle.exterior.coords)[:4]
+        e0, e1 = corners[1] - corners[0], corners[2] - corners[1]
+        long_side = e0 if np.hypot(*e0) >= np.hypot(*e1) else e1
+        t_long = np.arctan2(long_side[1], long_side[0])
+
+        def off(t):
+            x = np.mod(t - t_long, np.pi)
+            return min(x, np.pi - x)
+
+        theta = min((ta, ta + np.pi / 2), key=off)
+        d = np.array([np.cos(theta), np.sin(theta)])
+        n = np.array([-d[1], d[0]])
+        ctr = np.asarray(over.centroid.coords[0])
+        half = shapely.Polygon([ctr - big * d, ctr + big * d, ctr + big * d + big * n,
+                                ctr - big * d + big * n])
+        side_a, side_b = over.intersection(half), over.difference(half)
+        ca, cb = np.asarray(pa.centroid.coords[0]), np.asarray(pb.centroid.coords[0])
+        if np.dot(ca - cb, n) < 0:
+            side_a, side_b = side_b, side_a
+        new = []
+        for p, lose in ((pa, side_b), (pb, side_a)):
+            parts = [g for g in shapely.get_parts(p.difference(lose)) if g.area > 0]
+            # on a millimetre grid: the cut leaves vertices a hair's breadth from an edge,
+            # which a shift to world coordinates would turn into self-intersections
+            g = shapely.set_precision(max(parts, key=lambda g: g.area), 1e-3) if parts else None
+            new.append(g)
+        if all(g is not None and g.is_valid and g.geom_type == "Polygon" and g.area > 0
+               for g in new):
+            polys[a], polys[b] = new
+    return polys

@@ -166,7 +166,9 @@ def regularize_fit(traced, *, cell: float, simplified=None, **_ignored):
     if not mask.any():
         raise FitError("the outline covers no pixel centre at this cell size")
     try:
-        poly, kind, info = fit_building_outline(mask, cell=cell, offset=(x0, y1))
+        # one traced outline, no neighbours; the size-scaled weight is tuned for DSM regions
+        poly, kind, info = fit_building_outline(mask, cell=cell, offset=(x0, y1),
+                                                regular_cells=0.0)
     except EmptyInputError as exc:
         raise FitError(str(exc)) from None
     if poly.geom_type != "Polygon" or not poly.is_valid or poly.is_empty:
