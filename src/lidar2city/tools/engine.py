@@ -123,8 +123,9 @@ class DaskExecutor:
         def start():
             try:
                 self._start()
-                # the workers import the task modules now, not in their first task
-                self._client.run(_warm)
+                # the workers import the task modules now, not in their first task;
+                # those of our own cluster end without tearing their interpreter down
+                self._client.run(_warm, self.scheduler is None)
             except BaseException as exc:  # noqa: BLE001 - raised by ready()
                 self._error = exc
             finally:
@@ -345,9 +346,37 @@ def _process_cpu() -> float:
     return t.user + t.system
 
 
-def _warm():
-    """Import what a worker's tasks use (run on every worker once the cluster is up)."""
+def _warm(exit_fast: bool = False):
+    """Import what a worker's tasks use (run on every worker once the cluster is up).
+
+    ``exit_fast`` (a worker process of our own local cluster, never one of an
+    external cluster): once the worker has closed and its process runs its
+    exit handlers, end it at once (:func:`_exit_now`) instead of tearing down
+    its interpreter, which costs ~0.2 CPU-second per worker (measured: 2
+    workers 0.4 CPU-s and the cluster's close 0.3 -> 0.03 s) while the
+    client waits for the cluster to close.
+    """
     from . import reconstruct, task  # noqa: F401
+
+    if exit_fast:
+        import atexit
+
+        # registered last, so run first among the exit handlers: the worker has
+        # already closed (Dask's own clean-up ran when its nanny stopped it)
+        atexit.register(_exit_now)
+
+
+def _exit_now():
+    """End this worker process now, its output streams flushed: nothing it holds
+    outlives it (its scratch files are unlinked, its results already sent)."""
+    import sys
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(0)
 
 
 def shares_of(runs: int, workers: int) -> list:
