@@ -358,14 +358,24 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
 def _stop_forkserver() -> None:
     """End the server the local cluster's workers were forked from, and reap it, so
     that no process outlives the cluster and its CPU (its workers' included: it
-    reaps them) is accounted to this process. Python starts it again if another
-    cluster (or anything else in this process) needs it."""
+    has reaped them once they ended) is accounted to this process. It is ended
+    with SIGTERM, not asked to tear its interpreter down (measured: the close
+    0.23 -> 0.05 s at load ~5); Python starts it again if another cluster (or
+    anything else in this process) needs it."""
     if START_METHOD != "forkserver":
         return
+    import signal
     from multiprocessing import forkserver
 
-    stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
-    if stop is not None:  # CPython's; elsewhere the server ends with this process
+    server = getattr(forkserver, "_forkserver", None)
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid is not None:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:  # already gone
+            pass
+    stop = getattr(server, "_stop", None)
+    if stop is not None:  # CPython's: reaps it; elsewhere it ends with this process
         stop()
 
 
