@@ -599,3 +599,21 @@ def test_local_worker_exits_without_interpreter_teardown(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, str(marker)], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0 and marker.read_text() == "torn down"
+
+
+def test_local_cluster_leaves_no_process():
+    """A local cluster's worker processes, and the server they were forked from, are
+    gone (reaped, not zombies) once the executor has closed."""
+    from multiprocessing import forkserver
+
+    with DaskExecutor(workers=1) as ex:
+        ex.ready()
+        pids = list(ex._client.run(os.getpid).values())
+        if engine.START_METHOD == "forkserver":
+            pids.append(forkserver._forkserver._forkserver_pid)
+    assert pids and all(pids)
+    if engine.START_METHOD == "forkserver":
+        assert forkserver._forkserver._forkserver_pid is None
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
