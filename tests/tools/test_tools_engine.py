@@ -603,15 +603,24 @@ def test_local_worker_exits_without_interpreter_teardown(tmp_path):
 
 def test_local_cluster_leaves_no_process():
     """A local cluster's worker processes, and the server they were forked from, are
-    gone (reaped, not zombies) once the executor has closed."""
+    gone (reaped, not zombies) once the last executor of the process has closed; a
+    cluster closed while another is open leaves the other's workers running."""
     from multiprocessing import forkserver
 
-    with DaskExecutor(workers=1) as ex:
-        ex.ready()
-        pids = list(ex._client.run(os.getpid).values())
-        if engine.START_METHOD == "forkserver":
-            pids.append(forkserver._forkserver._forkserver_pid)
-    assert pids and all(pids)
+    def square(i):
+        return i * i
+
+    with DaskExecutor(workers=1) as outer:
+        outer.ready()
+        pids = list(outer._client.run(os.getpid).values())
+        with DaskExecutor(workers=1) as inner:
+            inner.ready()
+            pids += list(inner._client.run(os.getpid).values())
+            if engine.START_METHOD == "forkserver":
+                pids.append(forkserver._forkserver._forkserver_pid)
+        assert dict(outer.map(square, range(3))) == {0: 0, 1: 1, 2: 4}
+        assert list(outer._client.run(os.getpid).values()) == pids[:1]
+    assert len(set(pids)) == len(pids) and all(pids)
     if engine.START_METHOD == "forkserver":
         assert forkserver._forkserver._forkserver_pid is None
     for pid in pids:

@@ -31,6 +31,7 @@ from ..errors import DependencyError, InputError
 logger = logging.getLogger(__name__)
 
 __all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
+           "kill_forkserver", "START_METHOD",
            "CONNECT_TIMEOUT",
            "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS"]
 
@@ -189,6 +190,8 @@ class DaskExecutor:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
                                          processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)
+            with _LOCAL_LOCK:
+                _LOCAL_CLUSTERS[0] += 1
             self._client = Client(self._cluster, set_as_default=False)
         return self
 
@@ -208,7 +211,11 @@ class DaskExecutor:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
-            _stop_forkserver()
+            with _LOCAL_LOCK:
+                _LOCAL_CLUSTERS[0] -= 1
+                last = _LOCAL_CLUSTERS[0] == 0
+            if last:  # not while another cluster has workers forked from the server
+                _stop_forkserver()
         if self._dlog is not None:
             self._dlog.setLevel(self._dlog_level)
 
@@ -355,6 +362,11 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
     return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
 
 
+#: local clusters open in this process (their workers come from one forkserver)
+_LOCAL_CLUSTERS = [0]
+_LOCAL_LOCK = threading.Lock()
+
+
 def _stop_forkserver() -> None:
     """End the server the local cluster's workers were forked from, and reap it, so
     that no process outlives the cluster and its CPU (its workers' included: it
@@ -362,8 +374,19 @@ def _stop_forkserver() -> None:
     with SIGTERM, not asked to tear its interpreter down (measured: the close
     0.23 -> 0.05 s at load ~5); Python starts it again if another cluster (or
     anything else in this process) needs it."""
+    server = kill_forkserver()
+    stop = getattr(server, "_stop", None)
+    if stop is not None:  # CPython's: reaps it; elsewhere it ends with this process
+        stop()
+
+
+def kill_forkserver():
+    """Send SIGTERM to the server local clusters fork their workers from, if it runs
+    (no new worker can be forked from then on; e.g. before an interrupted run kills
+    its workers, whose nannies would restart them at once); returns Python's
+    handle of the server (None without one)."""
     if START_METHOD != "forkserver":
-        return
+        return None
     import signal
     from multiprocessing import forkserver
 
@@ -374,9 +397,7 @@ def _stop_forkserver() -> None:
             os.kill(pid, signal.SIGTERM)
         except OSError:  # already gone
             pass
-    stop = getattr(server, "_stop", None)
-    if stop is not None:  # CPython's: reaps it; elsewhere it ends with this process
-        stop()
+    return server
 
 
 def _process_cpu() -> float:
