@@ -15,7 +15,9 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   neighbours that share their inputs (a block's tiles); each worker is dealt a
   contiguous share of the runs (:func:`shares_of`) and each run is told the
   share's next runs, so those inputs pass from run to run.
-  The cluster starts in the background when the executor is entered.
+  The cluster starts in the background when the executor is entered; its
+  worker processes are forked from a server that imported Dask once
+  (:data:`START_METHOD`), which ends with the last local cluster.
 """
 
 from __future__ import annotations
@@ -414,7 +416,8 @@ def _warm(exit_fast: bool = False):
     exit handlers, end it at once (:func:`_exit_now`) instead of tearing down
     its interpreter, which costs ~0.2 CPU-second per worker (measured: 2
     workers 0.4 CPU-s and the cluster's close 0.3 -> 0.03 s) while the
-    client waits for the cluster to close.
+    client waits for the cluster to close. A worker forked from the forkserver
+    (:data:`START_METHOD`) ends so anyway; this serves spawned workers.
     """
     from . import reconstruct, task  # noqa: F401
 
