@@ -21,8 +21,12 @@ client, which holds the results not yet written),
 seconds per building, and the MD5 of the output (the same for every worker
 count) and the CPU seconds used by the run and all the processes it started
 (Dask workers included); for a cluster also the seconds to start it, the CPU
-of each worker on its blocks and in all (start-up and imports included) and
-the CPU of the client process (scheduler, nannies, planning, writing). Then
+of each worker on its blocks and in all (its start-up included; a worker
+forked from a server that imported Dask and NumPy does not count those imports) and
+the CPU of the client process (scheduler, nannies, planning, writing), the
+seconds the cluster took to close once the run was written, and the CPU of
+every other process (the workers from start to exit, and the server they
+were forked from). Then
 the speed-up of 2 workers over 1, the ratio of their CPU seconds (the
 speed-up a quiet machine can give is at most workers / that ratio), and the
 load average of the machine at the time (the speed-up is depressed when
@@ -57,7 +61,8 @@ def main():
     print(json.dumps({"seconds": time.perf_counter() - t0, "total": s.total, "done": s.done,
                       "failed": s.failed, "blocks": s.blocks, "worker_mb": s.worker_peak_mb,
                       "client_cpu": t.user + t.system, "blocks_cpu": s.worker_cpu,
-                      "process_cpu": s.process_cpu, "startup": s.startup_seconds}))
+                      "process_cpu": s.process_cpu, "startup": s.startup_seconds,
+                      "run": s.seconds}))
 
 if __name__ == "__main__":
     main()
@@ -156,9 +161,11 @@ def main():
                 if r["process_cpu"]:
                     blocks = " / ".join(f"{v:.1f}" for v in r["blocks_cpu"].values())
                     procs = " / ".join(f"{v:.1f}" for v in r["process_cpu"].values())
-                    print(f"    cluster start-up {r['startup']:.1f} s; CPU per worker on its "
-                          f"blocks {blocks} s, whole process {procs} s; client process "
-                          f"{r['client_cpu']:.1f} s", flush=True)
+                    print(f"    cluster start-up {r['startup']:.1f} s, close "
+                          f"{r['seconds'] - r['run']:.2f} s; CPU per worker on its blocks "
+                          f"{blocks} s, whole process {procs} s; client process "
+                          f"{r['client_cpu']:.1f} s, every other process (workers, their "
+                          f"server) {r['cpu'] - r['client_cpu']:.1f} s", flush=True)
                 else:
                     print(f"    CPU on the blocks {sum(r['blocks_cpu'].values()):.1f} s, "
                           f"the rest (planning, writing) {r['cpu'] - sum(r['blocks_cpu'].values()):.1f} s",

@@ -574,3 +574,55 @@ def test_delft_built_group_by_group_is_the_same_bytes_as_from_whole_blocks(data,
         assert s.done >= 100
     assert len(seen) >= 4  # the blocks went group by group
     assert out["groups"].read_bytes() == out["whole"].read_bytes()
+
+
+def test_local_worker_exits_without_interpreter_teardown(tmp_path):
+    """A worker of our own cluster, once closed, ends at its first exit handler: the
+    handlers registered before (and the interpreter's teardown) are skipped, what it
+    printed is flushed, and it exits with status 0."""
+    import subprocess
+    import sys
+
+    code = ("import atexit, sys\n"
+            "atexit.register(lambda: open(sys.argv[1], 'w').write('torn down'))\n"
+            "from lidar2city.tools.engine import _warm\n"
+            "_warm(True)\n"
+            "print('worked', end='')\n")
+    marker = tmp_path / "marker"
+    r = subprocess.run([sys.executable, "-c", code, str(marker)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "worked"
+    assert not marker.exists()
+    # an external cluster's worker is left to end as it does
+    code = code.replace("_warm(True)", "_warm(False)")
+    r = subprocess.run([sys.executable, "-c", code, str(marker)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0 and marker.read_text() == "torn down"
+
+
+def test_local_cluster_leaves_no_process():
+    """A local cluster's worker processes, and the server they were forked from, are
+    gone (reaped, not zombies) once the last executor of the process has closed; a
+    cluster closed while another is open leaves the other's workers running."""
+    from multiprocessing import forkserver
+
+    def square(i):
+        return i * i
+
+    with DaskExecutor(workers=1) as outer:
+        outer.ready()
+        pids = list(outer._client.run(os.getpid).values())
+        with DaskExecutor(workers=1) as inner:
+            inner.ready()
+            pids += list(inner._client.run(os.getpid).values())
+            if engine.START_METHOD == "forkserver":
+                pids.append(forkserver._forkserver._forkserver_pid)
+        assert dict(outer.map(square, range(3))) == {0: 0, 1: 1, 2: 4}
+        assert list(outer._client.run(os.getpid).values()) == pids[:1]
+    assert len(set(pids)) == len(pids) and all(pids)
+    if engine.START_METHOD == "forkserver":
+        assert forkserver._forkserver._forkserver_pid is None
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)

@@ -109,6 +109,10 @@ def _stop_workers():  # pragma: no cover - exercised in a subprocess
     mp = sys.modules.get("multiprocessing")
     if mp is None:
         return
+    engine = sys.modules.get("lidar2city.tools.engine")
+    if engine is not None:  # first the server workers are forked from: no worker restarted
+        with contextlib.suppress(Exception):
+            engine.kill_forkserver()
     with contextlib.suppress(Exception):
         for child in mp.active_children():
             with contextlib.suppress(Exception):
