@@ -45,7 +45,6 @@ Energies, per edge ``(u, v)`` and candidate positions ``p_i`` of ``u`` and
 
 from __future__ import annotations
 
-import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -61,7 +60,6 @@ _SAMPLE_BUDGET = 1_000_000
 _EDGE_BATCH = 64
 #: Samples (candidate pairs x points) of the edges sampled together on a shared window.
 _CHUNK = 1 << 18
-_scratch_space = threading.local()
 
 __all__ = [
     "window_offsets",
@@ -364,18 +362,8 @@ def edge_energy_tables(
     return _window_edge_tables(layout, candidates, edges, raster, **kwargs)
 
 
-def _edge_tables_general(
-    candidates,
-    edges,
-    raster: DistanceRaster,
-    *,
-    cell: float,
-    t_adjust: float,
-    c_dir,
-    c_dis: float,
-    c_short: float = 0.0,
-    short_length: float = 0.0,
-) -> list[np.ndarray]:
+def _edge_tables_general(candidates, edges, raster: DistanceRaster, *, cell, t_adjust, c_dir, c_dis,
+                         c_short=0.0, short_length=0.0) -> list[np.ndarray]:
     """Edge tables edge by edge (any candidate sets): see :func:`edge_energy_tables`."""
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
@@ -477,6 +465,7 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
     kx, ky = kx.reshape(len(lay.ox), -1), ky.reshape(len(lay.oy), -1)
     pair = (kx[lay.ix[:, None], lay.ix[None, :]] * len(doy) + ky[lay.iy[:, None], lay.iy[None, :]]).ravel()
     use_dir = bool(np.any(weights))
+    scratch = _Scratch()  # the samples' buffers, reused by every block of this call
     out = []
     for b0 in range(0, len(edges), _EDGE_BATCH):
         e_ = edges[b0:b0 + _EDGE_BATCH]
@@ -490,7 +479,7 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
         rx = (lay.q[v_, 0, 0] - lay.q[u_, 0, 0])[:, None] + dox * scale
         ry = (lay.q[v_, 0, 1] - lay.q[u_, 0, 1])[:, None] + doy * scale
         length = per_pair(np.hypot(rx[:, :, None], ry[:, None, :]))
-        e = _window_deviation(lay, candidates, e_, raster, length, cell=cell, step=step)
+        e = _window_deviation(lay, candidates, e_, raster, length, scratch, cell=cell, step=step)
         e *= c_dis
         if use_dir or c_short:
             dx = ((lay.pos[v_, 0, 0] - lay.pos[u_, 0, 0])[:, None] + dox)[:, :, None] * cell
@@ -505,7 +494,7 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
     return out
 
 
-def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, length, *, cell, step):
+def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, length, scratch, *, cell, step):
     """E_Dis tables (k, d, d) of ``edges`` on a shared window, see :func:`_window_edge_tables`."""
     dt, _, scale = raster
     h, w = dt.shape
@@ -538,23 +527,28 @@ def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, l
             rows = np.take(_axis_cells_batch(lay.ux[u_[ks]], lay.ux[v_[ks]], t, h, stride=w), lay.ix, axis=2)
             cols = np.take(_axis_cells_batch(lay.uy[u_[ks]], lay.uy[v_[ks]], t, w), lay.iy, axis=2)
             shape = (len(ks), nx, ny, d, ns)
-            idx = np.add(rows[:, :, None], cols[:, None, :], out=_scratch("idx", shape, np.dtype(np.intp)))
+            idx = np.add(rows[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
             # every index is inside the raster: 'clip' is the plain look-up, unbuffered
-            dist = np.take(dt.ravel(), idx, out=_scratch(f"dist_{dt.dtype}", shape, dt.dtype), mode="clip")
-            sums = np.matmul(dist, wts, out=_scratch("sums", shape[:-1], np.dtype(np.float64)))
+            dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
+            sums = np.matmul(dist, wts, out=scratch("sums", shape[:-1], np.float64))
             dev[ks] = sums.reshape(len(ks), nx * ny, d)[:, grid] * length[ks] * (cell / scale) ** 2
     return dev
 
 
-def _scratch(name: str, shape: tuple, dtype) -> np.ndarray:
-    """A buffer of ``shape`` reused from call to call (one set per thread): fresh pages
-    for every few edges' samples cost the kernel more time than the look-ups."""
-    size = int(np.prod(shape))
-    buf = getattr(_scratch_space, name, None)
-    if buf is None or buf.size < size or buf.dtype != dtype:
-        buf = np.empty(max(size, _CHUNK), dtype=dtype)
-        setattr(_scratch_space, name, buf)
-    return buf[:size].reshape(shape)
+class _Scratch:
+    """Buffers reused from chunk to chunk of one call: fresh pages for every few
+    edges' samples cost the kernel more time than the look-ups. Dropped with the
+    call, so nothing stays allocated between snakes."""
+
+    def __init__(self):
+        self.bufs: dict[str, np.ndarray] = {}
+
+    def __call__(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        size = int(np.prod(shape))
+        buf = self.bufs.get(name)
+        if buf is None or buf.size < size or buf.dtype != dtype:
+            buf = self.bufs[name] = np.empty(size, dtype=dtype)
+        return buf[:size].reshape(shape)
 
 
 def _axis_cells_batch(u0, u1, t, size, stride=1):
