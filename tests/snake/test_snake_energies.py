@@ -155,11 +155,17 @@ def _random_graph(rng, n_vertices, n_edges, spread):
     return xy, np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
 
 
+@pytest.mark.parametrize("chunk", [None, 3000])
 @pytest.mark.parametrize("seed", range(6))
-def test_window_tables_are_bitwise_the_edge_by_edge_tables(seed):
+def test_window_tables_are_bitwise_the_edge_by_edge_tables(seed, chunk, monkeypatch):
     """The shared-window path (tables over offset differences, edges sampled together,
-    rows reordered after the BLAS sums) gives the very bytes of the edge-by-edge path."""
+    rows reordered after the BLAS sums, small chunks split by u's candidates) gives the
+    very bytes of the edge-by-edge path."""
+    import lidar2city.snake.energies as energies
     from lidar2city.snake.energies import _edge_tables_general, _window_layout
+
+    if chunk:
+        monkeypatch.setattr(energies, "_CHUNK", chunk)
 
     rng = np.random.default_rng(seed)
     xy, edges = _random_graph(rng, 9, 16, 25.0)

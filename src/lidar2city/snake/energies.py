@@ -526,11 +526,17 @@ def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, l
             # order, v's in their own
             rows = np.take(_axis_cells_batch(lay.ux[u_[ks]], lay.ux[v_[ks]], t, h, stride=w), lay.ix, axis=2)
             cols = np.take(_axis_cells_batch(lay.uy[u_[ks]], lay.uy[v_[ks]], t, w), lay.iy, axis=2)
-            shape = (len(ks), nx, ny, d, ns)
-            idx = np.add(rows[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
-            # every index is inside the raster: 'clip' is the plain look-up, unbuffered
-            dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
-            sums = np.matmul(dist, wts, out=scratch("sums", shape[:-1], np.float64))
+            sums = np.empty((len(ks), nx, ny, d))
+            # the samples of a few of u's candidate x at a time: bounded buffers
+            # (each sum is still one matrix-vector product over v's candidates)
+            step_x = max(1, _CHUNK // (len(ks) * ny * d * ns))
+            for i in range(0, nx, step_x):
+                part = rows[:, i:i + step_x]
+                shape = (len(ks), part.shape[1], ny, d, ns)
+                idx = np.add(part[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
+                # every index is inside the raster: 'wrap' is the plain look-up, unbuffered
+                dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
+                np.matmul(dist, wts, out=sums[:, i:i + step_x])
             dev[ks] = sums.reshape(len(ks), nx * ny, d)[:, grid] * length[ks] * (cell / scale) ** 2
     return dev
 
