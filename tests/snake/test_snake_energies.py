@@ -147,3 +147,69 @@ def test_edge_tables_batched_equal_edge_by_edge():
                 ref = ref + kw["c_dir"][k] * direction_energy(cands[u], cands[v], cell=0.5, t_adjust=1.0)
             ref = ref + 0.5 * short_edge_energy(cands[u], cands[v], cell=0.5, short_length=1.0)
             np.testing.assert_array_equal(tables[k], ref)
+
+
+def _random_graph(rng, n_vertices, n_edges, spread):
+    xy = rng.uniform(0, spread, (n_vertices, 2))
+    pairs = {tuple(sorted(p)) for p in rng.integers(0, n_vertices, (n_edges, 2)).tolist() if p[0] != p[1]}
+    return xy, np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("chunk", [None, 3000])
+@pytest.mark.parametrize("seed", range(6))
+def test_window_tables_are_bitwise_the_edge_by_edge_tables(seed, chunk, monkeypatch):
+    """The shared-window path (tables over offset differences, edges sampled together,
+    rows reordered after the BLAS sums, small chunks split by u's candidates) gives the
+    very bytes of the edge-by-edge path."""
+    import lidar2city.snake.energies as energies
+    from lidar2city.snake.energies import _edge_tables_general, _window_layout
+
+    if chunk:
+        monkeypatch.setattr(energies, "_CHUNK", chunk)
+
+    rng = np.random.default_rng(seed)
+    xy, edges = _random_graph(rng, 9, 16, 25.0)
+    xy[0] = xy[1] + [0.3, 0.2]  # a very short edge among the candidates
+    edges = np.vstack([edges, [[0, 1]]])
+    seg = np.stack([xy[edges[:, 0]], xy[edges[:, 1]]], axis=1)
+    window = int(rng.integers(1, 4))
+    cands = candidate_positions(xy, window)
+    r = distance_raster(seg, margin=window + 2, subdivide=int(rng.choice([1, 2, 4])))
+    c_dir = rng.choice([0.0, 1.0, 2.5], size=len(edges)) if seed % 2 else 1.0
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=c_dir, c_dis=float(rng.choice([0.5, 1.0])),
+              c_short=float(rng.choice([0.0, 0.5])), short_length=1.0)
+    assert _window_layout(cands, r) is not None
+    got = edge_energy_tables(cands, edges, r, **kw)
+    ref = _edge_tables_general(cands, edges, r, **kw)
+    assert len(got) == len(ref)
+    for a, b in zip(got, ref, strict=True):
+        assert a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_window_tables_bitwise_on_a_large_raster_and_a_long_edge():
+    # a raster above the sample budget stays int32; an edge long enough that its
+    # candidates of u are sampled in chunks, as edge by edge
+    from lidar2city.snake.energies import _SAMPLE_BUDGET, _edge_tables_general
+
+    xy = np.array([[0.0, 0.0], [900.0, 4.0], [905.0, 300.0], [2.0, 301.0]])
+    edges = np.array([(0, 1), (1, 2), (2, 3), (3, 0), (0, 2)])
+    seg = np.stack([xy[edges[:, 0]], xy[edges[:, 1]]], axis=1)
+    r = distance_raster(seg, margin=5, subdivide=2)
+    assert r.dt.size > _SAMPLE_BUDGET
+    cands = candidate_positions(xy, 3)
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=1.0, c_dis=1.0, c_short=0.25, short_length=1.0)
+    for a, b in zip(edge_energy_tables(cands, edges, r, **kw), _edge_tables_general(cands, edges, r, **kw),
+                    strict=True):
+        assert a.tobytes() == b.tobytes()
+
+
+def test_window_layout_needs_one_integer_window_everywhere():
+    from lidar2city.snake.energies import _window_layout
+
+    seg = np.array([[[0.0, 0.0], [10.0, 0.0]]])
+    r = distance_raster(seg, margin=4)
+    xy = np.array([[0.0, 0.0], [10.0, 0.0]])
+    assert _window_layout(candidate_positions(xy, 2), r) is not None
+    assert _window_layout(candidate_positions(xy, 2, fixed=[True, False]), r) is None
+    odd = candidate_positions(xy, 1)
+    assert _window_layout([odd[0], odd[1][::-1][:8]], r) is None  # not the same window

@@ -269,3 +269,57 @@ def test_reduction_work_estimates_before_any_table():
     grid = [(r * 8 + c, r * 8 + c + 1) for r in range(8) for c in range(7)] + \
            [(r * 8 + c, r * 8 + c + 8) for r in range(7) for c in range(8)]
     assert reduction_work([49] * 64, grid) == float("inf")
+
+
+def _reference_min_over(arrays, axis, shape):
+    """The plain broadcast sum, argmin and take along the eliminated axis."""
+    total = arrays[0]
+    for a in arrays[1:]:
+        total = total + a
+    total = np.broadcast_to(total, shape)
+    arg = total.argmin(axis=axis)
+    return np.squeeze(np.take_along_axis(total, np.expand_dims(arg, axis), axis=axis), axis=axis), arg
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_min_over_bitwise_equals_the_plain_broadcast(seed):
+    """Same sums in the same order, same first argmin on ties (integer energies tie often)."""
+    from lidar2city.snake.solver import _min_over
+
+    rng = np.random.default_rng(seed)
+    ndim = int(rng.integers(1, 5))
+    shape = tuple(int(x) for x in rng.integers(1, 6, ndim))
+    arrays = []
+    for _ in range(int(rng.integers(1, 4))):
+        keep = rng.random(ndim) < 0.6
+        sub = tuple(s if k else 1 for s, k in zip(shape, keep, strict=True))
+        vals = rng.integers(0, 4, sub).astype(float) * (0.1 if seed % 2 else 1.0)
+        arrays.append(vals)
+    for axis in range(ndim):
+        best, arg = _min_over(arrays, axis, shape)
+        ref_best, ref_arg = _reference_min_over(arrays, axis, shape)
+        assert best.shape == ref_best.shape and arg.shape == ref_arg.shape
+        assert best.tobytes() == ref_best.tobytes() and np.array_equal(arg, ref_arg)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_solve_bitwise_equals_the_plain_broadcast_solve(seed, monkeypatch):
+    """The whole solve on random planar graphs with tied energies: the same states and
+    the same energy bytes as with the plain min-plus step."""
+    import lidar2city.snake.solver as solver
+
+    rng = np.random.default_rng(100 + seed)
+    n = 9
+    pts = rng.uniform(0, 1, (n, 2))
+    from scipy.spatial import Delaunay
+
+    tri = Delaunay(pts).simplices
+    edges = sorted({tuple(sorted((int(a), int(b)))) for t in tri for a, b in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2]))})
+    dims = rng.integers(2, 5, n)
+    unary = [rng.integers(0, 3, d).astype(float) * 0.5 for d in dims]
+    tables = [rng.integers(0, 5, (dims[u], dims[v])).astype(float) * 0.25 for u, v in edges]
+    got = minimize_energy(unary, edges, tables)
+    monkeypatch.setattr(solver, "_min_over", _reference_min_over)
+    ref = minimize_energy(unary, edges, tables)
+    assert np.array_equal(got.states, ref.states) and got.energy == ref.energy
+    assert got.reductions == ref.reductions

@@ -58,6 +58,8 @@ _RASTER_BUDGET = 8_000_000
 _SAMPLE_BUDGET = 1_000_000
 # edges whose direction / jog tables are computed in one array operation
 _EDGE_BATCH = 64
+#: Samples (candidate pairs x points) of the edges sampled together on a shared window.
+_CHUNK = 1 << 18
 
 __all__ = [
     "window_offsets",
@@ -352,6 +354,18 @@ def edge_energy_tables(
     list of ndarray, shape (d_u, d_v) each
     """
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    kwargs = dict(cell=cell, t_adjust=t_adjust, c_dir=c_dir, c_dis=c_dis, c_short=c_short,
+                  short_length=short_length)
+    layout = _window_layout(candidates, raster)
+    if layout is None or not len(edges):
+        return _edge_tables_general(candidates, edges, raster, **kwargs)
+    return _window_edge_tables(layout, candidates, edges, raster, **kwargs)
+
+
+def _edge_tables_general(candidates, edges, raster: DistanceRaster, *, cell, t_adjust, c_dir, c_dis,
+                         c_short=0.0, short_length=0.0) -> list[np.ndarray]:
+    """Edge tables edge by edge (any candidate sets): see :func:`edge_energy_tables`."""
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
     if raster.dt.size <= _SAMPLE_BUDGET:
         # the integer distances read as doubles once per raster, not once per sample
@@ -380,6 +394,177 @@ def edge_energy_tables(
         out.append(e)
     return out
 
+
+class _Window(NamedTuple):
+    """Candidates that are the same window of integer grid offsets around every vertex.
+
+    ``q`` are the candidates in raster coordinates (exact integers); ``ix`` / ``iy``
+    the index of each candidate's x / y offset among the distinct ones ``ox`` /
+    ``oy`` (ascending), and ``ux`` / ``uy`` the raster x / y of those per vertex.
+    """
+
+    pos: np.ndarray  #: (V, d, 2) grid units
+    q: np.ndarray  #: (V, d, 2) raster coordinates
+    ix: np.ndarray  #: (d,)
+    iy: np.ndarray  #: (d,)
+    ux: np.ndarray  #: (V, nx)
+    uy: np.ndarray  #: (V, ny)
+    ox: np.ndarray  #: (nx,) grid units
+    oy: np.ndarray  #: (ny,) grid units
+
+
+#: Integer coordinates below this magnitude: their sums and differences are exact doubles.
+_EXACT = 2.0 ** 40
+
+
+def _window_layout(candidates, raster: DistanceRaster) -> _Window | None:
+    """The shared window of every vertex's candidates, or None (e.g. a fixed vertex)."""
+    if not len(candidates) or len({len(c) for c in candidates}) != 1:
+        return None
+    pos = np.stack([np.asarray(c, dtype=np.float64) for c in candidates])
+    off = pos - pos[:, :1]
+    if not (np.all(off == off[:1]) and np.all(pos == np.floor(pos)) and np.abs(pos).max() < _EXACT):
+        return None
+    q = pos * raster.scale - raster.origin  # as _ends computes it
+    if np.abs(q).max() >= _EXACT:
+        return None
+    ox, fx, ix = np.unique(off[0, :, 0], return_index=True, return_inverse=True)
+    oy, fy, iy = np.unique(off[0, :, 1], return_index=True, return_inverse=True)
+    # a vertex's candidate x (y) values are its candidate 0's plus the offsets, exactly:
+    # its distinct values are in the offsets' order
+    ix, iy = ix.ravel(), iy.ravel()
+    if len(ox) * len(oy) != pos.shape[1] or len(np.unique(ix * len(oy) + iy)) != pos.shape[1]:
+        return None  # not a whole rectangular window
+    return _Window(pos, q, ix, iy, q[:, fx, 0], q[:, fy, 1], ox, oy)
+
+
+def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster, *, cell, t_adjust,
+                        c_dir, c_dis, c_short, short_length, step=1.0):
+    """:func:`edge_energy_tables` when every vertex has the same window of grid offsets.
+
+    The same IEEE double operations per element as edge by edge
+    (:func:`_edge_tables_general`), with the work shared: a candidate pair's x
+    and y extents are the edge's base extent plus a difference of two window
+    offsets (exact integers), so its length, direction and jog energies are
+    computed once per difference (13 x 13 for a 7 x 7 window, not 49 x 49) and
+    looked up; edges with the same number of samples have their deviation
+    sampled together, the candidates of ``u`` in window order. The weighted
+    sums along the samples are still one BLAS matrix-vector product per
+    candidate of ``u`` over the candidates of ``v`` in their own order, exactly
+    as edge by edge (BLAS sums a row differently by its place in the matrix),
+    and their results are then put back in ``u``'s candidate order.
+    """
+    weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
+    if raster.dt.size <= _SAMPLE_BUDGET:
+        raster = raster._replace(dt=raster.dt.astype(np.float64))
+    scale = raster.scale
+    d = lay.pos.shape[1]
+    # (offset of b - offset of a) per axis, as an index among the distinct differences
+    dox, kx = np.unique(lay.ox[None, :] - lay.ox[:, None], return_inverse=True)
+    doy, ky = np.unique(lay.oy[None, :] - lay.oy[:, None], return_inverse=True)
+    kx, ky = kx.reshape(len(lay.ox), -1), ky.reshape(len(lay.oy), -1)
+    pair = (kx[lay.ix[:, None], lay.ix[None, :]] * len(doy) + ky[lay.iy[:, None], lay.iy[None, :]]).ravel()
+    use_dir = bool(np.any(weights))
+    scratch = _Scratch()  # the samples' buffers, reused by every block of this call
+    out = []
+    for b0 in range(0, len(edges), _EDGE_BATCH):
+        e_ = edges[b0:b0 + _EDGE_BATCH]
+        u_, v_ = e_[:, 0], e_[:, 1]
+
+        def per_pair(table):  # (k, ndx, ndy) -> (k, d, d)
+            return np.take(table.reshape(len(e_), -1), pair, axis=1).reshape(len(e_), d, d)
+
+        # extents (grid units, then raster cells) of every distinct offset difference:
+        # the edge's candidates 0 plus the difference, exact integers as edge by edge
+        rx = (lay.q[v_, 0, 0] - lay.q[u_, 0, 0])[:, None] + dox * scale
+        ry = (lay.q[v_, 0, 1] - lay.q[u_, 0, 1])[:, None] + doy * scale
+        length = per_pair(np.hypot(rx[:, :, None], ry[:, None, :]))
+        e = _window_deviation(lay, candidates, e_, raster, length, scratch, cell=cell, step=step)
+        e *= c_dis
+        if use_dir or c_short:
+            dx = ((lay.pos[v_, 0, 0] - lay.pos[u_, 0, 0])[:, None] + dox)[:, :, None] * cell
+            dy = ((lay.pos[v_, 0, 1] - lay.pos[u_, 0, 1])[:, None] + doy)[:, None, :] * cell
+            metres = np.hypot(dx, dy)
+        if use_dir:  # an edge of weight 0 adds 0 * E_Dir = +0.0: its energies unchanged
+            e += weights[b0:b0 + _EDGE_BATCH, None, None] * per_pair(
+                _direction(dx, dy, metres, cell=cell, t_adjust=t_adjust))
+        if c_short:
+            e += c_short * per_pair(_short(metres, cell=cell, short_length=short_length))
+        out += list(e)
+    return out
+
+
+def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, length, scratch, *, cell, step):
+    """E_Dis tables (k, d, d) of ``edges`` on a shared window, see :func:`_window_edge_tables`."""
+    dt, _, scale = raster
+    h, w = dt.shape
+    u_, v_ = edges[:, 0], edges[:, 1]
+    m, d = len(edges), lay.pos.shape[1]
+    nx, ny = len(lay.ox), len(lay.oy)
+    n = np.maximum(np.ceil(length.reshape(m, -1).max(axis=1) / step).astype(np.int64), 1) + 1
+    dev = np.empty((m, d, d))
+    chunked = _SAMPLE_BUDGET // (n * d) < d  # as edge by edge: candidates of u in chunks
+    for k in np.flatnonzero(chunked):
+        u, v = edges[k]
+        dev[k] = _deviation(candidates[u], candidates[v], _ends(candidates[u], raster),
+                            _ends(candidates[v], raster), raster, cell=cell, step=step)
+    grid = lay.ix * ny + lay.iy  # each candidate's cell in the window, x major
+    order = np.flatnonzero(~chunked)
+    order = order[np.argsort(n[order], kind="stable")]
+    for group in np.split(order, np.flatnonzero(np.diff(n[order])) + 1):
+        if not len(group):
+            continue
+        ns = int(n[group[0]])
+        t = np.linspace(0.0, 1.0, ns)
+        wts = np.full(ns, 1.0 / (ns - 1))
+        wts[[0, -1]] *= 0.5
+        per = max(1, _CHUNK // (d * d * ns))
+        for s in range(0, len(group), per):
+            ks = group[s:s + per]
+            # raster row (column) of every sample, per x (y) of u's candidate and
+            # candidate of v, then every pair's flat index: u's candidates in window
+            # order, v's in their own
+            rows = np.take(_axis_cells_batch(lay.ux[u_[ks]], lay.ux[v_[ks]], t, h, stride=w), lay.ix, axis=2)
+            cols = np.take(_axis_cells_batch(lay.uy[u_[ks]], lay.uy[v_[ks]], t, w), lay.iy, axis=2)
+            sums = np.empty((len(ks), nx, ny, d))
+            # the samples of a few of u's candidate x at a time: bounded buffers
+            # (each sum is still one matrix-vector product over v's candidates)
+            step_x = max(1, _CHUNK // (len(ks) * ny * d * ns))
+            for i in range(0, nx, step_x):
+                part = rows[:, i:i + step_x]
+                shape = (len(ks), part.shape[1], ny, d, ns)
+                idx = np.add(part[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
+                # every index is inside the raster: 'wrap' is the plain look-up, unbuffered
+                dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
+                np.matmul(dist, wts, out=sums[:, i:i + step_x])
+            dev[ks] = sums.reshape(len(ks), nx * ny, d)[:, grid] * length[ks] * (cell / scale) ** 2
+    return dev
+
+
+class _Scratch:
+    """Buffers reused from chunk to chunk of one call: fresh pages for every few
+    edges' samples cost the kernel more time than the look-ups. Dropped with the
+    call, so nothing stays allocated between snakes."""
+
+    def __init__(self):
+        self.bufs: dict[str, np.ndarray] = {}
+
+    def __call__(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        size = int(np.prod(shape))
+        buf = self.bufs.get(name)
+        if buf is None or buf.size < size or buf.dtype != dtype:
+            buf = self.bufs[name] = np.empty(size, dtype=dtype)
+        return buf[:size].reshape(shape)
+
+
+def _axis_cells_batch(u0, u1, t, size, stride=1):
+    """:func:`_axis_cells` of several edges (rows of ``u0``, ``u1``) before the look-up:
+    shape (k, len(u0[0]), len(u1[0]), len(t)), one row per pair of distinct values."""
+    d = u1[:, None, :] - u0[:, :, None]
+    c = np.floor(u0[:, :, None, None] + 0.5 + t * d[..., None]).astype(np.intp)
+    np.clip(c, 0, size - 1, out=c)
+    c *= stride
+    return c
 
 def vertex_energy_tables(candidates, grid_xy, *, cell: float, c_move: float) -> list[np.ndarray]:
     """Vertex energies: ``c_move`` times the displacement (m) from the input position.

@@ -92,7 +92,8 @@ class SnakeSolution:
 
 def _as_float_array(value, name: str, ndim: int) -> np.ndarray:
     try:
-        arr = np.array(value, dtype=np.float64)
+        # no copy of a float64 array: the solver never writes into its inputs
+        arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{name} must be a numeric {ndim}-D array") from None
     if arr.ndim != ndim:
@@ -317,13 +318,17 @@ def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
     """Minimum (and argmin) over ``axis`` of the broadcast sum of ``arrays``."""
     size = int(np.prod(shape, dtype=np.int64))
     if size <= _BROADCAST_LIMIT:
-        total = arrays[0]
+        # The eliminated axis last, each (small) table made contiguous that way: every
+        # element is the same sum in the same order, and the argmin runs along
+        # contiguous memory instead of a transposed copy.
+        out_shape = shape[:axis] + shape[axis + 1:]
+        total = np.ascontiguousarray(np.moveaxis(arrays[0], axis, -1))
         for a in arrays[1:]:
-            total = total + a
-        total = np.broadcast_to(total, shape)
-        arg = total.argmin(axis=axis)
-        best = np.take_along_axis(total, np.expand_dims(arg, axis), axis=axis)
-        return np.squeeze(best, axis=axis), arg
+            total = total + np.ascontiguousarray(np.moveaxis(a, axis, -1))
+        flat = np.broadcast_to(total, out_shape + (shape[axis],)).reshape(-1, shape[axis])
+        arg = flat.argmin(axis=1)
+        best = flat[np.arange(len(flat)), arg]
+        return best.reshape(out_shape), arg.reshape(out_shape)
     # Large table: run over the eliminated vertex's states, keeping a running minimum
     # in preallocated buffers (the sums are taken in the same order as above).
     out_shape = shape[:axis] + shape[axis + 1:]
