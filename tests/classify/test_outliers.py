@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lidar2city.classify.outliers import far_points
 
@@ -34,3 +35,43 @@ def test_far_points_is_translation_invariant():
     a = far_points(xy)
     b = far_points(xy + [1e7, -3e6])
     assert np.array_equal(a, b) and a[-1]
+
+
+def _far_points_reference(xy, gap=100.0, max_points=100, spread=2.0):
+    """far_points' rule written plainly: cells' 8-neighbour clumps by brute force."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    lo = xy.min(axis=0)
+    ij = np.floor((xy - lo) / gap).astype(np.int64)
+    cells, inverse = np.unique(ij, axis=0, return_inverse=True)
+    if np.ptp(ij, axis=0).max() + 1 <= 2:
+        return np.zeros(len(xy), dtype=bool)
+    near = np.abs(cells[:, None, :] - cells[None, :, :]).max(axis=2) <= 1
+    a, b = np.nonzero(near)
+    _, comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)),
+                                              shape=(len(cells),) * 2), directed=False)
+    clump = comp[inverse.reshape(-1)]
+    sizes = np.bincount(clump)
+    # the survey: the largest clump, the first in raster order on a tie
+    first = np.full(len(sizes), len(cells))
+    np.minimum.at(first, comp, np.arange(len(cells)))
+    survey = min(range(len(sizes)), key=lambda c: (-sizes[c], first[c]))
+    small = (sizes[clump] <= max_points) & (clump != survey)
+    if not small.any():
+        return np.zeros(len(xy), dtype=bool)
+    kept = xy[~small]
+    if np.any(np.ptp(xy, axis=0) > spread * np.ptp(kept, axis=0) + 2 * gap):
+        return small
+    return np.zeros(len(xy), dtype=bool)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_far_points_matches_plain_rule(seed):
+    rng = np.random.default_rng(seed)
+    parts = [rng.uniform(0, rng.uniform(50, 800), (rng.integers(200, 2000), 2))]
+    for _ in range(rng.integers(0, 5)):  # clumps of a few points, near or far
+        centre = rng.uniform(-5000, 5000, 2)
+        parts.append(centre + rng.normal(0, rng.uniform(1, 150), (rng.integers(1, 150), 2)))
+    xy = np.vstack(parts)
+    np.testing.assert_array_equal(far_points(xy), _far_points_reference(xy))

@@ -47,10 +47,6 @@ def far_points(xy, *, gap: float = 100.0, max_points: int = 100,
     >>> np.flatnonzero(far_points(xy)).tolist()
     [500]
     """
-    from scipy.spatial import cKDTree
-
-    from .._components import component_labels
-
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     out = np.zeros(len(xy), dtype=bool)
     if len(xy) < 2:
@@ -61,16 +57,24 @@ def far_points(xy, *, gap: float = 100.0, max_points: int = 100,
     if span.max() <= 2:  # every point within two cells of every other: one clump
         return out
     key = ij[:, 0] * span[1] + ij[:, 1]
-    if span[0] * span[1] <= 4_000_000:  # a tile's extent: counted, not sorted
-        cells = np.flatnonzero(np.bincount(key, minlength=int(span[0] * span[1])))
-        lookup = np.zeros(int(span[0] * span[1]), dtype=np.int64)
-        lookup[cells] = np.arange(len(cells))
-        inverse = lookup[key]
+    if span[0] * span[1] <= 4_000_000:  # a tile's extent: a grid of the cells, labelled
+        from scipy import ndimage  # the filters' own import: no scipy.spatial in a plain run
+
+        grid = np.zeros(int(span[0] * span[1]), dtype=bool)
+        grid[key] = True
+        # 8-neighbour clumps, numbered in raster order (the order of the smallest key)
+        labels, _ = ndimage.label(grid.reshape(int(span[0]), int(span[1])),
+                                  structure=np.ones((3, 3), dtype=bool))
+        clump = labels.reshape(-1)[key] - 1
     else:
+        from scipy.spatial import cKDTree
+
+        from .._components import component_labels
+
         cells, inverse = np.unique(key, return_inverse=True)
-    cell_ij = np.column_stack([cells // span[1], cells % span[1]])
-    pairs = cKDTree(cell_ij).query_pairs(1.5, p=np.inf, output_type="ndarray")
-    clump = component_labels(len(cells), pairs[:, 0], pairs[:, 1])[inverse.reshape(-1)]
+        cell_ij = np.column_stack([cells // span[1], cells % span[1]])
+        pairs = cKDTree(cell_ij).query_pairs(1.5, p=np.inf, output_type="ndarray")
+        clump = component_labels(len(cells), pairs[:, 0], pairs[:, 1])[inverse.reshape(-1)]
     sizes = np.bincount(clump)
     small = sizes[clump] <= max_points
     small &= clump != int(np.argmax(sizes))

@@ -730,13 +730,16 @@ def write_las(path, tile: LasTile, *, classification=None) -> None:
 
 
 def _write(las, path) -> None:
-    """Write ``las`` to ``path`` (LAZ with lazrs when the extension says so), atomically."""
+    """Write ``las`` to ``path`` (LAZ with lazrs when the extension says so), atomically.
+
+    LAZ chunks are compressed on every core (lazrs's parallel writer gives the same
+    bytes as its serial one, as laspy's own default does)."""
     import laspy
 
     laz = str(path).lower().endswith(".laz")
     with atomic_path(path) as tmp:
         las.write(str(tmp), do_compress=laz,
-                  laz_backend=laspy.LazBackend.Lazrs if laz else None)
+                  laz_backend=laspy.LazBackend.LazrsParallel if laz else None)
 
 
 def _needs_crs_vlr(las) -> bool:
