@@ -13,7 +13,10 @@ blocks, first start and last end, the seconds it was running a block and the
 CPU it spent on them, its buildings, the tiles it decoded, its idle gaps
 between blocks longer than 20 ms and how long it waited at the end for the
 last worker; and the CPU of every process the run started (the workers and
-the server they are forked from, counted once reaped). The machine is shared:
+the server they are forked from, counted once reaped); and the client's CPU
+while the blocks ran by thread (Linux ``/proc/self/task``: the main thread,
+which submits, receives and writes, and Dask's event loop thread, which runs
+the scheduler, the nannies and the connections). The machine is shared:
 the load average is printed, and wall seconds are only comparable at the same
 load.
 """
@@ -33,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_engine import BLOCK, make_area  # noqa: E402
 
 CHILD = r"""
-import json, os, resource, sys, time
+import json, os, resource, sys, threading, time
 
 from lidar2city.tools import reconstruct as R, task
 from lidar2city.tools.engine import make_executor
@@ -47,6 +50,26 @@ def timed_block(spec, options):
     return out
 
 
+def threads_cpu():
+    # CPU seconds of each thread of this process, by name (Linux /proc; {} elsewhere)
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    tick, out = os.sysconf("SC_CLK_TCK"), {}
+    try:
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                stat = f.read()
+        except OSError:  # the thread ended
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        name = names.get(int(tid), stat[stat.index("(") + 1:stat.rindex(")")])
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
 def main():
     a = json.loads(sys.argv[1])
     t0, c0 = time.time(), time.process_time()
@@ -56,6 +79,7 @@ def main():
         phases["planned"] = (time.time() - t0, time.process_time() - c0)
         ex.ready()
         phases["ready"] = (time.time() - t0, time.process_time() - c0)
+        threads_before = threads_cpu()
         ordered, sink = R.InOrder(plan), R._sink(a["out"], plan)
         costs = [max(s.size, 1) for s in plan.specs]
         rows = []
@@ -70,9 +94,10 @@ def main():
                          len(out.results)])
         sink.close()
         phases["blocks done"] = (time.time() - t0, time.process_time() - c0)
+        threads = {k: v - threads_before.get(k, 0.0) for k, v in threads_cpu().items()}
     phases["closed"] = (time.time() - t0, time.process_time() - c0)
     ch = resource.getrusage(resource.RUSAGE_CHILDREN)
-    print(json.dumps({"phases": phases, "rows": rows, "tiles": len(a["tiles"]),
+    print(json.dumps({"phases": phases, "rows": rows, "tiles": len(a["tiles"]), "threads": threads,
                       "children_cpu": ch.ru_utime + ch.ru_stime}))
 
 
@@ -102,6 +127,11 @@ def main():
     for name, (t, c) in m["phases"].items():
         print(f"{name:12s} at {t:6.2f} s; client CPU in this phase {c - prev:.2f} s")
         prev = c
+    busy = sorted(((v, k) for k, v in m["threads"].items() if v >= 0.005), reverse=True)
+    print("client CPU while the blocks ran, by thread: "
+          + (", ".join(f"{k} {v:.2f} s" for v, k in busy) or "not measured (no /proc)")
+          + " (MainThread: submitting, receiving the results, writing; IO loop: Dask's "
+          "scheduler, the nannies and the client's connections)")
     by = {}
     for row in m["rows"]:
         by.setdefault(row[2], []).append(row)
