@@ -396,7 +396,8 @@ def open_disk_series(a, radii):
 
 
 def bilinear_weights(spec: GridSpec, xy):
-    """Flat indices (4, N) and weights (4, N) of bilinear interpolation at ``xy`` (N, 2).
+    """Flat indices and weights (each four arrays (N,), corners in the order 00, 01, 10, 11)
+    of bilinear interpolation at ``xy`` (N, 2).
 
     Values live at cell centres; points beyond the outer centres are clamped.
     Reuse the result to sample several grids of the same ``spec``.
@@ -414,8 +415,11 @@ def bilinear_weights(spec: GridSpec, xy):
     dc = 1 if w > 1 else 0
     dr = w if h > 1 else 0
     i00 = r0 * w + c0
-    index = np.stack([i00, i00 + dc, i00 + dr, i00 + dr + dc])
-    weights = np.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty])
+    # tuples, not stacked (4, N) arrays: the copy cost more than the sampling
+    i10 = i00 + dr
+    sx, sy = 1 - tx, 1 - ty
+    index = (i00, i00 + dc, i10, i10 + dc)
+    weights = (sx * sy, tx * sy, sx * ty, tx * ty)
     return index, weights
 
 
