@@ -39,15 +39,22 @@ def component_labels(n: int, a, b) -> np.ndarray:
     a = np.asarray(a, dtype=np.int64).reshape(-1)
     b = np.asarray(b, dtype=np.int64).reshape(-1)
     root = np.arange(n, dtype=np.int64)
-    # each node takes the smallest node it is linked to, then the smallest its root
-    # reached (pointer jumping): a fixpoint holds one value per component, its
-    # smallest node (that node never takes a smaller one)
+    # every root takes the smallest root linked to its tree (hooking roots, not nodes),
+    # then every node jumps to the end of its chain: trees merge whole, so the rounds
+    # are few (every tree merges with another each round, so their number halves; node
+    # by node, the rounds were the graph's diameter). A fixpoint holds one value per
+    # component, its smallest node (that node never takes a smaller one)
     while len(a):
-        m = np.minimum(root[a], root[b])
+        ra, rb = root[a], root[b]
+        m = np.minimum(ra, rb)
         new = root.copy()
-        np.minimum.at(new, a, m)
-        np.minimum.at(new, b, m)
-        new = new[new]
+        np.minimum.at(new, ra, m)
+        np.minimum.at(new, rb, m)
+        while True:
+            jumped = new[new]
+            if np.array_equal(jumped, new):
+                break
+            new = jumped
         if np.array_equal(new, root):
             break
         root = new

@@ -75,3 +75,15 @@ def test_far_points_matches_plain_rule(seed):
         parts.append(centre + rng.normal(0, rng.uniform(1, 150), (rng.integers(1, 150), 2)))
     xy = np.vstack(parts)
     np.testing.assert_array_equal(far_points(xy), _far_points_reference(xy))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_far_points_matches_plain_rule_over_a_huge_extent(seed):
+    # strays hundreds of km off: the cells are too many for a dense grid
+    rng = np.random.default_rng(seed)
+    parts = [rng.uniform(0, 500, (1000, 2))]
+    for _ in range(rng.integers(1, 5)):
+        centre = rng.uniform(-5e5, 5e5, 2)
+        parts.append(centre + rng.normal(0, rng.uniform(1, 150), (rng.integers(1, 150), 2)))
+    xy = np.vstack(parts)
+    np.testing.assert_array_equal(far_points(xy), _far_points_reference(xy))

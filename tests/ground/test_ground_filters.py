@@ -341,3 +341,34 @@ def test_isprs_mean_total_error_target(data):
     assert np.mean(totals["smrf_vote"]) <= 0.032
     assert max(totals["smrf_vote"]) <= 0.08
     assert np.mean(totals["pmf"]) <= 0.048
+
+
+def _relax_whole_grid(values, unknown, iterations, omega=1.6):
+    """Red-black SOR written plainly: each colour computed on the whole padded grid."""
+    p = np.pad(values, 1)
+    v = p[1:-1, 1:-1]
+    parity = np.add.outer(np.arange(values.shape[0]), np.arange(values.shape[1])) % 2 == 1
+    quarter, keep = values.dtype.type(omega / 4.0), values.dtype.type(1.0 - omega)
+    for _ in range(iterations):
+        for colour in (unknown & ~parity, unknown & parity):
+            p[0, 1:-1], p[-1, 1:-1], p[1:-1, 0], p[1:-1, -1] = v[0], v[-1], v[:, 0], v[:, -1]
+            new = p[:-2, 1:-1] + p[2:, 1:-1]
+            new += p[1:-1, :-2]
+            new += p[1:-1, 2:]
+            new *= quarter
+            new += keep * v
+            np.copyto(v, new, where=colour)
+    return v.copy()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_relax_sweeps_each_colour_like_the_whole_grid(seed):
+    from lidar2city.ground._grid import _relax
+
+    rng = np.random.default_rng(seed)
+    for _ in range(30):
+        h, w = (int(n) for n in rng.integers(1, 25, 2))
+        values = rng.normal(size=(h, w)).astype(rng.choice([np.float32, np.float64]))
+        unknown = rng.random((h, w)) < rng.random()
+        expected = _relax_whole_grid(values.copy(), unknown, 4)
+        np.testing.assert_array_equal(_relax(values.copy(), unknown, 4), expected)

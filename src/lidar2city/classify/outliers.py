@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._components import component_labels
+
 __all__ = ["far_points"]
 
 
@@ -57,24 +59,7 @@ def far_points(xy, *, gap: float = 100.0, max_points: int = 100,
     if span.max() <= 2:  # every point within two cells of every other: one clump
         return out
     key = ij[:, 0] * span[1] + ij[:, 1]
-    if span[0] * span[1] <= 4_000_000:  # a tile's extent: a grid of the cells, labelled
-        from scipy import ndimage  # the filters' own import: no scipy.spatial in a plain run
-
-        grid = np.zeros(int(span[0] * span[1]), dtype=bool)
-        grid[key] = True
-        # 8-neighbour clumps, numbered in raster order (the order of the smallest key)
-        labels, _ = ndimage.label(grid.reshape(int(span[0]), int(span[1])),
-                                  structure=np.ones((3, 3), dtype=bool))
-        clump = labels.reshape(-1)[key] - 1
-    else:
-        from scipy.spatial import cKDTree
-
-        from .._components import component_labels
-
-        cells, inverse = np.unique(key, return_inverse=True)
-        cell_ij = np.column_stack([cells // span[1], cells % span[1]])
-        pairs = cKDTree(cell_ij).query_pairs(1.5, p=np.inf, output_type="ndarray")
-        clump = component_labels(len(cells), pairs[:, 0], pairs[:, 1])[inverse.reshape(-1)]
+    clump = _clumps(key, int(span[0]), int(span[1]))
     sizes = np.bincount(clump)
     small = sizes[clump] <= max_points
     small &= clump != int(np.argmax(sizes))
@@ -85,3 +70,31 @@ def far_points(xy, *, gap: float = 100.0, max_points: int = 100,
     if np.any(extent > spread * kept_extent + 2 * gap):
         out = small
     return out
+
+
+def _clumps(key, rows: int, cols: int) -> np.ndarray:
+    """The 8-neighbour clump of the occupied cell of each point, cells keyed ``i * cols + j``
+    on a ``rows`` x ``cols`` grid; clumps numbered in raster order (of their first cell).
+
+    Pure numpy: no scipy import (``ndimage`` or ``spatial``, 0.1-0.3 s) in a ground run.
+    """
+    if rows * cols <= 4_000_000:  # a tile's extent: the occupied cells from a dense grid
+        grid = np.zeros(rows * cols, dtype=bool)
+        grid[key] = True
+        cells = np.flatnonzero(grid)
+        index = np.zeros(rows * cols, dtype=np.int64)
+        index[cells] = np.arange(len(cells))
+        inverse = index[key]
+    else:
+        cells, inverse = np.unique(key, return_inverse=True)
+    ci, cj = np.divmod(cells, cols)
+    a, b = [], []
+    for di, dj in ((0, 1), (1, -1), (1, 0), (1, 1)):  # each neighbour pair once
+        ni, nj = ci + di, cj + dj
+        nk = ni * cols + nj
+        pos = np.minimum(np.searchsorted(cells, nk), len(cells) - 1)
+        hit = (ni < rows) & (nj >= 0) & (nj < cols) & (cells[pos] == nk)
+        a.append(np.flatnonzero(hit))
+        b.append(pos[hit])
+    # component_labels numbers clumps by their smallest cell: raster order
+    return component_labels(len(cells), np.concatenate(a), np.concatenate(b))[inverse.reshape(-1)]

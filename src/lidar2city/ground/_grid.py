@@ -152,6 +152,11 @@ def centre_surface(xyz, spec: GridSpec) -> np.ndarray:
     return out.reshape(spec.shape)
 
 
+def _every_other(start: int, n: int) -> slice:
+    """``n`` indices from ``start`` in steps of 2."""
+    return slice(start, start + 2 * n, 2)
+
+
 def _relax(values, unknown, iterations, omega=1.6):
     """Red-black SOR relaxation of Laplace's equation on ``unknown`` cells (known fixed).
 
@@ -167,25 +172,41 @@ def _relax(values, unknown, iterations, omega=1.6):
     r0, r1 = max(rows[0] - 1, 0), min(rows[-1] + 2, h)
     c0, c1 = max(cols[0] - 1, 0), min(cols[-1] + 2, w)
     u = unknown[r0:r1, c0:c1]
-    p = np.empty((r1 - r0 + 2, c1 - c0 + 2), dtype=values.dtype)
+    hh, ww = u.shape
+    p = np.empty((hh + 2, ww + 2), dtype=values.dtype)
     v = p[1:-1, 1:-1]  # a view: updates land in the padded array directly
     v[...] = values[r0:r1, c0:c1]
-    parity = (np.add.outer(np.arange(r0, r1), np.arange(c0, c1)) % 2).astype(bool)
-    colours = (u & ~parity, u & parity)
     quarter = values.dtype.type(omega / 4.0)
     keep = values.dtype.type(1.0 - omega)
+    # each colour is two strided blocks (rows of one parity, every other column): only
+    # its own cells are computed; their neighbours are all of the other colour, so the
+    # values are those of a whole-grid sweep
+    sweeps = []
+    for colour in (0, 1):
+        blocks = []
+        for ri in (0, 1):
+            cj = (colour - ri - r0 - c0) % 2
+            if ri >= hh or cj >= ww or not u[ri::2, cj::2].any():
+                continue
+            nr, nc = len(range(ri, hh, 2)), len(range(cj, ww, 2))
+            mid_r, mid_c = _every_other(ri + 1, nr), _every_other(cj + 1, nc)
+            blocks.append((v[ri::2, cj::2], u[ri::2, cj::2],
+                           (p[_every_other(ri, nr), mid_c], p[_every_other(ri + 2, nr), mid_c],
+                            p[mid_r, _every_other(cj, nc)], p[mid_r, _every_other(cj + 2, nc)])))
+        sweeps.append(blocks)
     for _ in range(iterations):
-        for colour in colours:
+        for blocks in sweeps:
             p[0, 1:-1] = v[0]
             p[-1, 1:-1] = v[-1]
             p[1:-1, 0] = v[:, 0]
             p[1:-1, -1] = v[:, -1]
-            new = p[:-2, 1:-1] + p[2:, 1:-1]
-            new += p[1:-1, :-2]
-            new += p[1:-1, 2:]
-            new *= quarter
-            new += keep * v
-            np.copyto(v, new, where=colour)
+            for cells, mask, (up, down, left, right) in blocks:
+                new = up + down
+                new += left
+                new += right
+                new *= quarter
+                new += keep * cells
+                np.copyto(cells, new, where=mask)
     values[r0:r1, c0:c1] = v
     return values
 
@@ -396,7 +417,8 @@ def open_disk_series(a, radii):
 
 
 def bilinear_weights(spec: GridSpec, xy):
-    """Flat indices (4, N) and weights (4, N) of bilinear interpolation at ``xy`` (N, 2).
+    """Flat indices and weights (each four arrays (N,), corners in the order 00, 01, 10, 11)
+    of bilinear interpolation at ``xy`` (N, 2).
 
     Values live at cell centres; points beyond the outer centres are clamped.
     Reuse the result to sample several grids of the same ``spec``.
@@ -414,8 +436,11 @@ def bilinear_weights(spec: GridSpec, xy):
     dc = 1 if w > 1 else 0
     dr = w if h > 1 else 0
     i00 = r0 * w + c0
-    index = np.stack([i00, i00 + dc, i00 + dr, i00 + dr + dc])
-    weights = np.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty])
+    # tuples, not stacked (4, N) arrays: the copy cost more than the sampling
+    i10 = i00 + dr
+    sx, sy = 1 - tx, 1 - ty
+    index = (i00, i00 + dc, i10, i10 + dc)
+    weights = (sx * sy, tx * sy, sx * ty, tx * ty)
     return index, weights
 
 
