@@ -1136,7 +1136,7 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         # rims are narrow by nature: first empty cells join a neighbour and same-plane cells
         # dissolve, then only the faces off the rims are held to the smallest area and width
         merged, merged_labels = dissolve_cells(cells, cell_lab, weights=counts)
-        on = np.isin(merged_labels, exempt)
+        on = _on_rims(merged, merged_labels, exempt, [cells[i] for i in np.flatnonzero(rim)])
         _, merged_counts = _cell_labels(merged, xyz, planes, cap)
         keep = np.flatnonzero(~on)
         faces, face_labels = dissolve_cells([merged[i] for i in keep], merged_labels[keep],
@@ -1151,6 +1151,21 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
             labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds, planes
     return faces, face_labels, kinds, planes
+
+
+def _on_rims(faces, face_labels, exempt, rim_cells):
+    """Which faces are rims, kept however narrow: those with a rim label (``exempt``)
+    holding one of the rim strips' cells (``rim_cells``). A face of a rim facet's label
+    made only of cells off the strips is held to the smallest area as any other."""
+    import shapely
+
+    on = np.isin(face_labels, exempt)
+    idx = np.flatnonzero(on)
+    if len(idx) and rim_cells:
+        probe = shapely.get_coordinates(shapely.point_on_surface(np.asarray(rim_cells, dtype=object)))
+        for i in idx:
+            on[i] = bool(shapely.contains_xy(faces[i], probe[:, 0], probe[:, 1]).any())
+    return on
 
 
 def collapse_short_edges(faces, footprint, *, min_length):
