@@ -10,10 +10,13 @@ boundary lines (label grid, chains, step snake), the arrangement partition,
 refining and building the solid, validation, and the whole try of each roof
 partition method (``rims`` first, ``arrangement`` without rims when the rims'
 shell does not close or validate, ``grid`` last). Prints the run's CPU, the
-LoD2.2 total and each phase's, the CPU per m2 by footprint size class (a cost
-growing faster than the area shows as a larger ms/m2 in the larger classes),
-then the N costliest buildings: area, points, roof faces, CPU by phase and
-which methods were tried. The timing wrappers only add their own small cost;
+LoD2.2 total and each phase's, the CPU per m2 and per point by footprint size
+class (a cost growing faster than the area or the points shows as a larger
+ms/m2 or us/point in the larger classes; the points per m2 vary by block),
+where the traced blocks lie against BGT's footprints (inside their hull + 2 m:
+on them or off them; outside: blocks the BGT file leaves out), then the N
+costliest buildings: area, points, roof faces, CPU by phase and which methods
+were tried. The timing wrappers only add their own small cost;
 the output is the same file as without them.
 """
 
@@ -88,6 +91,17 @@ def main(argv):
             rows.append((footprint.area, len(xyz), time.process_time() - t, dict(now)))
 
     B.reconstruct_lod22 = lod22
+    import lidar2city.tools.reconstruct as R
+
+    traced = []
+    trace = R.footprints_from_points
+
+    def traced_kept(cloud, *a, **k):
+        fps = trace(cloud, *a, **k)
+        traced.append((cloud, fps.geometries))
+        return fps
+
+    R.footprints_from_points = traced_kept
     out = Path(tempfile.mkdtemp()) / "traced.city.json"
     t0 = time.process_time()
     try:
@@ -112,15 +126,40 @@ def main(argv):
     for lo, hi in ((0, 200), (200, 500), (500, 1000), (1000, float("inf"))):
         sel = [r for r in rows if lo <= r[0] < hi]
         if sel:
-            a, c = sum(r[0] for r in sel), sum(r[2] for r in sel)
+            a, c, n = sum(r[0] for r in sel), sum(r[2] for r in sel), sum(r[1] for r in sel)
             print(f"  footprints {lo:g}-{hi:g} m2: {len(sel)} buildings, {a:.0f} m2, "
-                  f"{c:.2f} CPU s, {1000 * c / a:.2f} ms/m2")
+                  f"{c:.2f} CPU s, {1000 * c / a:.2f} ms/m2, {n / a:.1f} points/m2, "
+                  f"{1e6 * c / n:.0f} us/point")
+    if traced:
+        against_bgt(traced, laz.parent / "footprints_bgt.gpkg")
     print(f"  the {min(top, len(rows))} costliest (area m2, points, roof faces, CPU s: "
           "whole / segmentation / lines / arrangement / finish / check; tries)")
     for a, n, c, ph in sorted(rows, key=lambda r: -r[2])[:top]:
         tries = " ".join(f"{k[4:]} {v:.2f}" for k, v in ph.items() if k.startswith("try "))
         print(f"    {a:7.0f} {n:7d} {int(ph.get('faces', 0)):4d}  {c:5.2f} / "
               + " / ".join(f"{ph.get(k, 0.0):.2f}" for k in PHASES) + f"; {tries}")
+
+
+def against_bgt(traced, bgt_path):
+    """Where the traced blocks lie against BGT's footprints (which cover only the tile's two
+    central blocks): traced area inside BGT's hull + 2 m and outside it, and inside it the
+    area both cover, BGT's area not traced and the traced area off BGT."""
+    import shapely
+
+    from lidar2city.io.vector import read_footprints
+
+    cloud = traced[0][0]
+    tu = shapely.union_all([g for _, gs in traced for g in gs])
+    bgt, _ = read_footprints(bgt_path, origin=cloud.origin[:2], xy_unit=cloud.xy_unit,
+                             target_crs=cloud.crs)
+    bu = shapely.union_all([g for g in bgt.geometries if g is not None])
+    hull = shapely.convex_hull(bu).buffer(2.0)
+    inside = tu.intersection(hull)
+    print(f"  traced {tu.area:.0f} m2 against BGT's {len(bgt)} footprints, {bu.area:.0f} m2: "
+          f"{inside.area:.0f} m2 inside BGT's hull + 2 m ({inside.intersection(bu).area:.0f} m2 "
+          f"on BGT, {inside.difference(bu).area:.0f} m2 off it; BGT not traced "
+          f"{bu.difference(tu).area:.0f} m2), {tu.difference(hull).area:.0f} m2 outside it "
+          "(blocks BGT's file leaves out)")
 
 
 if __name__ == "__main__":

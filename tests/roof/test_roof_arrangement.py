@@ -450,3 +450,18 @@ def test_raised_parts_option_makes_a_valid_better_roof():
     a = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(raised_parts=True))
     b = reconstruct_lod22(SQ, xyz, 0.0)
     assert np.array_equal(a.solids[0].vertices, b.solids[0].vertices)
+
+
+def test_a_rim_facets_face_off_the_strip_is_no_rim():
+    from shapely.geometry import box
+
+    from lidar2city.roof.arrangement import _on_rims
+
+    # faces: the rim strip (label 2), a small patch of the rim facet's label far from the
+    # strip (label 2 too), a roof face (label 0)
+    faces = [box(0, 9.7, 10, 10), box(4, 4, 4.5, 4.5), box(0, 0, 10, 9.7).difference(box(4, 4, 4.5, 4.5))]
+    labels = np.array([2, 2, 0])
+    strip = [box(x, 9.7, x + 1, 10) for x in range(10)]
+    assert _on_rims(faces, labels, [2], strip).tolist() == [True, False, False]
+    # without rim cells every face of a rim label counts (nothing to tell them apart)
+    assert _on_rims(faces, labels, [2], []).tolist() == [True, True, False]

@@ -884,17 +884,22 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     return out
 
 
-def _cell_labels(cells, xyz, planes, cap):
-    """Per cell: the plane with the least capped residual sum of its points, and point counts."""
+def _cell_points(cells, xyz):
+    """``(ip, ic, counts)``: the points in the cells (indices into ``xyz``) and the cell of
+    each, a point on a shared edge in its first cell only; the count per cell (float)."""
     import shapely
 
-    n = len(cells)
     tree = shapely.STRtree(cells)
     ip, ic = tree.query(shapely.points(xyz[:, :2]), predicate="intersects")
-    # a point on a shared edge counts once (its first cell)
     first = np.unique(ip, return_index=True)[1]
     ip, ic = ip[first], ic[first]
-    counts = np.bincount(ic, minlength=n).astype(float)
+    return ip, ic, np.bincount(ic, minlength=len(cells)).astype(float)
+
+
+def _cell_labels(cells, xyz, planes, cap):
+    """Per cell: the plane with the least capped residual sum of its points, and point counts."""
+    n = len(cells)
+    ip, ic, counts = _cell_points(cells, xyz)
     cost = np.zeros((n, len(planes)))
     # a plane at a time: a block of many houses has ~1e4-1e5 points and ~1e2 planes;
     # bincount adds each cell's residuals in point order, as a running sum from zero
@@ -1136,8 +1141,8 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         # rims are narrow by nature: first empty cells join a neighbour and same-plane cells
         # dissolve, then only the faces off the rims are held to the smallest area and width
         merged, merged_labels = dissolve_cells(cells, cell_lab, weights=counts)
-        on = np.isin(merged_labels, exempt)
-        _, merged_counts = _cell_labels(merged, xyz, planes, cap)
+        on = _on_rims(merged, merged_labels, exempt, [cells[i] for i in np.flatnonzero(rim)])
+        merged_counts = _cell_points(merged, xyz)[2]
         keep = np.flatnonzero(~on)
         faces, face_labels = dissolve_cells([merged[i] for i in keep], merged_labels[keep],
                                             min_area=min_face_area, weights=merged_counts[keep],
@@ -1151,6 +1156,21 @@ def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_
         return [footprint], np.zeros(1, dtype=np.int64) + max(int(np.bincount(
             labels[labels >= 0]).argmax()) if (labels >= 0).any() else 0, 0), kinds, planes
     return faces, face_labels, kinds, planes
+
+
+def _on_rims(faces, face_labels, exempt, rim_cells):
+    """Which faces are rims, kept however narrow: those with a rim label (``exempt``)
+    holding one of the rim strips' cells (``rim_cells``). A face of a rim facet's label
+    made only of cells off the strips is held to the smallest area as any other."""
+    import shapely
+
+    on = np.isin(face_labels, exempt)
+    idx = np.flatnonzero(on)
+    if len(idx) and rim_cells:
+        probe = shapely.get_coordinates(shapely.point_on_surface(np.asarray(rim_cells, dtype=object)))
+        for i in idx:
+            on[i] = bool(shapely.contains_xy(faces[i], probe[:, 0], probe[:, 1]).any())
+    return on
 
 
 def collapse_short_edges(faces, footprint, *, min_length):

@@ -439,10 +439,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                 break
             if _closed_shell(solid):
                 found = check_solid(written)
-                if found and method != "rims":
+                if found:
                     # a crossing vertex rounded off its edge: moved by a grid step rather
-                    # than the roof redone by the coarser grid partition (a rim partition
-                    # that does not validate as it is gives way to the one without rims)
+                    # than the roof redone without rims or by the coarser grid partition
                     solid, found = _nudged(solid, written, found, precision)
                 if not found:
                     break
