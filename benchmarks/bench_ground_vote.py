@@ -69,7 +69,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_ground import arg_parser, load, reference_paths, speed, synthetic_scenes  # noqa: E402
 from bench_ground_segments import small_tile  # noqa: E402
 from lidar2city.ground import (  # noqa: E402
+    VETO_SLOPE,
     VOTE_RULE,
+    VOTE_VETO,
     GroundConfig,
     smrf_segments,
     smrf_vote,
@@ -90,10 +92,9 @@ CLEAR = (5.0, 8.0, 10.0, 15.0, 20.0, 30.0, np.inf)
 #: samples the ``--anatomy`` check looks at (the worst by smrf_vote's total error), and the
 #: wall distance (m) it counts errors within.
 ANATOMY_WORST = 2
-#: the further cues of the ``--cues`` check, the lenient slope of its fourth surface and the
-#: depth of its trees.
+#: the further cues of the ``--cues`` check (the first: the ratio to the fourth surface of
+#: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
 CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3")
-CUE_SLOPE = 0.4
 CUE_DEPTH = 3
 #: vetoes (tolerance ratios to the fourth surface) tried by the ``--cues`` veto check.
 VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
@@ -234,7 +235,7 @@ def cues(samples, scenes, feats, syn):
     """Print the leave-one-out of a depth-:data:`CUE_DEPTH` tree over the three ratios plus
     each further cue of :data:`CUES` (see ``--cues``)."""
     def cue_columns(xyz, f):
-        return {"segments 0.4 ratio": vote_features(xyz, slopes=(0.1, CUE_SLOPE))[0][:, 1],
+        return {"segments 0.4 ratio": vote_features(xyz, fourth=VETO_SLOPE)[0][:, 4],
                 "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz)}
 
     real = {n: cue_columns(xyz, feats[n]) for n, (xyz, _) in samples.items()}
@@ -262,16 +263,15 @@ def cues(samples, scenes, feats, syn):
                [c["segments 0.4 ratio"] for c in fake])
 
 
-def veto_rule(features, fourth, rule, veto):
-    """The coded rule, with a point near the strict surface (ratio <= ``near``) but farther
-    than ``veto`` from the fourth surface called object."""
-    return vote_rule(features, **rule) & ~((features[:, 0] <= rule["near"]) & (fourth > veto))
-
-
 def veto_check(samples, feats, syn, fourth, fourth_syn):
-    """Print the leave-one-out of :func:`veto_rule` (the coded rule refitted, then ``veto`` of
-    :data:`VETO` minimising the same objective) and its scores fitted on all seven."""
-    print(f"\nthe coded rule plus a veto by the segment surface at slope {CUE_SLOPE:g} "
+    """Print the leave-one-out of ``smrf_vote``'s ``veto`` option (the coded rule refitted,
+    then the veto of :data:`VETO` minimising the same objective) and its scores fitted on all
+    seven (:data:`~lidar2city.ground.VOTE_VETO`)."""
+
+    def veto_rule(f, q, rule, veto):
+        return vote_rule(np.column_stack([f[:, :4], q]), **rule, veto=veto)
+
+    print(f"\nthe coded rule plus a veto by the segment surface at slope {VETO_SLOPE:g} "
           f"(ratio > veto near the strict surface: object), veto chosen among "
           f"{', '.join(f'{v:g}' for v in VETO)}")
 
@@ -303,6 +303,7 @@ def veto_check(samples, feats, syn, fourth, fourth_syn):
         print(f"fitted on all seven, veto {v:g}: mean total {100 * np.mean(real):.2f} % "
               f"({' '.join(f'{100 * e:.2f}' for e in real)}); synthetic terrains "
               f"{100 * fake:.2f} %")
+    print("VOTE_VETO matches" if veto == VOTE_VETO else f"VOTE_VETO {VOTE_VETO} differs")
 
 
 def show_rule(rule):
