@@ -3,6 +3,7 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
+        [--cues] [--anatomy [PNG_DIR]]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -36,7 +37,18 @@ nearest wall. This script:
    default pair (0.1, 0.3) was chosen among these by looking at all seven
    samples' leave-one-out, so this nested figure is the honest one for the
    whole procedure (a few minutes more);
-7. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
+7. with ``--anatomy``, where ``smrf_vote``'s errors are on its two worst
+   samples: type I and type II points, the share of them each candidate of
+   step 5 has right, the share within 5 m of a wall and their median ratio
+   to the strict surface; with a folder, a PNG map of them per sample;
+8. with ``--cues``, the leave-one-out of a depth-3 tree over the three
+   ratios alone and with one more cue each (the ratio to ``smrf_segments``'
+   surface at slope 0.4, the wall distance, the height above the lowest
+   point of the 3x3 cells around), then of the coded rule plus a veto by
+   that fourth surface (a point near the strict surface but farther than
+   the veto from the fourth one is object), the veto chosen per fold too;
+   the cues tried for issue 18 (none is the default; see the README);
+9. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
    ``DIR/isprs/sites/CSite4_orig-utm.laz`` against reading and writing it
    with laspy (best of ``--repeat``, interleaved).
 
@@ -57,7 +69,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_ground import arg_parser, load, reference_paths, speed, synthetic_scenes  # noqa: E402
 from bench_ground_segments import small_tile  # noqa: E402
 from lidar2city.ground import (  # noqa: E402
+    VETO_SLOPE,
     VOTE_RULE,
+    VOTE_VETO,
     GroundConfig,
     smrf_segments,
     smrf_vote,
@@ -75,6 +89,16 @@ PAIRS = ((0.1, 0.2), (0.1, 0.25), (0.1, 0.3), (0.1, 0.4), (0.15, 0.3), (0.15, 0.
 ORACLE_SLOPES = (0.1, 0.15, 0.2, 0.3, 0.4)
 #: wall distances (m) tried for ``clear``; inf: the lenient surface never decides alone.
 CLEAR = (5.0, 8.0, 10.0, 15.0, 20.0, 30.0, np.inf)
+#: samples the ``--anatomy`` check looks at (the worst by smrf_vote's total error), and the
+#: wall distance (m) it counts errors within.
+ANATOMY_WORST = 2
+#: the further cues of the ``--cues`` check (the first: the ratio to the fourth surface of
+#: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
+CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3")
+CUE_DEPTH = 3
+#: vetoes (tolerance ratios to the fourth surface) tried by the ``--cues`` veto check.
+VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
+ANATOMY_WALL = 5.0
 
 
 def fit_rule(sets):
@@ -125,21 +149,161 @@ def nested_pairs(samples, scenes):
           f"{100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %")
 
 
+def candidates(xyz, features):
+    """Ground masks of the candidates of the per-point bound: ``smrf_segments`` at each slope
+    of :data:`ORACLE_SLOPES` and plain SMRF at 0.1 (from ``features``, the point's ratio)."""
+    params = GroundConfig(method="smrf_segments").method_params()
+    masks = {f"segments {slope:g}": smrf_segments(xyz, **dict(params, slope=slope))
+             for slope in ORACLE_SLOPES}
+    masks["plain 0.1"] = features[:, 2] <= 1.0
+    return masks
+
+
 def oracle(samples, feats):
     """Print the share of points every candidate surface gets wrong (see step 5)."""
     print(f"\nper-point bound: points wrong on all of smrf_segments at slopes "
           f"{', '.join(f'{v:g}' for v in ORACLE_SLOPES)} and plain SMRF at 0.1 (total error %)")
     wrong = []
     for name, (xyz, ref) in samples.items():
-        right = feats[name][:, 2] <= 1.0
-        right = np.where(ref, right, ~right)
-        for slope in ORACLE_SLOPES:
-            pred = smrf_segments(xyz, **dict(GroundConfig(method="smrf_segments").method_params(),
-                                              slope=slope))
+        right = np.zeros(len(ref), dtype=bool)
+        for pred in candidates(xyz, feats[name]).values():
             right |= pred == ref
         wrong.append(np.mean(~right))
         print(f"{name:<8} {100 * wrong[-1]:5.2f}")
     print(f"{'mean':<8} {100 * np.mean(wrong):5.2f}")
+
+
+def anatomy(samples, feats, out_dir=None, worst=ANATOMY_WORST):
+    """Print where ``smrf_vote``'s errors are on its ``worst`` samples (see ``--anatomy``)."""
+    errors = {n: ground_errors(smrf_vote(xyz), ref) for n, (xyz, ref) in samples.items()}
+    names = sorted(errors, key=lambda n: -errors[n]["total"])[:worst]
+    print(f"\nerror anatomy of smrf_vote on its {worst} worst samples: its wrong points, the "
+          f"share of them each candidate has right, within {ANATOMY_WALL:g} m of a wall, and "
+          f"the median ratio to the strict segment surface")
+    for name in names:
+        xyz, ref = samples[name]
+        f = feats[name]
+        pred = smrf_vote(xyz)
+        masks = candidates(xyz, f)
+        for label, wrong in (("type I", ref & ~pred), ("type II", ~ref & pred)):
+            n = int(wrong.sum())
+            right = " ".join(f"{k} {100 * np.mean(m[wrong] == ref[wrong]):3.0f}"
+                             for k, m in masks.items())
+            print(f"{name:<8} {label:<8} {n:>5} pts ({100 * n / len(ref):4.2f} % of all); right "
+                  f"on (%): {right}; wall {100 * np.mean(f[wrong, 3] <= ANATOMY_WALL):3.0f} %; "
+                  f"strict ratio {np.median(f[wrong, 0]):.2f}")
+        if out_dir is not None:
+            error_map(xyz, ref, pred, out_dir / f"{name}_errors.png", name)
+
+
+def error_map(xyz, ref, pred, path, title):
+    """A PNG of the points from above: heights, and the type I / type II errors of ``pred``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 2, figsize=(14, 7), sharex=True, sharey=True)
+    ax[0].scatter(xyz[:, 0], xyz[:, 1], c=xyz[:, 2], s=1, cmap="terrain")
+    ax[0].set_title(f"{title}: height")
+    ax[1].scatter(xyz[:, 0], xyz[:, 1], c="lightgrey", s=1)
+    for mask, colour, label in ((ref & ~pred, "red", "type I (ground called object)"),
+                                (~ref & pred, "blue", "type II (object called ground)")):
+        ax[1].scatter(xyz[mask, 0], xyz[mask, 1], c=colour, s=2, label=label)
+    ax[1].legend(loc="lower right")
+    ax[1].set_title(f"{title}: smrf_vote errors")
+    for a in ax:
+        a.set_aspect("equal")
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
+def height_above_lowest(xyz, cell=1.0):
+    """Each point's height (m) above the lowest point of its cell and the 8 around it."""
+    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64) + 1
+    low = np.full(tuple(ij.max(axis=0) + 2), np.inf)
+    np.minimum.at(low, (ij[:, 0], ij[:, 1]), xyz[:, 2])
+    h, w = low.shape
+    pad = np.pad(low, 1, constant_values=np.inf)
+    around = np.minimum.reduce([pad[i:i + h, j:j + w] for i in range(3) for j in range(3)])
+    return xyz[:, 2] - around[ij[:, 0], ij[:, 1]]
+
+
+def cues(samples, scenes, feats, syn):
+    """Print the leave-one-out of a depth-:data:`CUE_DEPTH` tree over the three ratios plus
+    each further cue of :data:`CUES` (see ``--cues``)."""
+    def cue_columns(xyz, f):
+        return {"segments 0.4 ratio": vote_features(xyz, fourth=VETO_SLOPE)[0][:, 4],
+                "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz)}
+
+    real = {n: cue_columns(xyz, feats[n]) for n, (xyz, _) in samples.items()}
+    fake = [cue_columns(s.xyz, f) for s, (f, _) in zip(scenes.values(), syn)]
+    print(f"\nleave-one-out of a depth-{CUE_DEPTH} tree over the three ratios and one more cue "
+          f"(held-out total % per sample; the tree fitted on all seven)")
+    for cue in (None, *CUES):
+        def x(f, more, cue=cue):
+            return f[:, :3] if cue is None else np.column_stack([f[:, :3], more[cue]])
+
+        held = []
+        for name, (_, ref) in samples.items():
+            sets = [(x(feats[n], real[n]), samples[n][1], 1.0) for n in samples if n != name]
+            sets += [(x(f, m), g, 1.0 / len(syn)) for (f, g), m in zip(syn, fake)]
+            tree = fit_tree(sets, depth=CUE_DEPTH)
+            pred = predict(tree, x(feats[name], real[name])) & np.isfinite(feats[name][:, 0])
+            held.append(ground_errors(pred, ref)["total"])
+        tree = fit_tree([(x(feats[n], real[n]), samples[n][1], 1.0) for n in samples]
+                        + [(x(f, m), g, 1.0 / len(syn)) for (f, g), m in zip(syn, fake)],
+                        depth=CUE_DEPTH)
+        print(f"{cue or 'ratios only':<24} leave-one-out {100 * np.mean(held):.2f} %, max "
+              f"{100 * np.max(held):.2f} % ({' '.join(f'{100 * v:.2f}' for v in held)}); "
+              f"{show(tree, (*NAMES, cue))}")
+    veto_check(samples, feats, syn, {n: c["segments 0.4 ratio"] for n, c in real.items()},
+               [c["segments 0.4 ratio"] for c in fake])
+
+
+def veto_check(samples, feats, syn, fourth, fourth_syn):
+    """Print the leave-one-out of ``smrf_vote``'s ``veto`` option (the coded rule refitted,
+    then the veto of :data:`VETO` minimising the same objective) and its scores fitted on all
+    seven (:data:`~lidar2city.ground.VOTE_VETO`)."""
+
+    def veto_rule(f, q, rule, veto):
+        return vote_rule(np.column_stack([f[:, :4], q]), **rule, veto=veto)
+
+    print(f"\nthe coded rule plus a veto by the segment surface at slope {VETO_SLOPE:g} "
+          f"(ratio > veto near the strict surface: object), veto chosen among "
+          f"{', '.join(f'{v:g}' for v in VETO)}")
+
+    def fit(names):
+        sets = ([(feats[n], samples[n][1], 1.0, fourth[n]) for n in names]
+                + [(f, g, 1.0 / len(syn), q) for (f, g), q in zip(syn, fourth_syn)])
+        rule, _ = fit_rule([st[:3] for st in sets])
+        if rule is None:
+            return None, None
+        return rule, min(VETO, key=lambda v: sum(
+            w * np.mean(veto_rule(f, q, rule, v) != g) for f, g, w, q in sets))
+
+    held = []
+    for name, (_, ref) in samples.items():
+        rule, veto = fit([n for n in samples if n != name])
+        if rule is None:
+            print(f"{name:<8} the fold's tree has not the coded shape")
+            continue
+        held.append(ground_errors(veto_rule(feats[name], fourth[name], rule, veto), ref)["total"])
+        print(f"{name:<8} held-out total {100 * held[-1]:5.2f} %  veto {veto:g}")
+    print(f"veto leave-one-out mean total {100 * np.mean(held):.2f} %, max "
+          f"{100 * np.max(held):.2f} %")
+    rule, veto = fit(list(samples))
+    for v in (np.inf, veto):
+        real = [ground_errors(veto_rule(feats[n], fourth[n], rule, v), samples[n][1])["total"]
+                for n in samples]
+        fake = np.mean([ground_errors(veto_rule(f, q, rule, v), g)["total"]
+                        for (f, g), q in zip(syn, fourth_syn)])
+        print(f"fitted on all seven, veto {v:g}: mean total {100 * np.mean(real):.2f} % "
+              f"({' '.join(f'{100 * e:.2f}' for e in real)}); synthetic terrains "
+              f"{100 * fake:.2f} %")
+    print("VOTE_VETO matches" if veto == VOTE_VETO else f"VOTE_VETO {VOTE_VETO} differs")
 
 
 def show_rule(rule):
@@ -194,12 +358,12 @@ def predict(tree, ratios):
     return out
 
 
-def show(tree):
+def show(tree, names=NAMES):
     """One-line form of a tree: ``near<=1.14 ? (steep<=0.92 ? G : O) : (...)``."""
     if not isinstance(tree, tuple):
         return "G" if tree else "O"
     j, t, left, right = tree
-    return f"{NAMES[j]}<={t:.3f} ? {show(left)} : {show(right)}"
+    return f"{names[j]}<={t:.3f} ? {show(left, names)} : {show(right, names)}"
 
 
 def rule_of(tree):
@@ -217,6 +381,10 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--pairs", action="store_true")
+    ap.add_argument("--cues", action="store_true",
+                    help="leave-one-out of depth-3 trees with one more cue each")
+    ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
+                    help="where smrf_vote's errors are on its worst samples (maps to PNG_DIR)")
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
@@ -260,6 +428,10 @@ def main():
         print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
               f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
     oracle(samples, feats)
+    if args.anatomy is not None:
+        anatomy(samples, feats, None if args.anatomy is True else Path(args.anatomy))
+    if args.cues:
+        cues(samples, scenes, feats, syn)
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:

@@ -90,3 +90,29 @@ def test_config_and_bad_parameters():
     with pytest.raises(InputError, match="lenient"):
         vote_features(xyz, slopes=(0.1, -1.0))
     assert smrf_vote(np.zeros((0, 3))).shape == (0,)
+
+
+def test_veto_option_adds_a_fourth_surface_and_only_takes_ground_away():
+    """``veto`` (off by default) builds smrf_segments' surface at VETO_SLOPE as column 4 of
+    the features (the first four unchanged) and calls object a point near the strict surface
+    but farther than the veto from the fourth one: never more ground than without it."""
+    scene = make_terrain("town_on_slope", spacing=1.0, seed=1)
+    base, out = vote_features(scene.xyz)
+    more, out4 = vote_features(scene.xyz, fourth=0.4)
+    assert more.shape == (len(scene.xyz), 5)
+    np.testing.assert_array_equal(more[:, :4], base)
+    np.testing.assert_array_equal(out4, out)
+    plain = smrf_vote(scene.xyz)
+    np.testing.assert_array_equal(smrf_vote(scene.xyz, veto=np.inf), plain)
+    strict = smrf_vote(scene.xyz, veto=0.05)
+    assert not (strict & ~plain).any() and (plain & ~strict).any()
+    near = more[:, 0] <= VOTE_RULE["near"]
+    np.testing.assert_array_equal(plain & ~strict, plain & near & (more[:, 4] > 0.05))
+
+
+def test_veto_bad_input():
+    xyz, _ = _box_scene()
+    with pytest.raises(InputError, match="veto"):
+        smrf_vote(xyz, veto=0.0)
+    with pytest.raises(InputError, match="fourth"):
+        vote_rule(vote_features(xyz)[0], **VOTE_RULE, veto=1.0)

@@ -33,7 +33,7 @@ from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
 from .segment_filter import anchored_objects, smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
-from .vote_filter import VOTE_RULE, smrf_vote, vote_features
+from .vote_filter import VETO_SLOPE, VOTE_RULE, VOTE_VETO, smrf_vote, vote_features
 
 __all__ = [
     "GROUND_METHODS",
@@ -48,6 +48,8 @@ __all__ = [
     "smrf_vote",
     "vote_features",
     "VOTE_RULE",
+    "VOTE_VETO",
+    "VETO_SLOPE",
     "pmf",
     "pmf_windows",
     "low_outliers",
