@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from lidar2city.roof.arrangement import _close_points, _nearest
+from lidar2city.roof.arrangement import _close_points, _nearest, _point_cells, arrangement_cells
 from lidar2city.roof.topology import _cross_dilation
 
 coord = st.floats(-1e4, 1e4, allow_nan=False)
@@ -69,3 +69,28 @@ def test_fit_plane_same_doubles_as_linalg_solve(seed, n, spread, tilt, skew):
     assert (expected is None) == (got is None)
     if got is not None:
         assert got.tobytes() == expected.tobytes()
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 400), lines=st.integers(0, 6))
+def test_point_cells_is_the_trees_query(seed, n, lines):
+    """Points in the cells of a line arrangement (many on the lines and at their crossings,
+    in several cells) take the cell an STRtree query gives first."""
+    import shapely
+    from shapely.geometry import box
+
+    rng = np.random.default_rng(seed)
+    foot = box(0, 0, 10, 6)
+    segs = [np.array([[x, -1.0], [x, 7.0]]) for x in rng.integers(1, 10, lines)]
+    segs += [np.array([[-1.0, -1.0], [11.0, 7.0]])] if lines % 2 else []
+    cells = arrangement_cells(foot, segs)
+    xy = rng.uniform(-1, 11, (n, 2))
+    if n:  # points on the cells' vertices and edges, and on a lattice of the lines
+        v = shapely.get_coordinates(np.asarray(cells, dtype=object))
+        xy[: n // 3] = v[rng.integers(0, len(v), n // 3)]
+        xy[n // 3: 2 * n // 3] = np.round(xy[n // 3: 2 * n // 3])
+    ip, ic = shapely.STRtree(cells).query(shapely.points(xy), predicate="intersects")
+    first = np.unique(ip, return_index=True)[1]
+    got = _point_cells(cells, xy)
+    np.testing.assert_array_equal(got[0], ip[first])
+    np.testing.assert_array_equal(got[1], ic[first])

@@ -1,0 +1,97 @@
+"""CPU of two array kernels of the no-footprints reconstruct on the Delft tile (issue 13),
+replayed: the LoD1.2 / 1.3 RMSE's point-to-prism distances and the arrangement's cell labels.
+
+Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC]
+(default data $LIDAR2CITY_DATA or ../shared/data, N = 5; SRC the ``src`` folder whose
+lidar2city is measured, default this checkout's: pass another checkout's to compare)
+
+Runs ``reconstruct`` of the Delft tile without footprints (LoD 1.2 + 1.3 + 2.2) once in
+this process, records the arguments of every call of
+:func:`lidar2city.lod.prism.prism_distance` and of
+``lidar2city.roof.arrangement._cell_labels``, then calls each again N times on them and
+prints the least CPU (``time.process_time``) of one pass over all the calls: the
+kernels' cost per Delft run, little affected by other processes on the machine. It
+also prints whether the replays gave what the run gave, and the MD5 of the output
+(the bytes must not change when only the kernels' speed does).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--src", default=str(ROOT / "src"))
+    args = ap.parse_args()
+    sys.path.insert(0, args.src)
+    data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
+    laz = data / "delft" / "ahn3_cropped_1.laz"
+
+    import numpy as np
+    import shapely
+
+    import lidar2city.lod.lod1 as lod1
+    import lidar2city.roof.arrangement as arr
+    from lidar2city.cli.main import cli
+
+    calls = {"prism_distance": [], "_cell_labels": []}
+    kernels = {"prism_distance": lod1.prism_distance, "_cell_labels": arr._cell_labels}
+
+    def recorder(name):
+        f = kernels[name]
+
+        def g(*a, **k):
+            # the cells as well-known binary: each replay gets them fresh (a kernel may
+            # prepare them, which a later pass must not inherit)
+            rec = (shapely.to_wkb(np.asarray(a[0], dtype=object)), *a[1:]) if name == "_cell_labels" else a
+            out = f(*a, **k)
+            # a copy: the caller may change the arrays it was given (the cell labels are)
+            calls[name].append((rec, k, tuple(np.copy(o) for o in out) if isinstance(out, tuple)
+                                else np.copy(out)))
+            return out
+        return g
+
+    lod1.prism_distance = recorder("prism_distance")
+    arr._cell_labels = recorder("_cell_labels")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "traced.city.json"
+        try:
+            cli.main(["reconstruct", str(laz), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
+                      "-o", str(out)], standalone_mode=False)
+        finally:
+            lod1.prism_distance, arr._cell_labels = kernels["prism_distance"], kernels["_cell_labels"]
+        md5 = hashlib.md5(out.read_bytes()).hexdigest()
+
+    def same(a, b):
+        if isinstance(a, tuple):
+            return all(same(x, y) for x, y in zip(a, b, strict=True))
+        return np.array_equal(a, b)
+
+    print(f"lidar2city from {args.src}; Delft reconstruct LoD 1.2+1.3+2.2, traced footprints")
+    for name, f in kernels.items():
+        best, identical = float("inf"), True
+        for _ in range(args.repeat):
+            todo = [((list(shapely.from_wkb(a[0])), *a[1:]) if name == "_cell_labels" else a, k)
+                    for a, k, _ in calls[name]]
+            t = time.process_time()
+            outs = [f(*a, **k) for a, k in todo]
+            best = min(best, time.process_time() - t)
+            identical &= all(same(o, r) for o, (_, _, r) in zip(outs, calls[name], strict=True))
+        print(f"{name}: {len(calls[name])} calls, least of {args.repeat} replays {best:.3f} CPU s; "
+              f"replays identical to the run: {identical}")
+    print(f"output MD5 {md5}")
+
+
+if __name__ == "__main__":
+    main()
