@@ -198,6 +198,10 @@ def main(argv):
         y_split = d.transform.f - int((rows.min() + rows.max() + 1) // 2) * d.cell_size
         print(f"  halves: {halves(pred, ref, hull, tree, y_split)}")
         near = [pred[i] for i in np.unique(tree.query(pred, predicate="intersects")[0])]
+        ref_all = shapely.union_all(ref)
+        graze = [g for g in near if g.intersection(ref_all).area < 1.0]
+        print(f"  predictions touching a reference over less than 1 m2 (scored whole): "
+              f"{len(graze)}, {sum(g.intersection(hull).area for g in graze):.0f} m2")
         print(f"  outlines touching a reference overlap each other on {overlap(near):.0f} m2 "
               f"(of {sum(g.area for g in near):.0f} m2)")
         pm = features.rasterize([(g, 1) for g in pred], out_shape=d.shape, transform=d.transform,
