@@ -366,3 +366,25 @@ def test_give_overlaps_to_the_pixel_owner_while_the_loser_stays_aligned():
     ga, gc = give_overlaps([a, c], lab, [1, 2], cell=0.5, min_aligned=0.0)
     assert gc.intersection(ga).area < 1e-6
     assert give_overlaps([a], lab, [1], cell=0.5) == [a]
+
+
+def test_outlines_from_labels_insets_only_the_edges_facing_the_background():
+    from lidar2city.tools.dsm import outlines_from_labels
+
+    lab = np.zeros((40, 60), np.int32)
+    lab[10:30, 10:30] = 1
+    lab[10:30, 30:50] = 2  # two row houses: 10 x 10 m each at 0.5 m, sharing x = 15 m
+    ndsm = np.where(lab > 0, 6.0, 0.0)
+    out = {}
+    for inset in (0.0, 0.25):
+        res = outlines_from_labels(lab, ndsm, cell=0.5,
+                                   fit_config=PolygonFitConfig(outline_inset=inset))
+        out[inset] = [r.footprint for r in res]
+    u0 = shapely.union_all(out[0.0])
+    u1 = shapely.union_all(out[0.25])
+    assert u0.area == pytest.approx(200.0, abs=0.5)
+    # the block's outer ring moves in by 0.25 m all round; no gap opens at the shared wall
+    assert u1.area == pytest.approx((20.0 - 0.5) * (10.0 - 0.5), abs=0.5)
+    assert len(shapely.get_parts(u1)) == 1 and len(u1.interiors) == 0
+    wall = shapely.LineString([(15.0, -5.5), (15.0, -14.5)])
+    assert wall.within(u1.buffer(-0.01))
