@@ -187,7 +187,8 @@ def edge_study(pred, ref_union, hull, nd, transform, cell, y_split, band=1.5):
         # the single inset that centres the DSM estimate on the references, chosen per half
         d0 = float(np.average(sd - sr, weights=L))
         out.append(f"{name} {sel.sum()} edges, {L.sum():.0f} m: mean |offset| now "
-                   f"{np.average(np.abs(sr), weights=L):.3f} m (mean {np.average(sr, weights=L):+.3f}),"
+                   f"{np.average(np.abs(sr), weights=L):.3f} m "
+                   f"(mean {np.average(sr, weights=L):+.3f}),"
                    f" at the DSM half-height edge minus {d0:.2f} m "
                    f"{np.average(np.abs(sr - (sd - d0)), weights=L):.3f} m, correlation "
                    f"{np.corrcoef(sr, sd)[0, 1]:+.2f}")

@@ -313,6 +313,7 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
         ``height``, ``cost``, ``fit_error``, ``n_vertices``, ``pixels``.
     """
     from scipy import ndimage
+    from shapely.geometry.polygon import orient
 
     if regularize not in REGULARIZERS:
         raise InputError(f"regularize must be one of {', '.join(REGULARIZERS)}, got {regularize!r}")
@@ -326,7 +327,7 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     inset = float((fit_config or PolygonFitConfig()).outline_inset) if regularize == "fit" else 0.0
     objects = ndimage.find_objects(labels)
     total = len(objects)
-    out = []
+    out, region_ids = [], []
     for i, sl in enumerate(objects, start=1):
         if sl is None:
             continue
@@ -347,8 +348,6 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
             if poly.is_empty or not poly.is_valid:
                 raise FitError("the fitted outline is empty or invalid")
             if inset > 0:
-                from shapely.geometry.polygon import orient
-
                 poly = orient(inset_outer_edges(poly, outer_edges(poly, labels, i, cell=cell),
                                                 inset), 1.0)
             h = building_height(ndsm, poly, cell=cell, roof_stat=lc.roof_stat,
@@ -366,23 +365,26 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
             res.status, res.reason = "failed", f"{type(exc).__name__}: {exc}"
             logger.warning("building %s failed unexpectedly", rid, exc_info=True)
         out.append(res)
+        region_ids.append(i)
         if progress is not None:
             progress(i, total)
     if grow:
-        _split_shared_walls(out, labels, ndsm, cell=cell, lod1_config=lc,
+        _split_shared_walls(out, region_ids, labels, ndsm, cell=cell, lod1_config=lc,
                             min_aligned=(fit_config or PolygonFitConfig()).overlap_aligned)
     return out
 
 
-def _split_shared_walls(results, labels, ndsm, *, cell, lod1_config, min_aligned=0.9):
+def _split_shared_walls(results, region_ids, labels, ndsm, *, cell, lod1_config,
+                        min_aligned=0.9):
     """Split the overlaps the shared-wall margin leaves between outlines: along the common
     axis of outlines on one axis, to the region owning the pixels for the others."""
     from shapely.geometry.polygon import orient
 
     ok = [r for r in results if r.ok]
+    ids = [i for r, i in zip(results, region_ids, strict=True) if r.ok]
     polys = split_overlaps([r.footprint for r in ok])
     if min_aligned <= 1.0:
-        polys = give_overlaps(polys, labels, [int(r.id[1:]) for r in ok], cell=cell,
+        polys = give_overlaps(polys, labels, ids, cell=cell,
                               min_aligned=min_aligned)
     for r, poly in zip(ok, polys, strict=True):
         if poly is r.footprint:
