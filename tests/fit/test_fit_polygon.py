@@ -388,3 +388,5 @@ def test_outlines_from_labels_insets_only_the_edges_facing_the_background():
     assert len(shapely.get_parts(u1)) == 1 and len(u1.interiors) == 0
     wall = shapely.LineString([(15.0, -5.5), (15.0, -14.5)])
     assert wall.within(u1.buffer(-0.01))
+    with pytest.raises(InputError, match="outline_inset"):
+        outlines_from_labels(lab, ndsm, cell=0.5, fit_config=PolygonFitConfig(outline_inset=-0.1))

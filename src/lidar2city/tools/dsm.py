@@ -325,6 +325,8 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     margin = (fit_config or PolygonFitConfig()).shared_margin if regularize == "fit" else 0.0
     grow = int(np.floor(float(margin) / float(cell) + 0.5)) if margin > 0 else 0
     inset = float((fit_config or PolygonFitConfig()).outline_inset) if regularize == "fit" else 0.0
+    if not inset >= 0:
+        raise InputError(f"polygon_fit.outline_inset must be >= 0 m, got {inset}")
     objects = ndimage.find_objects(labels)
     total = len(objects)
     out, region_ids = [], []
