@@ -288,3 +288,105 @@ def test_split_overlaps_on_a_common_axis(angle):
     qa, qd = split_overlaps([a, d])
     assert qa.equals(a) and qd.equals(d)
     assert split_overlaps([a]) == [a]
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 45.0])
+def test_inset_outer_edges_moves_outer_edges_by_the_distance_in_any_direction(angle):
+    """The inset is the same in metres on an axis and on a diagonal; shared edges stay."""
+    from shapely import affinity
+    from shapely.geometry.polygon import orient
+
+    from lidar2city.fit.polygon import inset_outer_edges
+
+    box = orient(affinity.rotate(shapely.box(0, 0, 12, 6), angle, origin=(0, 0)), 1.0)
+    all_outer = [np.ones(4, bool)]
+    g = inset_outer_edges(box, all_outer, 0.2)
+    assert g.area == pytest.approx(11.6 * 5.6, rel=1e-9)
+    assert g.within(box) and box.boundary.distance(g.boundary) == pytest.approx(0.2)
+    # one edge shared: its line does not move
+    flags = [np.array([True, False, True, True])]
+    g1 = inset_outer_edges(box, flags, 0.2)
+    xy = np.asarray(box.exterior.coords)
+    shared = shapely.LineString(xy[1:3])
+    long_shared = shared.length > 9
+    assert g1.area == pytest.approx(11.6 * 5.8 if long_shared else 11.8 * 5.6, rel=1e-9)
+    assert g1.boundary.distance(shared.interpolate(0.5, normalized=True)) < 1e-9
+    assert inset_outer_edges(box, [np.zeros(4, bool)], 0.2) is box
+    assert inset_outer_edges(box, all_outer, 0.0) is box
+    assert inset_outer_edges(box, all_outer, 5.0) is box  # nothing sensible left
+    with pytest.raises(InputError):
+        inset_outer_edges(box, all_outer, -0.1)
+
+
+def test_inset_outer_edges_grows_courtyards():
+    from shapely.geometry.polygon import orient
+
+    from lidar2city.fit.polygon import inset_outer_edges
+
+    ring = orient(shapely.box(0, 0, 10, 10).difference(shapely.box(3, 3, 6, 6)), 1.0)
+    g = inset_outer_edges(ring, [np.ones(4, bool), np.ones(4, bool)], 0.5)
+    assert g.exterior.bounds == (0.5, 0.5, 9.5, 9.5)
+    assert shapely.Polygon(g.interiors[0]).bounds == (2.5, 2.5, 6.5, 6.5)
+
+
+def test_outer_edges_tells_background_from_neighbours():
+    from lidar2city.fit.polygon import outer_edges
+
+    lab = np.zeros((20, 30), np.int32)
+    lab[4:14, 4:14] = 1
+    lab[4:14, 14:24] = 2  # east of region 1
+    cell = 0.5
+    # region 1's outline in local metres (y north, the raster's top-left at 0, 0), ccw
+    poly = shapely.Polygon([(2, -7), (7, -7), (7, -2), (2, -2)])
+    flags = outer_edges(poly, lab, 1, cell=cell)[0]
+    assert flags.tolist() == [True, False, True, True]  # the edge x = 7 faces region 2
+    # near the raster's edge points off the grid count as background
+    edge = shapely.Polygon([(0, -10), (15, -10), (15, 0), (0, 0)])
+    assert outer_edges(edge, np.zeros((20, 30), np.int32), 1, cell=cell)[0].all()
+
+
+def test_give_overlaps_to_the_pixel_owner_while_the_loser_stays_aligned():
+    from lidar2city.fit.polygon import give_overlaps
+
+    lab = np.zeros((20, 40), np.int32)
+    lab[:, :20] = 1
+    lab[:, 20:] = 2  # the wall at x = 10 m
+    a = shapely.box(0, -10, 10, 0)
+    b = shapely.Polygon([(9.6, -10), (20, -10), (20, 0), (9.2, 0)])  # 2.4 degrees off, into 1
+    ga, gb = give_overlaps([a, b], lab, [1, 2], cell=0.5, min_aligned=0.0)
+    assert ga.equals(a) and gb.intersection(ga).area < 1e-6
+    assert (gb.union(ga)).area == pytest.approx(a.union(b).area, rel=1e-6)
+    # the loser's cut follows the owner's edge on another axis: refused when it must stay
+    # aligned and is no longer
+    from shapely import affinity
+
+    c = affinity.rotate(shapely.box(9.0, -9.0, 19.0, -1.0), 20.0)  # on axes 20 degrees off
+    ga, gc = give_overlaps([a, c], lab, [1, 2], cell=0.5, min_aligned=0.99)
+    assert ga.equals(a) and gc.equals(c)
+    ga, gc = give_overlaps([a, c], lab, [1, 2], cell=0.5, min_aligned=0.0)
+    assert gc.intersection(ga).area < 1e-6
+    assert give_overlaps([a], lab, [1], cell=0.5) == [a]
+
+
+def test_outlines_from_labels_insets_only_the_edges_facing_the_background():
+    from lidar2city.tools.dsm import outlines_from_labels
+
+    lab = np.zeros((40, 60), np.int32)
+    lab[10:30, 10:30] = 1
+    lab[10:30, 30:50] = 2  # two row houses: 10 x 10 m each at 0.5 m, sharing x = 15 m
+    ndsm = np.where(lab > 0, 6.0, 0.0)
+    out = {}
+    for inset in (0.0, 0.25):
+        res = outlines_from_labels(lab, ndsm, cell=0.5,
+                                   fit_config=PolygonFitConfig(outline_inset=inset))
+        out[inset] = [r.footprint for r in res]
+    u0 = shapely.union_all(out[0.0])
+    u1 = shapely.union_all(out[0.25])
+    assert u0.area == pytest.approx(200.0, abs=0.5)
+    # the block's outer ring moves in by 0.25 m all round; no gap opens at the shared wall
+    assert u1.area == pytest.approx((20.0 - 0.5) * (10.0 - 0.5), abs=0.5)
+    assert len(shapely.get_parts(u1)) == 1 and len(u1.interiors) == 0
+    wall = shapely.LineString([(15.0, -5.5), (15.0, -14.5)])
+    assert wall.within(u1.buffer(-0.01))
+    with pytest.raises(InputError, match="outline_inset"):
+        outlines_from_labels(lab, ndsm, cell=0.5, fit_config=PolygonFitConfig(outline_inset=-0.1))

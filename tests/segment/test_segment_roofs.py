@@ -263,3 +263,48 @@ def test_regions_without_planar_faces_are_dropped_at_fine_resolution():
     assert np.array_equal(c_on, c_off)
     with pytest.raises(InputError):
         roof_regions(nd + 1.0, nd, min_planar_share=1.5, **kw)
+
+
+def _low_strip_between_roofs(seed=0):
+    """0.5 m grid: a 2 m wide flat roof 3 m below its two neighbours, and a bumpy crown."""
+    rng = np.random.default_rng(seed)
+    nd = np.zeros((40, 60))
+    nd[6:34, 6:22] = 9.0
+    nd[6:34, 26:42] = 9.0
+    strip = np.zeros(nd.shape, bool)
+    strip[6:34, 22:26] = True
+    nd[strip] = 6.0
+    nd[nd > 0] += rng.uniform(0.0, 0.1, (nd > 0).sum())
+    crown = np.zeros(nd.shape, bool)
+    crown[10:30, 45:58] = True
+    nd[crown] = (6.0 + 4.0 * ndimage.gaussian_filter(rng.normal(0.0, 1.0, nd.shape), 1.0))[crown]
+    return nd, strip, crown
+
+
+def test_plane_share_counts_pixels_on_one_plane():
+    from lidar2city.segment.dsm import plane_share
+
+    r, c = np.mgrid[0:10, 0:12]
+    z = 3.0 + 0.6 * c * 0.5 - 0.2 * r * 0.5
+    z[:2, :3] += 4.0  # a chimney does not tilt the plane
+    share = plane_share(z.ravel(), r.ravel(), c.ravel(), cell=0.5)
+    assert share == pytest.approx(1.0 - 6 / 120)
+    rng = np.random.default_rng(0)
+    bumpy = ndimage.gaussian_filter(rng.normal(0.0, 3.0, (10, 12)), 1.0)
+    assert plane_share(bumpy.ravel(), r.ravel(), c.ravel(), cell=0.5) < 0.5
+    assert plane_share(np.array([1.0, 2.0]), np.array([0, 1]), np.array([0, 0]), cell=0.5) == 0.0
+
+
+def test_narrow_flat_roof_between_steps_is_kept_the_crown_is_not():
+    # every 1.5 m slope window on the strip reaches over a 3 m step: the slope test drops
+    # it, but its pixels lie on one plane, which a crown's do not
+    nd, strip, crown = _low_strip_between_roofs()
+    kw = dict(cell=0.5, edge_inset=0.0, saddle_depth=0.0, expand=0.0, edge_fraction=0.0,
+              merge_area=0.0)
+    slope_only, _ = roof_regions(nd + 1.0, nd, min_plane_share=0.0, **kw)
+    both, _ = roof_regions(nd + 1.0, nd, **kw)
+    assert (slope_only[strip] > 0).mean() == 0.0
+    assert (both[strip] > 0).all() and len(np.unique(both[strip])) == 1
+    assert (both[crown] > 0).mean() == 0.0
+    with pytest.raises(InputError):
+        roof_regions(nd + 1.0, nd, plane_tolerance=0.0, **kw)

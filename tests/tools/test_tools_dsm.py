@@ -181,7 +181,8 @@ def test_touching_regions_share_their_wall(angle):
     gaps = {}
     for margin in (0.0, 0.5):
         res = outlines_from_labels(lab, ndsm, cell=0.5,
-                                   fit_config=PolygonFitConfig(shared_margin=margin))
+                                   fit_config=PolygonFitConfig(shared_margin=margin,
+                                                               outline_inset=0.0))
         assert [r.attributes["pixels"] for r in res] == [int((lab == 1).sum()),
                                                           int((lab == 2).sum())]
         u = shapely.union_all([r.footprint for r in res])

@@ -42,6 +42,7 @@ __all__ = [
     "building_mask",
     "RoofRegionsConfig",
     "roof_regions",
+    "plane_share",
     "trim_to_edges",
     "split_at_saddles",
     "label_buildings",
@@ -543,6 +544,14 @@ class RoofRegionsConfig:
     planar_spread: float = field(0.4, "a pixel is planar when the spread of the plane slopes "
                                       "around it (slope_spread, 1.5 m windows) is below this "
                                       "(m per m)")
+    min_plane_share: float = field(0.5, "a region failing min_planar_share is kept when at "
+                                        "least this share of its pixels lie within "
+                                        "plane_tolerance of one plane fitted to it (a small flat "
+                                        "roof, a roof under a little canopy; tree crowns are not "
+                                        "planes); 0: off")
+    plane_tolerance: float = field(0.2, "distance (m) from the region's plane within which a "
+                                        "pixel counts as on it (the spread of a highest-point "
+                                        "DSM on a roof face)")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -729,11 +738,68 @@ def _merge_fragments(lab, keep, candidate, rounds=3):
     return owner[lab]
 
 
+def plane_share(heights, rows, cols, *, cell, tolerance=0.2, iterations=3, keep_share=0.7):
+    """Share of pixels within ``tolerance`` metres of one plane fitted to them.
+
+    The plane is fitted by least squares, then refitted ``iterations`` times to
+    the ``keep_share`` of the pixels nearest to it (at least those within
+    ``tolerance``), so chimneys, a neighbour's wall or an overhanging branch do
+    not tilt it.
+
+    Parameters
+    ----------
+    heights : ndarray, shape (n,)
+        Heights (m).
+    rows, cols : ndarray of int, shape (n,)
+        Pixel positions.
+    cell : float
+        Pixel size (m).
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 for fewer than 3 pixels.
+
+    Examples
+    --------
+    >>> r, c = np.mgrid[0:6, 0:6]
+    >>> z = 0.3 * c + 0.1 * r; z[0, 0] = 5.0
+    >>> round(plane_share(z.ravel(), r.ravel(), c.ravel(), cell=0.5), 3)
+    0.972
+    """
+    z = np.asarray(heights, dtype=np.float64)
+    if len(z) < 3:
+        return 0.0
+    a = np.column_stack([np.ones(len(z)), np.asarray(rows) * cell, np.asarray(cols) * cell])
+    use = np.isfinite(z)
+    res = np.full(len(z), np.inf)
+    for _ in range(iterations + 1):
+        if use.sum() < 3:
+            break
+        coef = np.linalg.lstsq(a[use], z[use], rcond=None)[0]
+        res = np.abs(np.where(np.isfinite(z), z - a @ coef, np.inf))
+        use = np.isfinite(res) & (res <= max(np.quantile(res[np.isfinite(res)], keep_share),
+                                             tolerance))
+    return float(np.mean(res <= tolerance))
+
+
+def _on_one_plane(lab, dsm, todo, *, cell, tolerance, min_share):
+    """Per label: True where a ``todo`` region has ``min_share`` of its pixels on one plane."""
+    out = np.zeros(len(todo), dtype=bool)
+    for i, sl in enumerate(ndimage.find_objects(lab), start=1):
+        if sl is None or i >= len(todo) or not todo[i]:
+            continue
+        r, c = np.nonzero(lab[sl] == i)
+        z = dsm[sl][r, c]
+        out[i] = plane_share(z, r, c, cell=cell, tolerance=tolerance) >= min_share
+    return out
+
+
 def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0.5,
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
                  expand_roughness=0.2, merge_area=5.0, min_planar_share=0.4,
-                 planar_spread=0.4):
+                 planar_spread=0.4, min_plane_share=0.5, plane_tolerance=0.2):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -759,7 +825,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     Last, a region is dropped when less than ``min_planar_share`` of its
     pixels are planar (:func:`slope_spread` below ``planar_spread``): tree
     crowns and bushes whose heights grew into a smooth-enough region (only on
-    rasters of 1 m or finer).
+    rasters of 1 m or finer) -- unless at least ``min_plane_share`` of its
+    pixels lie within ``plane_tolerance`` metres of one plane fitted to it
+    (:func:`plane_share`): a small flat roof, or a roof under a little
+    canopy, holds too few windows wholly on its face for the slope test.
 
     Parameters
     ----------
@@ -796,6 +865,9 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     if not 0 <= min_planar_share <= 1 or not planar_spread > 0:
         raise InputError(f"min_planar_share must be in [0, 1] and planar_spread > 0, got "
                          f"{min_planar_share} and {planar_spread}")
+    if not 0 <= min_plane_share <= 1 or not plane_tolerance > 0:
+        raise InputError(f"min_plane_share must be in [0, 1] and plane_tolerance > 0, got "
+                         f"{min_plane_share} and {plane_tolerance}")
     elevated = np.isfinite(ndsm) & np.isfinite(dsm) & (ndsm > min_height)
     if vegetation is not None:
         vegetation = np.asarray(vegetation, dtype=bool)
@@ -858,7 +930,14 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         planar = (lab > 0) & (slope_spread(dsm, cell=cell) < planar_spread)
         n_all = np.bincount(lab.ravel())
         share = np.bincount(lab[planar], minlength=len(n_all)) / np.maximum(n_all, 1)
-        lab = np.where(share[lab] >= min_planar_share, lab, 0)
+        keep = share >= min_planar_share
+        if min_plane_share > 0:
+            # a small flat roof, or one under a little canopy, has too few 1.5 m windows
+            # wholly on it for the slope test; it still lies on one plane, a crown does not
+            keep |= _on_one_plane(lab, dsm, ~keep, cell=cell, tolerance=plane_tolerance,
+                                  min_share=min_plane_share)
+        keep[0] = False
+        lab = np.where(keep[lab], lab, 0)
     # touching regions stay apart (no re-labelling of connected components)
     ids = np.unique(lab[lab > 0])
     remap = np.zeros(lab.max() + 1, dtype=np.int32)

@@ -23,6 +23,9 @@ from ..errors import EmptyInputError, FitError, InputError
 from ..fit.polygon import (
     PolygonFitConfig,
     fit_building_outline,
+    give_overlaps,
+    inset_outer_edges,
+    outer_edges,
     region_polygon,
     split_overlaps,
 )
@@ -295,7 +298,12 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     (rounded to the nearest whole number of cells): the shared wall of two row houses split at a
     height step is placed by both fits, without a gap between the outlines;
     where two such outlines share their main axis (within 3 degrees) their
-    overlap is then split along it (:func:`~lidar2city.fit.polygon.split_overlaps`).
+    overlap is then split along it (:func:`~lidar2city.fit.polygon.split_overlaps`),
+    and other overlaps go to the region owning their pixels while the other
+    outline stays on its axes (``fit_config.overlap_aligned``,
+    :func:`~lidar2city.fit.polygon.give_overlaps`). Each fitted outline's edges
+    facing the background move in by ``fit_config.outline_inset``
+    (:func:`~lidar2city.fit.polygon.inset_outer_edges`).
 
     Returns
     -------
@@ -305,6 +313,7 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
         ``height``, ``cost``, ``fit_error``, ``n_vertices``, ``pixels``.
     """
     from scipy import ndimage
+    from shapely.geometry.polygon import orient
 
     if regularize not in REGULARIZERS:
         raise InputError(f"regularize must be one of {', '.join(REGULARIZERS)}, got {regularize!r}")
@@ -315,9 +324,12 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     # opens between the two outlines
     margin = (fit_config or PolygonFitConfig()).shared_margin if regularize == "fit" else 0.0
     grow = int(np.floor(float(margin) / float(cell) + 0.5)) if margin > 0 else 0
+    inset = float((fit_config or PolygonFitConfig()).outline_inset) if regularize == "fit" else 0.0
+    if not inset >= 0:
+        raise InputError(f"polygon_fit.outline_inset must be >= 0 m, got {inset}")
     objects = ndimage.find_objects(labels)
     total = len(objects)
-    out = []
+    out, region_ids = [], []
     for i, sl in enumerate(objects, start=1):
         if sl is None:
             continue
@@ -337,6 +349,9 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
             poly, kind, info = fn(sub, cell=cell, offset=(c0 * cell, -r0 * cell), config=fit_config)
             if poly.is_empty or not poly.is_valid:
                 raise FitError("the fitted outline is empty or invalid")
+            if inset > 0:
+                poly = orient(inset_outer_edges(poly, outer_edges(poly, labels, i, cell=cell),
+                                                inset), 1.0)
             h = building_height(ndsm, poly, cell=cell, roof_stat=lc.roof_stat,
                                 inner_margin=lc.inner_margin)
             res.footprint = poly
@@ -352,19 +367,28 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
             res.status, res.reason = "failed", f"{type(exc).__name__}: {exc}"
             logger.warning("building %s failed unexpectedly", rid, exc_info=True)
         out.append(res)
+        region_ids.append(i)
         if progress is not None:
             progress(i, total)
     if grow:
-        _split_shared_walls(out, ndsm, cell=cell, lod1_config=lc)
+        _split_shared_walls(out, region_ids, labels, ndsm, cell=cell, lod1_config=lc,
+                            min_aligned=(fit_config or PolygonFitConfig()).overlap_aligned)
     return out
 
 
-def _split_shared_walls(results, ndsm, *, cell, lod1_config):
-    """Split the overlaps the shared-wall margin leaves between outlines on one axis."""
+def _split_shared_walls(results, region_ids, labels, ndsm, *, cell, lod1_config,
+                        min_aligned=0.9):
+    """Split the overlaps the shared-wall margin leaves between outlines: along the common
+    axis of outlines on one axis, to the region owning the pixels for the others."""
     from shapely.geometry.polygon import orient
 
     ok = [r for r in results if r.ok]
-    for r, poly in zip(ok, split_overlaps([r.footprint for r in ok]), strict=True):
+    ids = [i for r, i in zip(results, region_ids, strict=True) if r.ok]
+    polys = split_overlaps([r.footprint for r in ok])
+    if min_aligned <= 1.0:
+        polys = give_overlaps(polys, labels, ids, cell=cell,
+                              min_aligned=min_aligned)
+    for r, poly in zip(ok, polys, strict=True):
         if poly is r.footprint:
             continue
         poly = orient(poly, 1.0)
