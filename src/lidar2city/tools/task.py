@@ -521,15 +521,9 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
             return _run_groups(spec, options, *read)
     cloud, classes = _block_cloud(spec, options, read)
     fps = None if spec.footprints is None else block_footprints(spec)
-    if fps is not None and cloud is not None and not options.classified:
-        # raw input: the footprints say where the buildings are
-        from ..footprints.points import claim_footprint_points
-
-        cfg = options.config
-        classes = claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
-                                         building_classes=cfg.building_classes,
-                                         excluded=(*cfg.ground_classes, 7),
-                                         min_points=cfg.min_points)
+    if fps is not None and cloud is not None:
+        # the footprints say where the buildings are
+        classes = _claim(cloud, classes, fps, options)
     if fps is None:  # traced
         fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
         if fps is None:
@@ -550,6 +544,26 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
 #: the points around it only (:func:`_run_groups`), so that what a block holds
 #: at full width does not grow with how many points the block reads
 GROUP_POINTS = 40_000
+
+
+#: classes a classified tile's footprint without building points may claim: those a
+#: classifier puts a missed building in (never created, unclassified, vegetation)
+CLAIMABLE = (0, 1, 3, 4, 5)
+
+
+def _claim(cloud, classes, fps, options):
+    """``classes`` with the points of footprints that hold no building points claimed
+    for them (:func:`lidar2city.footprints.points.claim_footprint_points`): on a raw
+    tile every non-ground point, on a classified one (ours or a vendor's) only
+    :data:`CLAIMABLE` points, since a small shed or a roof taken for trees must
+    not leave its footprint without a model."""
+    from ..footprints.points import claim_footprint_points
+
+    cfg = options.config
+    return claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
+                                  building_classes=cfg.building_classes,
+                                  excluded=(*cfg.ground_classes, 7), min_points=cfg.min_points,
+                                  claimable=CLAIMABLE if options.classified else None)
 
 
 def _by_groups(spec, options) -> bool:
@@ -651,6 +665,8 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
             sub = [p.take(np.flatnonzero(p.inside([world]))) for p in parts]
         cloud = reader.cloud(sub)
         classes = cloud.attributes.get("classification", np.zeros(0, dtype=np.uint8))
+        if len(classes):
+            classes = _claim(cloud, classes, _subset(fps, idx), options)
         done = reconstruct_buildings(cloud, _subset(fps, idx), config=cfg,
                                      building=np.isin(classes, cfg.building_classes),
                                      ground=np.isin(classes, cfg.ground_classes),
