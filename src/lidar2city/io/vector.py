@@ -160,6 +160,20 @@ def no_usable_footprint(path, geometries, notes) -> None:
                               f"usable polygon: {why}")
 
 
+def _id_text(value):
+    """A footprint id as text, or None when it is missing (null, NaN, blank); a whole
+    float (an integer column with nulls, read as floats) without its ``.0``."""
+    if value is None:
+        return None
+    if isinstance(value, float | np.floating):
+        if not np.isfinite(value):
+            return None
+        if float(value).is_integer():
+            return str(int(value))
+    text = str(value).strip()
+    return text or None
+
+
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
                     target_crs=None, bbox=None, fids=None, skip_features=0, max_features=None,
                     unique_ids=True, with_fids=False) -> tuple[Footprints, object]:
@@ -240,7 +254,13 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     if id_field is None:
         id_field = next((f for f in ("identificatie", "identificatiebagpnd", "id", "fid", "OBJECTID")
                          if f in fields), None)
-    ids = [str(v) for v in fields[id_field]] if id_field else [str(int(f)) for f in fids]
+    ids = [str(int(f)) for f in fids]
+    if id_field:
+        named = [_id_text(v) for v in fields[id_field]]
+        if None in named:
+            logger.warning("%d footprint(s) of %s have no %r: named by their feature id",
+                           named.count(None), p.name, id_field)
+        ids = [f if v is None else v for v, f in zip(named, ids, strict=True)]
     if unique_ids:
         ids = unique(ids)
     out, notes = [], []
