@@ -767,3 +767,34 @@ def test_claim_footprint_points_claimable_classes_only():
     out = claim_footprint_points(xy, classes, [box(0, 0, 2, 2)], min_points=1,
                                  claimable=(0, 1, 3, 4, 5))
     assert out.tolist() == [6, 6, 9, 26, 6]
+
+
+def test_footprints_outside_the_tiles_are_said(tmp_path, runner, caplog):
+    """Footprints wholly outside the tiles were left out with an info-level line only:
+    '3 of 3 buildings reconstructed' from a file of 5, and no word on the other two."""
+    import logging
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.synthetic import make_town
+
+    town = make_town(size=(60.0, 50.0), density=4.0, seed=3)
+    write_points(tmp_path / "t.laz", town.cloud)
+    far = [shapely_translate(town.footprints.geometries[0], d) for d in (5000.0, 7000.0)]
+    write_polygons(tmp_path / "f.gpkg", [*town.footprints.geometries, *far],
+                   {"id": [*town.footprints.ids, "far1", "far2"]},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    with caplog.at_level(logging.WARNING):
+        res = runner.invoke(cli, ["reconstruct", str(tmp_path / "t.laz"), "--footprints",
+                                  str(tmp_path / "f.gpkg"), "--lod", "1.2",
+                                  "-o", str(tmp_path / "m.city.json")])
+    assert res.exit_code == 0, res.output
+    n = len(town.footprints) + 2
+    assert f"2 of {n} footprint(s) outside the point cloud's extent" in caplog.text
+
+
+def shapely_translate(g, d):
+    import shapely
+
+    return shapely.transform(g, lambda c: c + d)

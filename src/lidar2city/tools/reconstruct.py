@@ -273,7 +273,8 @@ def load_footprints(path, cloud, *, id_field=None, layer=None, extent=None):
         raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
                               "point cloud's extent (check both CRSs)")
     if len(keep) < len(fps):
-        logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
+        logger.warning("%d of %d footprint(s) outside the point cloud's extent: no model",
+                       len(fps) - len(keep), len(fps))
     return _subset(fps, keep)
 
 
@@ -341,8 +342,8 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
         raise EmptyInputError(f"none of the {len(all_ids)} footprints of {str(path)!r} meets the "
                               "point cloud's extent (check both CRSs)")
     if len(kept) < len(all_ids):
-        logger.info("%d footprint(s) outside the point cloud's extent skipped",
-                    len(all_ids) - len(kept))
+        logger.warning("%d of %d footprint(s) outside the point cloud's extent: no model",
+                       len(all_ids) - len(kept), len(all_ids))
     if repeated:
         logger.warning("%d footprint(s) of %r repeat an earlier one's outline exactly: each "
                        "gets its own (overlapping) model; remove the duplicates", repeated,
