@@ -7,7 +7,9 @@ and the 78 BGT footprints wholly inside it are written again as other surveys
 would deliver them: LAS 1.4 point formats 6 / 7 / 8, extra-bytes dimensions,
 a 0.01 scale, z + 1000 m (a mountain town), coordinates near 0 and near 1e7
 (footprints moved with them), a few stray returns 1000 km off, and thinned at
-random (seed 0) to 4 and 2 pts/m2. Each is reconstructed at LoD1.2 + LoD2.2
+random (seed 0) to 4 and 2 pts/m2; the crop with its classes wiped, then through
+our own ``ground`` + ``classify``; and the whole Delft tile (132 footprints) with
+the stray returns. Each is reconstructed at LoD1.2 + LoD2.2
 (in this process, in a temporary folder) and compared with the crop as it is:
 buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
 (and why), the largest difference of ``roof_height`` (LoD1.2) and
@@ -103,14 +105,29 @@ def main():
             "3 stray returns": ({"strays": True}, None, 0.0),
             "4 pts/m2": ({"keep": draw < 4 * area / n}, None, 0.0),
             "2 pts/m2": ({"keep": draw < 2 * area / n}, None, 0.0),
+            "ours: ground + classify": ({"own_classes": True}, None, 0.0),
+            "whole tile + 3 strays": ({"strays": True, "whole": True}, None, 0.0),
         }
         base = None
         print(f"crop: {n:,} points ({n / area:.1f} pts/m2); LoD1.2 + LoD2.2 with the BGT "
               "footprints inside it")
         for name, (kw, fshift, dz) in variants.items():
             path = tmp / "v.laz"
-            _write_like(crop, path, **kw)
+            kw = dict(kw)
+            own, whole = kw.pop("own_classes", False), kw.pop("whole", False)
+            _write_like(tile if whole else crop, path, **kw)
+            if own:  # classes wiped, then our own ground filter and classifier
+                from lidar2city.tools.classify import classify_file
+                from lidar2city.tools.ground import ground_file
+
+                raw = laspy.read(path)
+                raw.classification[:] = 1
+                raw.write(tmp / "raw.laz")
+                ground_file(tmp / "raw.laz", tmp / "g.laz", crs="EPSG:7415")
+                classify_file(tmp / "g.laz", path, crs="EPSG:7415", ground_from_file=True)
             fp = tmp / "fp.gpkg"
+            if whole:
+                fp = data / "delft" / "footprints_bgt.gpkg"
             if fshift is not None:
                 fp = tmp / "fp_shift.gpkg"
                 _footprints(data / "delft" / "footprints_bgt.gpkg", fp, fshift)
