@@ -393,7 +393,33 @@ def _traced_footprints(spec, options, cloud, classes):
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     keys = block_keys(centre, spec.frame, options.block_size)
     idx = [i for i in range(len(fps)) if (keys[i, 0], keys[i, 1]) == tuple(spec.cell)]
+    # a traced region holding fewer building points than a model needs (lod1.min_points)
+    # is no building found: at 1 pts/m2 the tracer's smallest regions (4 m2) hold a
+    # handful, and each came out as a failed building ('too few points (1 < 10)')
+    cfg = options.config
+    held = _points_inside(cloud.xyz[np.isin(classes, cfg.building_classes), :2],
+                          [fps.geometries[i] for i in idx])
+    small = [i for i, n in zip(idx, held, strict=True) if n < cfg.min_points]
+    if small:
+        logger.info("%d traced region(s) with fewer than %d building points left out",
+                    len(small), cfg.min_points)
+        idx = [i for i in idx if i not in small]
     return _subset(fps, idx) if idx else None
+
+
+def _points_inside(xy, geometries) -> list:
+    """How many of the points ``xy`` (N, 2) each polygon holds."""
+    import shapely
+
+    order = np.argsort(xy[:, 0], kind="stable")
+    xs = xy[order, 0]
+    out = []
+    for g in geometries:
+        x0, y0, x1, y1 = g.bounds
+        c = order[np.searchsorted(xs, x0, "left"):np.searchsorted(xs, x1, "right")]
+        c = c[(xy[c, 1] >= y0) & (xy[c, 1] <= y1)]
+        out.append(int(np.count_nonzero(shapely.contains_xy(g, xy[c, 0], xy[c, 1]))))
+    return out
 
 
 def block_footprints(spec):

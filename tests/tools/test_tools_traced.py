@@ -1,0 +1,36 @@
+"""Traced footprints (``reconstruct`` without footprints): what a block keeps."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import shapely
+
+from lidar2city.datamodel import Footprints
+from lidar2city.lod.lod1 import Lod1Config
+from lidar2city.tools import reconstruct, task
+
+
+def test_traced_regions_too_small_to_model_are_left_out(monkeypatch):
+    """On ISPRS samp11 (about 1 pts/m2, EPSG:32632) the tracer's smallest regions held
+    1-9 building points and each came out as a failed building ('too few points
+    (1 < 10)'): 42 of 112. A traced region with fewer building points than a model
+    needs (lod1.min_points) is no building found: left out, the others kept in order."""
+    rng = np.random.default_rng(0)
+    big = rng.uniform([0, 0], [20, 10], (200, 2))       # a 20 m x 10 m roof, 1 pts/m2
+    blob = np.array([[50.0, 50.0], [51.0, 50.0], [50.0, 51.0], [51.0, 51.0]])  # 4 points
+    xy = np.vstack([big, blob, [[100.0, 100.0]]])
+    classes = np.full(len(xy), 6, dtype=np.uint8)
+    classes[-1] = 5  # a tree beside
+    cloud = SimpleNamespace(xyz=np.column_stack([xy, np.full(len(xy), 5.0)]))
+    traced = Footprints([shapely.box(-0.5, -0.5, 20.5, 10.5), shapely.box(49.5, 49.5, 51.5, 51.5),
+                         shapely.box(99, 99, 101, 101)], ["t1", "t2", "t3"])
+    monkeypatch.setattr(reconstruct, "footprints_from_points", lambda *a, **k: traced)
+    spec = SimpleNamespace(frame=SimpleNamespace(origin=np.zeros(3), xy_unit=1.0), cell=(0, 0))
+    options = SimpleNamespace(config=Lod1Config(), block_size=1000.0, footprints_config=None)
+    kept = task._traced_footprints(spec, options, cloud, classes)
+    assert kept.ids == ["t1"]
+    options = SimpleNamespace(config=Lod1Config(min_points=4), block_size=1000.0,
+                              footprints_config=None)
+    assert task._traced_footprints(spec, options, cloud, classes).ids == ["t1", "t2"]
