@@ -798,3 +798,28 @@ def shapely_translate(g, d):
     import shapely
 
     return shapely.transform(g, lambda c: c + d)
+
+
+@pytest.mark.parametrize("kind", ["laz", "tif", "cityjson"])
+def test_a_tile_raster_or_model_given_as_footprints_is_named(tmp_path, runner, kind):
+    """A LAS/LAZ tile, a GeoTIFF or a CityJSON model given as --footprints got GDAL's
+    "not recognized as being in a supported file format.; It might help to specify the
+    correct driver explicitly by prefixing the file path with '<DRIVER>:'": say what the
+    file is and what footprints are."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.synthetic import make_town
+
+    town = make_town(size=(40.0, 40.0), density=2.0, seed=1)
+    tile = tmp_path / "t.laz"
+    write_points(tile, town.cloud)
+    wrong = {"laz": tile, "tif": tmp_path / "d.tif", "cityjson": tmp_path / "m.city.json"}[kind]
+    if kind == "tif":
+        wrong.write_bytes(b"II*\x00" + bytes(60))
+    elif kind == "cityjson":
+        wrong.write_text('{"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}')
+    res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(wrong),
+                              "-o", str(tmp_path / "m.obj")])
+    line = _error_line(res)
+    what = {"laz": "LAS/LAZ point cloud", "tif": "GeoTIFF raster", "cityjson": "CityJSON model"}
+    assert what[kind] in line and "footprints are polygons" in line, line

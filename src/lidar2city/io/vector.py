@@ -139,8 +139,7 @@ def vector_crs(path, *, layer=None):
         with no_pam():
             wkt = pyogrio.read_info(str(p), layer=layer).get("crs")
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
-        raise FileFormatError(f"{str(p)!r} is not a readable vector source: "
-                              f"{str(exc).splitlines()[0]}") from None
+        raise _unreadable(p, exc) from None
     return CRS.from_user_input(wkt) if wkt else None
 
 
@@ -290,7 +289,31 @@ def _read_ogr(p, *, layer, bbox, fids, skip_features, max_features):
                 fids=None if fids is None else np.asarray(fids, dtype=np.int64),
                 skip_features=skip_features, max_features=max_features)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
-        raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
+        raise _unreadable(p, exc) from None
+
+
+_POLYGONS = ("footprints are polygons: GeoPackage, Shapefile, GeoJSON, FlatGeobuf, or a CSV "
+             "with a WKT column")
+#: leading bytes of the files a user may give where footprints are expected
+_SIGNATURES = ((b"LASF", "it is a LAS/LAZ point cloud (tiles are the inputs); " + _POLYGONS),
+               (b"ply", "it is a PLY point cloud; " + _POLYGONS),
+               (b"II*\x00", "it is a GeoTIFF raster (a DSM goes in with --dsm); " + _POLYGONS),
+               (b"MM\x00*", "it is a GeoTIFF raster (a DSM goes in with --dsm); " + _POLYGONS))
+
+
+def _unreadable(p, exc) -> FileFormatError:
+    """The error for a source OGR cannot open: what the file is when its first bytes
+    say so (a tile, a raster, a CityJSON model), else OGR's first line."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(256)
+    except OSError:
+        head = b""
+    what = next((w for sig, w in _SIGNATURES if head.startswith(sig)), None)
+    if what is None and head.lstrip().startswith(b"{") and b'"CityJSON"' in head:
+        what = "it is a CityJSON model; " + _POLYGONS
+    return FileFormatError(f"{str(p)!r} is not a readable vector source: "
+                           f"{what or str(exc).splitlines()[0]}")
 
 
 def unique(ids) -> list:
