@@ -14,6 +14,8 @@ the stray returns. Each is reconstructed at LoD1.2 + LoD2.2
 buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
 (and why), the largest difference of ``roof_height`` (LoD1.2) and
 ``ridge_height`` (LoD2.2, the highest vertex), and whether the file validates.
+Last, ISPRS samp11 (a sparse UTM survey) without footprints: traced buildings
+modelled and failed.
 """
 
 from __future__ import annotations
@@ -148,6 +150,30 @@ def main():
                   f"fallback(s); max |d| roof_height {diffs[0]:.3f} m, ridge_height "
                   f"{diffs[1]:.3f} m; {'valid' if valid else 'INVALID'}"
                   + (f"; {'; '.join(why)}" if why else ""))
+    sparse_survey_without_footprints(data)
+
+
+def sparse_survey_without_footprints(data):
+    """ISPRS samp11 (Stuttgart, about 1 pts/m2, EPSG:32632, ground labelled 2, the rest
+    0): reconstruct without footprints, LoD1.2 + LoD2.2; buildings traced, modelled,
+    failed (by reason), and whether the file validates."""
+    import collections
+
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.tools.validate import validate_file
+
+    src = data / "isprs" / "reference" / "samp11-utm.laz"
+    if not src.exists():
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "s11.city.json"
+        s = reconstruct([src], out, lods=("1.2", "2.2"))
+        valid = validate_file(out).valid
+        why = collections.Counter(a.get("reason", "").split(" (")[0]
+                                  for a in _attributes(out).values() if a.get("status") != "ok")
+    print(f"samp11, no footprints      {s.done}/{s.total} modelled, {s.failed} failed"
+          + "".join(f", {n} x {r}" for r, n in sorted(why.items()))
+          + f"; {'valid' if valid else 'INVALID'}")
 
 
 if __name__ == "__main__":
