@@ -34,3 +34,28 @@ def test_traced_regions_too_small_to_model_are_left_out(monkeypatch):
     options = SimpleNamespace(config=Lod1Config(min_points=4), block_size=1000.0,
                               footprints_config=None)
     assert task._traced_footprints(spec, options, cloud, classes).ids == ["t1", "t2"]
+
+
+def test_no_footprint_traced_is_an_error(tmp_path):
+    """A survey whose building points trace no footprint (laspy's simple.laz: 1,065
+    points over 3.4 x 4.6 km) wrote an empty model, '0 of 0 buildings reconstructed',
+    exit 0, where one without any building point says none was found; both say it now."""
+    import pytest
+    from pyproj import CRS
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.errors import EmptyInputError
+    from lidar2city.io.las import write_points
+
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 60, (8000, 2))
+    z = rng.normal(0.0, 0.02, len(xy))
+    cls = np.full(len(xy), 2, dtype=np.uint8)
+    cls[:3], z[:3] = 6, 5.0  # three stray building points: no region
+    cloud = PointCloud.from_world(np.column_stack([xy + [85000.0, 447000.0], z]),
+                                  crs=CRS.from_epsg(28992), attributes={"classification": cls})
+    write_points(tmp_path / "t.laz", cloud)
+    out = tmp_path / "m.city.json"
+    with pytest.raises(EmptyInputError, match="no building footprint found"):
+        reconstruct.reconstruct([tmp_path / "t.laz"], out, lods=("1.2",))
+    assert not out.exists()

@@ -871,8 +871,8 @@ class InOrder:
         return ready
 
     def check(self) -> None:
-        """Raise when the run found no building point at all."""
-        if not self.points:
+        """Raise when the run found no building point at all (traced: no footprint)."""
+        if not self.points or (self.plan.traced and not self.numbered):
             from ..io.las import check_header_bounds
 
             # blocks are planned on the headers' bounds: a wrong one hides its points
