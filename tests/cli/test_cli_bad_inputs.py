@@ -817,9 +817,36 @@ def test_a_tile_raster_or_model_given_as_footprints_is_named(tmp_path, runner, k
     if kind == "tif":
         wrong.write_bytes(b"II*\x00" + bytes(60))
     elif kind == "cityjson":
-        wrong.write_text('{"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}')
+        wrong.write_text('{"type": "CityJSON", "version": "2.0", "CityObjects": {}, '
+                         '"vertices": []}')
     res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(wrong),
                               "-o", str(tmp_path / "m.obj")])
     line = _error_line(res)
     what = {"laz": "LAS/LAZ point cloud", "tif": "GeoTIFF raster", "cityjson": "CityJSON model"}
     assert what[kind] in line and "footprints are polygons" in line, line
+
+
+def test_geojson_of_projected_coordinates_without_crs(runner, block, tmp_path, caplog):
+    """A GeoJSON without a 'crs' member is WGS 84 to GDAL (RFC 7946): projected
+    footprints written that way were reprojected from 'degrees' into NaN and refused
+    ('none of its 2 footprint(s) is a usable polygon: coordinates not finite'). Their
+    coordinates cannot be degrees: they are taken to have no CRS, with a warning."""
+    import json
+
+    import shapely
+
+    from lidar2city.cli.main import cli
+
+    def world(g):
+        return json.loads(shapely.to_geojson(shapely.transform(g, lambda c: c + (85000.0, 447000.0))))
+
+    feats = [{"type": "Feature", "properties": {"id": k}, "geometry": world(g)}
+             for k, g in (("A", box(6, 6, 18, 16)), ("B", box(24, 8, 34, 20)))]
+    gj = tmp_path / "f.geojson"
+    gj.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    out = tmp_path / "m.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(gj),
+                              "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "2 of 2 buildings reconstructed" in res.output
+    assert "are not degrees" in caplog.text

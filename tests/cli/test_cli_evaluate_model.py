@@ -27,7 +27,8 @@ def test_evaluate_model_with_points_of_another_area(runner, tmp_path):
 
     las, gpkg, _ = _synthetic_inputs(tmp_path)
     out = tmp_path / "o.city.json"
-    assert runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(gpkg), "-o", str(out)]).exit_code == 0
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(gpkg), "-o", str(out)])
+    assert res.exit_code == 0, res.output
     moved = laspy.read(las)
     moved.x = np.asarray(moved.x) + 3000.0
     moved.write(tmp_path / "far.las")

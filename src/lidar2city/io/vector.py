@@ -137,10 +137,32 @@ def vector_crs(path, *, layer=None):
     p = check_input_file(path)
     try:
         with no_pam():
-            wkt = pyogrio.read_info(str(p), layer=layer).get("crs")
+            info = pyogrio.read_info(str(p), layer=layer)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
         raise _unreadable(p, exc) from None
-    return CRS.from_user_input(wkt) if wkt else None
+    wkt = info.get("crs")
+    return _declared_crs(CRS.from_user_input(wkt) if wkt else None, info.get("total_bounds"), p)
+
+
+_WARNED: set = set()
+
+
+def _declared_crs(crs, bounds, p):
+    """``crs``, or None when it is geographic and the coordinates cannot be degrees: a
+    GeoJSON without a ``crs`` member is WGS 84 to GDAL (RFC 7946), whatever its
+    coordinates, and projected ones then reprojected as degrees become NaN."""
+    if crs is None or not crs.is_geographic or bounds is None:
+        return crs
+    b = np.asarray(bounds, dtype=np.float64)
+    degrees = np.abs(b[[0, 2]]).max() <= 360 and np.abs(b[[1, 3]]).max() <= 90
+    if not np.isfinite(b).all() or degrees:
+        return crs
+    if str(p) not in _WARNED:
+        _WARNED.add(str(p))
+        logger.warning("%s says %s (GeoJSON's default when none is given) but its coordinates "
+                       "(x %.0f..%.0f, y %.0f..%.0f) are not degrees: taken to have no CRS",
+                       p.name, crs.name, b[0], b[2], b[1], b[3])
+    return None
 
 
 def no_usable_footprint(path, geometries, notes) -> None:
@@ -236,8 +258,9 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         if skip_features or max_features is not None:
             return Footprints([], [], {}), None
         raise EmptyInputError(f"{str(p)!r} holds no footprints")
-    src_crs = CRS.from_user_input(meta["crs"]) if meta.get("crs") else None
     geoms = shapely.from_wkb(wkb)
+    src_crs = _declared_crs(CRS.from_user_input(meta["crs"]) if meta.get("crs") else None,
+                            shapely.total_bounds(geoms), p)
     if shapely.has_z(geoms).any():
         geoms = shapely.force_2d(geoms)
     if target_crs is not None and src_crs is not None and not src_crs.equals(target_crs, ignore_axis_order=True):
