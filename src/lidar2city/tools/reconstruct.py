@@ -192,7 +192,7 @@ def lod1_config(config=None, *, lods=None, stages=()):
     return cfg, resolved, others
 
 
-def point_roles(cloud, config, *, classified=None):
+def point_roles(cloud, config, *, classified=None, ground_filter: bool = False):
     """Boolean masks ``(building, ground)`` of the cloud's points, and the classes.
 
     Uses the classification the input carries (ASPRS 6 building, 2 ground by
@@ -201,6 +201,9 @@ def point_roles(cloud, config, *, classified=None):
     (:func:`lidar2city.tools.classify.classify_cloud`). ``classified`` makes
     that choice for the caller (a run over many blocks decides it once for
     all of them): True keeps the input's classes, False classifies.
+    ``ground_filter`` (classified input without any ground class): the ground
+    is filtered from the points that are not building points, the building
+    points kept as they are.
 
     Raises
     ------
@@ -213,6 +216,14 @@ def point_roles(cloud, config, *, classified=None):
     if classified and cls is not None:
         if not np.isin(cls, config.building_classes).any():
             raise EmptyInputError("no building point in the input's classes")
+        if ground_filter:
+            from ..ground import ground_mask
+
+            other = np.flatnonzero(~np.isin(cls, config.building_classes))
+            if len(other) >= 3:
+                cls = np.array(cls, copy=True)
+                cls[other[np.asarray(ground_mask(cloud.xyz[other]), dtype=bool)]] = \
+                    config.ground_classes[0]
     else:
         from .classify import classify_cloud
 
@@ -1057,6 +1068,11 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     classified = reader.has_classes(cfg.building_classes)
     if not classified:
         logger.info("no building class in the input: every block is ground-filtered and classified")
+    no_ground = classified and not reader.has_classes(cfg.ground_classes)
+    if no_ground:
+        logger.warning("the input has building points but no ground class (%s): the ground is "
+                       "filtered from the other points, if any",
+                       ", ".join(str(c) for c in cfg.ground_classes))
     if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
@@ -1077,7 +1093,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            else None,
                            user_primitives=user_prims,
                            check_images=None if check_images is None else str(check_images),
-                           footprints_config=others.get("footprints"),
+                           footprints_config=others.get("footprints"), ground_filter=no_ground,
                            # given footprints streamed: each block encodes its buildings
                            encode=({"lods": want, "scale": SEQ_SCALE, "xy_unit": frame.xy_unit,
                                     "z_unit": frame.z_unit}

@@ -62,6 +62,9 @@ class BlockOptions:
         re-applied to their buildings inside the block; empty: none.
     edit_context : EditContext or None
         How the run builds a building, for re-applying ``edits``.
+    ground_filter : bool
+        The classified input has no ground class anywhere: each block filters its
+        ground from the points that are not building points.
     encode : dict or None
         For a streamed CityJSONSeq output of given footprints: the LoDs written
         and the writer's ``scale``, ``xy_unit`` and ``z_unit``; each building's
@@ -80,6 +83,7 @@ class BlockOptions:
     edits: tuple = ()
     edit_context: object = None
     encode: dict | None = None
+    ground_filter: bool = False
 
 
 @dataclass(eq=False)
@@ -374,7 +378,8 @@ def _block_cloud(spec, options, read=None):
     if cloud is None:
         return None, None
     try:
-        _, _, classes = point_roles(cloud, options.config, classified=options.classified)
+        _, _, classes = point_roles(cloud, options.config, classified=options.classified,
+                                    ground_filter=options.ground_filter)
     except EmptyInputError:
         return None, None
     return cloud, classes
@@ -599,7 +604,8 @@ def _by_groups(spec, options) -> bool:
     Classifying raw points, tracing footprints, fitting primitives and
     re-applying edits look at the whole block."""
     return (options.classified and spec.footprints is not None and options.primitives is None
-            and not options.edits and spec.world_box is not None and bool(spec.tiles))
+            and not options.edits and spec.world_box is not None and bool(spec.tiles)
+            and not options.ground_filter)
 
 
 def _local(part, d, origin, scale):
