@@ -697,12 +697,24 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
             sub = [p.take(np.flatnonzero(p.inside([world]))) for p in parts]
         cloud = reader.cloud(sub)
         classes = cloud.attributes.get("classification", np.zeros(0, dtype=np.uint8))
-        if len(classes):
-            classes = _claim(cloud, classes, _subset(fps, idx), options)
         done = reconstruct_buildings(cloud, _subset(fps, idx), config=cfg,
                                      building=np.isin(classes, cfg.building_classes),
                                      ground=np.isin(classes, cfg.ground_classes),
                                      lod22=options.lod22, area_ground=area_ground)
+        # footprints the classes left without building points claim theirs and are
+        # built again (only those: nothing to do, and no cost, where every one has them)
+        short = [j for j, r in enumerate(done)
+                 if r.attributes.get("point_count", cfg.min_points) < cfg.min_points]
+        if short and len(classes):
+            few = _subset(fps, [idx[j] for j in short])
+            claimed = _claim(cloud, classes, few, options)
+            if (claimed != classes).any():
+                again = reconstruct_buildings(cloud, few, config=cfg,
+                                              building=np.isin(claimed, cfg.building_classes),
+                                              ground=np.isin(claimed, cfg.ground_classes),
+                                              lod22=options.lod22, area_ground=area_ground)
+                for j, r in zip(short, again, strict=True):
+                    done[j] = r
         del cloud, classes, sub
         for i, r in zip(idx, done, strict=True):
             results[i] = r
