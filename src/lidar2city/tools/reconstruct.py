@@ -1065,10 +1065,10 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     _check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
-    classified = reader.has_classes(cfg.building_classes)
+    classified, grounded = reader.classes_found([cfg.building_classes, cfg.ground_classes])
     if not classified:
         logger.info("no building class in the input: every block is ground-filtered and classified")
-    no_ground = classified and not reader.has_classes(cfg.ground_classes)
+    no_ground = classified and not grounded
     if no_ground:
         logger.warning("the input has building points but no ground class (%s): the ground is "
                        "filtered from the other points, if any",
