@@ -7,11 +7,17 @@ and the 78 BGT footprints wholly inside it are written again as other surveys
 would deliver them: LAS 1.4 point formats 6 / 7 / 8, extra-bytes dimensions,
 a 0.01 scale, z + 1000 m (a mountain town), coordinates near 0 and near 1e7
 (footprints moved with them), a few stray returns 1000 km off, and thinned at
-random (seed 0) to 4 and 2 pts/m2. Each is reconstructed at LoD1.2 + LoD2.2
+random (seed 0) to 4 and 2 pts/m2; the crop with its classes wiped, then through
+our own ``ground`` + ``classify``; its ground (class 2) left in class 1 (a
+buildings-only classification); and the whole Delft tile (132 footprints) with
+the stray returns. Each is reconstructed at LoD1.2 + LoD2.2
 (in this process, in a temporary folder) and compared with the crop as it is:
 buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
-(and why), the largest difference of ``roof_height`` (LoD1.2) and
-``ridge_height`` (LoD2.2, the highest vertex), and whether the file validates.
+(and why), the largest difference of ``roof_height`` (LoD1.2),
+``ridge_height`` (LoD2.2, the highest vertex) and ``ground_height``, and
+whether the file validates.
+Last, ISPRS samp11 (a sparse UTM survey) without footprints: traced buildings
+modelled and failed.
 """
 
 from __future__ import annotations
@@ -103,14 +109,36 @@ def main():
             "3 stray returns": ({"strays": True}, None, 0.0),
             "4 pts/m2": ({"keep": draw < 4 * area / n}, None, 0.0),
             "2 pts/m2": ({"keep": draw < 2 * area / n}, None, 0.0),
+            "ours: ground + classify": ({"own_classes": True}, None, 0.0),
+            "no ground class": ({"no_ground": True}, None, 0.0),
+            "whole tile + 3 strays": ({"strays": True, "whole": True}, None, 0.0),
         }
         base = None
         print(f"crop: {n:,} points ({n / area:.1f} pts/m2); LoD1.2 + LoD2.2 with the BGT "
               "footprints inside it")
         for name, (kw, fshift, dz) in variants.items():
             path = tmp / "v.laz"
-            _write_like(crop, path, **kw)
+            kw = dict(kw)
+            own, whole = kw.pop("own_classes", False), kw.pop("whole", False)
+            no_ground = kw.pop("no_ground", False)
+            _write_like(tile if whole else crop, path, **kw)
+            if no_ground:  # a buildings-only classification: the ground left in class 1
+                las = laspy.read(path)
+                c = np.asarray(las.classification).copy()
+                las.classification = np.where(c == 2, 1, c).astype(c.dtype)
+                las.write(path)
+            if own:  # classes wiped, then our own ground filter and classifier
+                from lidar2city.tools.classify import classify_file
+                from lidar2city.tools.ground import ground_file
+
+                raw = laspy.read(path)
+                raw.classification[:] = 1
+                raw.write(tmp / "raw.laz")
+                ground_file(tmp / "raw.laz", tmp / "g.laz", crs="EPSG:7415")
+                classify_file(tmp / "g.laz", path, crs="EPSG:7415", ground_from_file=True)
             fp = tmp / "fp.gpkg"
+            if whole:
+                fp = data / "delft" / "footprints_bgt.gpkg"
             if fshift is not None:
                 fp = tmp / "fp_shift.gpkg"
                 _footprints(data / "delft" / "footprints_bgt.gpkg", fp, fshift)
@@ -122,15 +150,40 @@ def main():
                 base = attrs
             why = sorted({a["lod22_fallback"] for a in attrs.values() if "lod22_fallback" in a})
             diffs = []
-            for key, shift in (("roof_height", dz), ("ridge_height", dz)):
+            for key, shift in (("roof_height", dz), ("ridge_height", dz), ("ground_height", dz)):
                 d = [abs(a[key] - shift - base[k][key]) for k, a in attrs.items()
                      if a.get(key) is not None and base.get(k, {}).get(key) is not None]
                 diffs.append(max(d) if d else float("nan"))
             fb = sum("lod22_fallback" in a for a in attrs.values())
             print(f"{name:24s} {s.done}/{s.total} modelled, {s.failed} failed, {fb} LoD1.2 "
                   f"fallback(s); max |d| roof_height {diffs[0]:.3f} m, ridge_height "
-                  f"{diffs[1]:.3f} m; {'valid' if valid else 'INVALID'}"
+                  f"{diffs[1]:.3f} m, ground_height {diffs[2]:.3f} m; "
+                  f"{'valid' if valid else 'INVALID'}"
                   + (f"; {'; '.join(why)}" if why else ""))
+    sparse_survey_without_footprints(data)
+
+
+def sparse_survey_without_footprints(data):
+    """ISPRS samp11 (Stuttgart, about 1 pts/m2, EPSG:32632, ground labelled 2, the rest
+    0): reconstruct without footprints, LoD1.2 + LoD2.2; buildings traced, modelled,
+    failed (by reason), and whether the file validates."""
+    import collections
+
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.tools.validate import validate_file
+
+    src = data / "isprs" / "reference" / "samp11-utm.laz"
+    if not src.exists():
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "s11.city.json"
+        s = reconstruct([src], out, lods=("1.2", "2.2"))
+        valid = validate_file(out).valid
+        why = collections.Counter(a.get("reason", "").split(" (")[0]
+                                  for a in _attributes(out).values() if a.get("status") != "ok")
+    print(f"samp11, no footprints      {s.done}/{s.total} modelled, {s.failed} failed"
+          + "".join(f", {n} x {r}" for r, n in sorted(why.items()))
+          + f"; {'valid' if valid else 'INVALID'}")
 
 
 if __name__ == "__main__":

@@ -725,3 +725,128 @@ def test_an_output_that_is_an_input_is_refused(runner, block, tmp_path, args):
     res = runner.invoke(cli, [a.format(**names) for a in args])
     assert "is also an input" in _error_line(res)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_classified_tile_footprint_without_building_points_gets_its_points(tmp_path, runner):
+    """Our own ground + classify on a raw Delft crop called 6 of 78 BGT footprints (8 m2
+    garden sheds, a 22 m2 annexe) vegetation / other, and reconstruct on the classified
+    tile trusted those classes: 'no points'. A footprint without building points now
+    gets its unclassified and vegetation points (0, 1, 3, 4, 5) on classified tiles too;
+    other classes (water, bridges, the vendor's own) are never claimed."""
+    import json
+
+    import shapely
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.synthetic import make_town
+
+    town = make_town(size=(60.0, 50.0), density=6.0, seed=3)
+    cls = np.asarray(town.cloud.get("classification")).copy()
+    xy = town.cloud.xyz[:, :2]
+    g = town.footprints.geometries[0]
+    inside = shapely.contains_xy(g, xy[:, 0], xy[:, 1]) & (cls == 6)
+    cls[inside] = 5  # the classifier took the roof for high vegetation
+    write_points(tmp_path / "t.laz", town.cloud.with_attributes(classification=cls))
+    write_polygons(tmp_path / "f.gpkg", town.footprints.geometries, {"id": town.footprints.ids},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    out = tmp_path / "m.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(tmp_path / "t.laz"), "--footprints",
+                              str(tmp_path / "f.gpkg"), "--lod", "1.2", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    attrs = json.loads(out.read_text())["CityObjects"][town.footprints.ids[0]]["attributes"]
+    assert attrs["status"] == "ok" and attrs["point_count"] >= inside.sum() // 2, attrs
+
+
+def test_claim_footprint_points_claimable_classes_only():
+    from lidar2city.footprints.points import claim_footprint_points
+
+    xy = np.array([[1.0, 1.0], [1.2, 1.0], [1.4, 1.0], [1.6, 1.0], [1.8, 1.0]])
+    classes = np.array([1, 5, 9, 26, 3])
+    out = claim_footprint_points(xy, classes, [box(0, 0, 2, 2)], min_points=1,
+                                 claimable=(0, 1, 3, 4, 5))
+    assert out.tolist() == [6, 6, 9, 26, 6]
+
+
+def test_footprints_outside_the_tiles_are_said(tmp_path, runner, caplog):
+    """Footprints wholly outside the tiles were left out with an info-level line only:
+    '3 of 3 buildings reconstructed' from a file of 5, and no word on the other two."""
+    import logging
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.io.vector import write_polygons
+    from lidar2city.synthetic import make_town
+
+    town = make_town(size=(60.0, 50.0), density=4.0, seed=3)
+    write_points(tmp_path / "t.laz", town.cloud)
+    far = [shapely_translate(town.footprints.geometries[0], d) for d in (5000.0, 7000.0)]
+    write_polygons(tmp_path / "f.gpkg", [*town.footprints.geometries, *far],
+                   {"id": [*town.footprints.ids, "far1", "far2"]},
+                   origin=town.cloud.origin, crs=town.cloud.crs)
+    with caplog.at_level(logging.WARNING):
+        res = runner.invoke(cli, ["reconstruct", str(tmp_path / "t.laz"), "--footprints",
+                                  str(tmp_path / "f.gpkg"), "--lod", "1.2",
+                                  "-o", str(tmp_path / "m.city.json")])
+    assert res.exit_code == 0, res.output
+    n = len(town.footprints) + 2
+    assert f"2 of {n} footprint(s) outside the point cloud's extent" in caplog.text
+
+
+def shapely_translate(g, d):
+    import shapely
+
+    return shapely.transform(g, lambda c: c + d)
+
+
+@pytest.mark.parametrize("kind", ["laz", "tif", "cityjson"])
+def test_a_tile_raster_or_model_given_as_footprints_is_named(tmp_path, runner, kind):
+    """A LAS/LAZ tile, a GeoTIFF or a CityJSON model given as --footprints got GDAL's
+    "not recognized as being in a supported file format.; It might help to specify the
+    correct driver explicitly by prefixing the file path with '<DRIVER>:'": say what the
+    file is and what footprints are."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import write_points
+    from lidar2city.synthetic import make_town
+
+    town = make_town(size=(40.0, 40.0), density=2.0, seed=1)
+    tile = tmp_path / "t.laz"
+    write_points(tile, town.cloud)
+    wrong = {"laz": tile, "tif": tmp_path / "d.tif", "cityjson": tmp_path / "m.city.json"}[kind]
+    if kind == "tif":
+        wrong.write_bytes(b"II*\x00" + bytes(60))
+    elif kind == "cityjson":
+        wrong.write_text('{"type": "CityJSON", "version": "2.0", "CityObjects": {}, '
+                         '"vertices": []}')
+    res = runner.invoke(cli, ["reconstruct", str(tile), "--footprints", str(wrong),
+                              "-o", str(tmp_path / "m.obj")])
+    line = _error_line(res)
+    what = {"laz": "LAS/LAZ point cloud", "tif": "GeoTIFF raster", "cityjson": "CityJSON model"}
+    assert what[kind] in line and "footprints are polygons" in line, line
+
+
+def test_geojson_of_projected_coordinates_without_crs(runner, block, tmp_path, caplog):
+    """A GeoJSON without a 'crs' member is WGS 84 to GDAL (RFC 7946): projected
+    footprints written that way were reprojected from 'degrees' into NaN and refused
+    ('none of its 2 footprint(s) is a usable polygon: coordinates not finite'). Their
+    coordinates cannot be degrees: they are taken to have no CRS, with a warning."""
+    import json
+
+    import shapely
+
+    from lidar2city.cli.main import cli
+
+    def world(g):
+        return json.loads(shapely.to_geojson(shapely.transform(g, lambda c: c + (85000.0, 447000.0))))
+
+    feats = [{"type": "Feature", "properties": {"id": k}, "geometry": world(g)}
+             for k, g in (("A", box(6, 6, 18, 16)), ("B", box(24, 8, 34, 20)))]
+    gj = tmp_path / "f.geojson"
+    gj.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    out = tmp_path / "m.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(gj),
+                              "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "2 of 2 buildings reconstructed" in res.output
+    assert "are not degrees" in caplog.text

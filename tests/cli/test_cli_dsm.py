@@ -211,3 +211,31 @@ def test_bad_rasters_one_line_error(runner, rasters, tmp_path, case, command):
     assert res.output.strip().startswith("Error:") and len(res.output.strip().splitlines()) == 1, \
         res.output
     assert not out.exists()
+
+
+def test_reconstruct_dsm_with_footprints_of_another_area(runner, rasters, tmp_path):
+    """Footprints of another area (Delft's on Alexandria's DSM) gave '0 of 78 buildings
+    reconstructed, 78 failed: no valid DSM/DTM pixel inside the outline' and exit 0; the
+    points path says none of them meets the extent, and so does the DSM path now. A
+    footprint partly outside keeps its own reason."""
+    import shapely
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+
+    p_dsm, p_dtm = rasters
+    far = tmp_path / "far.gpkg"
+    write_polygons(far, [shapely.box(600010, 4299974, 600040, 4299990)], {"id": ["A"]},
+                   origin=(0, 0), crs=CRS_UTM)
+    out = tmp_path / "o.city.json"
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "--dtm", str(p_dtm),
+                              "--footprints", str(far), "-o", str(out)])
+    assert res.exit_code == 1 and not out.exists(), res.output
+    assert res.output.startswith("Error:") and "meets the DSM's extent" in res.output
+    both = tmp_path / "both.gpkg"
+    write_polygons(both, [shapely.box(500010, 4299974, 500040, 4299990),
+                          shapely.box(600010, 4299974, 600040, 4299990)], {"id": ["A", "B"]},
+                   origin=(0, 0), crs=CRS_UTM)
+    res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "--dtm", str(p_dtm),
+                              "--footprints", str(both), "-o", str(out)])
+    assert res.exit_code == 0 and "1 of 2 buildings reconstructed" in res.output, res.output

@@ -114,3 +114,17 @@ def test_read_corners_of_the_3dbag_sample(data):
         assert c.shape[1] == 3 and len(c) >= 8
         # RD New metres: the transform is applied
         assert 0 < c[:, 0].mean() < 300000 and 300000 < c[:, 1].mean() < 625000
+
+
+def test_evaluate_corners_of_models_that_do_not_overlap(runner, tmp_path):
+    """The same building ids in another area (or CRS: Delft in EPSG:7415 against the same
+    buildings in EPSG:2263) printed 0 matched, 'mean X +nan' and exit 0: an error now."""
+    from lidar2city.cli.main import cli
+
+    ref, pred = tmp_path / "ref.city.json", tmp_path / "pred.city.json"
+    write_cityjson(ref, {"A": gable(), "B": gable(dx=30.0)})
+    write_cityjson(pred, {"A": gable(dx=5000.0), "B": gable(dx=5030.0)})
+    res = runner.invoke(cli, ["evaluate", "corners", str(pred), "--reference", str(ref)])
+    assert res.exit_code == 1, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error:") and "do not overlap" in lines[0]

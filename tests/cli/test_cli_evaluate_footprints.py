@@ -97,3 +97,18 @@ def test_evaluate_footprints_bad_input(runner, tmp_path):
     res = runner.invoke(cli, ["evaluate", "footprints", str(tmp_path / "ref.gpkg"),
                               "--reference", str(tmp_path / "ref.gpkg"), "--min-iou", "0"])
     assert res.exit_code == 1 and "min_iou" in res.output
+
+
+def test_evaluate_footprints_that_do_not_overlap_the_reference(runner, tmp_path):
+    """A prediction 5 km off its reference (another area, or a CRS mix-up without CRSs)
+    scored quality 0.000 with exit 0, and 'overall accuracy 1.000' over the empty
+    pixels: say they do not overlap instead."""
+    from lidar2city.cli.main import cli
+
+    _write(tmp_path / "ref.gpkg", [shapely.box(0, 0, 10, 10), shapely.box(20, 0, 30, 10)])
+    _write(tmp_path / "pred.gpkg", [shapely.box(5000, 0, 5010, 10)])
+    res = runner.invoke(cli, ["evaluate", "footprints", str(tmp_path / "pred.gpkg"),
+                              "--reference", str(tmp_path / "ref.gpkg")])
+    assert res.exit_code == 1, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error:") and "do not overlap" in lines[0]

@@ -79,3 +79,23 @@ def test_not_a_geopackage_steps_aside(tmp_path):
     bad.write_bytes(b"not sqlite")
     assert read_gpkg_raw(bad) is None
     assert read_gpkg_raw(tmp_path / "x.geojson") is None
+
+
+@pytest.mark.parametrize("suffix", [".gpkg", ".geojson"])
+def test_missing_footprint_ids_take_the_feature_id(tmp_path, suffix, caplog):
+    """Null or blank ids became the CityObject ids 'None', 'None-2' and '' (and an
+    integer column with nulls, read as floats, gave '12.0'); a footprint without an id
+    is named by its feature id, as in a layer without an id column, with a warning."""
+    import pyogrio.raw
+
+    path = tmp_path / f"f{suffix}"
+    g = [shapely.box(i * 10.0, 0.0, i * 10.0 + 5.0, 5.0) for i in range(4)]
+    ids = np.array([12.0, np.nan, 14.0, np.nan]) if suffix == ".geojson" else \
+        np.array(["a", None, " ", None], dtype=object)
+    pyogrio.raw.write(str(path), shapely.to_wkb(np.array(g)), [ids], ["id"],
+                      crs="EPSG:28992", geometry_type="Polygon")
+    fps, _ = read_footprints(path)
+    # GeoPackage feature ids start at 1, GeoJSON's at 0
+    want = ["12", "1", "14", "3"] if suffix == ".geojson" else ["a", "2", "3", "4"]
+    assert fps.ids == want
+    assert "have no 'id'" in caplog.text

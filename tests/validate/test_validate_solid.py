@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import MultiPoint, box
@@ -105,6 +106,21 @@ def test_self_intersecting_shell():
     joined = Solid(np.vstack([a.vertices, b.vertices]),
                    a.surfaces + [Surface([r + 8 for r in f.rings], f.semantic) for f in b.surfaces])
     assert 305 in solid_error_codes(joined)
+
+
+@pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (0.0, 1e6, 0.0), (1e7, 1e7, 0.0),
+                                    (84880.0, -552520.0, 0.0), (-1e6, 3.3, 500.0)])
+def test_checks_do_not_depend_on_where_the_solid_lies(origin):
+    """A stray return moved reconstruct's local origin 1000 km off, and its crossing
+    tolerance, scaled by the largest coordinate, grew to 1 mm: a roof crossing a wall by
+    0.4 mm passed reconstruct's check and failed validate's (306), which works near the
+    model. The same solid must get the same verdict wherever it is."""
+    tri = _triangulated(cube())
+    v = tri.vertices.copy()
+    i = np.flatnonzero((v == [1, 1, 1]).all(axis=1))[0]
+    v[i] = [0.5, 0.5, -4e-4]  # the roof corner 0.4 mm through the floor
+    assert solid_error_codes(Solid(v + np.array(origin), tri.surfaces)) == [306]
+    assert check_solid(Solid(tri.vertices + np.array(origin), tri.surfaces)) == []
 
 
 def test_coplanar_overlapping_faces_are_found():

@@ -30,8 +30,9 @@ def command(pred, reference, tolerance, by, lod, per_building, as_json):
     from ..io.corners import read_corners
     from ..metrics.corners import corner_metrics
 
-    m = corner_metrics(read_corners(pred, lod=lod), read_corners(reference, lod=lod),
-                       tolerance=tolerance, by=by)
+    p, r = read_corners(pred, lod=lod), read_corners(reference, lod=lod)
+    _same_area(pred, reference, p, r)
+    m = corner_metrics(p, r, tolerance=tolerance, by=by)
     if as_json:
         d = m.as_dict()
         if not per_building:
@@ -49,3 +50,23 @@ def command(pred, reference, tolerance, by, lod, per_building, as_json):
         for b in m.per_building:
             click.echo(f"  {b['predicted']} ~ {b['reference']}: {b['n_matched']}/{b['n_predicted']}"
                        f" of {b['n_reference']}  RMSE XY {b['rmse_xy']:.3f} Z {b['rmse_z']:.3f}")
+
+
+def _same_area(pred, reference, p, r):
+    """A one-line error when the two models' corners do not overlap in plan (another
+    area, or another CRS): else every figure is 0 % or nan."""
+    import numpy as np
+
+    from ..errors import InputError
+
+    def box(corners):
+        xy = [c[:, :2] for c in corners.values() if len(c)]
+        return None if not xy else np.r_[np.min([a.min(axis=0) for a in xy], axis=0),
+                                          np.max([a.max(axis=0) for a in xy], axis=0)]
+
+    a, b = box(p), box(r)
+    if a is not None and b is not None and (a[0] > b[2] or b[0] > a[2] or a[1] > b[3]
+                                            or b[1] > a[3]):
+        raise InputError(f"{pred!r} and {reference!r} do not overlap (x {a[0]:.0f}..{a[2]:.0f}, "
+                         f"y {a[1]:.0f}..{a[3]:.0f} against x {b[0]:.0f}..{b[2]:.0f}, y "
+                         f"{b[1]:.0f}..{b[3]:.0f}): not the same area, or not the same CRS")

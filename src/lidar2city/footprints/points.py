@@ -8,7 +8,7 @@ __all__ = ["claim_footprint_points"]
 
 
 def claim_footprint_points(xy, classes, footprints, *, building_classes=(6,),
-                           excluded=(2, 7), min_points: int = 10) -> np.ndarray:
+                           excluded=(2, 7), min_points: int = 10, claimable=None) -> np.ndarray:
     """Classes in which footprints without building points get the points inside them.
 
     A classifier run on a raw tile decides "building" without the footprints:
@@ -32,6 +32,11 @@ def claim_footprint_points(xy, classes, footprints, *, building_classes=(6,),
         Classes never claimed (ground, noise, water...).
     min_points : int
         Building points a footprint needs to be left as the classifier made it.
+    claimable : tuple of int, optional
+        Only points of these classes are claimed (on a classified tile: the
+        unclassified and vegetation classes a classifier puts a missed building
+        in, never water or a vendor's own classes); None: every class not
+        ``excluded``.
 
     Returns
     -------
@@ -55,6 +60,8 @@ def claim_footprint_points(xy, classes, footprints, *, building_classes=(6,),
     xs = xy[order, 0]
     building = np.isin(out, building_classes)
     free = ~np.isin(out, tuple(excluded) + tuple(building_classes))
+    if claimable is not None:
+        free &= np.isin(out, tuple(claimable))
     for g in footprints:
         if g is None or g.is_empty:
             continue

@@ -317,8 +317,14 @@ class TileReader:
         """Whether any point of the tiles carries one of ``classes`` (read in chunks of
         growing size, from a few thousand points, stopping at the first hit: a
         classified tile is known after decoding a sliver of it)."""
+        return self.classes_found([classes])[0]
+
+    def classes_found(self, groups) -> list:
+        """For each sequence of classes in ``groups``, whether any point carries one of
+        them: :meth:`has_classes` of every group in one scan, stopping once each is found."""
         import laspy
 
+        found = [False] * len(groups)
         for t in self.tiles:
             if not t.count:
                 continue
@@ -331,10 +337,13 @@ class TileReader:
                     if len(chunk) == 0:
                         break
                     left -= len(chunk)
-                    if np.isin(np.asarray(chunk.classification), classes).any():
-                        return True
+                    cls = np.asarray(chunk.classification)
+                    found = [was or bool(np.isin(cls, g).any())
+                             for was, g in zip(found, groups, strict=True)]
+                    if all(found):
+                        return found
                     size = min(4 * size, READ_CHUNK)
-        return False
+        return found
 
     def _tile(self, k) -> DecodedTile:
         if k in self._tiles:

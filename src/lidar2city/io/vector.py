@@ -137,11 +137,32 @@ def vector_crs(path, *, layer=None):
     p = check_input_file(path)
     try:
         with no_pam():
-            wkt = pyogrio.read_info(str(p), layer=layer).get("crs")
+            info = pyogrio.read_info(str(p), layer=layer)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
-        raise FileFormatError(f"{str(p)!r} is not a readable vector source: "
-                              f"{str(exc).splitlines()[0]}") from None
-    return CRS.from_user_input(wkt) if wkt else None
+        raise _unreadable(p, exc) from None
+    wkt = info.get("crs")
+    return _declared_crs(CRS.from_user_input(wkt) if wkt else None, info.get("total_bounds"), p)
+
+
+_WARNED: set = set()
+
+
+def _declared_crs(crs, bounds, p):
+    """``crs``, or None when it is geographic and the coordinates cannot be degrees: a
+    GeoJSON without a ``crs`` member is WGS 84 to GDAL (RFC 7946), whatever its
+    coordinates, and projected ones then reprojected as degrees become NaN."""
+    if crs is None or not crs.is_geographic or bounds is None:
+        return crs
+    b = np.asarray(bounds, dtype=np.float64)
+    degrees = np.abs(b[[0, 2]]).max() <= 360 and np.abs(b[[1, 3]]).max() <= 90
+    if not np.isfinite(b).all() or degrees:
+        return crs
+    if str(p) not in _WARNED:
+        _WARNED.add(str(p))
+        logger.warning("%s says %s (GeoJSON's default when none is given) but its coordinates "
+                       "(x %.0f..%.0f, y %.0f..%.0f) are not degrees: taken to have no CRS",
+                       p.name, crs.name, b[0], b[2], b[1], b[3])
+    return None
 
 
 def no_usable_footprint(path, geometries, notes) -> None:
@@ -158,6 +179,20 @@ def no_usable_footprint(path, geometries, notes) -> None:
         why = "; ".join(f"{k}" + (f" (x{c})" if c > 1 else "") for k, c in Counter(notes).items())
         raise EmptyInputError(f"{str(path)!r}: none of its {len(geometries)} footprint(s) is a "
                               f"usable polygon: {why}")
+
+
+def _id_text(value):
+    """A footprint id as text, or None when it is missing (null, NaN, blank); a whole
+    float (an integer column with nulls, read as floats) without its ``.0``."""
+    if value is None:
+        return None
+    if isinstance(value, float | np.floating):
+        if not np.isfinite(value):
+            return None
+        if float(value).is_integer():
+            return str(int(value))
+    text = str(value).strip()
+    return text or None
 
 
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
@@ -223,8 +258,9 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         if skip_features or max_features is not None:
             return Footprints([], [], {}), None
         raise EmptyInputError(f"{str(p)!r} holds no footprints")
-    src_crs = CRS.from_user_input(meta["crs"]) if meta.get("crs") else None
     geoms = shapely.from_wkb(wkb)
+    src_crs = _declared_crs(CRS.from_user_input(meta["crs"]) if meta.get("crs") else None,
+                            shapely.total_bounds(geoms), p)
     if shapely.has_z(geoms).any():
         geoms = shapely.force_2d(geoms)
     if target_crs is not None and src_crs is not None and not src_crs.equals(target_crs, ignore_axis_order=True):
@@ -240,7 +276,13 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     if id_field is None:
         id_field = next((f for f in ("identificatie", "identificatiebagpnd", "id", "fid", "OBJECTID")
                          if f in fields), None)
-    ids = [str(v) for v in fields[id_field]] if id_field else [str(int(f)) for f in fids]
+    ids = [str(int(f)) for f in fids]
+    if id_field:
+        named = [_id_text(v) for v in fields[id_field]]
+        if None in named:
+            logger.warning("%d footprint(s) of %s have no %r: named by their feature id",
+                           named.count(None), p.name, id_field)
+        ids = [f if v is None else v for v, f in zip(named, ids, strict=True)]
     if unique_ids:
         ids = unique(ids)
     out, notes = [], []
@@ -270,7 +312,31 @@ def _read_ogr(p, *, layer, bbox, fids, skip_features, max_features):
                 fids=None if fids is None else np.asarray(fids, dtype=np.int64),
                 skip_features=skip_features, max_features=max_features)
     except Exception as exc:  # pyogrio.errors.DataSourceError / DataLayerError
-        raise FileFormatError(f"{str(p)!r} is not a readable vector source: {str(exc).splitlines()[0]}") from None
+        raise _unreadable(p, exc) from None
+
+
+_POLYGONS = ("footprints are polygons: GeoPackage, Shapefile, GeoJSON, FlatGeobuf, or a CSV "
+             "with a WKT column")
+#: leading bytes of the files a user may give where footprints are expected
+_SIGNATURES = ((b"LASF", "it is a LAS/LAZ point cloud (tiles are the inputs); " + _POLYGONS),
+               (b"ply", "it is a PLY point cloud; " + _POLYGONS),
+               (b"II*\x00", "it is a GeoTIFF raster (a DSM goes in with --dsm); " + _POLYGONS),
+               (b"MM\x00*", "it is a GeoTIFF raster (a DSM goes in with --dsm); " + _POLYGONS))
+
+
+def _unreadable(p, exc) -> FileFormatError:
+    """The error for a source OGR cannot open: what the file is when its first bytes
+    say so (a tile, a raster, a CityJSON model), else OGR's first line."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(256)
+    except OSError:
+        head = b""
+    what = next((w for sig, w in _SIGNATURES if head.startswith(sig)), None)
+    if what is None and head.lstrip().startswith(b"{") and b'"CityJSON"' in head:
+        what = "it is a CityJSON model; " + _POLYGONS
+    return FileFormatError(f"{str(p)!r} is not a readable vector source: "
+                           f"{what or str(exc).splitlines()[0]}")
 
 
 def unique(ids) -> list:

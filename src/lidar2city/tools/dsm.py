@@ -564,6 +564,10 @@ def lod1_from_dsm(dsm, *, dtm=None, ortho=None, footprints=None, regularize="fit
             results.append(r)
             if progress is not None:
                 progress(i, len(fp))
+        if not any(r.ok and _polygon_pixels(r.footprint, d.shape, cell).any() for r in results) \
+                and any(g is not None for g in fp.geometries):
+            raise EmptyInputError(f"none of the {len(fp)} footprints of {str(footprints)!r} meets "
+                                  "the DSM's extent (check both CRSs)")
     for r in results:
         if not r.ok:
             continue

@@ -168,6 +168,13 @@ def evaluate_footprints(pred_path, ref_path, *, crs=None, min_iou: float = 0.5,
     p = [g for g in pred.geometries if g is not None]
     if not r:
         raise EmptyInputError(f"{str(ref_path)!r} holds no usable footprint")
+    rb = shapely.total_bounds(np.array(r, dtype=object))
+    pb = shapely.total_bounds(np.array(p, dtype=object)) if p else None
+    if pb is not None and not shapely.box(*pb).intersects(shapely.box(*rb)):
+        raise InputError(f"{str(pred_path)!r} and {str(ref_path)!r} do not overlap (x {pb[0]:.0f}.."
+                         f"{pb[2]:.0f}, y {pb[1]:.0f}..{pb[3]:.0f} against x {rb[0]:.0f}.."
+                         f"{rb[2]:.0f}, y {rb[1]:.0f}..{rb[3]:.0f}): not the same area, or not "
+                         "the same CRS")
     lo = np.floor(np.array(shapely.total_bounds(np.array(r, dtype=object))[:2]))
     r = list(to_local(np.array(r, dtype=object), lo))
     p = list(to_local(np.array(p, dtype=object), lo)) if p else []

@@ -170,5 +170,8 @@ def evaluate_model(model_path, points, *, crs=None, footprints=None, id_field=No
     rows = evaluate_buildings(model, xyz, origin=cloud.origin, unit_scale=(xy_unit, xy_unit, z_unit),
                               footprints=fps, lod=lod, check=check)
     summary = summarise(rows)
+    if summary["with_model"] and not any(row["points"] for row in rows):
+        raise InputError(f"none of the model's {summary['with_model']} building(s) has a building "
+                         "point of the tiles inside it: do the tiles cover the model, in its CRS?")
     summary["seconds"] = round(time.perf_counter() - t0, 2)
     return rows, summary

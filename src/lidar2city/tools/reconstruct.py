@@ -192,7 +192,7 @@ def lod1_config(config=None, *, lods=None, stages=()):
     return cfg, resolved, others
 
 
-def point_roles(cloud, config, *, classified=None):
+def point_roles(cloud, config, *, classified=None, ground_filter: bool = False):
     """Boolean masks ``(building, ground)`` of the cloud's points, and the classes.
 
     Uses the classification the input carries (ASPRS 6 building, 2 ground by
@@ -201,6 +201,9 @@ def point_roles(cloud, config, *, classified=None):
     (:func:`lidar2city.tools.classify.classify_cloud`). ``classified`` makes
     that choice for the caller (a run over many blocks decides it once for
     all of them): True keeps the input's classes, False classifies.
+    ``ground_filter`` (classified input without any ground class): the ground
+    is filtered from the points that are not building points, the building
+    points kept as they are.
 
     Raises
     ------
@@ -213,6 +216,14 @@ def point_roles(cloud, config, *, classified=None):
     if classified and cls is not None:
         if not np.isin(cls, config.building_classes).any():
             raise EmptyInputError("no building point in the input's classes")
+        if ground_filter:
+            from ..ground import ground_mask
+
+            other = np.flatnonzero(~np.isin(cls, config.building_classes))
+            if len(other) >= 3:
+                cls = np.array(cls, copy=True)
+                cls[other[np.asarray(ground_mask(cloud.xyz[other]), dtype=bool)]] = \
+                    config.ground_classes[0]
     else:
         from .classify import classify_cloud
 
@@ -273,7 +284,8 @@ def load_footprints(path, cloud, *, id_field=None, layer=None, extent=None):
         raise EmptyInputError(f"none of the {len(fps)} footprints of {str(path)!r} meets the "
                               "point cloud's extent (check both CRSs)")
     if len(keep) < len(fps):
-        logger.info("%d footprint(s) outside the point cloud's extent skipped", len(fps) - len(keep))
+        logger.warning("%d of %d footprint(s) outside the point cloud's extent: no model",
+                       len(fps) - len(keep), len(fps))
     return _subset(fps, keep)
 
 
@@ -341,8 +353,8 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
         raise EmptyInputError(f"none of the {len(all_ids)} footprints of {str(path)!r} meets the "
                               "point cloud's extent (check both CRSs)")
     if len(kept) < len(all_ids):
-        logger.info("%d footprint(s) outside the point cloud's extent skipped",
-                    len(all_ids) - len(kept))
+        logger.warning("%d of %d footprint(s) outside the point cloud's extent: no model",
+                       len(all_ids) - len(kept), len(all_ids))
     if repeated:
         logger.warning("%d footprint(s) of %r repeat an earlier one's outline exactly: each "
                        "gets its own (overlapping) model; remove the duplicates", repeated,
@@ -870,8 +882,8 @@ class InOrder:
         return ready
 
     def check(self) -> None:
-        """Raise when the run found no building point at all."""
-        if not self.points:
+        """Raise when the run found no building point at all (traced: no footprint)."""
+        if not self.points or (self.plan.traced and not self.numbered):
             from ..io.las import check_header_bounds
 
             # blocks are planned on the headers' bounds: a wrong one hides its points
@@ -1053,9 +1065,14 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     _check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
     # the run, so that every block is treated alike whatever it holds
-    classified = reader.has_classes(cfg.building_classes)
+    classified, grounded = reader.classes_found([cfg.building_classes, cfg.ground_classes])
     if not classified:
         logger.info("no building class in the input: every block is ground-filtered and classified")
+    no_ground = classified and not grounded
+    if no_ground:
+        logger.warning("the input has building points but no ground class (%s): the ground is "
+                       "filtered from the other points, if any",
+                       ", ".join(str(c) for c in cfg.ground_classes))
     if reader.crs is None:
         logger.warning("the input has no CRS: the output will have no reference system "
                        "(pass --crs EPSG:xxxx)")
@@ -1076,7 +1093,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            else None,
                            user_primitives=user_prims,
                            check_images=None if check_images is None else str(check_images),
-                           footprints_config=others.get("footprints"),
+                           footprints_config=others.get("footprints"), ground_filter=no_ground,
                            # given footprints streamed: each block encodes its buildings
                            encode=({"lods": want, "scale": SEQ_SCALE, "xy_unit": frame.xy_unit,
                                     "z_unit": frame.z_unit}

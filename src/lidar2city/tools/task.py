@@ -62,6 +62,9 @@ class BlockOptions:
         re-applied to their buildings inside the block; empty: none.
     edit_context : EditContext or None
         How the run builds a building, for re-applying ``edits``.
+    ground_filter : bool
+        The classified input has no ground class anywhere: each block filters its
+        ground from the points that are not building points.
     encode : dict or None
         For a streamed CityJSONSeq output of given footprints: the LoDs written
         and the writer's ``scale``, ``xy_unit`` and ``z_unit``; each building's
@@ -80,6 +83,7 @@ class BlockOptions:
     edits: tuple = ()
     edit_context: object = None
     encode: dict | None = None
+    ground_filter: bool = False
 
 
 @dataclass(eq=False)
@@ -374,7 +378,8 @@ def _block_cloud(spec, options, read=None):
     if cloud is None:
         return None, None
     try:
-        _, _, classes = point_roles(cloud, options.config, classified=options.classified)
+        _, _, classes = point_roles(cloud, options.config, classified=options.classified,
+                                    ground_filter=options.ground_filter)
     except EmptyInputError:
         return None, None
     return cloud, classes
@@ -393,7 +398,33 @@ def _traced_footprints(spec, options, cloud, classes):
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     keys = block_keys(centre, spec.frame, options.block_size)
     idx = [i for i in range(len(fps)) if (keys[i, 0], keys[i, 1]) == tuple(spec.cell)]
+    # a traced region holding fewer building points than a model needs (lod1.min_points)
+    # is no building found: at 1 pts/m2 the tracer's smallest regions (4 m2) hold a
+    # handful, and each came out as a failed building ('too few points (1 < 10)')
+    cfg = options.config
+    held = _points_inside(cloud.xyz[np.isin(classes, cfg.building_classes), :2],
+                          [fps.geometries[i] for i in idx])
+    small = [i for i, n in zip(idx, held, strict=True) if n < cfg.min_points]
+    if small:
+        logger.info("%d traced region(s) with fewer than %d building points left out",
+                    len(small), cfg.min_points)
+        idx = [i for i in idx if i not in small]
     return _subset(fps, idx) if idx else None
+
+
+def _points_inside(xy, geometries) -> list:
+    """How many of the points ``xy`` (N, 2) each polygon holds."""
+    import shapely
+
+    order = np.argsort(xy[:, 0], kind="stable")
+    xs = xy[order, 0]
+    out = []
+    for g in geometries:
+        x0, y0, x1, y1 = g.bounds
+        c = order[np.searchsorted(xs, x0, "left"):np.searchsorted(xs, x1, "right")]
+        c = c[(xy[c, 1] >= y0) & (xy[c, 1] <= y1)]
+        out.append(int(np.count_nonzero(shapely.contains_xy(g, xy[c, 0], xy[c, 1]))))
+    return out
 
 
 def block_footprints(spec):
@@ -521,15 +552,9 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
             return _run_groups(spec, options, *read)
     cloud, classes = _block_cloud(spec, options, read)
     fps = None if spec.footprints is None else block_footprints(spec)
-    if fps is not None and cloud is not None and not options.classified:
-        # raw input: the footprints say where the buildings are
-        from ..footprints.points import claim_footprint_points
-
-        cfg = options.config
-        classes = claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
-                                         building_classes=cfg.building_classes,
-                                         excluded=(*cfg.ground_classes, 7),
-                                         min_points=cfg.min_points)
+    if fps is not None and cloud is not None:
+        # the footprints say where the buildings are
+        classes = _claim(cloud, classes, fps, options)
     if fps is None:  # traced
         fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
         if fps is None:
@@ -552,6 +577,26 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
 GROUP_POINTS = 40_000
 
 
+#: classes a classified tile's footprint without building points may claim: those a
+#: classifier puts a missed building in (never created, unclassified, vegetation)
+CLAIMABLE = (0, 1, 3, 4, 5)
+
+
+def _claim(cloud, classes, fps, options):
+    """``classes`` with the points of footprints that hold no building points claimed
+    for them (:func:`lidar2city.footprints.points.claim_footprint_points`): on a raw
+    tile every non-ground point, on a classified one (ours or a vendor's) only
+    :data:`CLAIMABLE` points, since a small shed or a roof taken for trees must
+    not leave its footprint without a model."""
+    from ..footprints.points import claim_footprint_points
+
+    cfg = options.config
+    return claim_footprint_points(cloud.xyz[:, :2], classes, fps.geometries,
+                                  building_classes=cfg.building_classes,
+                                  excluded=(*cfg.ground_classes, 7), min_points=cfg.min_points,
+                                  claimable=CLAIMABLE if options.classified else None)
+
+
 def _by_groups(spec, options) -> bool:
     """Whether the block's buildings can be built group by group with the same
     results: each building then reads only the points around its footprint
@@ -559,7 +604,8 @@ def _by_groups(spec, options) -> bool:
     Classifying raw points, tracing footprints, fitting primitives and
     re-applying edits look at the whole block."""
     return (options.classified and spec.footprints is not None and options.primitives is None
-            and not options.edits and spec.world_box is not None and bool(spec.tiles))
+            and not options.edits and spec.world_box is not None and bool(spec.tiles)
+            and not options.ground_filter)
 
 
 def _local(part, d, origin, scale):
@@ -655,6 +701,20 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
                                      building=np.isin(classes, cfg.building_classes),
                                      ground=np.isin(classes, cfg.ground_classes),
                                      lod22=options.lod22, area_ground=area_ground)
+        # footprints the classes left without building points claim theirs and are
+        # built again (only those: nothing to do, and no cost, where every one has them)
+        short = [j for j, r in enumerate(done)
+                 if r.attributes.get("point_count", cfg.min_points) < cfg.min_points]
+        if short and len(classes):
+            few = _subset(fps, [idx[j] for j in short])
+            claimed = _claim(cloud, classes, few, options)
+            if (claimed != classes).any():
+                again = reconstruct_buildings(cloud, few, config=cfg,
+                                              building=np.isin(claimed, cfg.building_classes),
+                                              ground=np.isin(claimed, cfg.ground_classes),
+                                              lod22=options.lod22, area_ground=area_ground)
+                for j, r in zip(short, again, strict=True):
+                    done[j] = r
         del cloud, classes, sub
         for i, r in zip(idx, done, strict=True):
             results[i] = r

@@ -449,6 +449,10 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
         return [Issue(901, None, "vertex coordinates are NaN or infinite")]
     if not (np.abs(verts_in) / snap_tolerance < 2.0 ** 62).all():
         return [Issue(901, None, "vertex coordinates too large for the snap tolerance")]
+    # checked relative to the solid's lower corner (a multiple of the snap tolerance, so
+    # the same vertices merge): the crossing tolerance scales with the coordinates, and
+    # the verdict must not depend on where the solid lies (a local origin 1000 km off)
+    verts_in = verts_in - np.round(verts_in.min(axis=0) / snap_tolerance) * snap_tolerance
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
     raw = [[np.asarray(r, dtype=np.int64).reshape(-1) for r in (s.rings if hasattr(s, "rings") else s)]
            for s in solid.surfaces]
