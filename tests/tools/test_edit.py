@@ -300,3 +300,22 @@ def test_a_run_resumed_with_other_edits_is_refused(edit_town, town_edits, tmp_pa
         reconstruct([edit_town.laz], out, resume=True, **run)
     reconstruct([edit_town.laz], out, edits=town_edits, resume=True, **run)  # the same edits
     assert out.exists() and not journal_path(out).exists()
+
+
+def test_a_tile_without_ground_class_is_ground_filtered_as_reconstruct_does(edit_town, tmp_path):
+    """A tile whose ground is left in class 1 (buildings delivered classified, ground not):
+    reconstruct filters the ground from the other points; a refit in `edit` must see the
+    same ground, not the building's lowest point."""
+    from lidar2city.io.las import read_points, write_points
+
+    cloud = read_points(edit_town.laz)
+    cls = np.asarray(cloud.get("classification"))
+    laz = tmp_path / "noground.laz"
+    write_points(laz, cloud.with_attributes(classification=np.where(cls == 2, 1, cls).astype(cls.dtype)))
+    model = tmp_path / "m.city.json"
+    reconstruct([laz], model, footprints=edit_town.footprints, lods=("1.2", "2.2"))
+    session = EditSession(model, [laz], footprints=edit_town.footprints)
+    assert session.classified and session.ground_filter
+    bid = edit_town.town.footprints.ids[0]
+    _, classes = session.points(session.footprint(bid))
+    assert (classes == 2).sum() > 100

@@ -467,7 +467,11 @@ class EditSession:
         conf = (doc.get("+lidar2city") or {}).get("configuration") or {}
         self.configuration = conf
         self.context = EditContext.from_configuration(conf, _model_lods(doc))
-        self.classified = self.reader.has_classes(self.context.lod1.building_classes)
+        lod1 = self.context.lod1
+        # decided as reconstruct decides it, so that a refit sees the points it did
+        self.classified, grounded = self.reader.classes_found([lod1.building_classes,
+                                                               lod1.ground_classes])
+        self.ground_filter = self.classified and not grounded
         self._footprints = None
         if footprints is not None:
             from ..datamodel import PointCloud
@@ -555,7 +559,8 @@ class EditSession:
         if len(cloud) == 0:
             raise InputError("no point of the tiles around this building (wrong --points?)")
         if classes is None:
-            _, _, classes = point_roles(cloud, cfg, classified=self.classified)
+            _, _, classes = point_roles(cloud, cfg, classified=self.classified,
+                                       ground_filter=self.ground_filter)
         return cloud, classes
 
     def load_area(self):
@@ -569,7 +574,8 @@ class EditSession:
             r = self.reader
             box = r.world_bounds()
             cloud = r.box(*box)
-            _, _, classes = point_roles(cloud, self.context.lod1, classified=self.classified)
+            _, _, classes = point_roles(cloud, self.context.lod1, classified=self.classified,
+                                       ground_filter=self.ground_filter)
             world = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
                                      cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
             self._area = (world, cloud, classes)
