@@ -67,7 +67,8 @@ class Lod22Config:
     outline_tolerance: float = field(1.0, "Outline vertices within this many point spacings of "
                                      "the line through their neighbours (jogs the points cannot "
                                      "resolve) are dropped from the roof outline (Douglas-Peucker, "
-                                     "topology kept); 0 keeps the footprint as given.")
+                                     "topology kept) when that leaves at most 1 % of the part's "
+                                     "points outside it; 0 keeps the footprint as given.")
     select: bool = field(False, "Build each building's roof three ways (as configured, with step "
                          "edges snapped by angle, with twice min_facet_area) and keep the one of "
                          "least BIC, n log(SSE / n) + 3 log(n) corners (n points inside the "
@@ -133,6 +134,10 @@ def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_s
         (s, c), *_ = np.linalg.lstsq(A, pts[:, 2], rcond=None)
         out[k] = (s * np.cos(axis), s * np.sin(axis), c)
     return out
+
+
+#: the largest share of a part's points a straightened outline may leave outside its roof
+_OUTLINE_LEFT_OUT = 0.01
 
 
 def straighten_outline(poly, tolerance):
@@ -436,7 +441,12 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         outlines = [poly]
         if cfg.outline_tolerance > 0 and cfg.topology == "arrangement":
             straight = straighten_outline(poly, cfg.outline_tolerance * spacing)
-            outlines = [straight, poly] if straight is not poly else outlines
+            # kept where it leaves few of the part's points outside the roof (a jog cut off
+            # with the points on it is a part of the building, not noise of the outline)
+            inside = shapely.contains_xy(poly, pts[:, 0], pts[:, 1])
+            left = np.count_nonzero(inside & ~shapely.contains_xy(straight, pts[:, 0], pts[:, 1]))
+            if straight is not poly and left <= _OUTLINE_LEFT_OUT * np.count_nonzero(inside):
+                outlines = [straight, poly]
         tries = [(m, o) for o in outlines for m in ("rims", "arrangement")] + [("grid", poly)] \
             if cfg.topology == "arrangement" else [("grid", poly)]
         info, shared, last = {}, {}, None
