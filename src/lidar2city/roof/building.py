@@ -545,10 +545,6 @@ def model_cost(xyz, solids):
     ----------
     Schwarz, G. (1978). Estimating the dimension of a model. Annals of Statistics 6(2), 461-464.
     """
-    from ..lod.mesh import solid_triangles
-    from ..metrics.model import point_mesh_distance
-    from ..metrics.wireframe import roof_cleanliness, roof_wireframe
-
     return bic(len(xyz), *fit_terms(xyz, solids))
 
 
