@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
        [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
-       [--select] [--raised]
+       [--select] [--no-raised] [--footprint-as-given]
        python benchmarks/bench_roof_topology.py [DATA_DIR] --pareto
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
@@ -11,7 +11,8 @@ before the line arrangement; --no-step-snake sets ``[lod22] step_snake = false``
 step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
 --no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost;
 --select sets ``[lod22] select = true`` (each roof three ways, the least BIC kept);
---raised sets ``[lod22] raised_parts = true`` (chimneys as level rectangles);
+--no-raised sets ``[lod22] raised_parts = false`` (no chimneys as level rectangles);
+--footprint-as-given sets ``[lod22] outline_tolerance = 0`` (outline jogs kept);
 --pareto prints only the Delft Pareto table of the ``[lod22]`` variants and the
 per-building choice among them, :func:`pareto`)
 
@@ -76,7 +77,10 @@ def config():
     return Lod22Config(topology=option("--topology") or "arrangement",
                        step_snake="--no-step-snake" not in sys.argv[1:],
                        restore="--no-restore" not in sys.argv[1:],
-                       select="--select" in sys.argv[1:], raised_parts="--raised" in sys.argv[1:])
+                       select="--select" in sys.argv[1:],
+                       raised_parts="--no-raised" not in sys.argv[1:],
+                       outline_tolerance=0.0 if "--footprint-as-given" in sys.argv[1:]
+                       else Lod22Config().outline_tolerance)
 
 
 def data_dir() -> Path:

@@ -362,10 +362,11 @@ def test_restore_facets_leaves_what_is_no_lost_facet(case):
 
 def test_restored_block_makes_a_valid_better_roof():
     # a 1.5 x 1.5 m block on a roof whose label grid has 1 m cells: the partition's
-    # smallest face (4 cells) drops it, the restoration cuts it back in
+    # smallest face (4 cells) drops it, the restoration cuts it back in (raised parts off:
+    # they would cut the block in as a level rectangle without the restoration)
     xyz, _, _ = _lost_facet_roof(block=(4.0, 4.0, 5.5, 5.5))
-    on = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0))
-    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, restore=False))
+    on = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, raised_parts=False))
+    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, restore=False, raised_parts=False))
     assert not check_solid(on.solids[0]) and not check_solid(off.solids[0])
     assert (off.attributes["roof_planes"], on.attributes["roof_planes"]) == (1, 2)
     from lidar2city.lod.mesh import solid_triangles
@@ -439,7 +440,7 @@ def test_raised_parts_option_makes_a_valid_better_roof():
     # a 0.6 x 0.6 m chimney (9 points, under 1 m2: no facet comes back for it)
     xyz, _, _ = _lost_facet_roof(block=(4.0, 4.0, 4.7, 4.7), height=1.5)
     on = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, raised_parts=True))
-    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0))
+    off = reconstruct_lod22(SQ, xyz, 0.0, config=Lod22Config(cell=1.0, raised_parts=False))
     assert not check_solid(on.solids[0]) and not check_solid(off.solids[0])
     assert (off.attributes["roof_planes"], on.attributes["roof_planes"]) == (1, 2)
     inside = xyz[shapely.contains_xy(SQ, xyz[:, 0], xyz[:, 1])]
@@ -465,3 +466,34 @@ def test_a_rim_facets_face_off_the_strip_is_no_rim():
     assert _on_rims(faces, labels, [2], strip).tolist() == [True, False, False]
     # without rim cells every face of a rim label counts (nothing to tell them apart)
     assert _on_rims(faces, labels, [2], []).tolist() == [True, True, False]
+
+
+def test_straighten_outline_drops_jogs_below_tolerance_only():
+    from lidar2city.roof.building import straighten_outline
+
+    # a 10 x 6 m footprint with a 0.15 m jog in its long side and a 1 m deep notch
+    poly = shapely.Polygon([(0, 0), (5, 0), (5, 0.15), (10, 0.15), (10, 6), (6, 6), (6, 5), (4, 5), (4, 6),
+                            (0, 6)])
+    out = straighten_outline(poly, 0.3)
+    assert out.is_valid and len(out.interiors) == 0
+    # the jog's two corners go, the notch's four stay
+    assert len(out.exterior.coords) == len(poly.exterior.coords) - 2
+    assert out.hausdorff_distance(poly) <= 0.3
+    assert shapely.Point(4, 5).intersects(out.boundary) and shapely.Point(6, 5).intersects(out.boundary)
+    # the jog's corners lie 0.075 m off the chord that replaces them: a smaller tolerance keeps them
+    assert straighten_outline(poly, 0.05).equals(poly)
+
+
+def test_straightened_outline_keeps_the_roof_valid_and_close():
+    # the jogged footprint over a flat roof at 5 m: a valid solid, its points as close
+    rng = np.random.default_rng(3)
+    poly = shapely.Polygon([(0, 0), (5, 0), (5, 0.15), (10, 0.15), (10, 6), (0, 6)])
+    xy = rng.uniform((0, 0), (10, 6), size=(1500, 2))
+    xyz = np.column_stack([xy, 5.0 + rng.normal(0, 0.03, len(xy))])
+    xyz = xyz[shapely.contains_xy(poly, xyz[:, 0], xyz[:, 1])]
+    given = reconstruct_lod22(poly, xyz, 0.0, config=Lod22Config(outline_tolerance=0.0))
+    straight = reconstruct_lod22(poly, xyz, 0.0)
+    assert not check_solid(straight.solids[0]) and not check_solid(given.solids[0])
+    from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
+
+    assert roof_cleanliness(roof_wireframe(straight.solids))[0] == 4 < roof_cleanliness(roof_wireframe(given.solids))[0]

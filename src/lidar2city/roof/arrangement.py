@@ -1356,7 +1356,7 @@ def _cut_in(faces, face_labels, rect, label):
 
 
 def raised_parts(faces, face_labels, footprint, xyz, planes, *, direction, spacing, t_step=0.3,
-                 min_points=4, outside=0.5):
+                 min_points=4, outside=0.5, fit=False):
     """Clusters of points standing above the roof faces (chimneys, small dormers, roof
     boxes), cut in as level rectangles.
 
@@ -1379,6 +1379,10 @@ def raised_parts(faces, face_labels, footprint, xyz, planes, *, direction, spaci
         rectangle appended.
     added : int
         Rectangles cut in.
+    lifted : tuple of ndarray
+        Only with ``fit=True``: ``(index, level)``, the points (indices into ``xyz``)
+        of the clusters cut in and the level of each one's rectangle: what a caller
+        needs to bound the change in fit before it builds the solid.
     """
     import shapely
     from scipy.sparse import coo_matrix
@@ -1389,9 +1393,12 @@ def raised_parts(faces, face_labels, footprint, xyz, planes, *, direction, spaci
     planes = np.asarray(planes, dtype=np.float64)
     inside = shapely.contains_xy(footprint, xyz[:, 0], xyz[:, 1])
     idx = np.flatnonzero(inside)
-    up = idx[xyz[idx, 2] - _covering_height(faces, face_labels, planes, xyz[idx, :2]) > t_step]
+    above = xyz[idx, 2] - _covering_height(faces, face_labels, planes, xyz[idx, :2])
+    up = idx[above > t_step]
+    lifted, levels = [], []
     if len(up) < min_points:
-        return list(faces), np.asarray(face_labels, dtype=np.int64), planes, 0
+        none = list(faces), np.asarray(face_labels, dtype=np.int64), planes, 0
+        return (*none, (np.zeros(0, dtype=np.int64), np.zeros(0))) if fit else none
     pairs = cKDTree(xyz[up, :2]).query_pairs(1.5 * spacing, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(up), len(up)))
     n, lab = connected_components(graph, directed=False)
@@ -1419,8 +1426,14 @@ def raised_parts(faces, face_labels, footprint, xyz, planes, *, direction, spaci
         new_planes.append([0.0, 0.0, z0])
         taken = taken.union(rect.buffer(spacing))
         added += 1
+        lifted.append(m)
+        levels.append(np.full(len(m), z0))
     if new_planes:
         planes = np.vstack([planes, new_planes])
+    if fit:
+        lifted = (np.concatenate(lifted), np.concatenate(levels)) if lifted else \
+            (np.zeros(0, dtype=np.int64), np.zeros(0))
+        return faces, face_labels, planes, added, lifted
     return faces, face_labels, planes, added
 
 

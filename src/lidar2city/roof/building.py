@@ -61,9 +61,14 @@ class Lod22Config:
     step_snake: bool = field(True, "With topology 'arrangement': step edges (walls between faces "
                              "at different heights) from the exact 2-D snake over all step "
                              "chains at once; false: straight pieces snapped to the axes by angle.")
-    raised_parts: bool = field(False, "With topology 'arrangement': clusters of points standing "
+    raised_parts: bool = field(True, "With topology 'arrangement': clusters of points standing "
                                "T_step above the roof (chimneys, small dormers) cut in as level "
                                "rectangles when the model's BIC (see select) drops.")
+    outline_tolerance: float = field(1.0, "Outline vertices within this many point spacings of "
+                                     "the line through their neighbours (jogs the points cannot "
+                                     "resolve) are dropped from the roof outline (Douglas-Peucker, "
+                                     "topology kept) when that leaves at most 1 % of the part's "
+                                     "points outside it; 0 keeps the footprint as given.")
     select: bool = field(False, "Build each building's roof three ways (as configured, with step "
                          "edges snapped by angle, with twice min_facet_area) and keep the one of "
                          "least BIC, n log(SSE / n) + 3 log(n) corners (n points inside the "
@@ -128,6 +133,25 @@ def regularize_planes(planes, labels, xyz, direction, *, snap_angle=10.0, flat_s
         A = np.column_stack([u, np.ones_like(u)])
         (s, c), *_ = np.linalg.lstsq(A, pts[:, 2], rcond=None)
         out[k] = (s * np.cos(axis), s * np.sin(axis), c)
+    return out
+
+
+#: the largest share of a part's points a straightened outline may leave outside its roof
+_OUTLINE_LEFT_OUT = 0.01
+
+
+def straighten_outline(poly, tolerance):
+    """``poly`` with the outline vertices within ``tolerance`` (m) of the line through the
+    vertices kept beside them dropped (Douglas-Peucker, topology kept): jogs and kinks
+    smaller than the points can resolve. Every point of the result's boundary lies within
+    ``tolerance`` of the footprint's; ``poly`` itself when the result is not one valid
+    polygon with as many rings."""
+    import shapely
+
+    out = shapely.simplify(poly, tolerance, preserve_topology=True)
+    if (out.geom_type != "Polygon" or not out.is_valid or out.is_empty
+            or len(out.interiors) != len(poly.interiors)):
+        return poly
     return out
 
 
@@ -403,36 +427,50 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
                 continue
             raise FitError(f"footprint smaller than one label cell ({poly.area:.3f} m2 < "
                            f"{cell:.2f} m x {cell:.2f} m)")
+        d = _direction(poly) if direction is None else direction
         labels, planes = segment_planes(pts, dist_tol=cfg.dist_tol, angle_tol=cfg.angle_tol,
                                         min_area=cfg.min_facet_area, merge_angle=cfg.merge_angle)
         if len(planes) == 0:
             # no planar facet: one horizontal roof at the median height
             labels = np.zeros(len(pts), dtype=np.int64)
             planes = np.array([[0.0, 0.0, float(np.median(pts[:, 2]))]])
-        d = _direction(poly) if direction is None else direction
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
-        # the arrangement with raised rims along the outline, without them, then the grid
-        methods = ("rims", "arrangement", "grid") if cfg.topology == "arrangement" else ("grid",)
-        info, shared = {}, {}
-        for method in methods:
-            if method == "arrangement" and not info.get("rims", 1):
-                continue  # no rim was found: the same partition as the first try
+        # the arrangement with raised rims along the outline, without them, then the grid;
+        # with the outline straightened first, then the footprint as given
+        outlines = [poly]
+        if cfg.outline_tolerance > 0 and cfg.topology == "arrangement":
+            straight = straighten_outline(poly, cfg.outline_tolerance * spacing)
+            # kept where it leaves few of the part's points outside the roof (a jog cut off
+            # with the points on it is a part of the building, not noise of the outline)
+            inside = shapely.contains_xy(poly, pts[:, 0], pts[:, 1])
+            left = np.count_nonzero(inside & ~shapely.contains_xy(straight, pts[:, 0], pts[:, 1]))
+            if straight is not poly and left <= _OUTLINE_LEFT_OUT * np.count_nonzero(inside):
+                outlines = [straight, poly]
+        tries = [(m, o) for o in outlines for m in ("rims", "arrangement")] + [("grid", poly)] \
+            if cfg.topology == "arrangement" else [("grid", poly)]
+        info, shared, last = {}, {}, None
+        for k, (method, outline) in enumerate(tries):
+            if method == "arrangement" and not info.get("rims", 1) and last is outline:
+                continue  # no rim was found: the same partition as the try before
+            if last is not outline:
+                info, shared, last = {}, {}, outline
+            final = k == len(tries) - 1
             try:
                 solid, faces, face_labels, planes_k, info = _part_solid(
-                    method, poly, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg,
+                    method, outline, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg,
                     shared=shared)
                 if cfg.raised_parts and method != "grid":
                     solid, faces, face_labels, planes_k, info = _with_raised_parts(
-                        (solid, faces, face_labels, planes_k, info), method, poly, pts, ground_z,
+                        (solid, faces, face_labels, planes_k, info), method, outline, pts, ground_z,
                         cell=cell, direction=d, spacing=spacing, cfg=cfg)
             except (FitError, ValueError, shapely.errors.GEOSException) as exc:
-                if method == methods[-1]:
+                if final:
                     raise
                 logger.debug("%s roof topology failed (%s); trying the next", method, exc)
                 continue
             written = on_grid(solid, precision)
-            if method == methods[-1]:
+            if final:
                 found = check_solid(written) if precision else None
                 if found:
                     solid, found = _nudged(solid, written, found, precision)
@@ -506,13 +544,23 @@ def model_cost(xyz, solids):
     ----------
     Schwarz, G. (1978). Estimating the dimension of a model. Annals of Statistics 6(2), 461-464.
     """
+    return bic(len(xyz), *fit_terms(xyz, solids))
+
+
+def fit_terms(xyz, solids):
+    """``(sse, corners)`` of :func:`model_cost`: the points' sum of squared point-to-mesh
+    distances to ``solids`` and the roof corners seen from above."""
     from ..lod.mesh import solid_triangles
     from ..metrics.model import point_mesh_distance
     from ..metrics.wireframe import roof_cleanliness, roof_wireframe
 
-    n = len(xyz)
     sse = float(np.sum(point_mesh_distance(xyz, solid_triangles(solids)) ** 2))
-    corners = roof_cleanliness(roof_wireframe(solids))[0]
+    return sse, roof_cleanliness(roof_wireframe(solids))[0]
+
+
+def bic(n, sse, corners):
+    """:func:`model_cost` of a model with ``corners`` roof corners whose ``n`` points have
+    the sum of squared distances ``sse``."""
     # a floor of 1 mm RMS: below it the fit is exact for every purpose
     return n * np.log(max(sse / n, 1e-6)) + CORNER_PARAMETERS * np.log(n) * corners
 
@@ -641,20 +689,42 @@ def _with_raised_parts(part, method, poly, pts, ground_z, *, cell, direction, sp
     import shapely
 
     solid, faces, face_labels, planes, info = part
-    faces2, labels2, planes2, added = raised_parts(faces, face_labels, poly, pts, planes, direction=direction,
-                                                   spacing=spacing, t_step=2 * cfg.elevation_error)
+    faces2, labels2, planes2, added, (lifted, level) = raised_parts(
+        faces, face_labels, poly, pts, planes, direction=direction, spacing=spacing,
+        t_step=2 * cfg.elevation_error, fit=True)
     own = pts[shapely.contains_xy(poly, pts[:, 0], pts[:, 1])]
     if not added or len(own) < 3:
+        return part
+    from ..lod.mesh import solid_triangles
+    from ..metrics.model import point_mesh_distance
+    from ..metrics.wireframe import roof_cleanliness, roof_wireframe
+
+    # the most the rectangles can win, before their solid is built: their points as far
+    # from the roof as they are now and on their levels in the new solid, each rectangle
+    # with at least two new corners (one clipped at the outline), the other points as they are
+    tri = solid_triangles([solid])
+    gain = float(np.sum(point_mesh_distance(pts[lifted], tri) ** 2 - (pts[lifted, 2] - level) ** 2))
+    if gain <= 0:
+        return part
+    n = len(own)
+    sse = float(np.sum(point_mesh_distance(own, tri) ** 2))
+    corners = roof_cleanliness(roof_wireframe([solid]))[0]
+    cost = bic(n, sse, corners)
+    if bic(n, sse - gain, corners + _RAISED_MIN_CORNERS * added) >= cost:
         return part
     try:
         alt = _finish_solid(method, poly, pts, faces2, labels2, planes2, ground_z, cell=cell, cfg=cfg,
                             info=info)
     except (FitError, ValueError, shapely.errors.GEOSException):
         return part
-    if not _closed_shell(alt[0]) or check_solid(alt[0]) or model_cost(own, [alt[0]]) >= model_cost(own, [solid]):
+    if not _closed_shell(alt[0]) or check_solid(alt[0]) or model_cost(own, [alt[0]]) >= cost:
         return part
     alt[4]["raised"] = added
     return alt
+
+
+#: the fewest corners a raised part's rectangle adds to a roof: two where it is clipped at the outline
+_RAISED_MIN_CORNERS = 2
 
 
 def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info):
