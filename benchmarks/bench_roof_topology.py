@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
        [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
-       [--select] [--no-raised] [--footprint-as-given]
+       [--select] [--raised] [--outline]
        python benchmarks/bench_roof_topology.py [DATA_DIR] --pareto
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
@@ -11,8 +11,9 @@ before the line arrangement; --no-step-snake sets ``[lod22] step_snake = false``
 step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
 --no-restore sets ``[lod22] restore = false``: facets the partition lost stay lost;
 --select sets ``[lod22] select = true`` (each roof three ways, the least BIC kept);
---no-raised sets ``[lod22] raised_parts = false`` (no chimneys as level rectangles);
---footprint-as-given sets ``[lod22] outline_tolerance = 0`` (outline jogs kept);
+--raised sets ``[lod22] raised_parts = true`` (chimneys as level rectangles);
+--outline sets ``[lod22] outline_tolerance = 1`` (outline jogs within a point spacing
+straightened);
 --pareto prints only the Delft Pareto table of the ``[lod22]`` variants and the
 per-building choice among them, :func:`pareto`)
 
@@ -78,9 +79,8 @@ def config():
                        step_snake="--no-step-snake" not in sys.argv[1:],
                        restore="--no-restore" not in sys.argv[1:],
                        select="--select" in sys.argv[1:],
-                       raised_parts="--no-raised" not in sys.argv[1:],
-                       outline_tolerance=0.0 if "--footprint-as-given" in sys.argv[1:]
-                       else Lod22Config().outline_tolerance)
+                       raised_parts="--raised" in sys.argv[1:],
+                       outline_tolerance=1.0 if "--outline" in sys.argv[1:] else 0.0)
 
 
 def data_dir() -> Path:
@@ -272,7 +272,9 @@ PARETO_VARIANTS = (("default", {}), ("grid partition", {"topology": "grid"}),
                    ("no restored facets", {"restore": False}), ("steps by angle", {"step_snake": False}),
                    ("short edges kept", {"min_edge": 0.0}), ("min facet 0.5 m2", {"min_facet_area": 0.5}),
                    ("min facet 2 m2", {"min_facet_area": 2.0}), ("dist_tol 0.15 m", {"dist_tol": 0.15}),
-                   ("merge angle 5 deg", {"merge_angle": 5.0}))
+                   ("merge angle 5 deg", {"merge_angle": 5.0}), ("raised parts", {"raised_parts": True}),
+                   ("outline straightened", {"outline_tolerance": 1.0}),
+                   ("raised + outline", {"raised_parts": True, "outline_tolerance": 1.0}))
 
 
 def pareto(d, ks=(0, 1, 2, 4, 8, 16, 32, 64, 128)):

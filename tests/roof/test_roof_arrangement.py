@@ -492,7 +492,7 @@ def test_straightened_outline_keeps_the_roof_valid_and_close():
     xyz = np.column_stack([xy, 5.0 + rng.normal(0, 0.03, len(xy))])
     xyz = xyz[shapely.contains_xy(poly, xyz[:, 0], xyz[:, 1])]
     given = reconstruct_lod22(poly, xyz, 0.0, config=Lod22Config(outline_tolerance=0.0))
-    straight = reconstruct_lod22(poly, xyz, 0.0)
+    straight = reconstruct_lod22(poly, xyz, 0.0, config=Lod22Config(outline_tolerance=1.0))
     assert not check_solid(straight.solids[0]) and not check_solid(given.solids[0])
     from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
 

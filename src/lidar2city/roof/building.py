@@ -61,14 +61,15 @@ class Lod22Config:
     step_snake: bool = field(True, "With topology 'arrangement': step edges (walls between faces "
                              "at different heights) from the exact 2-D snake over all step "
                              "chains at once; false: straight pieces snapped to the axes by angle.")
-    raised_parts: bool = field(True, "With topology 'arrangement': clusters of points standing "
+    raised_parts: bool = field(False, "With topology 'arrangement': clusters of points standing "
                                "T_step above the roof (chimneys, small dormers) cut in as level "
-                               "rectangles when the model's BIC (see select) drops.")
-    outline_tolerance: float = field(1.0, "Outline vertices within this many point spacings of "
+                               "rectangles when the model's BIC (see select) drops (Delft: median "
+                               "RMSE 0.165 -> 0.161 m for ~11 % more reconstruct CPU).")
+    outline_tolerance: float = field(0.0, "Outline vertices within this many point spacings of "
                                      "the line through their neighbours (jogs the points cannot "
                                      "resolve) are dropped from the roof outline (Douglas-Peucker, "
                                      "topology kept) when that leaves at most 1 % of the part's "
-                                     "points outside it; 0 keeps the footprint as given.")
+                                     "points outside it; 0 (the default) keeps the footprint as given.")
     select: bool = field(False, "Build each building's roof three ways (as configured, with step "
                          "edges snapped by angle, with twice min_facet_area) and keep the one of "
                          "least BIC, n log(SSE / n) + 3 log(n) corners (n points inside the "
