@@ -31,7 +31,8 @@ from ..io.las import DecodedTile, SpilledTile, TileReader
 logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
-           "give_back_memory", "run_block", "reconstruct_block", "tile_keeper", "TracedBlock",
+           "give_back_memory", "run_block", "reconstruct_block", "splittable", "tile_keeper",
+           "TracedBlock",
            "trace_block"]
 
 
@@ -552,14 +553,22 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
 GROUP_POINTS = 40_000
 
 
+def splittable(options) -> bool:
+    """Whether a block's buildings with these options depend only on the points
+    around each footprint (classified input, LoD1 / LoD2.2 from the roof
+    topology): given footprints can then be built group by group
+    (:func:`_run_groups`), and a block cut into parts of its footprints
+    (:func:`lidar2city.tools.blocks.footprint_blocks` ``split``) gives the same
+    results. Classifying raw points, fitting primitives and re-applying edits
+    look at the whole block."""
+    return bool(options.classified and options.primitives is None and not options.edits)
+
+
 def _by_groups(spec, options) -> bool:
     """Whether the block's buildings can be built group by group with the same
-    results: each building then reads only the points around its footprint
-    (classified input, given footprints, LoD1 / LoD2.2 from the roof topology).
-    Classifying raw points, tracing footprints, fitting primitives and
-    re-applying edits look at the whole block."""
-    return (options.classified and spec.footprints is not None and options.primitives is None
-            and not options.edits and spec.world_box is not None and bool(spec.tiles))
+    results (:func:`splittable`, given footprints, points to read)."""
+    return (splittable(options) and spec.footprints is not None
+            and spec.world_box is not None and bool(spec.tiles))
 
 
 def _local(part, d, origin, scale):
