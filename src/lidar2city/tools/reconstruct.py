@@ -725,10 +725,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         that does not answer.
     """
     from .engine import make_executor
+    from .task import worker_modules
 
     t0 = time.perf_counter()
     # a cluster starts (its workers import the task modules) while the area is planned
-    with make_executor(workers, scheduler) as executor:
+    with make_executor(workers, scheduler, preload=worker_modules(lods, method)) as executor:
         return _reconstruct(executor, t0, inputs, output, footprints=footprints, lods=lods,
                             crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
                             progress=progress, method=method, primitives=primitives,
