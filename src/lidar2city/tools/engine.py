@@ -16,8 +16,10 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   contiguous share of the runs (:func:`shares_of`) and each run is told the
   share's next runs, so those inputs pass from run to run.
   The cluster starts in the background when the executor is entered; its
-  worker processes are forked from a server that imported Dask once
-  (:data:`START_METHOD`), which ends with the last local cluster.
+  worker processes are forked from a server that imported Dask and the task
+  modules once (:data:`START_METHOD`, started first: :func:`_start_forkserver`),
+  which ends with the last local cluster. Until a local cluster is up, the
+  client process runs the first items itself (:meth:`DaskExecutor._while_starting`).
 """
 
 from __future__ import annotations
