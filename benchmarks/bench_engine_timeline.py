@@ -8,8 +8,7 @@ a fresh process through the same steps as ``reconstruct`` (the planner, the
 executor, the task, the in-order writer; no journal), each block wrapped to
 record when it started and ended on its worker. Printed: when the plan was
 made, the cluster ready (its start-up), the blocks done and the cluster closed (seconds from
-the start), with the client process's CPU in each phase; for the client (the
-blocks it ran itself while the cluster started) and per worker its
+the start), with the client process's CPU in each phase; per worker its
 blocks, first start and last end, the seconds it was running a block and the
 CPU it spent on them, its buildings, the tiles it decoded, its idle gaps
 between blocks longer than 20 ms and how long it waited at the end for the
@@ -98,8 +97,7 @@ def main():
     phases["closed"] = (time.time() - t0, time.process_time() - c0)
     ch = resource.getrusage(resource.RUSAGE_CHILDREN)
     print(json.dumps({"phases": phases, "rows": rows, "tiles": len(a["tiles"]), "threads": threads,
-                      "children_cpu": ch.ru_utime + ch.ru_stime, "client": os.getpid(),
-                      "ready": ready}))
+                      "children_cpu": ch.ru_utime + ch.ru_stime, "ready": ready}))
 
 
 if __name__ == "__main__":
@@ -128,8 +126,8 @@ def main():
     for name, (t, c) in m["phases"].items():
         print(f"{name:12s} at {t:6.2f} s; client CPU in this phase {c - prev:.2f} s")
         prev = c
-    print(f"cluster ready at {m['ready']:6.2f} s (started when the run began; the client runs "
-          "blocks itself until then, once it has planned)")
+    print(f"cluster ready at {m['ready']:6.2f} s (started when the run began, while the "
+          "client planned)")
     busy = sorted(((v, k) for k, v in m["threads"].items() if v >= 0.005), reverse=True)
     print("client CPU while the blocks ran, by thread: "
           + (", ".join(f"{k} {v:.2f} s" for v, k in busy) or "not measured (no /proc)")
@@ -140,15 +138,11 @@ def main():
         by.setdefault(row[2], []).append(row)
     ends = {pid: max(r[1] for r in rs) for pid, rs in by.items()}
     last = max(ends.values())
-    workers = sorted((pid for pid in by if pid != m["client"]),
-                     key=lambda pid: min(r[0] for r in by[pid]))
-    for k, pid in enumerate(([m["client"]] if m["client"] in by else []) + workers):
-        rs = sorted(by[pid])
+    for k, (pid, rs) in enumerate(sorted(by.items(), key=lambda kv: min(r[0] for r in kv[1]))):
+        rs.sort()
         gaps = [(round(b[0] - a_[1], 3)) for a_, b in zip(rs[:-1], rs[1:], strict=True)
                 if b[0] - a_[1] > 0.02]
-        who = ("client (while the cluster started)" if pid == m["client"]
-               else f"worker {k - (m['client'] in by)}")
-        print(f"{who}: {len(rs)} blocks ({min(r[5] for r in rs)}..{max(r[5] for r in rs)}), "
+        print(f"worker {k}: {len(rs)} blocks ({min(r[5] for r in rs)}..{max(r[5] for r in rs)}), "
               f"first start {rs[0][0]:.2f} s, last end {rs[-1][1]:.2f} s, running blocks "
               f"{sum(r[1] - r[0] for r in rs):.2f} s, CPU on them {sum(r[4] for r in rs):.2f} s, "
               f"{sum(r[6] for r in rs)} buildings, {max(r[3] for r in rs)} tile decodings, "

@@ -18,8 +18,7 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   The cluster starts in the background when the executor is entered; its
   worker processes are forked from a server that imported Dask and the task
   modules once (:data:`START_METHOD`, started first: :func:`_start_forkserver`),
-  which ends with the last local cluster. Until a local cluster is up, the
-  client process runs the first items itself (:meth:`DaskExecutor._while_starting`).
+  which ends with the last local cluster.
 """
 
 from __future__ import annotations
@@ -37,7 +36,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
            "kill_forkserver", "START_METHOD",
            "CONNECT_TIMEOUT",
-           "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS", "HEAD_SHARE"]
+           "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS"]
 
 #: times a failed task is tried again before its failure is reported
 RETRIES = 1
@@ -252,15 +251,9 @@ class DaskExecutor:
         items = list(items)
         if not items:
             return
-        # while our local cluster starts, this process runs the first items itself
-        head = yield from self._while_starting(fn, items, args, run_hook)
-        if head == len(items):
-            return
         self.ready()
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
-        base, items = head, items[head:]
-        costs = None if costs is None else list(costs)[head:]
         runs = runs_of(len(items), self.workers, costs)
         names = sorted(self._client.scheduler_info().get("workers", {}))
         shares = shares_of(len(runs), max(1, len(names)))
@@ -292,36 +285,10 @@ class DaskExecutor:
                     outs = [(j, exc) for j in range(stop - start)]
                 fut.release()
                 for j, out in outs:
-                    yield base + start + j, out
+                    yield start + j, out
         finally:
             for f in futures:
                 f.cancel()
-
-    def _while_starting(self, fn, items, args, run_hook):
-        """Run the first ``items`` in this process, in order, while our local cluster
-        is still starting (a generator as :meth:`InProcess.map`; returns how many it
-        ran): the client's core would be idle until then. It stops after the item
-        during which the cluster became ready, and at :data:`HEAD_SHARE` of the
-        first worker's share; its decoded tiles are dropped then. An external
-        cluster's client (``scheduler``) runs nothing itself."""
-        starting = self._starting
-        if self.scheduler is not None or starting is None or not starting.is_alive():
-            return 0
-        limit = max(1, int(len(items) * HEAD_SHARE / max(1, self.workers)))
-        done = 0
-        local = InProcess().map(fn, items[:limit], *args, run_hook=run_hook)
-        try:
-            for i, out in local:
-                done = i + 1
-                yield i, out
-                if not starting.is_alive():
-                    break
-        finally:
-            local.close()  # its run ends: no tile is kept in this process
-        if done:
-            logger.info("%d of %d tasks run in the client while the cluster started", done,
-                        len(items))
-        return done
 
     def describe(self) -> str:
         if self.scheduler is not None:  # its workers are counted once it answers
@@ -334,11 +301,6 @@ class DaskExecutor:
 #: from run to run (:func:`shares_of`), so runs cost no extra reading; several
 #: per worker let an idle worker take a short run off a slow one at the end
 RUNS_PER_WORKER = 4
-
-#: the most items the client runs itself while its local cluster starts, as a
-#: share of one worker's items (:meth:`DaskExecutor._while_starting`): the
-#: first worker's share still starts on its own items
-HEAD_SHARE = 0.5
 
 #: the runs of its share a run is told of (their items travel with the task):
 #: the tiles a run decodes are kept for these too, so a strip of tiles that a
