@@ -626,3 +626,35 @@ def test_local_cluster_leaves_no_process():
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_one_block_cut_into_parts_for_two_workers_gives_the_same_bytes(area, tmp_path,
+                                                                       monkeypatch):
+    """A block of many buildings (here the whole area) is one spec for one process
+    and cut into parts of its footprints for two workers, which share it: the
+    same bytes."""
+    from lidar2city.tools import blocks
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)  # parts of 2 buildings at least
+    one, two = tmp_path / "w1.city.json", tmp_path / "w2.city.json"
+    s1 = _run(area, one, block_size=1000.0)
+    s2 = _run(area, two, block_size=1000.0, workers=2)
+    assert s1.blocks == 1 and s2.blocks > 1
+    assert s2.done == s1.done >= 8
+    assert two.read_bytes() == one.read_bytes()
+
+
+@pytest.mark.parametrize("n,split", [(5, 8), (9, 8), (17, 8), (132, 17)])
+def test_a_split_block_gives_parts_covering_its_footprints_once(n, split):
+    from lidar2city.tools.blocks import _split_parts
+
+    rng = np.random.default_rng(n)
+    centre = rng.uniform(0, 200, (n, 2))
+    empty = np.zeros(n, dtype=bool)
+    empty[::7] = True
+    block = np.arange(n)  # in footprint order, as footprint_blocks gives it
+    parts = _split_parts(block, centre, empty, split)
+    assert sorted(i for p in parts for i in p) == list(range(n))
+    assert all(0 < len(p) <= split and p == sorted(p) for p in parts)
+    assert len(parts) == -(-n // split)
+    assert _split_parts(block, centre, empty, split) == parts  # deterministic

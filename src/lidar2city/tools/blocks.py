@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys"]
+__all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys",
+           "split_size", "SPLIT_LEAST"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,7 +119,7 @@ class FootprintRef:
 
 
 def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: float,
-                     footprints) -> list:
+                     footprints, *, split: int | None = None) -> list:
     """Specs of the blocks of footprints given by their local ``bounds``, row by row.
 
     Parameters
@@ -129,6 +130,15 @@ def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: flo
     footprints : callable
         ``footprints(idx)``: what a spec carries for the footprints ``idx``
         (positions, in order), e.g. a :class:`FootprintRef`.
+    split : int, optional
+        Cut a block of more than ``split`` footprints into parts of at most
+        ``split`` (:func:`_split_parts`: strips across the block's longer
+        side, of equal numbers of footprints), each a spec of its own reading
+        its footprints' box plus ``margin``, so that several processes can
+        share one block's buildings (a single large tile). Only for blocks
+        whose buildings do not depend on one another's points (given
+        footprints on classified points: :func:`lidar2city.tools.task.splittable`);
+        None (default): a block is one spec.
     """
     bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
@@ -140,17 +150,51 @@ def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: flo
     order = np.argsort(which, kind="stable")
     cuts = np.flatnonzero(np.diff(which[order])) + 1
     specs = []
-    for idx in np.split(order, cuts):
-        idx = idx.tolist()
-        b = bounds[[i for i in idx if not empty[i]]]
-        world = None
-        if len(b):
-            world = frame.to_world([b[:, 0].min() - margin, b[:, 1].min() - margin,
-                                    b[:, 2].max() + margin, b[:, 3].max() + margin])
-        row, col = cells[which[idx[0]]]
-        specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
-                               _tiles_meeting(tiles, world), frame, footprints(idx)))
+    for block in np.split(order, cuts):
+        row, col = cells[which[block[0]]]
+        for idx in _split_parts(block, centre, empty, split):
+            b = bounds[[i for i in idx if not empty[i]]]
+            world = None
+            if len(b):
+                world = frame.to_world([b[:, 0].min() - margin, b[:, 1].min() - margin,
+                                        b[:, 2].max() + margin, b[:, 3].max() + margin])
+            specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
+                                   _tiles_meeting(tiles, world), frame, footprints(idx)))
     return specs
+
+
+#: the fewest footprints a part of a split block holds (:func:`split_size`):
+#: each part reads its box and builds its buildings' surroundings on its own
+SPLIT_LEAST = 8
+
+
+def split_size(total: int, runs: int) -> int | None:
+    """The most footprints a block part may hold so that ``total`` footprints
+    make at least ``runs`` tasks of similar size (an executor's runs, e.g. 4
+    per worker), and at least :data:`SPLIT_LEAST`; None for one run (one
+    process: no block is split)."""
+    if runs <= 1 or total <= 0:
+        return None
+    return max(SPLIT_LEAST, -(-int(total) // int(runs)))
+
+
+def _split_parts(block, centre, empty, split) -> list:
+    """A block's footprint positions (in order) cut into parts of at most ``split``:
+    ``k`` strips across its longer side, of equal numbers of footprints (by
+    their centres; ties and empty footprints in footprint order), each part in
+    footprint order; ``[block]`` when it is not cut."""
+    idx = np.asarray(block, dtype=np.int64)
+    if split is None or len(idx) <= split:
+        return [idx.tolist()]
+    c = centre[idx]
+    ok = ~empty[idx]
+    span = (np.ptp(c[ok], axis=0) if ok.any() else np.zeros(2))
+    axis = int(span[1] > span[0])
+    key = np.where(ok, c[:, axis], -np.inf)
+    along = idx[np.lexsort((idx, key))]
+    k = -(-len(idx) // int(split))
+    cuts = [len(idx) * j // k for j in range(k + 1)]
+    return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
 #: points per square metre of a tile's header box under which the box is taken

@@ -16,8 +16,9 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
   contiguous share of the runs (:func:`shares_of`) and each run is told the
   share's next runs, so those inputs pass from run to run.
   The cluster starts in the background when the executor is entered; its
-  worker processes are forked from a server that imported Dask once
-  (:data:`START_METHOD`), which ends with the last local cluster.
+  worker processes are forked from a server that imported Dask and the task
+  modules once (:data:`START_METHOD`, started first: :func:`_start_forkserver`),
+  which ends with the last local cluster.
 """
 
 from __future__ import annotations
@@ -102,27 +103,44 @@ class InProcess:
 class DaskExecutor:
     """Run tasks on a Dask cluster: a local one of ``workers`` processes, or ``scheduler``'s."""
 
-    def __init__(self, workers: int | None = None, scheduler: str | None = None):
-        try:
-            import distributed  # noqa: F401
-        except ImportError:  # pragma: no cover - a core dependency
+    def __init__(self, workers: int | None = None, scheduler: str | None = None,
+                 preload=()):
+        import importlib.util
+
+        # found, not imported: Dask is imported by the thread that starts the cluster
+        if importlib.util.find_spec("distributed") is None:  # pragma: no cover - a core dependency
             raise DependencyError("--workers / --scheduler need dask.distributed: "
-                                  "pip install 'dask[distributed]'") from None
+                                  "pip install 'dask[distributed]'")
         self.scheduler = scheduler
         self.workers = workers
+        self.preload = tuple(preload)
         self._cluster = None
         self._client = None
         self._starting = None
         self._error = None
         self._dlog = None
+        self._local = False
         self.startup_seconds = 0.0
 
     def __enter__(self):
         """Start the cluster (or connect to it) in the background: the caller plans
         its work meanwhile; the first :meth:`map` waits for it (and raises its
-        error, e.g. a scheduler that does not answer)."""
+        error, e.g. a scheduler that does not answer).
+
+        For a local cluster the server its workers are forked from is started
+        first (:func:`_start_forkserver`), so that it imports Dask and the
+        task modules (``preload``) on another core while this process imports
+        Dask and starts the scheduler."""
         t0 = time.perf_counter()
         self._error = None
+        if self.scheduler is None:
+            with _LOCAL_LOCK:
+                _LOCAL_CLUSTERS[0] += 1
+            self._local = True
+            try:
+                _start_forkserver(self.preload)
+            except Exception as exc:  # noqa: BLE001 - Dask starts it as it would have
+                logger.debug("the worker server did not start early: %s", exc)
 
         def start():
             try:
@@ -177,23 +195,15 @@ class DaskExecutor:
                                  "`dask scheduler` and `dask worker ADDRESS`") from None
             self.workers = len(self._client.scheduler_info().get("workers", {}))
             return self
-        # a task that kills two workers is reported, not retried for ever; one thread per
-        # worker process, LAZ decoding included (lazrs decodes on a rayon pool of all cores)
-        environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}),
-                   "RAYON_NUM_THREADS": 1, "NUMBA_NUM_THREADS": 1}
-        # a fixed trim threshold turns off glibc's dynamic mmap threshold: every large
-        # array would be mapped and faulted in afresh (system CPU), not reused
-        environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+        # a task that kills two workers is reported, not retried for ever
         with dask.config.set({"distributed.scheduler.allowed-failures": RETRIES,
                               "distributed.worker.daemon": False,
                               "distributed.worker.multiprocessing-method": START_METHOD,
-                              "distributed.nanny.pre-spawn-environ": environ,
+                              "distributed.nanny.pre-spawn-environ": _worker_environ(),
                               **QUIET_CLUSTER}):
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
                                          processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)
-            with _LOCAL_LOCK:
-                _LOCAL_CLUSTERS[0] += 1
             self._client = Client(self._cluster, set_as_default=False)
         return self
 
@@ -213,6 +223,9 @@ class DaskExecutor:
             self._client.close()
         if self._cluster is not None:
             self._cluster.close()
+            self._cluster = None
+        if self._local:
+            self._local = False
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] -= 1
                 last = _LOCAL_CLUSTERS[0] == 0
@@ -278,7 +291,8 @@ class DaskExecutor:
                 f.cancel()
 
     def describe(self) -> str:
-        self.ready()
+        if self.scheduler is not None:  # its workers are counted once it answers
+            self.ready()
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
 
@@ -367,6 +381,51 @@ def runs_of(n: int, workers: int, costs=None, max_cost: float | None = None) -> 
 #: local clusters open in this process (their workers come from one forkserver)
 _LOCAL_CLUSTERS = [0]
 _LOCAL_LOCK = threading.Lock()
+
+
+def _worker_environ() -> dict:
+    """The environment variables a local cluster's worker processes start with
+    (Dask's ``distributed.nanny.pre-spawn-environ``): one thread per worker
+    process, LAZ decoding included (lazrs decodes on a rayon pool of all
+    cores), and no fixed ``MALLOC_TRIM_THRESHOLD_``, which turns off glibc's
+    dynamic mmap threshold (every large array would be mapped and faulted in
+    afresh, system CPU, not reused)."""
+    import dask
+
+    environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}),
+               "RAYON_NUM_THREADS": 1, "NUMBA_NUM_THREADS": 1}
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return environ
+
+
+#: what the server local workers are forked from imports before it forks any
+#: (besides a caller's ``preload``): Dask's worker and what every task needs
+FORKSERVER_PRELOAD = ("distributed", "numpy", "lidar2city.tools.task",
+                      "lidar2city.tools.reconstruct")
+
+
+def _start_forkserver(preload=()) -> None:
+    """Start the server local clusters fork their workers from (:data:`START_METHOD`)
+    now, with the environment Dask's nannies would give it (:func:`_worker_environ`,
+    set in this process as a nanny does) and :data:`FORKSERVER_PRELOAD` +
+    ``preload`` imported in it: it imports them on another core while this
+    process imports Dask and starts the scheduler and nannies (which then find
+    it running), and each worker forked from it has them already. Nothing to
+    do without a ``forkserver``, or when it runs (another cluster's)."""
+    if START_METHOD != "forkserver":
+        return
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    if getattr(server, "_forkserver_pid", None) is not None:
+        return
+    env = {k: os.environ.get(k, str(v)) for k, v in _worker_environ().items() if v is not None}
+    if env.get("PYTHONHASHSEED") in (None, "0"):  # as a nanny sets it before it spawns
+        env["PYTHONHASHSEED"] = "6640"
+    os.environ.update(env)
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(dict.fromkeys([*FORKSERVER_PRELOAD, *preload])))
+    forkserver.ensure_running()
 
 
 def _stop_forkserver() -> None:
@@ -467,10 +526,13 @@ def _run_many(items, *args, fn, run_hook=None, ahead=()):
     return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
-def make_executor(workers: int = 1, scheduler: str | None = None):
-    """The executor for ``--workers N`` / ``--scheduler ADDRESS`` (use it as a context manager)."""
+def make_executor(workers: int = 1, scheduler: str | None = None, preload=()):
+    """The executor for ``--workers N`` / ``--scheduler ADDRESS`` (use it as a context manager);
+    ``preload``: modules a local cluster's workers import before they are forked
+    (:func:`_start_forkserver`)."""
     if scheduler is not None:
         return DaskExecutor(scheduler=scheduler)
     if int(workers) < 1:
         raise InputError(f"workers must be at least 1, got {workers}")
-    return InProcess() if int(workers) == 1 else DaskExecutor(workers=int(workers))
+    return InProcess() if int(workers) == 1 else DaskExecutor(workers=int(workers),
+                                                               preload=preload)

@@ -737,10 +737,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         that does not answer.
     """
     from .engine import make_executor
+    from .task import worker_modules
 
     t0 = time.perf_counter()
     # a cluster starts (its workers import the task modules) while the area is planned
-    with make_executor(workers, scheduler) as executor:
+    with make_executor(workers, scheduler, preload=worker_modules(lods, method)) as executor:
         return _reconstruct(executor, t0, inputs, output, footprints=footprints, lods=lods,
                             crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
                             progress=progress, method=method, primitives=primitives,
@@ -757,10 +758,12 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
 
     paths = tile_paths(inputs)
     inputs = paths
+    # an external cluster's workers are counted once it answers
+    workers = executor.workers or executor.ready().workers
     plan = plan_reconstruct(inputs, output, footprints=footprints, lods=lods, crs=crs,
                             config=config, fmt=fmt, id_field=id_field, layer=layer, method=method,
                             primitives=primitives, check_images=check_images,
-                            block_size=block_size, edits=edits)
+                            block_size=block_size, edits=edits, workers=workers)
     from .task import give_back_memory
 
     give_back_memory()  # what the planning freed (it reads every header), before the blocks
@@ -771,7 +774,9 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
         # the edits' content: a run resumed with other edits is refused
         "edits": [e.to_dict() for e in plan.options.edits],
         "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
-                    float(block_size), None if check_images is None else str(check_images)]})
+                    float(block_size), None if check_images is None else str(check_images)],
+        # blocks cut into parts for several workers: the journal's blocks are those parts
+        **({} if plan.split is None else {"split": plan.split})})
     journal = Journal.open(output, key, len(plan.specs), resume=resume)
     n_blocks, state, cpu = len(plan.specs), {"blocks": 0, "buildings": 0, "mb": 0.0}, {}
     ordered, sink = InOrder(plan), _sink(output, plan)
@@ -1013,18 +1018,27 @@ class ReconstructPlan:
     resolved: dict
     traced: bool
     total: int | None
+    #: the most footprints of a block part (blocks cut for several workers), or None
+    split: int | None = None
 
 
 def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None,
                      fmt=None, id_field=None, layer=None, method="roof", primitives=None,
-                     check_images=None, block_size=1000.0, edits=None) -> ReconstructPlan:
+                     check_images=None, block_size=1000.0, edits=None,
+                     workers: int = 1) -> ReconstructPlan:
     """Check the options, index the tiles and cut the area into block specs (no point read).
 
-    Keywords as :func:`reconstruct`.
+    Keywords as :func:`reconstruct`; ``workers``: the processes that will run
+    the blocks. With several, a block holding more footprints than an even
+    share of the executor's runs (:func:`lidar2city.tools.blocks.split_size`)
+    is cut into parts of its footprints when its buildings allow it
+    (:func:`lidar2city.tools.task.splittable`): a single large tile is then
+    shared by the workers, with the same results.
     """
     from ..io.las import TileReader, check_header_bounds, scan_tiles
-    from .blocks import FootprintRef, Frame, footprint_blocks, traced_blocks
-    from .task import BlockOptions
+    from .blocks import FootprintRef, Frame, footprint_blocks, split_size, traced_blocks
+    from .engine import RUNS_PER_WORKER
+    from .task import BlockOptions, splittable
 
     fmt = format_from_name(output, fmt)
     if method not in LOD22_METHODS:
@@ -1102,6 +1116,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     # what a building needs around its footprint: its ground ring, the area's
     # ground level (50 m) and the roof's overhang
     margin = max(cfg.search_radius, 50.0) + (lod22.overhang if lod22 is not None else 0.0)
+    split = None
     if footprints is None:
         logger.info("no footprints given: tracing them from the building points")
         specs = traced_blocks(tiles, frame, reader.world_bounds(), block_size, margin + 100.0)
@@ -1120,13 +1135,18 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
             return FootprintRef(str(footprints), layer, id_field, tuple(fids[i] for i in idx),
                                 tuple(ids[i] for i in idx), tuple(idx))
 
-        specs = footprint_blocks(tiles, frame, bounds, block_size, margin, ref)
+        # one process runs the blocks whole: the same plan as ever
+        split = (split_size(len(fids), RUNS_PER_WORKER * int(workers))
+                 if int(workers or 1) > 1 and splittable(options) else None)
+        specs = footprint_blocks(tiles, frame, bounds, block_size, margin, ref, split=split)
+        if len({spec.cell for spec in specs}) == len(specs):
+            split = None  # no block was cut: the plan of one process
         if options.edits:  # an unknown building id: an error before any block runs
             from .edit import check_edit_ids
 
             check_edit_ids(options.edits, ids, source=str(edits))
     return ReconstructPlan(specs, options, frame, fmt, want, resolved, footprints is None,
-                           None if footprints is None else sum(s.size for s in specs))
+                           None if footprints is None else sum(s.size for s in specs), split)
 
 
 def _edit_options(edits, cfg, lod22, others, lods, method) -> dict:

@@ -31,7 +31,8 @@ from ..io.las import DecodedTile, SpilledTile, TileReader
 logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
-           "give_back_memory", "run_block", "reconstruct_block", "tile_keeper", "TracedBlock",
+           "give_back_memory", "run_block", "reconstruct_block", "splittable", "tile_keeper",
+           "TracedBlock", "worker_modules",
            "trace_block"]
 
 
@@ -274,6 +275,23 @@ class _TileCache:
 #: of tiles a row of blocks leaves to the next row on areas tens of blocks wide
 KEEP_BLOCKS = 8
 _cache = _TileCache()
+
+
+#: what a block imports (besides this module), for a local cluster's workers to
+#: have it imported before they are forked (:func:`worker_modules`)
+WORKER_MODULES = ("laspy", "lazrs", "shapely", "pyproj", "lidar2city.io.las",
+                  "lidar2city.io.vector", "lidar2city.lod.lod1", "lidar2city.metrics.model",
+                  "lidar2city.validate.solid")
+#: what LoD2.2 from the roof topology imports besides (scipy's ~0.25 CPU-second)
+LOD22_MODULES = ("scipy.ndimage", "scipy.spatial", "scipy.sparse", "lidar2city.roof.building",
+                 "lidar2city.regularize.snake", "lidar2city.lod.roofcheck")
+
+
+def worker_modules(lods=(), method="roof") -> tuple:
+    """The modules the blocks of a run building ``lods`` import
+    (:func:`lidar2city.tools.engine.make_executor` ``preload``)."""
+    return WORKER_MODULES + (LOD22_MODULES if "2.2" in (lods or ()) and method == "roof"
+                             else ())
 
 
 def tile_keeper(specs, ahead=()):
@@ -597,15 +615,23 @@ def _claim(cloud, classes, fps, options):
                                   claimable=CLAIMABLE if options.classified else None)
 
 
+def splittable(options) -> bool:
+    """Whether a block's buildings with these options depend only on the points
+    around each footprint (classified input, LoD1 / LoD2.2 from the roof
+    topology): given footprints can then be built group by group
+    (:func:`_run_groups`), and a block cut into parts of its footprints
+    (:func:`lidar2city.tools.blocks.footprint_blocks` ``split``) gives the same
+    results. Classifying raw points, filtering the ground of a tile without a
+    ground class, fitting primitives and re-applying edits look at the whole block."""
+    return bool(options.classified and options.primitives is None and not options.edits
+                and not options.ground_filter)
+
+
 def _by_groups(spec, options) -> bool:
     """Whether the block's buildings can be built group by group with the same
-    results: each building then reads only the points around its footprint
-    (classified input, given footprints, LoD1 / LoD2.2 from the roof topology).
-    Classifying raw points, tracing footprints, fitting primitives and
-    re-applying edits look at the whole block."""
-    return (options.classified and spec.footprints is not None and options.primitives is None
-            and not options.edits and spec.world_box is not None and bool(spec.tiles)
-            and not options.ground_filter)
+    results (:func:`splittable`, given footprints, points to read)."""
+    return (splittable(options) and spec.footprints is not None
+            and spec.world_box is not None and bool(spec.tiles))
 
 
 def _local(part, d, origin, scale):

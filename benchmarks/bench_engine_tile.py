@@ -1,0 +1,106 @@
+"""One large tile on 1 and 2 workers: the Delft tile's 132 buildings, against the laspy floor.
+
+Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2]``
+(default $LIDAR2CITY_DATA or ../shared/data)
+
+The Delft AHN3 tile with its 132 BGT footprints is one block of the grid:
+with ``--workers 2`` the planner cuts it into parts of its footprints (strips
+of equal numbers of buildings) that the two worker processes share, and the
+client runs the first part itself while the cluster starts. Each run is the
+whole command as a user types it, in a fresh process
+(``lidar2city reconstruct ahn3_cropped_1.laz --footprints footprints_bgt.gpkg
+--lod 1.2 --lod 1.3 --lod 2.2 -o OUT.city.json --workers N``), measured from
+outside: wall seconds (cluster start-up and close included), user + system
+CPU seconds of the process and of every process it started and reaped (Dask
+workers and the server they are forked from), the largest peak RSS among
+them. The laspy floor (a fresh Python running ``laspy.read`` of the tile,
+as ``bench_speed.py``) and the runs alternate, ``--runs`` rounds of (floor,
+1 worker, 2 workers), so that the ratios are taken round by round while the
+shared machine's speed drifts. Printed per round and as medians: the wall
+seconds, CPU seconds, their ratios to the floor, the speed-up of 2 workers
+over 1; the MD5 of every output (the same on 1 and 2 workers); the load
+average before and after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_speed import ROOT, data_dir, run  # noqa: E402
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?")
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--workers", default="1,2")
+    args = ap.parse_args()
+    workers = [int(v) for v in args.workers.split(",")]
+    d = data_dir(args.data) / "delft"
+    laz, fps = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_speed.py: bytecode cached
+    py = sys.executable
+    floor = [py, "-c", f"import laspy; laspy.read({str(laz)!r})"]
+    tmp = Path(tempfile.mkdtemp())
+
+    def command(w):
+        out = tmp / f"w{w}.city.json"
+        return out, [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), "--footprints",
+                     str(fps), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(out),
+                     "--workers", str(w)]
+
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
+          f"({os.cpu_count()} cores)", flush=True)
+    run(floor, env)  # warm the file cache and the bytecode
+    for w in workers:
+        run(command(w)[1], env)
+    rows = {w: [] for w in workers}
+    floors, md5 = [], {}
+    for k in range(max(1, args.runs)):
+        f = run(floor, env)
+        floors.append(f)
+        line = [f"round {k + 1}: floor {f[0]:.2f} s {f[2]:.2f} CPU s"]
+        for w in workers:
+            out, cmd = command(w)
+            r = run(cmd, env)
+            rows[w].append((r, f))
+            md5.setdefault(w, set()).add(hashlib.md5(out.read_bytes()).hexdigest())
+            line.append(f"{w} worker(s) {r[0]:.2f} s ({r[0] / f[0]:.1f}x floor) "
+                        f"{r[2]:.2f} CPU s ({r[2] / f[2]:.1f}x) {r[1]:.0f} MB")
+        if 1 in rows and len(workers) > 1:
+            one = rows[1][-1][0][0]
+            line += [f"speed-up {w}/1 {one / rows[w][-1][0][0]:.2f}" for w in workers if w != 1]
+        print("; ".join(line), flush=True)
+    f_t = statistics.median(f[0] for f in floors)
+    f_c = statistics.median(f[2] for f in floors)
+    print(f"laspy floor: median {f_t:.2f} s, {f_c:.2f} CPU s ({len(floors)} runs)")
+    for w in workers:
+        rs = rows[w]
+        print(f"{w} worker(s): median {statistics.median(r[0] for r, _ in rs):.2f} s, "
+              f"{statistics.median(r[2] for r, _ in rs):.2f} CPU s; time / floor median "
+              f"{statistics.median(r[0] / f[0] for r, f in rs):.1f}x, CPU / floor CPU median "
+              f"{statistics.median(r[2] / f[2] for r, f in rs):.1f}x; peak RSS "
+              f"{max(r[1] for r, _ in rs):.0f} MB; md5 {' '.join(sorted(md5[w]))}")
+    if 1 in rows:
+        for w in workers:
+            if w != 1:
+                sp = [a[0][0] / b[0][0] for a, b in zip(rows[1], rows[w], strict=True)]
+                cp = [b[0][2] / a[0][2] for a, b in zip(rows[1], rows[w], strict=True)]
+                print(f"speed-up {w} workers / 1: median {statistics.median(sp):.2f} "
+                      f"({', '.join(f'{v:.2f}' for v in sp)}); CPU {w} workers / 1 median "
+                      f"{statistics.median(cp):.2f}; same bytes: "
+                      f"{'yes' if md5[w] == md5[1] and len(md5[1]) == 1 else 'NO'}")
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()
