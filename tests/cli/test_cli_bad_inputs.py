@@ -676,6 +676,8 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
             journal = out / "x.city.jsonl.journal"
             if journal.exists():
                 assert not [p.name for p in journal.iterdir() if ".tmp" in p.name]
+                # the message says what is kept and how to go on from it
+                assert str(journal) in lines[-1] and "--resume" in lines[-1], err
         for p in out.iterdir():
             shutil.rmtree(p) if p.is_dir() else p.unlink()
     assert interrupted, "every run ended before its signal"

@@ -93,11 +93,14 @@ def _fail(ctx, message):
 
 
 def _on_interrupt(signum, frame):  # pragma: no cover - exercised in a subprocess
-    from ..io._atomic import remove_run_outputs
+    from ..io._atomic import kept_for_resume, remove_run_outputs
 
     removed = remove_run_outputs()
     _stop_workers()
     note = f"; {len(removed)} partial output(s) removed" if removed else ""
+    kept = [p for p in kept_for_resume() if os.path.isdir(p)]
+    if kept:  # the blocks finished are in the journal: say how to go on from them
+        note += f"; the journal {kept[0]} is kept: run the same command with --resume to go on"
     with contextlib.suppress(Exception):
         os.write(2, f"\nError: interrupted{note}\n".encode())
     os._exit(130 if signum == signal.SIGINT else 143)

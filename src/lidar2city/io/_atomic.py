@@ -18,7 +18,8 @@ from pathlib import Path
 from ..errors import FileFormatError, Lidar2CityError
 
 __all__ = ["atomic_path", "check_input_file", "check_output_path", "make_output_dir",
-           "begin_run", "end_run", "remove_run_outputs", "scratch_path"]
+           "begin_run", "end_run", "remove_run_outputs", "scratch_path", "keep_for_resume",
+           "kept_for_resume"]
 
 #: temporary files being written by this process
 _PENDING: set = set()
@@ -33,13 +34,25 @@ _WRITER_MODULES = ("rasterio", "pyogrio", "lazrs", "laspy", "fiona")
 def begin_run() -> None:
     """Start recording the outputs finished from now on (see :func:`remove_run_outputs`)."""
     global _RUN
-    _RUN = {"files": [], "dirs": []}
+    _RUN = {"files": [], "dirs": [], "kept": []}
 
 
 def end_run() -> None:
     """Stop recording outputs: what was written is kept."""
     global _RUN
     _RUN = None
+
+
+def keep_for_resume(path) -> None:
+    """Record ``path`` (a run's journal) as what a failed or interrupted run leaves
+    behind on purpose, so that the message can name it (:func:`kept_for_resume`)."""
+    if _RUN is not None:
+        _RUN["kept"].append(str(path))
+
+
+def kept_for_resume() -> list[str]:
+    """The paths the open run keeps for ``--resume`` (:func:`keep_for_resume`)."""
+    return list(_RUN["kept"]) if _RUN is not None else []
 
 
 def remove_run_outputs() -> list[str]:

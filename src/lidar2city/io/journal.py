@@ -21,7 +21,7 @@ import shutil
 from pathlib import Path
 
 from ..errors import FileFormatError, InputError
-from ._atomic import scratch_path
+from ._atomic import keep_for_resume, scratch_path
 
 logger = logging.getLogger(__name__)
 
@@ -120,6 +120,7 @@ class Journal:
                 folder.rmdir()
             raise FileFormatError(f"cannot write the journal {str(folder)!r}: "
                                   f"{exc.strerror or exc}") from None
+        keep_for_resume(folder)
         return journal
 
     def _block(self, index: int) -> Path:
