@@ -658,3 +658,31 @@ def test_a_split_block_gives_parts_covering_its_footprints_once(n, split):
     assert all(0 < len(p) <= split and p == sorted(p) for p in parts)
     assert len(parts) == -(-n // split)
     assert _split_parts(block, centre, empty, split) == parts  # deterministic
+
+
+def test_an_interrupted_run_releases_every_semaphore_it_registered():
+    """A semaphore registered with the resource tracker but not yet given its finalizer
+    (a nanny's queue being made in the cluster's thread when Ctrl-C came) is released
+    too, so the tracker has nothing to warn of after the run's last line."""
+    import multiprocessing
+    import os
+    from multiprocessing import resource_tracker
+
+    from lidar2city.tools import engine
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        pytest.skip("named semaphores are a forkserver / spawn platform's")
+    engine._track_semaphores()
+    engine._track_semaphores()  # once per process
+    lock = multiprocessing.get_context("forkserver").Lock()
+    name = lock._semlock.name
+    # one made as a nanny's queue is made, stopped between its registration and its finalizer
+    from _multiprocessing import SemLock
+
+    bare = SemLock(1, 1, 1, "/mp-l2c-test", False)
+    resource_tracker.register(bare.name, "semaphore")
+    assert {name, bare.name} <= engine._SEMAPHORES
+    engine.release_semaphores()
+    assert not {name, bare.name} & engine._SEMAPHORES
+    assert not os.path.exists(f"/dev/shm/sem.{name.lstrip('/')}")
+    assert not os.path.exists("/dev/shm/sem.mp-l2c-test")

@@ -125,17 +125,12 @@ def _stop_workers():  # pragma: no cover - exercised in a subprocess
 
 def _release_semaphores():  # pragma: no cover - exercised in a subprocess
     """Unlink the named semaphores the cluster's nannies made in this process (their
-    queues' locks). os._exit skips multiprocessing's exit hooks, so the resource
+    queues' locks): os._exit skips multiprocessing's exit hooks, so the resource
     tracker would unlink them itself and warn of "leaked semaphore objects"."""
-    util = sys.modules.get("multiprocessing.util")
-    sync = sys.modules.get("multiprocessing.synchronize")
-    if util is None or sync is None:
-        return
-    with contextlib.suppress(Exception):
-        for finalizer in list(util._finalizer_registry.values()):
-            if getattr(finalizer, "_callback", None) is sync.SemLock._cleanup:
-                with contextlib.suppress(Exception):
-                    finalizer()
+    engine = sys.modules.get("lidar2city.tools.engine")
+    if engine is not None:
+        with contextlib.suppress(Exception):
+            engine.release_semaphores()
 
 
 def _install_interrupt_handlers():

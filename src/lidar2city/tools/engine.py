@@ -137,6 +137,7 @@ class DaskExecutor:
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] += 1
             self._local = True
+            _track_semaphores()
             try:
                 _start_forkserver(self.preload)
             except Exception as exc:  # noqa: BLE001 - Dask starts it as it would have
@@ -439,6 +440,71 @@ def _stop_forkserver() -> None:
     stop = getattr(server, "_stop", None)
     if stop is not None:  # CPython's: reaps it; elsewhere it ends with this process
         stop()
+
+
+#: names of the semaphores this process registered with multiprocessing's resource
+#: tracker and has not released (:func:`_track_semaphores`)
+_SEMAPHORES: set = set()
+
+
+def _track_semaphores() -> None:
+    """Record the semaphores this process registers with multiprocessing's resource
+    tracker (a local cluster's nannies make them for their queues, in the thread that
+    starts the cluster), so that an interrupted run can release every one of them
+    (:func:`release_semaphores`): one registered but not yet given its finalizer when
+    the interrupt came was left to the tracker, which warned of a "leaked semaphore"
+    after the run's last line. Installed once per process."""
+    from multiprocessing import resource_tracker
+
+    if getattr(resource_tracker.register, "_lidar2city", False):
+        return
+    register, unregister = resource_tracker.register, resource_tracker.unregister
+
+    def tracked_register(name, rtype):
+        if rtype == "semaphore":
+            _SEMAPHORES.add(name)
+        return register(name, rtype)
+
+    def tracked_unregister(name, rtype):
+        if rtype == "semaphore":
+            _SEMAPHORES.discard(name)
+        return unregister(name, rtype)
+
+    tracked_register._lidar2city = True
+    resource_tracker.register, resource_tracker.unregister = tracked_register, tracked_unregister
+
+
+def release_semaphores() -> None:
+    """Unlink the named semaphores this process made and still holds (a local cluster's
+    nannies' queue locks), and tell the resource tracker: for a run ended by
+    ``os._exit``, which skips multiprocessing's exit hooks (the tracker would unlink
+    them itself and warn of "leaked semaphore objects"). Safe in a signal handler."""
+    import contextlib
+    import sys
+
+    util = sys.modules.get("multiprocessing.util")
+    sync = sys.modules.get("multiprocessing.synchronize")
+    if util is None or sync is None:
+        return
+    finalizers = []
+    for _ in range(10):  # another thread may be adding one: take a stable snapshot
+        try:
+            finalizers = list(util._finalizer_registry.values())
+            break
+        except RuntimeError:
+            continue
+    for finalizer in finalizers:
+        if getattr(finalizer, "_callback", None) is sync.SemLock._cleanup:
+            with contextlib.suppress(Exception):
+                finalizer()
+    # registered, but their finalizer not made yet when the run was stopped
+    from multiprocessing import resource_tracker
+
+    for name in list(_SEMAPHORES):
+        with contextlib.suppress(Exception):
+            sync.sem_unlink(name)
+        with contextlib.suppress(Exception):
+            resource_tracker.unregister(name, "semaphore")
 
 
 def kill_forkserver():
