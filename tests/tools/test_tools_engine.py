@@ -658,3 +658,58 @@ def test_a_split_block_gives_parts_covering_its_footprints_once(n, split):
     assert all(0 < len(p) <= split and p == sorted(p) for p in parts)
     assert len(parts) == -(-n // split)
     assert _split_parts(block, centre, empty, split) == parts  # deterministic
+
+
+def _traced(area, out, **kw):
+    return reconstruct([area / "town.laz"], out, lods=("1.2", "1.3", "2.2"), block_size=1000.0,
+                       **kw)
+
+
+@pytest.fixture(scope="module")
+def traced_reference(area, tmp_path_factory):
+    out = tmp_path_factory.mktemp("traced") / "w1.city.json"
+    summary = _traced(area, out)
+    assert summary.blocks < 4 * 2 and summary.done >= 8 and summary.failed == 0
+    return out.read_bytes(), summary
+
+
+class _Three(engine.InProcess):
+    """In-process, but planned as for three workers (the two passes of a traced run)."""
+
+    workers = 3
+
+
+def test_traced_blocks_built_in_parts_give_the_bytes_of_the_whole_block(area, traced_reference,
+                                                                        tmp_path, monkeypatch):
+    """Without footprints, fewer blocks than the workers' runs: each block is traced
+    first, then its buildings are built in parts (their boxes plus the margin, cut
+    to the block's box, nothing claimed): the bytes of the block building them."""
+    from lidar2city.tools import blocks
+    from lidar2city.tools.reconstruct import _reconstruct
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    out = tmp_path / "parts.city.json"
+    calls = []
+    first = task.trace_footprints
+    monkeypatch.setattr(task, "trace_footprints", lambda *a: calls.append(1) or first(*a))
+    s = _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
+                     lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None, id_field=None,
+                     layer=None, progress=None, method="roof", primitives=None,
+                     check_images=None, block_size=1000.0, resume=False, block_progress=None,
+                     edits=None)
+    # each block traced once, then built in parts
+    assert len(calls) == traced_reference[1].blocks < s.blocks
+    assert s.done == traced_reference[1].done
+    assert out.read_bytes() == traced_reference[0]
+
+
+def test_traced_block_shared_by_two_workers_gives_the_same_bytes(area, traced_reference,
+                                                                 tmp_path, monkeypatch):
+    """A real 2-worker cluster on a one-block traced area: parts, the same bytes."""
+    from lidar2city.tools import blocks
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    out = tmp_path / "w2.city.json"
+    s = _traced(area, out, workers=2)
+    assert s.blocks > traced_reference[1].blocks and s.done == traced_reference[1].done
+    assert out.read_bytes() == traced_reference[0]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys",
-           "split_size", "SPLIT_LEAST"]
+           "split_size", "SPLIT_LEAST", "traced_parts"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +59,14 @@ class BlockSpec:
     tiles : tuple of TileInfo
         Headers of the tiles meeting ``world_box``.
     frame : Frame
-    footprints : FootprintRef or None
+    footprints : FootprintRef, Footprints or None
         The block's footprints (read by the worker from the file); None: trace
-        them in the cell.
+        them in the cell; a :class:`~lidar2city.datamodel.Footprints` (local,
+        with their output positions in ``_index``): those a first pass traced
+        in the cell (:func:`traced_parts`), carried inline.
+    traced : bool
+        ``footprints`` were traced by the run: no points are claimed for them
+        (the block that traces them builds them as traced, unclaimed).
     """
 
     index: int
@@ -70,6 +75,7 @@ class BlockSpec:
     tiles: tuple
     frame: Frame
     footprints: object = None
+    traced: bool = False
 
     @property
     def size(self) -> int:
@@ -195,6 +201,45 @@ def _split_parts(block, centre, empty, split) -> list:
     k = -(-len(idx) // int(split))
     cuts = [len(idx) * j // k for j in range(k + 1)]
     return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def traced_parts(spec, bounds, margin: float, split: int | None, footprints, start: int) -> list:
+    """Specs of the parts of a traced block (``spec``, from :func:`traced_blocks`)
+    whose footprints a first pass traced, numbered from ``start``.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (N, 4)
+        Local bounds of the block's traced footprints, in their order.
+    margin : float
+        What a building reads around its footprint's box (m).
+    split : int or None
+        The most footprints of a part (:func:`_split_parts`); None: one part.
+    footprints : callable
+        ``footprints(idx)``: what a part carries for the footprints ``idx``.
+
+    Each part reads its footprints' box plus ``margin`` within the block's own
+    box: every box a building queries (its footprint's box plus at most
+    ``margin``) then holds the same points as in the whole block's cloud,
+    which is what the block built them from.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
+    if not len(bounds):
+        return []
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    empty = ~np.isfinite(centre).all(axis=1)
+    wb = spec.world_box
+    specs = []
+    for idx in _split_parts(np.arange(len(bounds)), centre, empty, split):
+        b = bounds[[i for i in idx if not empty[i]]]
+        world = None
+        if len(b):
+            w = spec.frame.to_world([b[:, 0].min() - margin, b[:, 1].min() - margin,
+                                     b[:, 2].max() + margin, b[:, 3].max() + margin])
+            world = (max(w[0], wb[0]), max(w[1], wb[1]), min(w[2], wb[2]), min(w[3], wb[3]))
+        specs.append(BlockSpec(start + len(specs), spec.cell, world, _tiles_meeting(spec.tiles, world),
+                               spec.frame, footprints(idx), traced=True))
+    return specs
 
 
 #: points per square metre of a tile's header box under which the box is taken
