@@ -713,3 +713,42 @@ def test_traced_block_shared_by_two_workers_gives_the_same_bytes(area, traced_re
     s = _traced(area, out, workers=2)
     assert s.blocks > traced_reference[1].blocks and s.done == traced_reference[1].done
     assert out.read_bytes() == traced_reference[0]
+
+
+@pytest.mark.parametrize("n,k", [(1, 4), (5, 2), (30, 7), (80, 16)])
+def test_weighted_parts_cover_every_footprint_once_in_strips_of_about_equal_work(n, k):
+    from lidar2city.tools.blocks import _weighted_parts
+
+    rng = np.random.default_rng(n)
+    centre = rng.uniform(0, 100, (n, 2)) * [3.0, 1.0]  # wider than high: strips across x
+    weights = rng.uniform(1.0, 3.0, n)
+    empty = np.zeros(n, dtype=bool)
+    parts = _weighted_parts(np.arange(n), centre, empty, weights, k)
+    assert sorted(i for p in parts for i in p) == list(range(n))
+    assert all(p == sorted(p) and p for p in parts) and len(parts) <= k
+    assert len(parts) == min(n, k)  # no weight dominates: every strip holds one at least
+    # strips along x, each about an equal share of the work (one footprint of slack)
+    assert all(max(centre[a, 0] for a in p) <= min(centre[b, 0] for b in q)
+               for p, q in zip(parts[:-1], parts[1:], strict=False))
+    work = [weights[p].sum() for p in parts]
+    assert max(work) <= weights.sum() / len(parts) + weights.max() + 1e-9
+    assert _weighted_parts(np.arange(n), centre, empty, weights, k) == parts
+
+
+def test_a_traced_part_reads_its_footprints_surroundings_inside_its_blocks_box():
+    import shapely
+
+    from lidar2city.datamodel import Footprints
+    from lidar2city.tools.blocks import BlockSpec, Frame, traced_parts
+
+    frame = Frame(np.array([1000.0, 2000.0, 0.0]), None, 1.0, 1.0)
+    block = BlockSpec(0, (1, 2), (1000.0, 2000.0, 1200.0, 2200.0), (), frame)
+    geoms = [shapely.box(10, 10, 20, 20), shapely.box(150, 150, 190, 195)]
+    bounds = np.array([g.bounds for g in geoms])
+    parts = traced_parts(block, bounds, 51.0, np.array([1.0, 1.0]), 1.0,
+                         lambda idx: Footprints([geoms[i] for i in idx], [f"b{i + 1}" for i in idx]),
+                         5)
+    assert [p.index for p in parts] == [5, 6] and all(p.traced for p in parts)
+    assert parts[0].world_box == (1000.0, 2000.0, 1071.0, 2071.0)  # cut to the block's box
+    assert parts[1].world_box == (1099.0, 2099.0, 1200.0, 2200.0)
+    assert [p.cost for p in parts] == [1.0, 1.0] and parts[1].footprints.ids == ["b2"]

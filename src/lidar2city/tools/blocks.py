@@ -67,6 +67,9 @@ class BlockSpec:
     traced : bool
         ``footprints`` were traced by the run: no points are claimed for them
         (the block that traces them builds them as traced, unclaimed).
+    cost : float or None
+        The block's expected work in buildings, for cutting the run into
+        tasks of equal work; None: its number of footprints.
     """
 
     index: int
@@ -76,11 +79,17 @@ class BlockSpec:
     frame: Frame
     footprints: object = None
     traced: bool = False
+    cost: float | None = None
 
     @property
     def size(self) -> int:
         """Buildings known before the block runs (0 when traced)."""
         return 0 if self.footprints is None else len(self.footprints)
+
+    @property
+    def work(self) -> float:
+        """The block's expected work (:attr:`cost`, else its footprints, at least 1)."""
+        return float(self.cost) if self.cost is not None else float(max(self.size, 1))
 
 
 def block_keys(centres_local, frame: Frame, block_size: float) -> np.ndarray:
@@ -203,7 +212,8 @@ def _split_parts(block, centre, empty, split) -> list:
     return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
-def traced_parts(spec, bounds, margin: float, split: int | None, footprints, start: int) -> list:
+def traced_parts(spec, bounds, margin: float, weights, share: float, footprints,
+                 start: int) -> list:
     """Specs of the parts of a traced block (``spec``, from :func:`traced_blocks`)
     whose footprints a first pass traced, numbered from ``start``.
 
@@ -213,8 +223,13 @@ def traced_parts(spec, bounds, margin: float, split: int | None, footprints, sta
         Local bounds of the block's traced footprints, in their order.
     margin : float
         What a building reads around its footprint's box (m).
-    split : int or None
-        The most footprints of a part (:func:`_split_parts`); None: one part.
+    weights : ndarray, shape (N,)
+        Each footprint's expected work (e.g. its area: a building's cost grows
+        with its points), in buildings.
+    share : float
+        The most work a part should hold: the block is cut into strips
+        across its longer side of about equal work (:func:`_weighted_parts`),
+        each part carrying its work as :attr:`BlockSpec.cost`.
     footprints : callable
         ``footprints(idx)``: what a part carries for the footprints ``idx``.
 
@@ -229,8 +244,10 @@ def traced_parts(spec, bounds, margin: float, split: int | None, footprints, sta
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     empty = ~np.isfinite(centre).all(axis=1)
     wb = spec.world_box
+    weights = np.asarray(weights, dtype=np.float64).reshape(-1)
+    k = max(1, int(np.ceil(weights.sum() / share - 1e-9))) if share > 0 else 1
     specs = []
-    for idx in _split_parts(np.arange(len(bounds)), centre, empty, split):
+    for idx in _weighted_parts(np.arange(len(bounds)), centre, empty, weights, k):
         b = bounds[[i for i in idx if not empty[i]]]
         world = None
         if len(b):
@@ -238,8 +255,28 @@ def traced_parts(spec, bounds, margin: float, split: int | None, footprints, sta
                                      b[:, 2].max() + margin, b[:, 3].max() + margin])
             world = (max(w[0], wb[0]), max(w[1], wb[1]), min(w[2], wb[2]), min(w[3], wb[3]))
         specs.append(BlockSpec(start + len(specs), spec.cell, world, _tiles_meeting(spec.tiles, world),
-                               spec.frame, footprints(idx), traced=True))
+                               spec.frame, footprints(idx), traced=True,
+                               cost=float(weights[idx].sum())))
     return specs
+
+
+def _weighted_parts(idx, centre, empty, weights, k: int) -> list:
+    """Footprint positions ``idx`` cut into at most ``k`` strips across their longer
+    side (by their centres, ties and empty footprints in footprint order) of
+    about equal total ``weights``, each part in footprint order."""
+    idx = np.asarray(idx, dtype=np.int64)
+    if k <= 1 or len(idx) <= 1:
+        return [idx.tolist()]
+    c = centre[idx]
+    ok = ~empty[idx]
+    span = (np.ptp(c[ok], axis=0) if ok.any() else np.zeros(2))
+    axis = int(span[1] > span[0])
+    along = idx[np.lexsort((idx, np.where(ok, c[:, axis], -np.inf)))]
+    cum = np.cumsum(weights[along])
+    # a strip ends with the footprint that brings it past its share of the total
+    ends = np.searchsorted(cum, cum[-1] * np.arange(1, k) / k, side="left") + 1
+    cuts = np.unique(np.concatenate([[0], np.clip(ends, 1, len(along)), [len(along)]]))
+    return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
 #: points per square metre of a tile's header box under which the box is taken

@@ -1171,12 +1171,19 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                            trace_first=first, margin=margin)
 
 
+#: parts of a traced block per executor run (:func:`trace_then_split`): a run
+#: takes consecutive parts of about equal expected work, so that the estimate's
+#: errors (a building's work is taken to grow with its area) average out
+PARTS_PER_RUN = 2
+
+
 def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     """The plan of a traced run whose blocks are traced first on ``executor``
     (:func:`lidar2city.tools.task.trace_footprints`), then cut into parts of
-    their footprints (:func:`lidar2city.tools.blocks.traced_parts`, at most
-    :func:`~lidar2city.tools.blocks.split_size` footprints each) that the
-    workers share.
+    their footprints of about equal expected work (the footprints' areas,
+    :data:`PARTS_PER_RUN` parts per executor run,
+    :func:`lidar2city.tools.blocks.traced_parts`) that the workers share,
+    heaviest first, each handed to whichever worker is free (``balance``).
 
     A part builds its footprints from the points of their boxes plus the
     margin inside the block's box, with the block's classes (the input's: the
@@ -1187,7 +1194,7 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     """
     import dataclasses
 
-    from .blocks import split_size, traced_parts
+    from .blocks import SPLIT_LEAST, split_size, traced_parts
     from .engine import RUNS_PER_WORKER
     from .task import tile_keeper, trace_footprints
 
@@ -1203,9 +1210,16 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     if first is not None:
         first.update(cpu=cpu, mb=mb)
     total = sum(len(f) for f in traced if f is not None)
-    split = split_size(total, RUNS_PER_WORKER * int(executor.workers or 1))
+    # a building's work grows with its points, hence its area: parts of equal
+    # areas, their work counted in buildings (the executor's runs of equal work)
+    areas = [np.array([g.area for g in f.geometries], dtype=np.float64) if f else None
+             for f in traced]
+    whole = sum(float(a.sum()) for a in areas if a is not None)
+    scale = total / whole if whole > 0 else 0.0
+    runs = RUNS_PER_WORKER * int(executor.workers or 1)
+    split = split_size(total, runs)
     specs, position = [], 0
-    for spec, fps in zip(plan.specs, traced, strict=True):
+    for spec, fps, area in zip(plan.specs, traced, areas, strict=True):
         if not fps:
             continue
         bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
@@ -1216,8 +1230,12 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
             return part
 
         # + 1 m: every box a building queries lies a metre inside its part's box
-        specs += traced_parts(spec, bounds, plan.margin + 1.0, split, inline, len(specs))
+        specs += traced_parts(spec, bounds, plan.margin + 1.0, area * scale,
+                              max(total / (PARTS_PER_RUN * runs), float(SPLIT_LEAST)), inline, len(specs))
         position += len(fps)
+    # heaviest first: handed out one by one to the free worker, they end about together
+    heavy = sorted(specs, key=lambda s: (-s.work, s.index))
+    specs = [dataclasses.replace(s, index=k) for k, s in enumerate(heavy)]
     logger.info("%d traced footprints in %d parts", total, len(specs))
     return dataclasses.replace(plan, specs=specs, trace_first=False, parts=True, points=points,
                                split=split)
@@ -1244,9 +1262,9 @@ def run_blocks(executor, plan, specs=None):
 
     specs = plan.specs if specs is None else specs
     # runs of equal numbers of buildings (traced blocks: of equal numbers of blocks)
-    costs = [max(s.size, 1) for s in specs]
+    costs = [s.work for s in specs]
     for i, out in executor.map(task.run_block, specs, plan.options, run_hook=task.tile_keeper,
-                               costs=costs):
+                               costs=costs, **({"balance": True} if plan.parts else {})):
         yield _failed_block(specs[i], out) if isinstance(out, BaseException) else out
 
 
