@@ -703,6 +703,43 @@ def test_traced_blocks_built_in_parts_give_the_bytes_of_the_whole_block(area, tr
     assert out.read_bytes() == traced_reference[0]
 
 
+def test_traced_parts_resumed_after_a_crash_give_the_same_bytes(area, traced_reference, tmp_path,
+                                                                monkeypatch):
+    """The journal of a traced run built in parts keeps the parts done; a resumed run
+    traces again (the same parts) and builds only the others."""
+    from lidar2city.tools import blocks
+    from lidar2city.tools.reconstruct import _reconstruct
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    real, ran = task.run_block, []
+
+    def crash_on_third(spec, options):
+        if len(ran) == 2:
+            raise Crash
+        ran.append(spec.index)
+        return real(spec, options)
+
+    def run(out, resume):
+        return _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
+                            lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None,
+                            id_field=None, layer=None, progress=None, method="roof",
+                            primitives=None, check_images=None, block_size=1000.0,
+                            resume=resume, block_progress=None, edits=None)
+
+    out = tmp_path / "r.city.json"
+    monkeypatch.setattr(task, "run_block", crash_on_third)
+    with pytest.raises(Crash):
+        run(out, False)
+    assert len(list(journal_path(out).glob("block-*"))) == 2
+    first = list(ran)
+    monkeypatch.setattr(task, "run_block", lambda spec, options: ran.append(spec.index)
+                        or real(spec, options))
+    summary = run(out, True)
+    assert summary.resumed == 2 and sorted(ran) == list(range(summary.blocks))
+    assert not set(ran[2:]) & set(first)
+    assert out.read_bytes() == traced_reference[0]
+
+
 def test_traced_block_shared_by_two_workers_gives_the_same_bytes(area, traced_reference,
                                                                  tmp_path, monkeypatch):
     """A real 2-worker cluster on a one-block traced area: parts, the same bytes."""

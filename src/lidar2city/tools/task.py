@@ -7,7 +7,10 @@ none were given, and builds every building of the block with
 :func:`reconstruct_block` (the per-building step). The same spec and options
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
-in which blocks finish. :func:`trace_block` is the task of ``footprints`` on a
+in which blocks finish. With several workers and fewer traced blocks than
+their runs, :func:`trace_footprints` traces a block first and its buildings
+are built in parts (specs carrying the traced footprints inline, built as the
+block builds them). :func:`trace_block` is the task of ``footprints`` on a
 folder of tiles (the same blocks, traced). Decoded tiles are shared by the
 blocks a process runs in turn and kept only while its next blocks read them
 (:func:`tile_keeper`).
