@@ -99,18 +99,22 @@ def test_an_external_scheduler_gives_the_same_bytes(area, reference, dask_cluste
     assert out.read_bytes() == reference[0]
 
 
-def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missing(
-        area, reference, tmp_path, monkeypatch):
-    real, ran = task.run_block, []
-
-    def crash_on_third(spec, options):
+def _crash_on_third(real, ran):
+    """``real`` (a block task) noting the blocks it ran in ``ran``; the third crashes the run."""
+    def task_fn(spec, options):
         if len(ran) == 2:
             raise Crash
         ran.append(spec.index)
         return real(spec, options)
 
+    return task_fn
+
+
+def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missing(
+        area, reference, tmp_path, monkeypatch):
+    real, ran = task.run_block, []
     out = tmp_path / "r.city.json"
-    monkeypatch.setattr(task, "run_block", crash_on_third)
+    monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
     with pytest.raises(Crash):
         _run(area, out)
     assert not out.exists() and len(list(journal_path(out).glob("block-*"))) == 2
@@ -679,24 +683,30 @@ class _Three(engine.InProcess):
     workers = 3
 
 
+def _traced_in_parts(area, out, resume=False):
+    """The traced run of :func:`_traced`, planned for three workers, run in this process."""
+    from lidar2city.tools.reconstruct import _reconstruct
+
+    return _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
+                        lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None,
+                        id_field=None, layer=None, progress=None, method="roof",
+                        primitives=None, check_images=None, block_size=1000.0,
+                        resume=resume, block_progress=None, edits=None)
+
+
 def test_traced_blocks_built_in_parts_give_the_bytes_of_the_whole_block(area, traced_reference,
                                                                         tmp_path, monkeypatch):
     """Without footprints, fewer blocks than the workers' runs: each block is traced
     first, then its buildings are built in parts (their boxes plus the margin, cut
     to the block's box, nothing claimed): the bytes of the block building them."""
     from lidar2city.tools import blocks
-    from lidar2city.tools.reconstruct import _reconstruct
 
     monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
     out = tmp_path / "parts.city.json"
     calls = []
     first = task.trace_footprints
     monkeypatch.setattr(task, "trace_footprints", lambda *a: calls.append(1) or first(*a))
-    s = _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
-                     lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None, id_field=None,
-                     layer=None, progress=None, method="roof", primitives=None,
-                     check_images=None, block_size=1000.0, resume=False, block_progress=None,
-                     edits=None)
+    s = _traced_in_parts(area, out)
     # each block traced once, then built in parts
     assert len(calls) == traced_reference[1].blocks < s.blocks
     assert s.done == traced_reference[1].done
@@ -708,33 +718,18 @@ def test_traced_parts_resumed_after_a_crash_give_the_same_bytes(area, traced_ref
     """The journal of a traced run built in parts keeps the parts done; a resumed run
     traces again (the same parts) and builds only the others."""
     from lidar2city.tools import blocks
-    from lidar2city.tools.reconstruct import _reconstruct
 
     monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
     real, ran = task.run_block, []
-
-    def crash_on_third(spec, options):
-        if len(ran) == 2:
-            raise Crash
-        ran.append(spec.index)
-        return real(spec, options)
-
-    def run(out, resume):
-        return _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
-                            lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None,
-                            id_field=None, layer=None, progress=None, method="roof",
-                            primitives=None, check_images=None, block_size=1000.0,
-                            resume=resume, block_progress=None, edits=None)
-
     out = tmp_path / "r.city.json"
-    monkeypatch.setattr(task, "run_block", crash_on_third)
+    monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
     with pytest.raises(Crash):
-        run(out, False)
+        _traced_in_parts(area, out)
     assert len(list(journal_path(out).glob("block-*"))) == 2
     first = list(ran)
     monkeypatch.setattr(task, "run_block", lambda spec, options: ran.append(spec.index)
                         or real(spec, options))
-    summary = run(out, True)
+    summary = _traced_in_parts(area, out, resume=True)
     assert summary.resumed == 2 and sorted(ran) == list(range(summary.blocks))
     assert not set(ran[2:]) & set(first)
     assert out.read_bytes() == traced_reference[0]
