@@ -1,7 +1,11 @@
 """One large tile on 1 and 2 workers: the Delft tile's 132 buildings, against the laspy floor.
 
-Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2]``
+Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2] [--traced]``
 (default $LIDAR2CITY_DATA or ../shared/data)
+
+``--traced``: the same without ``--footprints`` (footprints traced from the
+points, 80 buildings): with ``--workers 2`` the tile's one block is traced
+first by a worker, then its buildings are built in parts by both.
 
 The Delft AHN3 tile with its 132 BGT footprints is one block of the grid:
 with ``--workers 2`` the planner cuts it into parts of its footprints (strips
@@ -42,6 +46,8 @@ def main():
     ap.add_argument("data", nargs="?")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--traced", action="store_true",
+                    help="no footprint file: footprints traced from the points")
     args = ap.parse_args()
     workers = [int(v) for v in args.workers.split(",")]
     d = data_dir(args.data) / "delft"
@@ -54,12 +60,13 @@ def main():
 
     def command(w):
         out = tmp / f"w{w}.city.json"
-        return out, [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), "--footprints",
-                     str(fps), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(out),
+        given = [] if args.traced else ["--footprints", str(fps)]
+        return out, [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), *given,
+                     "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(out),
                      "--workers", str(w)]
 
-    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
-          f"({os.cpu_count()} cores)", flush=True)
+    print(f"{'traced footprints' if args.traced else 'given footprints'}; load average before: "
+          f"{' '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     run(floor, env)  # warm the file cache and the bytecode
     for w in workers:
         run(command(w)[1], env)

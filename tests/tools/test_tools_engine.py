@@ -99,18 +99,22 @@ def test_an_external_scheduler_gives_the_same_bytes(area, reference, dask_cluste
     assert out.read_bytes() == reference[0]
 
 
-def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missing(
-        area, reference, tmp_path, monkeypatch):
-    real, ran = task.run_block, []
-
-    def crash_on_third(spec, options):
+def _crash_on_third(real, ran):
+    """``real`` (a block task) noting the blocks it ran in ``ran``; the third crashes the run."""
+    def task_fn(spec, options):
         if len(ran) == 2:
             raise Crash
         ran.append(spec.index)
         return real(spec, options)
 
+    return task_fn
+
+
+def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missing(
+        area, reference, tmp_path, monkeypatch):
+    real, ran = task.run_block, []
     out = tmp_path / "r.city.json"
-    monkeypatch.setattr(task, "run_block", crash_on_third)
+    monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
     with pytest.raises(Crash):
         _run(area, out)
     assert not out.exists() and len(list(journal_path(out).glob("block-*"))) == 2
@@ -686,3 +690,125 @@ def test_an_interrupted_run_releases_every_semaphore_it_registered():
     assert not {name, bare.name} & engine._SEMAPHORES
     assert not os.path.exists(f"/dev/shm/sem.{name.lstrip('/')}")
     assert not os.path.exists("/dev/shm/sem.mp-l2c-test")
+
+
+def _traced(area, out, **kw):
+    return reconstruct([area / "town.laz"], out, lods=("1.2", "1.3", "2.2"), block_size=1000.0,
+                       **kw)
+
+
+@pytest.fixture(scope="module")
+def traced_reference(area, tmp_path_factory):
+    out = tmp_path_factory.mktemp("traced") / "w1.city.json"
+    summary = _traced(area, out)
+    assert summary.blocks < 4 * 2 and summary.done >= 8 and summary.failed == 0
+    return out.read_bytes(), summary
+
+
+class _Three(engine.InProcess):
+    """In-process, but planned as for three workers (the two passes of a traced run)."""
+
+    workers = 3
+
+
+def _traced_in_parts(area, out, resume=False):
+    """The traced run of :func:`_traced`, planned for three workers, run in this process."""
+    from lidar2city.tools.reconstruct import _reconstruct
+
+    return _reconstruct(_Three(), 0.0, [area / "town.laz"], out, footprints=None,
+                        lods=("1.2", "1.3", "2.2"), crs=None, config=None, fmt=None,
+                        id_field=None, layer=None, progress=None, method="roof",
+                        primitives=None, check_images=None, block_size=1000.0,
+                        resume=resume, block_progress=None, edits=None)
+
+
+def test_traced_blocks_built_in_parts_give_the_bytes_of_the_whole_block(area, traced_reference,
+                                                                        tmp_path, monkeypatch):
+    """Without footprints, fewer blocks than the workers' runs: each block is traced
+    first, then its buildings are built in parts (their boxes plus the margin, cut
+    to the block's box, nothing claimed): the bytes of the block building them."""
+    from lidar2city.tools import blocks
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    out = tmp_path / "parts.city.json"
+    calls = []
+    first = task.trace_footprints
+    monkeypatch.setattr(task, "trace_footprints", lambda *a: calls.append(1) or first(*a))
+    s = _traced_in_parts(area, out)
+    # each block traced once, then built in parts
+    assert len(calls) == traced_reference[1].blocks < s.blocks
+    assert s.done == traced_reference[1].done
+    assert out.read_bytes() == traced_reference[0]
+
+
+def test_traced_parts_resumed_after_a_crash_give_the_same_bytes(area, traced_reference, tmp_path,
+                                                                monkeypatch):
+    """The journal of a traced run built in parts keeps the parts done; a resumed run
+    traces again (the same parts) and builds only the others."""
+    from lidar2city.tools import blocks
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    real, ran = task.run_block, []
+    out = tmp_path / "r.city.json"
+    monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
+    with pytest.raises(Crash):
+        _traced_in_parts(area, out)
+    assert len(list(journal_path(out).glob("block-*"))) == 2
+    first = list(ran)
+    monkeypatch.setattr(task, "run_block", lambda spec, options: ran.append(spec.index)
+                        or real(spec, options))
+    summary = _traced_in_parts(area, out, resume=True)
+    assert summary.resumed == 2 and sorted(ran) == list(range(summary.blocks))
+    assert not set(ran[2:]) & set(first)
+    assert out.read_bytes() == traced_reference[0]
+
+
+def test_traced_block_shared_by_two_workers_gives_the_same_bytes(area, traced_reference,
+                                                                 tmp_path, monkeypatch):
+    """A real 2-worker cluster on a one-block traced area: parts, the same bytes."""
+    from lidar2city.tools import blocks
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    out = tmp_path / "w2.city.json"
+    s = _traced(area, out, workers=2)
+    assert s.blocks > traced_reference[1].blocks and s.done == traced_reference[1].done
+    assert out.read_bytes() == traced_reference[0]
+
+
+@pytest.mark.parametrize("n,k", [(1, 4), (5, 2), (30, 7), (80, 16)])
+def test_weighted_parts_cover_every_footprint_once_in_strips_of_about_equal_work(n, k):
+    from lidar2city.tools.blocks import _weighted_parts
+
+    rng = np.random.default_rng(n)
+    centre = rng.uniform(0, 100, (n, 2)) * [3.0, 1.0]  # wider than high: strips across x
+    weights = rng.uniform(1.0, 3.0, n)
+    empty = np.zeros(n, dtype=bool)
+    parts = _weighted_parts(np.arange(n), centre, empty, weights, k)
+    assert sorted(i for p in parts for i in p) == list(range(n))
+    assert all(p == sorted(p) and p for p in parts) and len(parts) <= k
+    assert len(parts) == min(n, k)  # no weight dominates: every strip holds one at least
+    # strips along x, each about an equal share of the work (one footprint of slack)
+    assert all(max(centre[a, 0] for a in p) <= min(centre[b, 0] for b in q)
+               for p, q in zip(parts[:-1], parts[1:], strict=False))
+    work = [weights[p].sum() for p in parts]
+    assert max(work) <= weights.sum() / len(parts) + weights.max() + 1e-9
+    assert _weighted_parts(np.arange(n), centre, empty, weights, k) == parts
+
+
+def test_a_traced_part_reads_its_footprints_surroundings_inside_its_blocks_box():
+    import shapely
+
+    from lidar2city.datamodel import Footprints
+    from lidar2city.tools.blocks import BlockSpec, Frame, traced_parts
+
+    frame = Frame(np.array([1000.0, 2000.0, 0.0]), None, 1.0, 1.0)
+    block = BlockSpec(0, (1, 2), (1000.0, 2000.0, 1200.0, 2200.0), (), frame)
+    geoms = [shapely.box(10, 10, 20, 20), shapely.box(150, 150, 190, 195)]
+    bounds = np.array([g.bounds for g in geoms])
+    parts = traced_parts(block, bounds, 51.0, np.array([1.0, 1.0]), 1.0,
+                         lambda idx: Footprints([geoms[i] for i in idx], [f"b{i + 1}" for i in idx]),
+                         5)
+    assert [p.index for p in parts] == [5, 6] and all(p.traced for p in parts)
+    assert parts[0].world_box == (1000.0, 2000.0, 1071.0, 2071.0)  # cut to the block's box
+    assert parts[1].world_box == (1099.0, 2099.0, 1200.0, 2200.0)
+    assert [p.cost for p in parts] == [1.0, 1.0] and parts[1].footprints.ids == ["b2"]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys",
-           "split_size", "SPLIT_LEAST"]
+           "split_size", "SPLIT_LEAST", "traced_parts"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +59,17 @@ class BlockSpec:
     tiles : tuple of TileInfo
         Headers of the tiles meeting ``world_box``.
     frame : Frame
-    footprints : FootprintRef or None
+    footprints : FootprintRef, Footprints or None
         The block's footprints (read by the worker from the file); None: trace
-        them in the cell.
+        them in the cell; a :class:`~lidar2city.datamodel.Footprints` (local,
+        with their output positions in ``_index``): those a first pass traced
+        in the cell (:func:`traced_parts`), carried inline.
+    traced : bool
+        ``footprints`` were traced by the run: no points are claimed for them
+        (the block that traces them builds them as traced, unclaimed).
+    cost : float or None
+        The block's expected work in buildings, for cutting the run into
+        tasks of equal work; None: its number of footprints.
     """
 
     index: int
@@ -70,11 +78,18 @@ class BlockSpec:
     tiles: tuple
     frame: Frame
     footprints: object = None
+    traced: bool = False
+    cost: float | None = None
 
     @property
     def size(self) -> int:
         """Buildings known before the block runs (0 when traced)."""
         return 0 if self.footprints is None else len(self.footprints)
+
+    @property
+    def work(self) -> float:
+        """The block's expected work (:attr:`cost`, else its footprints, at least 1)."""
+        return float(self.cost) if self.cost is not None else float(max(self.size, 1))
 
 
 def block_keys(centres_local, frame: Frame, block_size: float) -> np.ndarray:
@@ -194,6 +209,73 @@ def _split_parts(block, centre, empty, split) -> list:
     along = idx[np.lexsort((idx, key))]
     k = -(-len(idx) // int(split))
     cuts = [len(idx) * j // k for j in range(k + 1)]
+    return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def traced_parts(spec, bounds, margin: float, weights, share: float, footprints,
+                 start: int) -> list:
+    """Specs of the parts of a traced block (``spec``, from :func:`traced_blocks`)
+    whose footprints a first pass traced, numbered from ``start``.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (N, 4)
+        Local bounds of the block's traced footprints, in their order.
+    margin : float
+        What a building reads around its footprint's box (m).
+    weights : ndarray, shape (N,)
+        Each footprint's expected work (e.g. its area: a building's cost grows
+        with its points), in buildings.
+    share : float
+        The most work a part should hold: the block is cut into strips
+        across its longer side of about equal work (:func:`_weighted_parts`),
+        each part carrying its work as :attr:`BlockSpec.cost`.
+    footprints : callable
+        ``footprints(idx)``: what a part carries for the footprints ``idx``.
+
+    Each part reads its footprints' box plus ``margin`` within the block's own
+    box: every box a building queries (its footprint's box plus at most
+    ``margin``) then holds the same points as in the whole block's cloud,
+    which is what the block built them from.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
+    if not len(bounds):
+        return []
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    empty = ~np.isfinite(centre).all(axis=1)
+    wb = spec.world_box
+    weights = np.asarray(weights, dtype=np.float64).reshape(-1)
+    k = max(1, int(np.ceil(weights.sum() / share - 1e-9))) if share > 0 else 1
+    specs = []
+    for idx in _weighted_parts(np.arange(len(bounds)), centre, empty, weights, k):
+        b = bounds[[i for i in idx if not empty[i]]]
+        world = None
+        if len(b):
+            w = spec.frame.to_world([b[:, 0].min() - margin, b[:, 1].min() - margin,
+                                     b[:, 2].max() + margin, b[:, 3].max() + margin])
+            world = (max(w[0], wb[0]), max(w[1], wb[1]), min(w[2], wb[2]), min(w[3], wb[3]))
+        specs.append(BlockSpec(start + len(specs), spec.cell, world, _tiles_meeting(spec.tiles, world),
+                               spec.frame, footprints(idx), traced=True,
+                               cost=float(weights[idx].sum())))
+    return specs
+
+
+def _weighted_parts(idx, centre, empty, weights, k: int) -> list:
+    """Footprint positions ``idx`` cut into at most ``k`` strips across their longer
+    side (by their centres, ties and empty footprints in footprint order) of
+    about equal total ``weights``, each part in footprint order."""
+    idx = np.asarray(idx, dtype=np.int64)
+    if k <= 1 or len(idx) <= 1:
+        return [idx.tolist()]
+    c = centre[idx]
+    ok = ~empty[idx]
+    span = (np.ptp(c[ok], axis=0) if ok.any() else np.zeros(2))
+    axis = int(span[1] > span[0])
+    along = idx[np.lexsort((idx, np.where(ok, c[:, axis], -np.inf)))]
+    cum = np.cumsum(weights[along])
+    # a strip ends with the footprint that brings it past its share of the total
+    ends = np.searchsorted(cum, cum[-1] * np.arange(1, k) / k, side="left") + 1
+    cuts = np.unique(np.concatenate([[0], np.clip(ends, 1, len(along)), [len(along)]]))
     return [np.sort(along[a:b]).tolist() for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 

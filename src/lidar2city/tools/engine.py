@@ -66,7 +66,7 @@ class InProcess:
         """Ready at once (see :meth:`DaskExecutor.ready`)."""
         return self
 
-    def map(self, fn, items, *args, run_hook=None, costs=None, ahead=()):
+    def map(self, fn, items, *args, run_hook=None, costs=None, ahead=(), balance=False):
         """``fn(item, *args)`` for every item in turn: ``(index, result or exception)``.
 
         ``run_hook(items, ahead)``, when given, is called once with the items this
@@ -75,7 +75,9 @@ class InProcess:
         ``ahead``: the items the process is expected to run after these (a
         cluster worker's next runs), whose inputs may be kept too.
         ``costs`` (one number per item) tells a cluster how to cut the items
-        into runs of equal work; here they are all one run.
+        into runs of equal work; here they are all one run. ``balance``: a
+        cluster hands the items out one by one, in order, to whichever worker
+        is free (see :meth:`DaskExecutor.map`); here nothing changes.
         """
         items = list(items)
         after = run_hook(items, list(ahead)) if run_hook is not None and items else None
@@ -235,10 +237,16 @@ class DaskExecutor:
         if self._dlog is not None:
             self._dlog.setLevel(self._dlog_level)
 
-    def map(self, fn, items, *args, run_hook=None, costs=None):
+    def map(self, fn, items, *args, run_hook=None, costs=None, balance=False):
         """As :meth:`InProcess.map`; a cluster task is a run of consecutive items
         (:func:`runs_of`, of equal total ``costs`` when given), and ``run_hook``
         is called on the worker per run.
+
+        ``balance``: every item is a task of its own, tied to no worker, handed
+        out in the items' order to whichever worker is free (Dask queues
+        them on the scheduler): a few items of uneven work that share their
+        inputs (the parts of one block, heaviest first) end about together.
+        Each is told the next :data:`AHEAD_RUNS` items, whose inputs it keeps.
 
         The runs are dealt to the workers in contiguous shares (:func:`shares_of`):
         each worker is asked to run its share's runs in order (Dask may still move
@@ -255,10 +263,18 @@ class DaskExecutor:
         self.ready()
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
-        runs = runs_of(len(items), self.workers, costs)
+        futures, where = [], {}
+        if balance:
+            for i in range(len(items)):
+                fut = self._client.submit(_run_many, items[i:i + 1], *shared, fn=fn,
+                                          run_hook=run_hook,
+                                          ahead=items[i + 1:i + 1 + AHEAD_RUNS], pure=False,
+                                          retries=RETRIES, priority=len(items) - i)
+                futures.append(fut)
+                where[fut.key] = (i, i + 1)
+        runs = [] if balance else runs_of(len(items), self.workers, costs)
         names = sorted(self._client.scheduler_info().get("workers", {}))
         shares = shares_of(len(runs), max(1, len(names)))
-        futures, where = [], {}
         for rank, (k, r) in enumerate(_dealt(shares)):
             a, b = runs[r]
             # the share's next runs (the tiles they read are kept for them), not all

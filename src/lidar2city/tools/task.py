@@ -7,7 +7,10 @@ none were given, and builds every building of the block with
 :func:`reconstruct_block` (the per-building step). The same spec and options
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
-in which blocks finish. :func:`trace_block` is the task of ``footprints`` on a
+in which blocks finish. With several workers and fewer traced blocks than
+their runs, :func:`trace_footprints` traces a block first and its buildings
+are built in parts (specs carrying the traced footprints inline, built as the
+block builds them). :func:`trace_block` is the task of ``footprints`` on a
 folder of tiles (the same blocks, traced). Decoded tiles are shared by the
 blocks a process runs in turn and kept only while its next blocks read them
 (:func:`tile_keeper`).
@@ -32,7 +35,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
            "give_back_memory", "run_block", "reconstruct_block", "splittable", "tile_keeper",
-           "TracedBlock", "worker_modules",
+           "TracedBlock", "worker_modules", "trace_footprints",
            "trace_block"]
 
 
@@ -430,6 +433,31 @@ def _traced_footprints(spec, options, cloud, classes):
     return _subset(fps, idx) if idx else None
 
 
+def _block_traced(spec, options, cloud, classes):
+    """The block's traced footprints (:func:`_traced_footprints`), numbered ``b1``,
+    ``b2``... in the block; none without building points."""
+    from ..datamodel import Footprints
+
+    fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
+    if fps is None:
+        return Footprints([], [])
+    return Footprints(fps.geometries, [f"b{j + 1}" for j in range(len(fps))], fps.attributes)
+
+
+def trace_footprints(spec, options: BlockOptions) -> BlockOutput:
+    """The first pass of a traced block shared by several workers: its footprints
+    (:func:`_block_traced`, the block's own cloud and classes, as
+    :func:`run_block` traces them) in ``footprints``, no results; the
+    buildings are then built in parts (:func:`lidar2city.tools.blocks.traced_parts`)."""
+    return _measured(_trace_footprints, spec, options)
+
+
+def _trace_footprints(spec, options):
+    cloud, classes = _block_cloud(spec, options)
+    return BlockOutput(spec.index, [], _block_traced(spec, options, cloud, classes),
+                       cloud is not None)
+
+
 def _points_inside(xy, geometries) -> list:
     """How many of the points ``xy`` (N, 2) each polygon holds."""
     import shapely
@@ -452,6 +480,8 @@ def block_footprints(spec):
     from ..io.vector import read_footprints
 
     ref, frame = spec.footprints, spec.frame
+    if isinstance(ref, Footprints):  # carried inline (traced by a first pass)
+        return ref
     fps, _ = read_footprints(ref.path, layer=ref.layer, id_field=ref.id_field,
                              origin=frame.origin[:2], xy_unit=frame.xy_unit,
                              target_crs=frame.crs, fids=ref.fids, unique_ids=False)
@@ -561,8 +591,6 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
         traced footprints are numbered ``b1``, ``b2``... inside the block (the
         run renumbers them in block order).
     """
-    from ..datamodel import Footprints
-
     read = None
     if _by_groups(spec, options):
         read = _read_parts(spec)
@@ -570,14 +598,13 @@ def _run_block(spec, options: BlockOptions) -> BlockOutput:
             return _run_groups(spec, options, *read)
     cloud, classes = _block_cloud(spec, options, read)
     fps = None if spec.footprints is None else block_footprints(spec)
-    if fps is not None and cloud is not None:
+    if fps is not None and cloud is not None and not spec.traced:
         # the footprints say where the buildings are
         classes = _claim(cloud, classes, fps, options)
     if fps is None:  # traced
-        fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
-        if fps is None:
-            return BlockOutput(spec.index, [], Footprints([], []), cloud is not None)
-        fps = Footprints(fps.geometries, [f"b{j + 1}" for j in range(len(fps))], fps.attributes)
+        fps = _block_traced(spec, options, cloud, classes)
+        if not len(fps):
+            return BlockOutput(spec.index, [], fps, cloud is not None)
     if cloud is None:  # no building point in this block
         return _without_points(spec, fps)
     images = options.check_images
@@ -731,7 +758,7 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
         # built again (only those: nothing to do, and no cost, where every one has them)
         short = [j for j, r in enumerate(done)
                  if r.attributes.get("point_count", cfg.min_points) < cfg.min_points]
-        if short and len(classes):
+        if short and len(classes) and not spec.traced:  # traced: never claimed
             few = _subset(fps, [idx[j] for j in short])
             claimed = _claim(cloud, classes, few, options)
             if (claimed != classes).any():
