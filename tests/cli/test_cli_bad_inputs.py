@@ -852,3 +852,22 @@ def test_geojson_of_projected_coordinates_without_crs(runner, block, tmp_path, c
     assert res.exit_code == 0, res.output
     assert "2 of 2 buildings reconstructed" in res.output
     assert "are not degrees" in caplog.text
+
+
+def test_a_finished_run_ignores_ctrl_c_while_its_process_ends(monkeypatch):
+    """Ctrl-C after the run's outputs are complete, while the interpreter ends: the
+    handler of before the run, Python's, turned it into click's 'Aborted!' with
+    status 1 (seen in CI at 95 % of a classify run). A process of its own (the
+    console script, ``python -m``) ignores it then; in a host program (CliRunner)
+    the handlers of before are put back."""
+    from lidar2city.cli import main as cli_main
+
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        cli_main._restore_handlers({signal.SIGINT: signal.default_int_handler}, finished=True)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        monkeypatch.setattr(cli_main, "_STANDALONE", [True])
+        cli_main._restore_handlers({signal.SIGINT: signal.default_int_handler}, finished=True)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)

@@ -15,7 +15,10 @@ import click
 
 from ._lazy import LazyGroup
 
-__all__ = ["cli"]
+__all__ = ["cli", "main"]
+
+#: set by :func:`main`: this process runs one command and ends
+_STANDALONE: list = []
 
 
 class _RootGroup(LazyGroup):
@@ -58,7 +61,7 @@ class _RootGroup(LazyGroup):
             _fail(ctx, f"{where}{exc.strerror or exc}")
         finally:
             gc.set_threshold(*thresholds)
-            _restore_handlers(previous)
+            _restore_handlers(previous, finished=True)
             _atomic.end_run()
 
 
@@ -142,8 +145,14 @@ def _install_interrupt_handlers():
     return previous
 
 
-def _restore_handlers(previous):
+def _restore_handlers(previous, *, finished=False):
+    """Put the handlers of before the run back; in a process of its own
+    (:func:`main`) a finished run ignores SIGINT instead while the interpreter
+    ends: its outputs are complete and kept, and a Ctrl-C then must not turn
+    it into click's "Aborted!" with status 1."""
     for sig, handler in previous.items():
+        if finished and _STANDALONE and sig == signal.SIGINT:
+            handler = signal.SIG_IGN
         signal.signal(sig, handler)
 
 
@@ -168,5 +177,11 @@ def cli(verbose, quiet):
                         format="%(levelname)s %(name)s: %(message)s")
 
 
+def main():  # pragma: no cover - the console script, exercised in subprocesses
+    """The ``lidar2city`` command: :func:`cli` in a process of its own."""
+    _STANDALONE.append(True)
+    return cli()
+
+
 if __name__ == "__main__":  # pragma: no cover
-    cli()
+    main()
