@@ -23,9 +23,11 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
+import sys
 import threading
 import time
 
@@ -495,9 +497,6 @@ def release_semaphores() -> None:
     nannies' queue locks), and tell the resource tracker: for a run ended by
     ``os._exit``, which skips multiprocessing's exit hooks (the tracker would unlink
     them itself and warn of "leaked semaphore objects"). Safe in a signal handler."""
-    import contextlib
-    import sys
-
     util = sys.modules.get("multiprocessing.util")
     sync = sys.modules.get("multiprocessing.synchronize")
     if util is None or sync is None:
@@ -573,8 +572,6 @@ def _warm(exit_fast: bool = False):
 def _exit_now():
     """End this worker process now, its output streams flushed: nothing it holds
     outlives it (its scratch files are unlinked, its results already sent)."""
-    import sys
-
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
