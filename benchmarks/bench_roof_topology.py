@@ -267,7 +267,7 @@ def delft(d):
     if models:
         print(f"  models kept by [lod22] select: {type_counts(models)}")
     if "--band" in sys.argv[1:]:
-        median_band(np.array(rms), np.array(corners), types, parts, solids, fps.geometries)
+        median_band(np.array(rms), np.array(corners), types, parts, solids, fps.geometries, bxyz)
     if option("--figure"):
         figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
 
@@ -371,7 +371,8 @@ def _ideal_parts(dist, cluster, corners, *, part_corners=2):
     return np.sqrt(sse / n), corners
 
 
-def median_band(rms, corners, types, parts, solids, geoms, *, target=0.15, upto=0.185, fin_corners=2):
+def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15, upto=0.185, fin_corners=2,
+                reach=0.8, level=0.3):
     """The buildings that decide the median RMSE and where their squared error is (a
     diagnostic; the score is unchanged).
 
@@ -382,7 +383,13 @@ def median_band(rms, corners, types, parts, solids, geoms, *, target=0.15, upto=
     source at zero error, and how many buildings then reach ``target``. Last, what a
     strip of the neighbour's height along each shared edge (the largest source) would
     cost in corners: median corners with ``fin_corners`` more on every building whose
-    BIC (:func:`lidar2city.roof.building.bic`) drops with that source at zero."""
+    BIC (:func:`lidar2city.roof.building.bic`) drops with that source at zero; and how
+    much of that source's squared error is in points with a building point (of ``bxyz``)
+    outside the footprint within ``reach`` m across and ``level`` m in height (the
+    neighbour's roof or wall going on over the line), and how far inside the line they lie."""
+    import shapely
+    from scipy.spatial import cKDTree
+
     from lidar2city.roof.building import bic
 
     n = len(rms)
@@ -417,6 +424,20 @@ def median_band(rms, corners, types, parts, solids, geoms, *, target=0.15, upto=
           f"{int(takes.sum())} buildings take it by BIC, median corners {np.median(corners + fin_corners * takes):.1f} "
           f"(now {np.median(corners):.1f}), median RMSE at best "
           f"{np.median(np.where(takes, np.sqrt(sse_nb / npts), rms)):.4f} m")
+    tree = cKDTree(bxyz[:, :2])
+    sq_nb, sq_on, depth = 0.0, 0.0, []
+    for p, s, g in zip(parts, src, geoms, strict=True):
+        for k in np.flatnonzero(s == 0):
+            q = bxyz[tree.query_ball_point(p[1][k, :2], reach)]
+            out = q[~shapely.contains_xy(g, q[:, 0], q[:, 1])]
+            sq_nb += p[0][k] ** 2
+            sq_on += p[0][k] ** 2 * bool(np.any(np.abs(out[:, 2] - p[1][k, 2]) <= level))
+            depth.append(p[3][k])
+    if depth:
+        print(f"  of (1), {100 * sq_on / sq_nb:.0f} % of its squared error in points with a building point outside "
+              f"the footprint within {reach} m across and {level} m in height; {len(depth)} points, "
+              f"{np.median(depth):.2f} m inside the footprint line in the median (90 % within "
+              f"{np.percentile(depth, 90):.2f} m)")
     ideal = np.array([_ideal_parts(p[0], f[1], c) for p, f, c in zip(parts, found, corners, strict=True)])
     print(f"  every cluster of (2)-(4) modelled exactly where the BIC drops, 2 corners each (the least: a "
           f"part clipped at the outline): median corners {np.median(ideal[:, 1]):.1f}, median RMSE "
