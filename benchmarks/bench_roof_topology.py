@@ -355,24 +355,25 @@ def point_sources(dist, pts, zr, d_edge, d_other, solids, footprint, *, near=0.3
     return source, np.where(np.isin(source, (1, 2, 3)), cluster, -1)
 
 
-def _ideal_parts(dist, cluster, corners, *, part_corners=2):
-    """``(RMSE, corners)`` of a building whose point clusters (``cluster`` >= 0) are modelled
-    exactly, each at the cost of ``part_corners`` roof corners, taken largest gain first
-    while the BIC (:func:`lidar2city.roof.building.bic`) drops."""
-    from lidar2city.roof.building import bic
+def _ideal_parts(dist, groups, corners, *, penalty=None, part_corners=2):
+    """``(RMSE, corners)`` of a building whose point groups (``groups``: boolean masks over
+    ``dist``) are modelled exactly, each at the cost of ``part_corners`` roof corners,
+    taken largest gain first while ``n log(SSE / n) + penalty log(n) corners`` drops
+    (``penalty`` None: the BIC of :func:`lidar2city.roof.building.bic`)."""
+    from lidar2city.roof.building import CORNER_PARAMETERS
 
+    p = CORNER_PARAMETERS if penalty is None else penalty
     n, sq = len(dist), dist ** 2
     sse = float(sq.sum())
-    gains = sorted((float(sq[cluster == c].sum()) for c in np.unique(cluster[cluster >= 0])), reverse=True)
-    for g in gains:
-        if bic(n, sse - g, corners + part_corners) >= bic(n, sse, corners):
+    for g in sorted((float(sq[m].sum()) for m in groups), reverse=True):
+        if g <= 0 or g >= sse or n * np.log((sse - g) / sse) + p * np.log(n) * part_corners >= 0:
             break
         sse, corners = sse - g, corners + part_corners
     return np.sqrt(sse / n), corners
 
 
-def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15, upto=0.185, fin_corners=2,
-                reach=0.8, level=0.3):
+def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15, upto=0.185, reach=0.8,
+                level=0.3):
     """The buildings that decide the median RMSE and where their squared error is (a
     diagnostic; the score is unchanged).
 
@@ -380,17 +381,17 @@ def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15,
     there, one row per building with ``target`` < RMSE <= ``upto`` (id, RMSE, corners,
     points, footprint area, roof type, share of its squared error per source of
     :func:`point_sources`), and per source over all buildings: the median RMSE with that
-    source at zero error, and how many buildings then reach ``target``. Last, what a
-    strip of the neighbour's height along each shared edge (the largest source) would
-    cost in corners: median corners with ``fin_corners`` more on every building whose
-    BIC (:func:`lidar2city.roof.building.bic`) drops with that source at zero; and how
-    much of that source's squared error is in points with a building point (of ``bxyz``)
-    outside the footprint within ``reach`` m across and ``level`` m in height (the
-    neighbour's roof or wall going on over the line), and how far inside the line they lie."""
+    source at zero error, and how many buildings then reach ``target``. Then how much of
+    the largest source's squared error (a neighbour's edge above our roof) is in points
+    with a building point (of ``bxyz``) outside the footprint within ``reach`` m across
+    and ``level`` m in height (the neighbour's roof or wall going on over the line), and
+    how far inside the line they lie. Last, ideal models (:func:`_ideal_parts`): the
+    clusters above / below the roof, a strip at the neighbour's height along the shared
+    edges, or both, modelled exactly at 2 corners a group, for several corner penalties:
+    what the median RMSE and corners could be at best."""
     import shapely
     from scipy.spatial import cKDTree
 
-    from lidar2city.roof.building import bic
 
     n = len(rms)
     need = n // 2 + 1  # the middle value (both, for an even n) at or below the target
@@ -416,14 +417,6 @@ def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15,
         zeroed = np.array([np.sqrt(np.mean(np.where(s == k, 0.0, p[0]) ** 2)) for s, p in zip(src, parts)])
         share = sum(np.sum(p[0][s == k] ** 2) for s, p in zip(src, parts)) / sse.sum()
         print(f"    ({k + 1}) {name:24s} {100 * share:5.1f} %  {np.median(zeroed):.4f} m  {np.sum(zeroed <= target)}")
-    npts = np.array([len(p[0]) for p in parts])
-    sse_nb = np.array([np.sum(np.where(s == 0, 0.0, p[0]) ** 2) for s, p in zip(src, parts)])
-    takes = np.array([b < a and bic(m, b, c + fin_corners) < bic(m, a, c)
-                      for m, a, b, c in zip(npts, sse, sse_nb, corners, strict=True)])
-    print(f"  a strip at the neighbour's height along shared edges, its points at zero error: "
-          f"{int(takes.sum())} buildings take it by BIC, median corners {np.median(corners + fin_corners * takes):.1f} "
-          f"(now {np.median(corners):.1f}), median RMSE at best "
-          f"{np.median(np.where(takes, np.sqrt(sse_nb / npts), rms)):.4f} m")
     tree = cKDTree(bxyz[:, :2])
     sq_nb, sq_on, depth = 0.0, 0.0, []
     for p, s, g in zip(parts, src, geoms, strict=True):
@@ -438,10 +431,18 @@ def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15,
               f"the footprint within {reach} m across and {level} m in height; {len(depth)} points, "
               f"{np.median(depth):.2f} m inside the footprint line in the median (90 % within "
               f"{np.percentile(depth, 90):.2f} m)")
-    ideal = np.array([_ideal_parts(p[0], f[1], c) for p, f, c in zip(parts, found, corners, strict=True)])
-    print(f"  every cluster of (2)-(4) modelled exactly where the BIC drops, 2 corners each (the least: a "
-          f"part clipped at the outline): median corners {np.median(ideal[:, 1]):.1f}, median RMSE "
-          f"{np.median(ideal[:, 0]):.4f} m, {int(np.sum(ideal[:, 0] <= target))} buildings at or below {target:.3f} m")
+    kinds = {"clusters (2)-(4)": lambda s, c: [c == k for k in np.unique(c[c >= 0])],
+             "neighbour strip (1)": lambda s, c: [s == 0],
+             "both": lambda s, c: [c == k for k in np.unique(c[c >= 0])] + [s == 0]}
+    print("  ideal models: each group modelled exactly at 2 corners (the least: a part clipped at the outline), "
+          "taken while n log(SSE/n) + p log(n) corners drops (p 3 = BIC); median RMSE / median corners")
+    for p in (3, 10, 20, 35, 50):
+        cells = []
+        for make in kinds.values():
+            ideal = np.array([_ideal_parts(q[0], make(*f), c, penalty=p)
+                              for q, f, c in zip(parts, found, corners, strict=True)])
+            cells.append(f"{np.median(ideal[:, 0]):.4f} m / {np.median(ideal[:, 1]):.1f}")
+        print(f"    p {p:2d}: " + ", ".join(f"{k} {v}" for k, v in zip(kinds, cells, strict=True)))
 
 
 #: the [lod22] variants the Pareto table compares (name, Lod22Config keywords): every roof
