@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_roof_topology.py [DATA_DIR] [delft|synthetic|city3d]
        [--figure docs/roof_topology_delft.png] [--topology grid] [--no-step-snake] [--no-restore]
-       [--select] [--raised] [--outline]
+       [--select] [--raised] [--outline] [--band]
        python benchmarks/bench_roof_topology.py [DATA_DIR] --pareto
 (default data $LIDAR2CITY_DATA or ../shared/data; one section name runs only that
 section; --figure also draws a Delft block from above, the points beside our
@@ -14,6 +14,9 @@ step edges as angle-snapped straight pieces instead of the exact 2-D snake's;
 --raised sets ``[lod22] raised_parts = true`` (chimneys as level rectangles);
 --outline sets ``[lod22] outline_tolerance = 1`` (outline jogs within a point spacing
 straightened);
+--band also prints the median band of the Delft RMSE (:func:`median_band`: the buildings
+that decide the median, their squared error by where the points lie, and the median
+each error source at zero would give);
 --pareto prints only the Delft Pareto table of the ``[lod22]`` variants and the
 per-building choice among them, :func:`pareto`)
 
@@ -223,7 +226,7 @@ def delft(d):
     results = delft_models(cloud, fps, config())
     bxyz = cloud.xyz[cls == 6]
     rms, corners, short, total, valid, faces, times, fallback = [], [], 0.0, 0.0, 0, 0, [], 0
-    types, parts = [], []
+    types, parts, solids = [], [], []
     tree = shapely.STRtree(fps.geometries)
     for g, r in zip(fps.geometries, results, strict=True):
         pts, s22, dist, (c, sh, tot) = building_score(g, r, bxyz)
@@ -233,6 +236,7 @@ def delft(d):
         near = shapely.union_all([fps.geometries[h] for h in others]) if others else None
         parts.append((dist, pts, roof_height(s22, pts[:, :2]), shapely.distance(g.boundary, xy),
                       shapely.distance(near, xy) if near is not None else np.full(len(pts), np.inf)))
+        solids.append(s22)
         fell = "lod22_fallback" in r.attributes
         valid += all(not check_solid(s) for s in s22) and not fell
         fallback += fell
@@ -262,8 +266,183 @@ def delft(d):
     models = [r.attributes["roof_model"] for r in results if "roof_model" in r.attributes]
     if models:
         print(f"  models kept by [lod22] select: {type_counts(models)}")
+    if "--band" in sys.argv[1:]:
+        median_band(np.array(rms), np.array(corners), types, parts, solids, fps.geometries, bxyz)
     if option("--figure"):
         figure(Path(option("--figure")), cloud.xyz[cls == 6], fps.geometries, results)
+
+
+#: the error sources of :func:`median_band`, in the order a point is given to the first that holds
+BAND_SOURCES = ("neighbour edge above", "cluster above", "cluster below > 1 m in", "below near outline",
+                "outline < 0.5 m", "step edge < 0.5 m", "intersection < 0.5 m", "other far", "near (< 0.3 m)")
+
+
+def _interior_edges(solids, footprint, *, probe=0.05, level=0.1):
+    """The roof-face edges of ``solids`` off the footprint outline, as ``(step, intersection)``
+    lists of 2-D segments: a step edge has faces more than ``level`` m apart in height on
+    its two sides (``probe`` m off its middle), an intersection edge does not."""
+    import shapely
+
+    step, inter = [], []
+    for s in solids:
+        for surf in s.surfaces:
+            if surf.semantic != "RoofSurface":
+                continue
+            v = s.vertices[surf.rings[0]][:, :2]
+            for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
+                length = float(np.hypot(*(b - a)))
+                m = (a + b) / 2
+                if length < 1e-6 or footprint.boundary.distance(shapely.Point(m)) < probe:
+                    continue
+                nrm = np.array([a[1] - b[1], b[0] - a[0]]) / length
+                z = roof_height(solids, np.array([m + probe * nrm, m - probe * nrm]))
+                (step if not np.all(np.isfinite(z)) or abs(z[0] - z[1]) > level else inter).append((a, b))
+    return step, inter
+
+
+def _segment_distance(xy, segments):
+    import shapely
+
+    if not segments:
+        return np.full(len(xy), np.inf)
+    lines = shapely.multilinestrings([[tuple(a), tuple(b)] for a, b in segments])
+    return shapely.distance(lines, shapely.points(xy))
+
+
+def point_sources(dist, pts, zr, d_edge, d_other, solids, footprint, *, near=0.3, link=1.0, min_points=4,
+                  inner=1.0, band=0.5):
+    """The error source of each point of a building (index into :data:`BAND_SOURCES`).
+
+    Points within ``near`` m of the model are ``near``; of the others, in this order: a
+    neighbour's edge above our roof (as :func:`error_sources`), clusters (linked within
+    ``link`` m, ``min_points`` or more, as :func:`ceilings`) above the roof, clusters below
+    it with their median more than ``inner`` m inside the outline, clusters below it nearer
+    the outline (facades set back, porches), then single points within ``band`` m of the
+    outline, of a step edge, of an intersection edge, and the rest.
+
+    Returns ``(source, cluster)``: the source of each point and its cluster's number
+    (-1 for a point in no cluster of sources 2-4)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    dz = pts[:, 2] - zr
+    far = dist > near
+    nb = far & (d_edge < 0.3) & (d_other < 0.5) & (dz > 0.3)
+    idx = np.flatnonzero(far & ~nb)
+    up, low_in, low_out = (np.zeros(len(dist), bool) for _ in range(3))
+    cluster = np.full(len(dist), -1)
+    if len(idx) >= min_points:
+        pairs = cKDTree(pts[idx]).query_pairs(link, output_type="ndarray")
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx),) * 2)
+        n, lab = connected_components(graph, directed=False)
+        big = np.bincount(lab, minlength=n)[lab] >= min_points
+        # a point under no roof face (NaN) counts as below it
+        med_dz = np.array([np.median(np.nan_to_num(dz[idx[lab == c]], nan=-1.0)) for c in range(n)])
+        med_edge = np.array([np.median(d_edge[idx[lab == c]]) for c in range(n)])
+        up[idx[big & (med_dz[lab] > 0)]] = True
+        low_in[idx[big & (med_dz[lab] <= 0) & (med_edge[lab] > inner)]] = True
+        low_out[idx[big & (med_dz[lab] <= 0) & (med_edge[lab] <= inner)]] = True
+        cluster[idx[big]] = lab[big]
+    step, inter = _interior_edges(solids, footprint)
+    masks = (nb, up, low_in, low_out, d_edge < band, _segment_distance(pts[:, :2], step) < band,
+             _segment_distance(pts[:, :2], inter) < band, np.ones(len(dist), bool))
+    source = np.full(len(dist), len(BAND_SOURCES) - 1)
+    rest = far.copy()
+    for k, m in enumerate(masks):
+        source[rest & m] = k
+        rest &= ~m
+    return source, np.where(np.isin(source, (1, 2, 3)), cluster, -1)
+
+
+def _ideal_parts(dist, groups, corners, *, penalty=None, part_corners=2):
+    """``(RMSE, corners)`` of a building whose point groups (``groups``: boolean masks over
+    ``dist``) are modelled exactly, each at the cost of ``part_corners`` roof corners,
+    taken largest gain first while ``n log(SSE / n) + penalty log(n) corners`` drops
+    (``penalty`` None: the BIC of :func:`lidar2city.roof.building.bic`)."""
+    from lidar2city.roof.building import CORNER_PARAMETERS
+
+    p = CORNER_PARAMETERS if penalty is None else penalty
+    n, sq = len(dist), dist ** 2
+    sse = float(sq.sum())
+    for g in sorted((float(sq[m].sum()) for m in groups), reverse=True):
+        if g <= 0 or g >= sse or n * np.log((sse - g) / sse) + p * np.log(n) * part_corners >= 0:
+            break
+        sse, corners = sse - g, corners + part_corners
+    return np.sqrt(sse / n), corners
+
+
+def median_band(rms, corners, types, parts, solids, geoms, bxyz, *, target=0.15, upto=0.185, reach=0.8,
+                level=0.3):
+    """The buildings that decide the median RMSE and where their squared error is (a
+    diagnostic; the score is unchanged).
+
+    Prints how many buildings must fall to ``target`` or below for the median to get
+    there, one row per building with ``target`` < RMSE <= ``upto`` (id, RMSE, corners,
+    points, footprint area, roof type, share of its squared error per source of
+    :func:`point_sources`), and per source over all buildings: the median RMSE with that
+    source at zero error, and how many buildings then reach ``target``. Then how much of
+    the largest source's squared error (a neighbour's edge above our roof) is in points
+    with a building point (of ``bxyz``) outside the footprint within ``reach`` m across
+    and ``level`` m in height (the neighbour's roof or wall going on over the line), and
+    how far inside the line they lie. Last, ideal models (:func:`_ideal_parts`): the
+    clusters above / below the roof, a strip at the neighbour's height along the shared
+    edges, or both, modelled exactly at 2 corners a group, for several corner penalties:
+    what the median RMSE and corners could be at best."""
+    import shapely
+    from scipy.spatial import cKDTree
+
+
+    n = len(rms)
+    need = n // 2 + 1  # the middle value (both, for an even n) at or below the target
+    done = int(np.sum(rms <= target))
+    print(f"  median band: {done}/{n} buildings at or below {target:.3f} m; the median needs "
+          f"{need}: {max(need - done, 0)} more must drop")
+    found = [point_sources(*p, s, g) for p, s, g in zip(parts, solids, geoms, strict=True)]
+    src = [f[0] for f in found]
+    print("    id   RMSE  corners points  area m2  roof type    % of its squared error: "
+          + ", ".join(f"({k + 1}) {name}" for k, name in enumerate(BAND_SOURCES)))
+    print("    " + " " * 57 + " ".join(f"{f'({k + 1})':>4}" for k in range(len(BAND_SOURCES))))
+    for i in np.argsort(rms, kind="stable"):
+        if not target < rms[i] <= upto:
+            continue
+        sq = parts[i][0] ** 2
+        share = np.bincount(src[i], weights=sq, minlength=len(BAND_SOURCES)) / max(sq.sum(), 1e-12)
+        print(f"    {i:3d}  {rms[i]:.3f}  {corners[i]:4d}  {len(sq):6d}  {geoms[i].area:7.0f}  {types[i]:11s} "
+              + " ".join(f"{100 * v:4.0f}" for v in share))
+    print(f"  per source, all {n} buildings: share of the squared error, median RMSE with it at zero, "
+          f"buildings at or below {target:.3f} m then")
+    sse = np.array([np.sum(p[0] ** 2) for p in parts])
+    for k, name in enumerate(BAND_SOURCES):
+        zeroed = np.array([np.sqrt(np.mean(np.where(s == k, 0.0, p[0]) ** 2)) for s, p in zip(src, parts)])
+        share = sum(np.sum(p[0][s == k] ** 2) for s, p in zip(src, parts)) / sse.sum()
+        print(f"    ({k + 1}) {name:24s} {100 * share:5.1f} %  {np.median(zeroed):.4f} m  {np.sum(zeroed <= target)}")
+    tree = cKDTree(bxyz[:, :2])
+    sq_nb, sq_on, depth = 0.0, 0.0, []
+    for p, s, g in zip(parts, src, geoms, strict=True):
+        for k in np.flatnonzero(s == 0):
+            q = bxyz[tree.query_ball_point(p[1][k, :2], reach)]
+            out = q[~shapely.contains_xy(g, q[:, 0], q[:, 1])]
+            sq_nb += p[0][k] ** 2
+            sq_on += p[0][k] ** 2 * bool(np.any(np.abs(out[:, 2] - p[1][k, 2]) <= level))
+            depth.append(p[3][k])
+    if depth:
+        print(f"  of (1), {100 * sq_on / sq_nb:.0f} % of its squared error in points with a building point outside "
+              f"the footprint within {reach} m across and {level} m in height; {len(depth)} points, "
+              f"{np.median(depth):.2f} m inside the footprint line in the median (90 % within "
+              f"{np.percentile(depth, 90):.2f} m)")
+    kinds = {"clusters (2)-(4)": lambda s, c: [c == k for k in np.unique(c[c >= 0])],
+             "neighbour strip (1)": lambda s, c: [s == 0],
+             "both": lambda s, c: [c == k for k in np.unique(c[c >= 0])] + [s == 0]}
+    print("  ideal models: each group modelled exactly at 2 corners (the least: a part clipped at the outline), "
+          "taken while n log(SSE/n) + p log(n) corners drops (p 3 = BIC); median RMSE / median corners")
+    for p in (3, 10, 20, 35, 50):
+        cells = []
+        for make in kinds.values():
+            ideal = np.array([_ideal_parts(q[0], make(*f), c, penalty=p)
+                              for q, f, c in zip(parts, found, corners, strict=True)])
+            cells.append(f"{np.median(ideal[:, 0]):.4f} m / {np.median(ideal[:, 1]):.1f}")
+        print(f"    p {p:2d}: " + ", ".join(f"{k} {v}" for k, v in zip(kinds, cells, strict=True)))
 
 
 #: the [lod22] variants the Pareto table compares (name, Lod22Config keywords): every roof
