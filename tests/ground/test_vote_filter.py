@@ -116,3 +116,19 @@ def test_veto_bad_input():
         smrf_vote(xyz, veto=0.0)
     with pytest.raises(InputError, match="fourth"):
         vote_rule(vote_features(xyz)[0], **VOTE_RULE, veto=1.0)
+
+
+def test_veto_in_the_ground_config():
+    """``ground.veto`` reaches smrf_vote (and only it); it must be > 0; inf turns it off."""
+    from lidar2city.errors import ConfigError
+
+    assert GroundConfig(method="smrf_vote", veto=0.8).method_params()["veto"] == 0.8
+    assert "veto" not in GroundConfig(method="smrf_segments", veto=0.8).method_params()
+    for bad in (0.0, -1.0):
+        with pytest.raises(ConfigError, match="ground.veto"):
+            GroundConfig(veto=bad)
+    scene = make_terrain("terraces", spacing=1.0, seed=1)
+    np.testing.assert_array_equal(
+        ground_mask(scene.xyz, method="smrf_vote",
+                    **GroundConfig(method="smrf_vote", veto=np.inf).method_params()),
+        smrf_vote(scene.xyz, veto=None))

@@ -124,6 +124,10 @@ class GroundConfig:
                                              "if the opening also cuts one of its cells at this "
                                              "slope (rise/run), e.g. 0.4 with slope 0.1; default "
                                              "none: no such test")
+    veto: float | None = field(None, "smrf_vote: a point near the strict surface is object when "
+                                     "its height off smrf_segments' slope-0.4 surface exceeds "
+                                     "this many tolerances (0.8 is the fitted value); default "
+                                     "none (inf): no veto")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -153,6 +157,8 @@ class GroundConfig:
             raise ConfigError(f"ground.min_cells: must be an integer >= 1, got {self.min_cells!r}")
         if self.strong_slope is not None and not self.strong_slope > 0:
             raise ConfigError(f"ground.strong_slope: must be > 0, got {self.strong_slope!r}")
+        if self.veto is not None and not self.veto > 0:
+            raise ConfigError(f"ground.veto: must be > 0, got {self.veto!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 

@@ -209,7 +209,7 @@ outlier_depth
         Wall distance (m) beyond which the lenient surface decides; default
         :data:`VOTE_RULE`.
     veto : float or None
-        Option, off by default (None): a fourth surface (``smrf_segments``'
+        Option, off by default (None or inf): a fourth surface (``smrf_segments``'
         at :data:`VETO_SLOPE`) is built, and a point near the strict surface
         is object when its ratio to the fourth one exceeds ``veto``
         (:data:`VOTE_VETO` is the fitted value). ``bench_ground_vote.py
@@ -250,6 +250,8 @@ outlier_depth
     """
     _check_positive(near=near, steep=steep, plain=plain, clear=clear,
                     **({} if veto is None else {"veto": veto}))
+    if veto is not None and np.isinf(veto):
+        veto = None  # no point is vetoed: the fourth surface is not built
     features, out = vote_features(xyz, cell=cell, window=window, scalar=scalar,
                                 threshold=threshold, extend=extend, jump=jump, raised=raised,
                                 min_cells=min_cells, outlier_radius=outlier_radius,
