@@ -1,4 +1,4 @@
-"""The learnt vote of three SMRF surfaces (``smrf_vote``): its rule refitted, leave-one-out, speed.
+"""The learnt vote of SMRF surfaces (``smrf_vote``): its rule refitted, leave-one-out, speed.
 
 Usage::
 
@@ -9,7 +9,8 @@ Usage::
 its tolerance ratios to three provisional surfaces of one SMRF opening
 (:func:`~lidar2city.ground.vote_features`: ``smrf_segments``' surface at
 slope 0.1, the same at 0.3, plain SMRF's at 0.1) and its distance to the
-nearest wall. This script:
+nearest wall, and (its `veto`) a fourth, ``smrf_segments``' at 0.4. This
+script:
 
 1. computes the features of every point of the ISPRS reference samples in
    ``DIR/isprs/reference`` and of the synthetic terrains of
@@ -19,14 +20,16 @@ nearest wall. This script:
    the pooled ratios, that minimises the weighted point error, every sample
    weighted equally and the synthetic terrains together as one more sample),
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
-   objective, leaving each ISPRS sample out in turn; it prints the held-out
-   sample's type I / type II / total error, the rule of each fold, their
-   mean and maximum (the leave-one-out figure);
+   objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
+   each ISPRS sample out in turn; it prints the held-out sample's type I /
+   type II / total error with the veto and the total without it, the rule
+   of each fold, their mean and maximum (the leave-one-out figures);
 3. fits it on all seven and prints the rule: its thresholds, rounded to two
-   decimals, are :data:`lidar2city.ground.VOTE_RULE` (the script says
-   whether they still are);
-4. scores ``smrf_vote`` with its defaults against ``smrf_segments`` (the
-   ``ground`` default) on the seven samples, the synthetic terrains and the
+   decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
+   :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
+   are);
+4. scores ``smrf_vote`` with its defaults and without its veto against
+   ``smrf_segments`` on the seven samples, the synthetic terrains and the
    small tile with a building of ``bench_ground_segments.py``;
 5. the bound of any per-point rule over such surfaces: the share of points
    that every one of ``smrf_segments`` at the slopes of :data:`ORACLE_SLOPES`
@@ -50,13 +53,12 @@ nearest wall. This script:
    (:func:`raised_all_sides`), the cloth simulation filter's call when its
    package is installed), the worst sample's error with such trees fitted
    on that sample itself over every cue (the ceiling of the rule family
-   there), then of the coded rule plus a veto by that fourth surface (a
-   point near the strict surface but farther than the veto from the fourth
-   one is object), the veto chosen per fold too; the cues tried for issue
-   18 (see the README); a few minutes with the cloth filter;
-9. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
-   ``DIR/isprs/sites/CSite4_orig-utm.laz`` against reading and writing it
-   with laspy (best of ``--repeat``, interleaved).
+   there); the cues tried for issue 18 (the first became the veto; see the
+   README); a few minutes with the cloth filter;
+9. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
+   ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
+   against reading and writing it with laspy (best of ``--repeat``,
+   interleaved).
 
 About a minute plus the speed runs.
 """
@@ -105,7 +107,7 @@ CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3",
 #: reach (m) of the ``raised on all sides`` cue.
 RAISED_REACH = 12.0
 CUE_DEPTH = 3
-#: vetoes (tolerance ratios to the fourth surface) tried by the ``--cues`` veto check.
+#: vetoes (tolerance ratios to the fourth surface) :func:`fit_veto` chooses among.
 VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
 ANATOMY_WALL = 5.0
 
@@ -300,7 +302,7 @@ def cues(samples, scenes, feats, syn):
     tree fitted on that sample itself over the ratios and every cue (the rule family's
     ceiling there, with hindsight)."""
     def cue_columns(xyz, f):
-        return {"segments 0.4 ratio": vote_features(xyz, fourth=VETO_SLOPE)[0][:, 4],
+        return {"segments 0.4 ratio": f[:, 4],
                 "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz),
                 "raised on all sides": raised_all_sides(xyz),
                 "cloth (CSF) ground": cloth_ground(xyz)}
@@ -338,52 +340,6 @@ def cues(samples, scenes, feats, syn):
         wrong = np.mean(predict(tree, every) != samples[worst][1])
         print(f"{worst}, a depth-{depth} tree over the ratios and the {len(known)} cues fitted on "
               f"{worst} itself: total {100 * wrong:.2f} %")
-    veto_check(samples, feats, syn, {n: c["segments 0.4 ratio"] for n, c in real.items()},
-               [c["segments 0.4 ratio"] for c in fake])
-
-
-def veto_check(samples, feats, syn, fourth, fourth_syn):
-    """Print the leave-one-out of ``smrf_vote``'s ``veto`` option (the coded rule refitted,
-    then the veto of :data:`VETO` minimising the same objective) and its scores fitted on all
-    seven (:data:`~lidar2city.ground.VOTE_VETO`)."""
-
-    def veto_rule(f, q, rule, veto):
-        return vote_rule(np.column_stack([f[:, :4], q]), **rule, veto=veto)
-
-    print(f"\nthe coded rule plus a veto by the segment surface at slope {VETO_SLOPE:g} "
-          f"(ratio > veto near the strict surface: object), veto chosen among "
-          f"{', '.join(f'{v:g}' for v in VETO)}")
-
-    def fit(names):
-        sets = ([(np.column_stack([feats[n][:, :4], fourth[n]]), samples[n][1], 1.0)
-                 for n in names]
-                + [(np.column_stack([f[:, :4], q]), g, 1.0 / len(syn))
-                   for (f, g), q in zip(syn, fourth_syn)])
-        rule, _ = fit_rule(sets)
-        if rule is None:
-            return None, None
-        return rule, fit_veto(sets, rule)[0]
-
-    held = []
-    for name, (_, ref) in samples.items():
-        rule, veto = fit([n for n in samples if n != name])
-        if rule is None:
-            print(f"{name:<8} the fold's tree has not the coded shape")
-            continue
-        held.append(ground_errors(veto_rule(feats[name], fourth[name], rule, veto), ref)["total"])
-        print(f"{name:<8} held-out total {100 * held[-1]:5.2f} %  veto {veto:g}")
-    print(f"veto leave-one-out mean total {100 * np.mean(held):.2f} %, max "
-          f"{100 * np.max(held):.2f} %")
-    rule, veto = fit(list(samples))
-    for v in (np.inf, veto):
-        real = [ground_errors(veto_rule(feats[n], fourth[n], rule, v), samples[n][1])["total"]
-                for n in samples]
-        fake = np.mean([ground_errors(veto_rule(f, q, rule, v), g)["total"]
-                        for (f, g), q in zip(syn, fourth_syn)])
-        print(f"fitted on all seven, veto {v:g}: mean total {100 * np.mean(real):.2f} % "
-              f"({' '.join(f'{100 * e:.2f}' for e in real)}); synthetic terrains "
-              f"{100 * fake:.2f} %")
-    print("VOTE_VETO matches" if veto == VOTE_VETO else f"VOTE_VETO {VOTE_VETO} differs")
 
 
 def show_rule(rule):
@@ -468,29 +424,41 @@ def main():
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
-    feats = {n: vote_features(xyz)[0] for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz)[0], s.ground) for s in scenes.values()]
+    # the three ratios, the wall distance and the ratio to the veto's fourth surface
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE)[0] for n, (xyz, _) in samples.items()}
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE)[0], s.ground) for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
 
-    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance "
-          f"(fitted on the six other samples + synthetic terrains)")
-    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8}  rule")
-    held = []
+    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
+          f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
+          f"synthetic terrains); the held-out errors with the veto, and the total without it")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10}  rule")
+    held = {"veto": [], "no veto": []}
     for name, (_, ref) in samples.items():
-        rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples if n != name]
-                              + syn_set)
-        e = ground_errors(score(rule, tree, feats[name]), ref)
-        held.append(e["total"])
+        sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
+        rule, tree = fit_rule(sets)
+        plain = ground_errors(score(rule, tree, feats[name]), ref)
+        veto = None if rule is None else fit_veto(sets, rule)[0]
+        e = plain if rule is None else ground_errors(vote_rule(feats[name], **rule, veto=veto),
+                                                     ref)
+        held["veto"].append(e["total"])
+        held["no veto"].append(plain["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f}  {show(tree) if rule is None else show_rule(rule)}")
-    print(f"smrf_vote leave-one-out mean total {100 * np.mean(held):.2f} %, "
-          f"max {100 * np.max(held):.2f} %")
-    rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples] + syn_set)
-    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}; "
-          f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}")
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f}  "
+              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto))}")
+    for k, v in held.items():
+        print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
+              f"max {100 * np.max(v):.2f} %")
+    sets = [(feats[n], samples[n][1], 1.0) for n in samples] + syn_set
+    rule, tree = fit_rule(sets)
+    veto = None if rule is None else fit_veto(sets, rule)[0]
+    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}; "
+          f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
+          f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
-        xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote}
+        xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
+        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
     rows = []
