@@ -11,7 +11,8 @@ error of each method on the synthetic terrains of
 :mod:`lidar2city.synthetic_terrain` (1 m and 2.5 m spacing). Then times
 ``lidar2city ground`` on ``DIR/isprs/sites/CSite4_orig-utm.laz`` as a fresh
 process against plainly reading and writing the same file with laspy (best
-of ``--repeat`` runs each) and prints the ratio.
+of ``--repeat`` runs each) and prints the ratio, for each method and for
+``smrf_vote`` with its ``veto`` off (:data:`SPEED_VARIANTS`).
 
 ``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
 smrf_segments (the same grid for the three; ``--loo-methods smrf_segments``
@@ -183,7 +184,13 @@ def best_times(cmd, env, repeat):
     return min(wall), min(cpu)
 
 
-def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote")):
+#: ``lidar2city ground`` runs of the speed check besides the methods' defaults: label ->
+#: (method, the ``[ground]`` table of a run TOML given with ``--config``).
+SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf")}
+
+
+def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),
+          variants=SPEED_VARIANTS):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / ("out" + site.suffix))
@@ -191,16 +198,23 @@ def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_
                     f"import laspy; laspy.read({str(site)!r}).write({out!r})"]
         cli_cmds = {m: [sys.executable, "-m", "lidar2city.cli.main", "ground", str(site), "-o", out,
                         "--method", m] for m in methods}
+        for label, (method, table) in variants.items():
+            toml = Path(tmp) / f"variant{len(cli_cmds)}.toml"
+            toml.write_text(f"[ground]\n{table}\n")
+            cli_cmds[label] = cli_cmds.get(method, [
+                sys.executable, "-m", "lidar2city.cli.main", "ground", str(site), "-o", out,
+                "--method", method]) + ["--config", str(toml)]
         # interleave to share the machine load fairly
         base = (float("inf"),) * 2
-        cli = dict.fromkeys(methods, (float("inf"),) * 2)
+        cli = dict.fromkeys(cli_cmds, (float("inf"),) * 2)
         for _ in range(repeat):
             base = tuple(map(min, base, best_times(base_cmd, env, 1)))
             for m, cmd in cli_cmds.items():
                 cli[m] = tuple(map(min, cli[m], best_times(cmd, env, 1)))
     load = os.getloadavg()[0]
-    for m in methods:
-        print(f"\nspeed on {site.name}: laspy read+write {base[0]:.2f} s, lidar2city ground --method {m} "
+    for m in cli_cmds:
+        how = f"--method {m}" if m in methods else f"({m})"
+        print(f"\nspeed on {site.name}: laspy read+write {base[0]:.2f} s, lidar2city ground {how} "
               f"{cli[m][0]:.2f} s, ratio {cli[m][0] / base[0]:.2f} (best of {repeat}); CPU seconds "
               f"{base[1]:.2f} and {cli[m][1]:.2f}, ratio {cli[m][1] / base[1]:.2f} "
               f"(load average {load:.1f})")

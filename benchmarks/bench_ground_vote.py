@@ -1,4 +1,4 @@
-"""The learnt vote of three SMRF surfaces (``smrf_vote``): its rule refitted, leave-one-out, speed.
+"""The learnt vote of SMRF surfaces (``smrf_vote``): its rule refitted, leave-one-out, speed.
 
 Usage::
 
@@ -9,7 +9,8 @@ Usage::
 its tolerance ratios to three provisional surfaces of one SMRF opening
 (:func:`~lidar2city.ground.vote_features`: ``smrf_segments``' surface at
 slope 0.1, the same at 0.3, plain SMRF's at 0.1) and its distance to the
-nearest wall. This script:
+nearest wall, and (its `veto`) a fourth, ``smrf_segments``' at 0.4. This
+script:
 
 1. computes the features of every point of the ISPRS reference samples in
    ``DIR/isprs/reference`` and of the synthetic terrains of
@@ -19,14 +20,16 @@ nearest wall. This script:
    the pooled ratios, that minimises the weighted point error, every sample
    weighted equally and the synthetic terrains together as one more sample),
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
-   objective, leaving each ISPRS sample out in turn; it prints the held-out
-   sample's type I / type II / total error, the rule of each fold, their
-   mean and maximum (the leave-one-out figure);
+   objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
+   each ISPRS sample out in turn; it prints the held-out sample's type I /
+   type II / total error with the veto and the total without it, the rule
+   of each fold, their mean and maximum (the leave-one-out figures);
 3. fits it on all seven and prints the rule: its thresholds, rounded to two
-   decimals, are :data:`lidar2city.ground.VOTE_RULE` (the script says
-   whether they still are);
-4. scores ``smrf_vote`` with its defaults against ``smrf_segments`` (the
-   ``ground`` default) on the seven samples, the synthetic terrains and the
+   decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
+   :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
+   are);
+4. scores ``smrf_vote`` with its defaults and without its veto against
+   ``smrf_segments`` on the seven samples, the synthetic terrains and the
    small tile with a building of ``bench_ground_segments.py``;
 5. the bound of any per-point rule over such surfaces: the share of points
    that every one of ``smrf_segments`` at the slopes of :data:`ORACLE_SLOPES`
@@ -36,7 +39,8 @@ nearest wall. This script:
    lowest objective on the six other samples + synthetic terrains): the
    default pair (0.1, 0.3) was chosen among these by looking at all seven
    samples' leave-one-out, so this nested figure is the honest one for the
-   whole procedure (a few minutes more);
+   whole procedure; printed without and with the ``veto`` (chosen per fold
+   too, :func:`fit_veto`) (a few minutes more);
 7. with ``--anatomy``, where ``smrf_vote``'s errors are on its two worst
    samples: type I and type II points, the share of them each candidate of
    step 5 has right, the share within 5 m of a wall and their median ratio
@@ -44,13 +48,17 @@ nearest wall. This script:
 8. with ``--cues``, the leave-one-out of a depth-3 tree over the three
    ratios alone and with one more cue each (the ratio to ``smrf_segments``'
    surface at slope 0.4, the wall distance, the height above the lowest
-   point of the 3x3 cells around), then of the coded rule plus a veto by
-   that fourth surface (a point near the strict surface but farther than
-   the veto from the fourth one is object), the veto chosen per fold too;
-   the cues tried for issue 18 (none is the default; see the README);
-9. unless ``--no-speed``, times ``lidar2city ground`` with both methods on
-   ``DIR/isprs/sites/CSite4_orig-utm.laz`` against reading and writing it
-   with laspy (best of ``--repeat``, interleaved).
+   point of the 3x3 cells around, how far the point is raised above the
+   ground on both sides in its second most raised direction
+   (:func:`raised_all_sides`), the cloth simulation filter's call when its
+   package is installed), the worst sample's error with such trees fitted
+   on that sample itself over every cue (the ceiling of the rule family
+   there); the cues tried for issue 18 (the first became the veto; see the
+   README); a few minutes with the cloth filter;
+9. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
+   ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
+   against reading and writing it with laspy (best of ``--repeat``,
+   interleaved).
 
 About a minute plus the speed runs.
 """
@@ -94,9 +102,12 @@ CLEAR = (5.0, 8.0, 10.0, 15.0, 20.0, 30.0, np.inf)
 ANATOMY_WORST = 2
 #: the further cues of the ``--cues`` check (the first: the ratio to the fourth surface of
 #: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
-CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3")
+CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3",
+        "raised on all sides", "cloth (CSF) ground")
+#: reach (m) of the ``raised on all sides`` cue.
+RAISED_REACH = 12.0
 CUE_DEPTH = 3
-#: vetoes (tolerance ratios to the fourth surface) tried by the ``--cues`` veto check.
+#: vetoes (tolerance ratios to the fourth surface) :func:`fit_veto` chooses among.
 VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
 ANATOMY_WALL = 5.0
 
@@ -126,27 +137,50 @@ def score(rule, tree, features):
 
 
 def nested_pairs(samples, scenes):
-    """Print the leave-one-out with the slope pair chosen per fold (see ``--pairs``)."""
+    """Print the leave-one-out with the slope pair chosen per fold (see ``--pairs``), without
+    and with ``smrf_vote``'s ``veto`` (chosen per fold too, as by :func:`fit_veto`)."""
     feats = {}
     for pair in PAIRS:
-        feats[pair] = ({n: vote_features(xyz, slopes=pair)[0] for n, (xyz, _) in samples.items()},
-                       [(vote_features(s.xyz, slopes=pair)[0], s.ground, 1.0 / len(scenes))
-                        for s in scenes.values()])
+        feats[pair] = ({n: vote_features(xyz, slopes=pair, fourth=VETO_SLOPE)[0]
+                        for n, (xyz, _) in samples.items()},
+                       [(vote_features(s.xyz, slopes=pair, fourth=VETO_SLOPE)[0], s.ground,
+                         1.0 / len(scenes)) for s in scenes.values()])
     print("\nleave-one-out with the slope pair chosen per fold among "
-          f"{', '.join(str(p) for p in PAIRS)}")
-    held = []
+          f"{', '.join(str(p) for p in PAIRS)}, without and with the veto (chosen per fold)")
+    held = {"no veto": [], "veto": []}
     for name, (_, ref) in samples.items():
-        best = None
+        best = dict.fromkeys(held)
         for pair, (real, syn) in feats.items():
             sets = [(real[n], samples[n][1], 1.0) for n in samples if n != name] + syn
             rule, tree = fit_rule(sets)
             objective = sum(w * np.mean(score(rule, tree, f) != g) for f, g, w in sets)
-            if best is None or objective < best[0]:
-                best = (objective, pair, score(rule, tree, real[name]))
-        held.append(ground_errors(best[2], ref)["total"])
-        print(f"{name:<8} held-out total {100 * held[-1]:5.2f} %  slopes {best[1]}")
-    print(f"smrf_vote leave-one-out with the slopes chosen per fold: mean total "
-          f"{100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %")
+            if best["no veto"] is None or objective < best["no veto"][0]:
+                best["no veto"] = (objective, pair, score(rule, tree, real[name]), "")
+            if rule is None:
+                continue
+            veto, objective = fit_veto(sets, rule)
+            if best["veto"] is None or objective < best["veto"][0]:
+                best["veto"] = (objective, pair, vote_rule(real[name], **rule, veto=veto),
+                                f" veto {veto:g}")
+        line = f"{name:<8}"
+        for k, (_, pair, pred, extra) in best.items():
+            held[k].append(ground_errors(pred, ref)["total"])
+            line += f"  {k}: held-out total {100 * held[k][-1]:5.2f} %  slopes {pair}{extra}"
+        print(line)
+    for k, v in held.items():
+        print(f"smrf_vote leave-one-out with the slopes chosen per fold ({k}): mean total "
+              f"{100 * np.mean(v):.2f} %, max {100 * np.max(v):.2f} %")
+
+
+def fit_veto(sets, rule):
+    """The veto of :data:`VETO` (and its objective) that minimises the weighted point error of
+    ``rule`` over ``sets`` of ``(features (N, 5), ground, weight)``: ``rule`` with a point near
+    the strict surface object when its ratio to the fourth surface (column 4) exceeds it."""
+    total = sum(w for _, _, w in sets)
+    objective = {v: sum(w * np.mean(vote_rule(f, **rule, veto=v) != g) for f, g, w in sets)
+                 / total for v in VETO}
+    veto = min(VETO, key=objective.get)
+    return veto, objective[veto]
 
 
 def candidates(xyz, features):
@@ -231,21 +265,60 @@ def height_above_lowest(xyz, cell=1.0):
     return xyz[:, 2] - around[ij[:, 0], ij[:, 1]]
 
 
+def raised_all_sides(xyz, cell=1.0, reach=RAISED_REACH):
+    """How far (m) each point stands above the ground on both sides of it, in its second most
+    raised of four directions (rows, columns, both diagonals): for each direction, the least
+    over distances up to ``reach`` of the mean of the lowest points of the two cells at that
+    distance either side, minus the point's height (negative: raised). A roof is raised in
+    every direction, a terrace top or a slope in at most the one across its edge; 0 where a
+    side has no points."""
+    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
+    k_max = int(reach / cell)
+    low = np.full(tuple(ij.max(axis=0) + 1), np.inf)
+    np.minimum.at(low, (ij[:, 0], ij[:, 1]), xyz[:, 2])
+    low = np.pad(np.where(np.isinf(low), np.nan, low), k_max, constant_values=np.nan)
+    i, j = ij[:, 0] + k_max, ij[:, 1] + k_max
+    sides = np.full((len(xyz), 4), np.nan)
+    for p, (di, dj) in enumerate(((1, 0), (0, 1), (1, 1), (1, -1))):
+        for k in range(1, k_max + 1):
+            mid = (low[i + di * k, j + dj * k] + low[i - di * k, j - dj * k]) / 2 - xyz[:, 2]
+            sides[:, p] = np.fmin(sides[:, p], mid)
+    return np.sort(np.nan_to_num(sides, nan=0.0), axis=1)[:, 1]
+
+
+def cloth_ground(xyz):
+    """1 for the points the cloth simulation filter (``bench_ground_bounds.csf``, rigidness 2)
+    calls ground, else 0; NaN everywhere when the package is not installed."""
+    try:
+        from bench_ground_bounds import csf
+        return csf(xyz, 2).astype(float)
+    except ImportError:
+        return np.full(len(xyz), np.nan)
+
+
 def cues(samples, scenes, feats, syn):
     """Print the leave-one-out of a depth-:data:`CUE_DEPTH` tree over the three ratios plus
-    each further cue of :data:`CUES` (see ``--cues``)."""
+    each further cue of :data:`CUES` (see ``--cues``), and the worst sample's error with the
+    tree fitted on that sample itself over the ratios and every cue (the rule family's
+    ceiling there, with hindsight)."""
     def cue_columns(xyz, f):
-        return {"segments 0.4 ratio": vote_features(xyz, fourth=VETO_SLOPE)[0][:, 4],
-                "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz)}
+        return {"segments 0.4 ratio": f[:, 4],
+                "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz),
+                "raised on all sides": raised_all_sides(xyz),
+                "cloth (CSF) ground": cloth_ground(xyz)}
 
     real = {n: cue_columns(xyz, feats[n]) for n, (xyz, _) in samples.items()}
     fake = [cue_columns(s.xyz, f) for s, (f, _) in zip(scenes.values(), syn)]
     print(f"\nleave-one-out of a depth-{CUE_DEPTH} tree over the three ratios and one more cue "
           f"(held-out total % per sample; the tree fitted on all seven)")
+    worst = None
     for cue in (None, *CUES):
         def x(f, more, cue=cue):
             return f[:, :3] if cue is None else np.column_stack([f[:, :3], more[cue]])
 
+        if cue is not None and np.isnan(real[next(iter(real))][cue]).all():
+            print(f"{cue:<24} skipped: pip install cloth-simulation-filter to include it")
+            continue
         held = []
         for name, (_, ref) in samples.items():
             sets = [(x(feats[n], real[n]), samples[n][1], 1.0) for n in samples if n != name]
@@ -259,51 +332,14 @@ def cues(samples, scenes, feats, syn):
         print(f"{cue or 'ratios only':<24} leave-one-out {100 * np.mean(held):.2f} %, max "
               f"{100 * np.max(held):.2f} % ({' '.join(f'{100 * v:.2f}' for v in held)}); "
               f"{show(tree, (*NAMES, cue))}")
-    veto_check(samples, feats, syn, {n: c["segments 0.4 ratio"] for n, c in real.items()},
-               [c["segments 0.4 ratio"] for c in fake])
-
-
-def veto_check(samples, feats, syn, fourth, fourth_syn):
-    """Print the leave-one-out of ``smrf_vote``'s ``veto`` option (the coded rule refitted,
-    then the veto of :data:`VETO` minimising the same objective) and its scores fitted on all
-    seven (:data:`~lidar2city.ground.VOTE_VETO`)."""
-
-    def veto_rule(f, q, rule, veto):
-        return vote_rule(np.column_stack([f[:, :4], q]), **rule, veto=veto)
-
-    print(f"\nthe coded rule plus a veto by the segment surface at slope {VETO_SLOPE:g} "
-          f"(ratio > veto near the strict surface: object), veto chosen among "
-          f"{', '.join(f'{v:g}' for v in VETO)}")
-
-    def fit(names):
-        sets = ([(feats[n], samples[n][1], 1.0, fourth[n]) for n in names]
-                + [(f, g, 1.0 / len(syn), q) for (f, g), q in zip(syn, fourth_syn)])
-        rule, _ = fit_rule([st[:3] for st in sets])
-        if rule is None:
-            return None, None
-        return rule, min(VETO, key=lambda v: sum(
-            w * np.mean(veto_rule(f, q, rule, v) != g) for f, g, w, q in sets))
-
-    held = []
-    for name, (_, ref) in samples.items():
-        rule, veto = fit([n for n in samples if n != name])
-        if rule is None:
-            print(f"{name:<8} the fold's tree has not the coded shape")
-            continue
-        held.append(ground_errors(veto_rule(feats[name], fourth[name], rule, veto), ref)["total"])
-        print(f"{name:<8} held-out total {100 * held[-1]:5.2f} %  veto {veto:g}")
-    print(f"veto leave-one-out mean total {100 * np.mean(held):.2f} %, max "
-          f"{100 * np.max(held):.2f} %")
-    rule, veto = fit(list(samples))
-    for v in (np.inf, veto):
-        real = [ground_errors(veto_rule(feats[n], fourth[n], rule, v), samples[n][1])["total"]
-                for n in samples]
-        fake = np.mean([ground_errors(veto_rule(f, q, rule, v), g)["total"]
-                        for (f, g), q in zip(syn, fourth_syn)])
-        print(f"fitted on all seven, veto {v:g}: mean total {100 * np.mean(real):.2f} % "
-              f"({' '.join(f'{100 * e:.2f}' for e in real)}); synthetic terrains "
-              f"{100 * fake:.2f} %")
-    print("VOTE_VETO matches" if veto == VOTE_VETO else f"VOTE_VETO {VOTE_VETO} differs")
+        worst = worst or list(samples)[int(np.argmax(held))]
+    known = [c for c in CUES if not np.isnan(real[worst][c]).all()]
+    every = np.column_stack([feats[worst][:, :3]] + [real[worst][c] for c in known])
+    for depth in (CUE_DEPTH, 2 * CUE_DEPTH):
+        tree = fit_tree([(every, samples[worst][1], 1.0)], depth=depth)
+        wrong = np.mean(predict(tree, every) != samples[worst][1])
+        print(f"{worst}, a depth-{depth} tree over the ratios and the {len(known)} cues fitted on "
+              f"{worst} itself: total {100 * wrong:.2f} %")
 
 
 def show_rule(rule):
@@ -388,29 +424,41 @@ def main():
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
-    feats = {n: vote_features(xyz)[0] for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz)[0], s.ground) for s in scenes.values()]
+    # the three ratios, the wall distance and the ratio to the veto's fourth surface
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE)[0] for n, (xyz, _) in samples.items()}
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE)[0], s.ground) for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
 
-    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance "
-          f"(fitted on the six other samples + synthetic terrains)")
-    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8}  rule")
-    held = []
+    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
+          f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
+          f"synthetic terrains); the held-out errors with the veto, and the total without it")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10}  rule")
+    held = {"veto": [], "no veto": []}
     for name, (_, ref) in samples.items():
-        rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples if n != name]
-                              + syn_set)
-        e = ground_errors(score(rule, tree, feats[name]), ref)
-        held.append(e["total"])
+        sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
+        rule, tree = fit_rule(sets)
+        plain = ground_errors(score(rule, tree, feats[name]), ref)
+        veto = None if rule is None else fit_veto(sets, rule)[0]
+        e = plain if rule is None else ground_errors(vote_rule(feats[name], **rule, veto=veto),
+                                                     ref)
+        held["veto"].append(e["total"])
+        held["no veto"].append(plain["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f}  {show(tree) if rule is None else show_rule(rule)}")
-    print(f"smrf_vote leave-one-out mean total {100 * np.mean(held):.2f} %, "
-          f"max {100 * np.max(held):.2f} %")
-    rule, tree = fit_rule([(feats[n], samples[n][1], 1.0) for n in samples] + syn_set)
-    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}; "
-          f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}")
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f}  "
+              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto))}")
+    for k, v in held.items():
+        print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
+              f"max {100 * np.max(v):.2f} %")
+    sets = [(feats[n], samples[n][1], 1.0) for n in samples] + syn_set
+    rule, tree = fit_rule(sets)
+    veto = None if rule is None else fit_veto(sets, rule)[0]
+    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}; "
+          f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
+          f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
-        xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote}
+        xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
+        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
     rows = []

@@ -311,11 +311,11 @@ def test_any_small_cloud_gives_a_mask(n, extent, seed, method):
 def test_isprs_mean_total_error_target(data):
     """Mean total error over the ISPRS samples, one parameter set (the defaults).
 
-    Measured: smrf_vote 3.07 % (max 7.87 %), smrf_segments 3.34 % (kappa 89.9 %,
-    max 7.25 %), smrf_refined 3.54 % (kappa 89.4 %), SMRF 3.56 % (kappa 89.3 %),
-    PMF 4.57 %. Leave-one-sample-out: smrf_vote 3.31 % (bench_ground_vote.py; 3.47 %
-    with its slopes chosen per fold too), smrf_segments 3.57 %, smrf_refined 3.67 %,
-    SMRF 3.88 % (bench_ground.py --loo).
+    Measured: smrf_vote 3.04 % (max 8.01 %, samp11; 3.07 % and 7.87 % without its veto),
+    smrf_segments 3.34 % (kappa 89.9 %, max 7.25 %), smrf_refined 3.54 % (kappa 89.4 %),
+    SMRF 3.56 % (kappa 89.3 %), PMF 4.57 %. Leave-one-sample-out: smrf_vote 3.19 %
+    (bench_ground_vote.py --cues; 3.42 % with its slopes chosen per fold too, --pairs),
+    smrf_segments 3.57 %, smrf_refined 3.67 %, SMRF 3.88 % (bench_ground.py --loo).
     """
     import laspy
 
@@ -338,8 +338,8 @@ def test_isprs_mean_total_error_target(data):
     assert max(totals["smrf_refined"]) <= 0.095
     assert np.mean(totals["smrf_segments"]) <= 0.035
     assert max(totals["smrf_segments"]) <= 0.08
-    assert np.mean(totals["smrf_vote"]) <= 0.032
-    assert max(totals["smrf_vote"]) <= 0.08
+    assert np.mean(totals["smrf_vote"]) <= 0.031
+    assert max(totals["smrf_vote"]) <= 0.081
     assert np.mean(totals["pmf"]) <= 0.048
 
 

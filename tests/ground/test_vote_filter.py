@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from lidar2city.errors import InputError
-from lidar2city.ground import VOTE_RULE, GroundConfig, ground_mask, smrf_vote, vote_features
+from lidar2city.ground import (
+    VOTE_RULE,
+    VOTE_VETO,
+    GroundConfig,
+    ground_mask,
+    smrf_vote,
+    vote_features,
+)
 from lidar2city.ground.vote_filter import vote_rule
 from lidar2city.metrics.ground import ground_errors
 from lidar2city.synthetic_terrain import make_terrain
@@ -93,8 +100,8 @@ def test_config_and_bad_parameters():
 
 
 def test_veto_option_adds_a_fourth_surface_and_only_takes_ground_away():
-    """``veto`` (off by default) builds smrf_segments' surface at VETO_SLOPE as column 4 of
-    the features (the first four unchanged) and calls object a point near the strict surface
+    """``veto`` (VOTE_VETO by default) builds smrf_segments' surface at VETO_SLOPE as column 4
+    of the features (the first four unchanged) and calls object a point near the strict surface
     but farther than the veto from the fourth one: never more ground than without it."""
     scene = make_terrain("town_on_slope", spacing=1.0, seed=1)
     base, out = vote_features(scene.xyz)
@@ -102,8 +109,11 @@ def test_veto_option_adds_a_fourth_surface_and_only_takes_ground_away():
     assert more.shape == (len(scene.xyz), 5)
     np.testing.assert_array_equal(more[:, :4], base)
     np.testing.assert_array_equal(out4, out)
-    plain = smrf_vote(scene.xyz)
+    plain = smrf_vote(scene.xyz, veto=None)
     np.testing.assert_array_equal(smrf_vote(scene.xyz, veto=np.inf), plain)
+    default = smrf_vote(scene.xyz)
+    np.testing.assert_array_equal(default, smrf_vote(scene.xyz, veto=VOTE_VETO))
+    assert not (default & ~plain).any()
     strict = smrf_vote(scene.xyz, veto=0.05)
     assert not (strict & ~plain).any() and (plain & ~strict).any()
     near = more[:, 0] <= VOTE_RULE["near"]
@@ -116,3 +126,19 @@ def test_veto_bad_input():
         smrf_vote(xyz, veto=0.0)
     with pytest.raises(InputError, match="fourth"):
         vote_rule(vote_features(xyz)[0], **VOTE_RULE, veto=1.0)
+
+
+def test_veto_in_the_ground_config():
+    """``ground.veto`` reaches smrf_vote (and only it); it must be > 0; inf turns it off."""
+    from lidar2city.errors import ConfigError
+
+    assert GroundConfig(method="smrf_vote", veto=0.8).method_params()["veto"] == 0.8
+    assert "veto" not in GroundConfig(method="smrf_segments", veto=0.8).method_params()
+    for bad in (0.0, -1.0):
+        with pytest.raises(ConfigError, match="ground.veto"):
+            GroundConfig(veto=bad)
+    scene = make_terrain("terraces", spacing=1.0, seed=1)
+    np.testing.assert_array_equal(
+        ground_mask(scene.xyz, method="smrf_vote",
+                    **GroundConfig(method="smrf_vote", veto=np.inf).method_params()),
+        smrf_vote(scene.xyz, veto=None))

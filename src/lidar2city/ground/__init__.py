@@ -8,7 +8,7 @@ of a small tile is reflected into a pit that can take all the ground away,
 so it is not the default), ``"smrf_segments"`` (that surface with the
 object segments that join the terrain smoothly - terrace tops, embankments -
 given back; the same edge caveat), ``"smrf_vote"`` (each point judged from its
-heights off three of those surfaces and its distance to walls by a rule fitted
+heights off four of those surfaces and its distance to walls by a rule fitted
 on the ISPRS samples and synthetic terrains; the default of
 :class:`GroundConfig`, lowest on leave-one-sample-out and on the synthetic
 terrains) and ``"pmf"`` (Zhang et al. 2003). All set low
@@ -102,8 +102,8 @@ class GroundConfig:
         "smrf_vote", "ground filter: smrf (Pingel 2013), smrf_refined (SMRF + edge extension and "
         "optional surface cleanup), smrf_segments (SMRF + edge extension, terrain-like object "
         "segments given back), smrf_vote (a rule learnt on labelled samples over a point's heights "
-        "off three SMRF surfaces - slopes 0.1 and 0.3 with segments given back, 0.1 plain - and "
-        "its distance to walls) or pmf (Zhang 2003)")
+        "off four SMRF surfaces - slopes 0.1, 0.3 and 0.4 with segments given back, 0.1 plain - "
+        "and its distance to walls) or pmf (Zhang 2003)")
     cell: float = field(1.0, "grid cell size of the filter (m)")
     slope: float | None = field(None, "terrain slope (rise/run) the filter keeps; default 0.15 for "
                                       "smrf, smrf_refined and smrf_segments, 0.3 for pmf")
@@ -124,6 +124,9 @@ class GroundConfig:
                                              "if the opening also cuts one of its cells at this "
                                              "slope (rise/run), e.g. 0.4 with slope 0.1; default "
                                              "none: no such test")
+    veto: float | None = field(0.8, "smrf_vote: a point near the strict surface is object when "
+                                    "its height off smrf_segments' slope-0.4 surface exceeds "
+                                    "this many tolerances (the fitted value); inf: no veto")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -153,6 +156,8 @@ class GroundConfig:
             raise ConfigError(f"ground.min_cells: must be an integer >= 1, got {self.min_cells!r}")
         if self.strong_slope is not None and not self.strong_slope > 0:
             raise ConfigError(f"ground.strong_slope: must be > 0, got {self.strong_slope!r}")
+        if self.veto is not None and not self.veto > 0:
+            raise ConfigError(f"ground.veto: must be > 0, got {self.veto!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 
