@@ -403,6 +403,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     from ..lod.lod1 import Lod1Config, reconstruct_building
     from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
     from ..validate import solid as _solid  # noqa: F401
+    from .info import point_density
 
     cfg = config or Lod1Config()
     if building is None or ground is None:
@@ -413,6 +414,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     ggrid = PointGrid(gxyz[:, :2], cell=10.0)
     radius = cfg.search_radius
     area_radius = 50.0
+    grids = []  # every point's grid, for the density around a footprint with few points
     total = len(footprints)
     results = [None] * total
     notes = footprints.attributes.get("_note", [""] * total)
@@ -438,8 +440,18 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
                 z = gxyz[ggrid.query(*box), 2] if area_ground is None else area_ground(*box)
                 return float(np.percentile(z, cfg.ground_percentile)) if len(z) else None
 
+            def density(x0=x0, y0=y0, x1=x1, y1=y1):
+                # the survey's density around the footprint, every point counted (built
+                # only for a footprint holding fewer than min_points building points)
+                if not grids:
+                    grids.append(PointGrid(cloud.xyz[:, :2], cell=10.0))
+                near = grids[0].query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
+                # averaged over 5 m cells with points: gaps between scan lines count,
+                # water and the space beyond the tile's edge do not
+                return point_density(cloud.xyz[near, :2], cell=5.0)
+
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
-                                       fallback_ground_z=fallback)
+                                       fallback_ground_z=fallback, point_density=density)
             if lod22 is not None and res.ok:
                 add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision)
         if notes[i]:
