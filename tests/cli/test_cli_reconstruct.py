@@ -71,6 +71,30 @@ def test_duplicate_footprints_are_modelled_with_a_warning(runner, tmp_path, capl
     assert "3 of 3 buildings reconstructed" in res.output
     assert "1 footprint(s) of" in caplog.text and "repeat an earlier one" in caplog.text
     assert {"A", "B", "A-2"} <= set(json.loads(out.read_text())["CityObjects"])
+    assert "overlap (by up to" not in caplog.text  # exact repeats are said apart
+    assert "pair(s) of footprints" not in caplog.text
+
+
+def test_overlapping_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
+    """Footprints that overlap others (buffered outlines, two sources merged) were
+    modelled in silence, each from the points of the overlap too; the run now says
+    how many pairs overlap and by how much. Footprints sharing a wall do not count."""
+    from pyproj import CRS
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+
+    las, _, _ = _synthetic_inputs(tmp_path)
+    fps = [box(5, 5, 15, 13), box(15, 5, 25, 13), box(12, 6, 18, 12)]
+    ov = tmp_path / "ov.gpkg"
+    write_polygons(ov, fps, {"bag_id": ["A", "B", "C"]}, origin=(85000.0, 447000.0),
+                   crs=CRS.from_epsg(28992))
+    out = tmp_path / "o.city.json"
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(ov), "-o", str(out),
+                              "--id-field", "bag_id"])
+    assert res.exit_code == 0, res.output
+    assert "3 of 3 buildings reconstructed" in res.output
+    assert "2 pair(s) of footprints of" in caplog.text and "by up to 18.0 m2" in caplog.text
 
 
 def test_reconstruct_formats(runner, tmp_path):

@@ -313,12 +313,13 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     """
     import shapely
 
-    from ..io.vector import no_usable_footprint, read_footprints, unique
+    from ..io.vector import no_usable_footprint, overlapping, read_footprints, unique
 
     chunk = int(chunk or FOOTPRINT_CHUNK)
     area = shapely.box(*extent)
     all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
     outlines, repeated = set(), 0  # a footprint repeated exactly: two overlapping models
+    overlaps, largest = 0, 0.0  # footprints overlapping others (in one chunk of the file)
     while True:
         part, src_crs = read_footprints(path, layer=layer, id_field=id_field,
                                         origin=frame.origin[:2], xy_unit=frame.xy_unit,
@@ -341,6 +342,8 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
                 bounds.append([np.nan] * 4 if g is None or g.is_empty else g.bounds)
             else:
                 keep.append(False)
+        pairs, most = overlapping(part.geometries)
+        overlaps, largest = overlaps + pairs, max(largest, most)
         all_ids += part.ids
         if len(part) < chunk:
             break
@@ -359,6 +362,10 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
         logger.warning("%d footprint(s) of %r repeat an earlier one's outline exactly: each "
                        "gets its own (overlapping) model; remove the duplicates", repeated,
                        str(path))
+    if overlaps:
+        logger.warning("%d pair(s) of footprints of %r overlap (by up to %.1f m2): each takes "
+                       "the points of the overlap, so their models overlap and mix the two "
+                       "roofs' heights", overlaps, str(path), largest)
     return fids, [ids[i] for i in kept], np.array(bounds, dtype=np.float64).reshape(-1, 4)
 
 
