@@ -431,3 +431,25 @@ def test_points_needed_scale_with_the_measured_density():
     assert reconstruct_building(fp, dense, g, point_density=lambda: 1 / 0).ok
     with pytest.raises(ConfigError, match="lod1.min_area"):
         Lod1Config(min_area=-1.0)
+
+
+def test_lod13_parts_whose_holes_touch_are_opened_and_checked():
+    """Two high roofs meeting corner to corner inside a low one: the low LoD1.3 part had
+    two holes touching at a point, its prism a non-manifold edge (303 in the written
+    file), and prism_is_valid vouched for it (GEOS's minimum clearance leaves shared
+    vertices out), so the building said valid. The contact is now opened (one hole)
+    and a prism with a vertex shared by two rings is checked in full."""
+    from lidar2city.lod.prism import prism_is_valid
+
+    fp = box(0, 0, 20, 20)
+    hi = [box(5, 5, 10, 10), box(10, 10, 15, 15)]
+    pts = _grid_points(fp, lambda xy: np.where(
+        ((xy[:, 0] > 5) & (xy[:, 0] < 10) & (xy[:, 1] > 5) & (xy[:, 1] < 10))
+        | ((xy[:, 0] > 10) & (xy[:, 0] < 15) & (xy[:, 1] > 10) & (xy[:, 1] < 15)), 9.0, 3.0))
+    r = reconstruct_building(fp, pts, _ground_ring(fp), config=Lod1Config(lods=("1.3",)))
+    assert r.ok and r.attributes["lod13_parts"] == 3 and r.attributes["valid"]
+    assert all(check_solid(s) == [] for s in r.parts["1.3"])
+    low = Polygon(fp.exterior.coords, [h.exterior.coords for h in hi])
+    assert low.is_valid  # touching holes make a valid polygon, not a valid prism
+    s = prism_solid(low, 0.0, 3.0)
+    assert [i.code for i in check_solid(s)] == [303] and not prism_is_valid(s)

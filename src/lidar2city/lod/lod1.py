@@ -20,7 +20,7 @@ from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
-from .prism import clean_polygon, prism_distance, prism_is_valid, prism_solid
+from .prism import _ring_contact, clean_polygon, prism_distance, prism_is_valid, prism_solid
 
 logger = logging.getLogger(__name__)
 
@@ -329,6 +329,13 @@ def _lod13(polys, inside, ground, cfg) -> list:
         pts = inside[sel]
         parts = height_parts(poly, pts, cell=cfg.lod13_cell, step=cfg.lod13_step,
                              min_area=cfg.lod13_min_area, grid=cfg.precision)
+        tol = 2.5 * max(cfg.precision, 0.001)
+        # a part whose holes touch each other or its outline at a point (height regions
+        # meeting corner to corner) is opened there as LoD1.2 footprints are: its prism
+        # was non-manifold (val3dity 303) in the written file
+        parts = [q for part in parts for q in (
+            clean_polygon(part, grid=cfg.precision)
+            if part.interiors and _ring_contact(part, tol) is not None else [part])]
         for part in parts:
             in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
             zz = pts[in_part, 2] if in_part.sum() >= 1 else pts[:, 2]
