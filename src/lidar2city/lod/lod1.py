@@ -20,7 +20,8 @@ from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
-from .prism import _ring_contact, clean_polygon, prism_distance, prism_is_valid, prism_solid
+from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distance,
+                    prism_is_valid, prism_solid)
 
 logger = logging.getLogger(__name__)
 
@@ -322,6 +323,7 @@ def _codes(solids) -> list[int]:
 def _lod13(polys, inside, ground, cfg) -> list:
     """Prisms of the roof-height parts of each footprint polygon."""
     import shapely
+    from shapely.geometry.polygon import orient
 
     solids = []
     for poly in polys:
@@ -332,9 +334,10 @@ def _lod13(polys, inside, ground, cfg) -> list:
         tol = 2.5 * max(cfg.precision, 0.001)
         # a part whose holes touch each other or its outline at a point (height regions
         # meeting corner to corner) is opened there as LoD1.2 footprints are: its prism
-        # was non-manifold (val3dity 303) in the written file
+        # was non-manifold (val3dity 303) in the written file (only the contacts are cut:
+        # no hole of it dropped, which would overlap the part inside)
         parts = [q for part in parts for q in (
-            clean_polygon(part, grid=cfg.precision)
+            [orient(r, 1.0) for r in _separate_rings(part, cfg.precision, 2.0 * tol)]
             if part.interiors and _ring_contact(part, tol) is not None else [part])]
         for part in parts:
             in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
