@@ -14,8 +14,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "overlapping", "read_footprints", "vector_crs", "unique", "repair_polygonal", "VectorLayer",
-           "write_layers", "write_polygons", "to_local", "to_world"]
+__all__ = ["no_pam", "overlapping", "read_footprints", "vector_crs", "unique", "repair_polygonal",
+           "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
 
 
 def to_local(geoms, origin, xy_unit=1.0):
