@@ -6,8 +6,9 @@ A 100 m x 120 m crop of the Delft AHN3 tile (x 84880-84980, y 447480-447600)
 and the 78 BGT footprints wholly inside it are written again as other surveys
 would deliver them: LAS 1.4 point formats 6 / 7 / 8, extra-bytes dimensions,
 a 0.01 scale, z + 1000 m (a mountain town), coordinates near 0 and near 1e7
-(footprints moved with them), a few stray returns 1000 km off, and thinned at
-random (seed 0) to 4 and 2 pts/m2; the crop with its classes wiped, then through
+(footprints moved with them), a few stray returns 1000 km off, thinned at
+random (seed 0) to 8, 4, 2 and 1 pts/m2, and to 2 pts/m2 in scan lines 1.4 m
+apart (points 0.35 m apart along them); the crop with its classes wiped, then through
 our own ``ground`` + ``classify``; its ground (class 2) left in class 1 (a
 buildings-only classification); and the whole Delft tile (132 footprints) with
 the stray returns. Each is reconstructed at LoD1.2 + LoD2.2
@@ -15,7 +16,8 @@ the stray returns. Each is reconstructed at LoD1.2 + LoD2.2
 buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
 (and why), the largest difference of ``roof_height`` (LoD1.2),
 ``ridge_height`` (LoD2.2, the highest vertex) and ``ground_height``, and
-whether the file validates.
+whether the file validates; for the crop and the thinned surveys, the RMSE of
+the models (LoD2.2, or the LoD1.2 prism standing in) to the crop's building points.
 Last, ISPRS samp11 (a sparse UTM survey) without footprints: traced buildings
 modelled and failed.
 """
@@ -55,6 +57,15 @@ def _write_like(src, path, *, version="1.2", fmt=1, scale=None, shift=(0.0, 0.0,
     if extra:
         out.height_above = xyz[:, 2].astype(np.float32)
     out.write(path)
+
+
+def _scan_lines(src, draw, density, area, *, anisotropy=4.0, width=0.3):
+    """Points of ``src`` kept as a scanner at ``density`` pts/m2 whose scan lines lie
+    ``anisotropy`` times farther apart than its points along a line: strips ``width``
+    wide (about the crop's own spacing) across y, thinned at random within them."""
+    line = np.sqrt(anisotropy / density)
+    on = ((np.asarray(src.y) - Y0) % line) < width
+    return on & (draw < density * area / max(int(on.sum()), 1))
 
 
 def _footprints(src_gpkg, path, shift=(0.0, 0.0)):
@@ -107,8 +118,11 @@ def main():
             "near 0": ({"shift": (-X0, -Y0, 0.0)}, (-X0, -Y0), 0.0),
             "near 1e7": ({"shift": (1e7 - X0, 1e7 - Y0, 0.0)}, (1e7 - X0, 1e7 - Y0), 0.0),
             "3 stray returns": ({"strays": True}, None, 0.0),
+            "8 pts/m2": ({"keep": draw < 8 * area / n}, None, 0.0),
             "4 pts/m2": ({"keep": draw < 4 * area / n}, None, 0.0),
             "2 pts/m2": ({"keep": draw < 2 * area / n}, None, 0.0),
+            "2 pts/m2 in scan lines": ({"keep": _scan_lines(crop, draw, 2.0, area)}, None, 0.0),
+            "1 pts/m2": ({"keep": draw < 1 * area / n}, None, 0.0),
             "ours: ground + classify": ({"own_classes": True}, None, 0.0),
             "no ground class": ({"no_ground": True}, None, 0.0),
             "whole tile + 3 strays": ({"strays": True, "whole": True}, None, 0.0),
@@ -154,12 +168,21 @@ def main():
                 d = [abs(a[key] - shift - base[k][key]) for k, a in attrs.items()
                      if a.get(key) is not None and base.get(k, {}).get(key) is not None]
                 diffs.append(max(d) if d else float("nan"))
+            rmse = ""
+            if "pts/m2" in name or base is attrs:  # the model against the crop's every point
+                from lidar2city.tools.evaluate_model import evaluate_model
+
+                _, ev = evaluate_model(out, [tmp / "crop.laz"], crs="EPSG:7415", check=False)
+                rmse = (f"; RMSE to the crop's points median {ev['rmse_median']:.3f} m, "
+                        f"p90 {ev['rmse_p90']:.3f} m")
             fb = sum("lod22_fallback" in a for a in attrs.values())
+            failed = sorted(a.get("reason", "") for a in attrs.values() if a.get("status") != "ok")
             print(f"{name:24s} {s.done}/{s.total} modelled, {s.failed} failed, {fb} LoD1.2 "
                   f"fallback(s); max |d| roof_height {diffs[0]:.3f} m, ridge_height "
                   f"{diffs[1]:.3f} m, ground_height {diffs[2]:.3f} m; "
-                  f"{'valid' if valid else 'INVALID'}"
-                  + (f"; {'; '.join(why)}" if why else ""))
+                  f"{'valid' if valid else 'INVALID'}" + rmse
+                  + (f"; {'; '.join(why)}" if why else "")
+                  + (f"; failed: {'; '.join(failed)}" if failed else ""))
     sparse_survey_without_footprints(data)
 
 

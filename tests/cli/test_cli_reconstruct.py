@@ -51,26 +51,42 @@ def test_reconstruct_tile_without_crs_takes_the_footprints_crs(runner, tmp_path,
     assert json.loads(out.read_text())["metadata"]["referenceSystem"].endswith("/28992")
 
 
-def test_duplicate_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
-    """A footprint file holding some outlines twice: every footprint gets its model
-    (ids made unique), and the run warns once that the models overlap."""
+def _run_with_footprints(runner, tmp_path, fps, ids):
+    """``reconstruct`` of the synthetic tile with footprints ``fps`` (local boxes) named
+    ``ids``: the result and the model's CityObjects."""
     from pyproj import CRS
 
     from lidar2city.cli.main import cli
     from lidar2city.io.vector import write_polygons
 
     las, _, _ = _synthetic_inputs(tmp_path)
-    fps = [box(5, 5, 15, 13), box(15, 5, 25, 13), box(5, 5, 15, 13)]
-    dup = tmp_path / "dup.gpkg"
-    write_polygons(dup, fps, {"bag_id": ["A", "B", "A"]}, origin=(85000.0, 447000.0),
-                   crs=CRS.from_epsg(28992))
+    src = tmp_path / "fp.gpkg"
+    write_polygons(src, fps, {"bag_id": ids}, origin=(85000.0, 447000.0), crs=CRS.from_epsg(28992))
     out = tmp_path / "d.city.json"
-    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(dup), "-o", str(out),
+    res = runner.invoke(cli, ["reconstruct", str(las), "--footprints", str(src), "-o", str(out),
                               "--id-field", "bag_id"])
     assert res.exit_code == 0, res.output
     assert "3 of 3 buildings reconstructed" in res.output
+    return json.loads(out.read_text())["CityObjects"]
+
+
+def test_duplicate_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
+    """A footprint file holding some outlines twice: every footprint gets its model
+    (ids made unique), and the run warns once that the models overlap."""
+    objects = _run_with_footprints(runner, tmp_path, [box(5, 5, 15, 13), box(15, 5, 25, 13),
+                                                      box(5, 5, 15, 13)], ["A", "B", "A"])
     assert "1 footprint(s) of" in caplog.text and "repeat an earlier one" in caplog.text
-    assert {"A", "B", "A-2"} <= set(json.loads(out.read_text())["CityObjects"])
+    assert {"A", "B", "A-2"} <= set(objects)
+    assert "pair(s) of footprints" not in caplog.text  # exact repeats are said apart
+
+
+def test_overlapping_footprints_are_modelled_with_a_warning(runner, tmp_path, caplog):
+    """Footprints that overlap others (buffered outlines, two sources merged) were
+    modelled in silence, each from the points of the overlap too; the run now says
+    how many pairs overlap and by how much. Footprints sharing a wall do not count."""
+    _run_with_footprints(runner, tmp_path, [box(5, 5, 15, 13), box(15, 5, 25, 13),
+                                            box(12, 6, 18, 12)], ["A", "B", "C"])
+    assert "2 pair(s) of footprints of" in caplog.text and "by up to 18.0 m2" in caplog.text
 
 
 def test_reconstruct_formats(runner, tmp_path):

@@ -168,3 +168,43 @@ def test_a_spilled_tile_loads_back_the_same(n):
     assert back.steps.dtype == np.int32 and np.array_equal(back.world(), tile.world())
     assert all(np.array_equal(back.attrs[k], v) and back.attrs[k].dtype == v.dtype
                for k, v in tile.attrs.items())
+
+
+def _with_count(tmp_path, name, delta):
+    """A tile whose header's (legacy) point count is off by ``delta``."""
+    import struct
+
+    import laspy
+
+    rng = np.random.default_rng(0)
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    xyz = rng.uniform(0, 50, (3000, 3))
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    p = tmp_path / name
+    las.write(p)
+    b = bytearray(p.read_bytes())
+    struct.pack_into("<I", b, 107, struct.unpack_from("<I", b, 107)[0] + delta)
+    p.write_bytes(bytes(b))
+    return p
+
+
+def test_a_wrong_header_point_count_is_found_when_the_tiles_are_scanned(tmp_path, caplog):
+    """A LAZ whose header counts more points than it holds passed the scan and failed in
+    every block that read it (reconstruct with footprints: a model of failed buildings,
+    exit 0); it is now a one-line error before any work. An uncompressed tile holding
+    more records than its header counts is read to the count, with a warning."""
+    from lidar2city.errors import FileFormatError
+    from lidar2city.io.las import scan_tiles
+
+    bad = _with_count(tmp_path, "more.laz", 1000)
+    with pytest.raises(FileFormatError, match="header counts 4,000 points but its compressed"):
+        scan_tiles([bad])
+    with pytest.raises(FileFormatError, match="header counts 4,000 points"):
+        read_las(bad)
+    good = _with_count(tmp_path, "ok.laz", 0)
+    assert scan_tiles([good])[0].count == 3000
+    less = _with_count(tmp_path, "less.las", -1000)
+    with caplog.at_level("WARNING"):
+        assert scan_tiles([less])[0].count == 2000
+        assert len(read_las(less).data.points) == 2000
+    assert "holds 3,000 point records, its header counts 2,000" in caplog.text

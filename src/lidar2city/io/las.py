@@ -118,6 +118,8 @@ def read_las(path, *, crs=None) -> LasTile:
 
     p = check_input_file(path)
     with _reading(p):
+        with laspy.open(p) as f:
+            _check_point_count(f, p)
         las = laspy.read(p)
     resolved = parse_crs(crs) if crs is not None else _read_crs(las, p)
     return LasTile(str(p), las, resolved)
@@ -211,6 +213,7 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = forced if forced is not None else _read_crs(f, p)
+            _check_point_count(f, p)
         if tile_crs is not None:
             # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
             # state: 300 MB for 10,000 tiles otherwise)
@@ -223,6 +226,50 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     if not allow_empty and not any(t.count for t in out):
         raise EmptyInputError("the input files hold no points")
     return out
+
+
+def _check_point_count(reader, path) -> None:
+    """Check a tile's header point count against its point data (an open laspy reader).
+
+    A LAZ file whose header counts more points than it holds was read as valid
+    here and failed in every block that read it (``reconstruct`` with footprints
+    wrote a model of failed buildings, exit 0; without, ``no building footprint
+    found``): its last point is decoded (one chunk) so it fails at once. An
+    uncompressed file whose point data holds more records than its header
+    counts is read to the header's count, with a warning.
+
+    Raises
+    ------
+    FileFormatError
+    """
+    h = reader.header
+    n = int(h.point_count)
+    if n == 0:
+        return
+    if h.are_points_compressed:
+        try:
+            reader.seek(n - 1)
+            got = len(reader.read_points(1))
+        except Exception as exc:  # lazrs.LazrsError, OSError, laspy.LaspyException
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            got, why = 0, f" ({msg})"
+        else:
+            why = ""
+        reader.seek(0)
+        if got != 1:
+            raise FileFormatError(
+                f"{str(path)!r} is not a readable LAS/LAZ file: its header counts {n:,} "
+                f"points but its compressed point data ends before the last{why}: a wrong "
+                "header point count, or a truncated file")
+        return
+    import os
+
+    end = int(getattr(h, "start_of_first_evlr", 0) or 0) or os.path.getsize(path)
+    held = (end - int(h.offset_to_point_data)) // int(h.point_format.size)
+    if held > n:
+        logger.warning("%s: its point data holds %s point records, its header counts %s: "
+                       "only those read (rewrite the header to read them all)", path,
+                       f"{held:,}", f"{n:,}")
 
 
 def check_header_bounds(tiles, *, limit: int = 100) -> None:

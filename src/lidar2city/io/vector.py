@@ -14,8 +14,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "read_footprints", "vector_crs", "unique", "repair_polygonal", "VectorLayer",
-           "write_layers", "write_polygons", "to_local", "to_world"]
+__all__ = ["no_pam", "overlapping", "read_footprints", "vector_crs", "unique", "repair_polygonal",
+           "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
 
 
 def to_local(geoms, origin, xy_unit=1.0):
@@ -179,6 +179,46 @@ def no_usable_footprint(path, geometries, notes) -> None:
         why = "; ".join(f"{k}" + (f" (x{c})" if c > 1 else "") for k, c in Counter(notes).items())
         raise EmptyInputError(f"{str(path)!r}: none of its {len(geometries)} footprint(s) is a "
                               f"usable polygon: {why}")
+
+
+def overlapping(geometries, *, min_area: float = 1.0) -> tuple:
+    """Pairs of footprints that overlap by more than ``min_area`` (m2, local metres).
+
+    Footprints sharing a wall meet along it (an overlap of about nothing); two
+    that overlap more each take the points of the overlap, so their models
+    overlap and their heights mix the two roofs. Outlines repeated exactly are
+    left out (said apart).
+
+    Parameters
+    ----------
+    geometries : sequence of shapely geometries or None
+
+    Returns
+    -------
+    pairs : int
+    largest : float
+        The largest overlap (m2), 0.0 when none.
+
+    Examples
+    --------
+    >>> from shapely import box
+    >>> overlapping([box(0, 0, 4, 4), box(3, 0, 7, 4), box(7, 0, 9, 4), box(0, 0, 4, 4)])
+    (2, 4.0)
+    """
+    import shapely
+
+    g = np.array([x if x is not None and not x.is_empty else None for x in geometries],
+                 dtype=object)
+    ok = np.flatnonzero(g != None)  # noqa: E711 (element-wise)
+    if len(ok) < 2:
+        return 0, 0.0
+    g = g[ok]
+    i, j = shapely.STRtree(g).query(g, predicate="intersects")
+    pair = i < j
+    i, j = i[pair], j[pair]
+    area = shapely.area(shapely.intersection(g[i], g[j]))
+    big = (area > min_area) & ~shapely.equals_exact(g[i], g[j], tolerance=0.0)
+    return int(big.sum()), float(area[big].max()) if big.any() else 0.0
 
 
 def _id_text(value):

@@ -20,11 +20,12 @@ from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
-from .prism import clean_polygon, prism_distance, prism_is_valid, prism_solid
+from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distance,
+                    prism_is_valid, prism_solid)
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Lod1Config", "LODS", "reconstruct_building"]
+__all__ = ["FEWEST_POINTS", "Lod1Config", "LODS", "points_needed", "reconstruct_building"]
 
 #: LoDs this module builds.
 LODS = ("1.2", "1.3")
@@ -46,7 +47,11 @@ class Lod1Config:
     ground_wide_ring: float = field(10.0, "Wider ring (m) used when the first holds too few "
                                     "ground points.")
     min_ground_points: int = field(3, "Ground points needed in a ring to use it.")
-    min_points: int = field(10, "Building points needed inside a footprint.")
+    min_points: int = field(10, "Building points needed inside a footprint where the survey "
+                            "is dense enough (see min_area).")
+    min_area: float = field(2.0, "Roof area (m2) whose points a footprint needs at the survey's "
+                            "measured density around it: on a sparse survey fewer than "
+                            "min_points are enough (never fewer than 3).")
     min_height: float = field(0.5, "Smallest roof height above ground (m) for a model.")
     lod13_cell: float = field(0.5, "Raster cell (m) of the LoD1.3 height regions.")
     lod13_step: float = field(2.0, "Height difference (m) between the heights of neighbouring "
@@ -84,6 +89,8 @@ class Lod1Config:
                 raise ConfigError(f"lod1.{name}: must be >= 0, got {getattr(self, name)}")
         if self.min_points < 1:
             raise ConfigError(f"lod1.min_points: must be >= 1, got {self.min_points}")
+        if not self.min_area >= 0:
+            raise ConfigError(f"lod1.min_area: must be >= 0, got {self.min_area}")
         object.__setattr__(self, "building_classes", tuple(int(c) for c in self.building_classes))
         object.__setattr__(self, "ground_classes", tuple(int(c) for c in self.ground_classes))
 
@@ -97,6 +104,36 @@ class Lod1Config:
         return dataclasses.replace(self, **changes)
 
 
+#: the fewest building points a model is made from on any survey: one or two returns
+#: in a footprint are as likely a wire, a bird or a branch as a roof
+FEWEST_POINTS = 3
+
+
+def points_needed(config: Lod1Config, density: float | None) -> int:
+    """Building points a footprint needs for a model at a survey ``density`` (pts/m2).
+
+    ``config.min_area`` m2 worth of points at that density, between
+    :data:`FEWEST_POINTS` and ``config.min_points``: a fixed count would leave a
+    small shed without a model on a sparse survey (a 5 m2 shed holds about 10
+    points at 2 pts/m2) while a dense one keeps ``min_points``.
+
+    Parameters
+    ----------
+    config : Lod1Config
+    density : float or None
+        Points per m2 around the building; None: unknown (``config.min_points``).
+
+    Examples
+    --------
+    >>> points_needed(Lod1Config(), 2.0), points_needed(Lod1Config(), 10.0)
+    (4, 10)
+    """
+    if density is None or not np.isfinite(density):
+        return config.min_points
+    need = int(np.ceil(config.min_area * max(float(density), 0.0) - 1e-9))
+    return int(min(config.min_points, max(need, FEWEST_POINTS)))
+
+
 def _failed(result, reason, t0):
     result.status = "failed"
     result.reason = reason
@@ -108,7 +145,8 @@ def _failed(result, reason, t0):
 
 
 def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Config | None = None,
-                         id: str = "", fallback_ground_z=None) -> BuildingResult:
+                         id: str = "", fallback_ground_z=None,
+                         point_density=None) -> BuildingResult:
     """LoD1.2 / LoD1.3 models of one building.
 
     Parameters
@@ -126,6 +164,11 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         Ground height used when no ground point and no building point gives one
         (e.g. the area's ground level; a callable is evaluated only then);
         recorded as ``ground_source`` ``"fallback"``.
+    point_density : float or callable, optional
+        The survey's points per m2 around the footprint (a callable is evaluated
+        only when fewer than ``config.min_points`` building points are inside):
+        the points needed are then :func:`points_needed`; default
+        ``config.min_points``.
 
     Returns
     -------
@@ -186,7 +229,12 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         if n == 0:
             return _failed(result, "no points", t0)
         if n < cfg.min_points:
-            return _failed(result, f"too few points ({n} < {cfg.min_points})", t0)
+            density = point_density() if callable(point_density) else point_density
+            need = points_needed(cfg, density)
+            if n < need:
+                why = "" if need == cfg.min_points else (
+                    f": {cfg.min_area:g} m2 at the measured {density:.1f} pts/m2")
+                return _failed(result, f"too few points ({n} < {need}{why})", t0)
         z = inside[:, 2]
         roof = roof_height(z, cfg.roof_statistic)
         ground, source = ground_height(
@@ -275,6 +323,7 @@ def _codes(solids) -> list[int]:
 def _lod13(polys, inside, ground, cfg) -> list:
     """Prisms of the roof-height parts of each footprint polygon."""
     import shapely
+    from shapely.geometry.polygon import orient
 
     solids = []
     for poly in polys:
@@ -282,6 +331,14 @@ def _lod13(polys, inside, ground, cfg) -> list:
         pts = inside[sel]
         parts = height_parts(poly, pts, cell=cfg.lod13_cell, step=cfg.lod13_step,
                              min_area=cfg.lod13_min_area, grid=cfg.precision)
+        tol = 2.5 * max(cfg.precision, 0.001)
+        # a part whose holes touch each other or its outline at a point (height regions
+        # meeting corner to corner) is opened there as LoD1.2 footprints are: its prism
+        # was non-manifold (val3dity 303) in the written file (only the contacts are cut:
+        # no hole of it dropped, which would overlap the part inside)
+        parts = [q for part in parts for q in (
+            [orient(r, 1.0) for r in _separate_rings(part, cfg.precision, 2.0 * tol)]
+            if part.interiors and _ring_contact(part, tol) is not None else [part])]
         for part in parts:
             in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
             zz = pts[in_part, 2] if in_part.sum() >= 1 else pts[:, 2]

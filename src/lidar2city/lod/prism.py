@@ -368,6 +368,10 @@ def prism_is_valid(solid, *, tolerance: float = 0.001) -> bool:
     if not v[k, 2] - v[0, 2] >= 2.0 * tolerance:
         return False
     xy = v[:k, :2]
+    if len(np.unique(xy, axis=0)) < k:
+        # a vertex shared by two rings (holes touching at a point): GEOS's minimum
+        # clearance leaves such contacts out, the shell's edge there is non-manifold
+        return False
     rings = [shapely.LinearRing(xy[s0:s0 + m]) for s0, m in zip(starts, lens, strict=True)]
     ccw = shapely.is_ccw(rings)
     if not ccw[0] or ccw[1:].any():

@@ -313,12 +313,13 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
     """
     import shapely
 
-    from ..io.vector import no_usable_footprint, read_footprints, unique
+    from ..io.vector import no_usable_footprint, overlapping, read_footprints, unique
 
     chunk = int(chunk or FOOTPRINT_CHUNK)
     area = shapely.box(*extent)
     all_ids, fids, keep, bounds, geoms, notes = [], [], [], [], [], []
     outlines, repeated = set(), 0  # a footprint repeated exactly: two overlapping models
+    overlaps, largest = 0, 0.0  # footprints overlapping others (in one chunk of the file)
     while True:
         part, src_crs = read_footprints(path, layer=layer, id_field=id_field,
                                         origin=frame.origin[:2], xy_unit=frame.xy_unit,
@@ -341,6 +342,8 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
                 bounds.append([np.nan] * 4 if g is None or g.is_empty else g.bounds)
             else:
                 keep.append(False)
+        pairs, most = overlapping(part.geometries)
+        overlaps, largest = overlaps + pairs, max(largest, most)
         all_ids += part.ids
         if len(part) < chunk:
             break
@@ -359,6 +362,10 @@ def index_footprints(path, frame, *, id_field=None, layer=None, extent=None, chu
         logger.warning("%d footprint(s) of %r repeat an earlier one's outline exactly: each "
                        "gets its own (overlapping) model; remove the duplicates", repeated,
                        str(path))
+    if overlaps:
+        logger.warning("%d pair(s) of footprints of %r overlap (by up to %.1f m2): each takes "
+                       "the points of the overlap, so their models overlap and mix the two "
+                       "roofs' heights", overlaps, str(path), largest)
     return fids, [ids[i] for i in kept], np.array(bounds, dtype=np.float64).reshape(-1, 4)
 
 
@@ -403,6 +410,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     from ..lod.lod1 import Lod1Config, reconstruct_building
     from ..metrics import model as _model  # noqa: F401  (imported once, not in the first building's time)
     from ..validate import solid as _solid  # noqa: F401
+    from .info import point_density
 
     cfg = config or Lod1Config()
     if building is None or ground is None:
@@ -413,6 +421,7 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     ggrid = PointGrid(gxyz[:, :2], cell=10.0)
     radius = cfg.search_radius
     area_radius = 50.0
+    grids = []  # every point's grid, for the density around a footprint with few points
     total = len(footprints)
     results = [None] * total
     notes = footprints.attributes.get("_note", [""] * total)
@@ -438,8 +447,18 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
                 z = gxyz[ggrid.query(*box), 2] if area_ground is None else area_ground(*box)
                 return float(np.percentile(z, cfg.ground_percentile)) if len(z) else None
 
+            def density(x0=x0, y0=y0, x1=x1, y1=y1):
+                # the survey's density around the footprint, every point counted (built
+                # only for a footprint holding fewer than min_points building points)
+                if not grids:
+                    grids.append(PointGrid(cloud.xyz[:, :2], cell=10.0))
+                near = grids[0].query(x0 - radius, y0 - radius, x1 + radius, y1 + radius)
+                # averaged over 5 m cells with points: gaps between scan lines count,
+                # water and the space beyond the tile's edge do not
+                return point_density(cloud.xyz[near, :2], cell=5.0)
+
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
-                                       fallback_ground_z=fallback)
+                                       fallback_ground_z=fallback, point_density=density)
             if lod22 is not None and res.ok:
                 add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision)
         if notes[i]:

@@ -756,8 +756,8 @@ def _run_groups(spec, options, reader, parts) -> BlockOutput:
                                      lod22=options.lod22, area_ground=area_ground)
         # footprints the classes left without building points claim theirs and are
         # built again (only those: nothing to do, and no cost, where every one has them)
-        short = [j for j, r in enumerate(done)
-                 if r.attributes.get("point_count", cfg.min_points) < cfg.min_points]
+        short = [j for j, r in enumerate(done) if not r.ok
+                 and r.attributes.get("point_count", cfg.min_points) < cfg.min_points]
         if short and len(classes) and not spec.traced:  # traced: never claimed
             few = _subset(fps, [idx[j] for j in short])
             claimed = _claim(cloud, classes, few, options)
