@@ -6,7 +6,8 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from lidar2city.roof.arrangement import _close_points, _nearest, _point_cells, arrangement_cells
+from lidar2city.roof.arrangement import _close_points, _nearest, _point_cells, _spike_free, arrangement_cells
+from lidar2city.roof.refine import _remove_spikes
 from lidar2city.roof.topology import _cross_dilation
 
 coord = st.floats(-1e4, 1e4, allow_nan=False)
@@ -94,3 +95,18 @@ def test_point_cells_is_the_trees_query(seed, n, lines):
     got = _point_cells(cells, xy)
     np.testing.assert_array_equal(got[0], ip[first])
     np.testing.assert_array_equal(got[1], ic[first])
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(0, 12), spikes=st.integers(0, 3))
+def test_spike_free_is_remove_spikes(seed, m, spikes):
+
+    rng = np.random.default_rng(seed)
+    ring = list(np.round(rng.random((m, 2)) * 4, 1))
+    for _ in range(spikes):  # A, X, A back and forth
+        if len(ring) >= 2:
+            i = int(rng.integers(1, len(ring)))
+            ring[i:i] = [rng.random(2), ring[i - 1].copy()]
+    ring = np.asarray(ring, dtype=float).reshape(-1, 2)
+    want = np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
+    np.testing.assert_array_equal(_spike_free(ring), want)

@@ -1203,6 +1203,18 @@ def _on_rims(faces, face_labels, exempt, rim_cells):
     return on
 
 
+def _spike_free(ring):
+    """:func:`.refine._remove_spikes` of a ring (m, 2) as an array; a ring without a spike
+    (the usual one) is found so by one vectorised test and returned as it is."""
+    from .refine import _remove_spikes
+
+    if len(ring) >= 3:
+        gap = np.concatenate([ring[-1:], ring[:-1]]) - np.concatenate([ring[1:], ring[:1]])
+        if not (np.hypot(gap[:, 0], gap[:, 1]) < 1e-6).any():
+            return ring
+    return np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
+
+
 def collapse_short_edges(faces, footprint, *, min_length):
     """A partition without edges shorter than ``min_length`` where they can go.
 
@@ -1229,7 +1241,6 @@ def collapse_short_edges(faces, footprint, *, min_length):
     """
     import shapely
 
-    from .refine import _remove_spikes
     from .solid import _key, _ring_keys
 
     rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
@@ -1271,11 +1282,16 @@ def collapse_short_edges(faces, footprint, *, min_length):
     def rebuild_face(fi, mp):
         new_rs = []
         for r, keys in zip(rings[fi], ring_keys[fi], strict=True):
-            pts = [mp.get(k, p) for k, p in zip(keys, r, strict=True)]
-            pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+            pts = np.array(r, dtype=float)
+            moved = [(i, mp[k]) for i, k in enumerate(keys) if k in mp] if mp else ()
+            if moved:
+                pts[[i for i, _ in moved]] = [q for _, q in moved]
+            # a vertex equal to the one before it (moved onto it) goes
+            step = pts[1:] - pts[:-1]
+            pts = pts[np.r_[True, np.hypot(step[:, 0], step[:, 1]) > 1e-9]]
             if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
-                pts.pop()
-            new_rs.append(_remove_spikes(pts))
+                pts = pts[:-1]
+            new_rs.append(_spike_free(pts))
         if len(new_rs[0]) < 3:
             return None
         poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
@@ -1302,7 +1318,7 @@ def collapse_short_edges(faces, footprint, *, min_length):
 
     for members in sorted(clusters.values()):
         pts = np.array([xy_of[k] for k in members])
-        on = np.array([outline.distance(shapely.Point(p)) < 1e-6 for p in pts])
+        on = shapely.distance(outline, shapely.points(pts)) < 1e-6
         fixed = [k for k in members if k in corners]
         if len(fixed) > 1 or (not fixed and on.sum() > 1):
             continue
