@@ -378,11 +378,11 @@ def _fit_line(sub, direction, snap_angle):
     return m, d, float(np.abs((sub - m) @ normal).max())
 
 
-def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
+def _split_fit(raw, lo, hi, tol, direction, snap_angle, out, fits):
     """Pieces (lo, hi) of raw[lo..hi] each fitted by one line within ``tol`` (split at the point
-    farthest from the chord, as Douglas-Peucker)."""
+    farthest from the chord, as Douglas-Peucker). ``fits``: :func:`_span_fit`'s memo."""
     sub = raw[lo:hi + 1]
-    fit = _fit_line(sub, direction, snap_angle)
+    fit = _span_fit(raw, lo, hi, direction, snap_angle, fits)
     if hi - lo < 3 or (fit is not None and fit[2] <= tol):
         out.append((lo, hi))
         return
@@ -394,8 +394,17 @@ def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
     else:
         dist = np.abs((sub - a) @ np.array([-d[1], d[0]]) / n)
     k = lo + int(np.argmax(dist[1:-1])) + 1
-    _split_fit(raw, lo, k, tol, direction, snap_angle, out)
-    _split_fit(raw, k, hi, tol, direction, snap_angle, out)
+    _split_fit(raw, lo, k, tol, direction, snap_angle, out, fits)
+    _split_fit(raw, k, hi, tol, direction, snap_angle, out, fits)
+
+
+def _span_fit(raw, lo, hi, direction, snap_angle, fits):
+    """:func:`_fit_line` of raw[lo..hi], memoised in the dict ``fits`` by ``(lo, hi)``: a
+    chain's splitting, merging and final pieces fit many spans more than once."""
+    key = (lo, hi)
+    if key not in fits:
+        fits[key] = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+    return fits[key]
 
 
 def _step_polyline(chain, *, tol, direction, snap_angle, closed):
@@ -410,20 +419,20 @@ def _step_polyline(chain, *, tol, direction, snap_angle, closed):
     raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
     if len(raw) < 2 or (closed and len(raw) < 5):
         return None
-    spans = []
-    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans)
+    spans, fits = [], {}
+    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans, fits)
     merged = True
     while merged and len(spans) > 1:
         merged = False
         for i in range(len(spans) - 1):
-            fit = _fit_line(raw[spans[i][0]:spans[i + 1][1] + 1], direction, snap_angle)
+            fit = _span_fit(raw, spans[i][0], spans[i + 1][1], direction, snap_angle, fits)
             if fit is not None and fit[2] <= tol:
                 spans[i:i + 2] = [(spans[i][0], spans[i + 1][1])]
                 merged = True
                 break
     pieces = []
     for lo, hi in spans:
-        fit = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+        fit = _span_fit(raw, lo, hi, direction, snap_angle, fits)
         if fit is not None:
             pieces.append((fit[0], fit[1], raw[lo:hi + 1]))
     if not pieces or (closed and len(pieces) < 3):
