@@ -110,3 +110,19 @@ def test_spike_free_is_remove_spikes(seed, m, spikes):
     ring = np.asarray(ring, dtype=float).reshape(-1, 2)
     want = np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
     np.testing.assert_array_equal(_spike_free(ring), want)
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40), m=st.integers(1, 6),
+       ties=st.booleans())
+def test_column_medians_are_the_medians(seed, n, m, ties):
+    from lidar2city._stats import median
+    from lidar2city.roof.facets import _column_medians
+
+    rng = np.random.default_rng(seed)
+    d = rng.random((n, m))
+    if ties:  # repeated values
+        d = np.round(d * 3) / 3
+    got = _column_medians(d)
+    for c in range(m):
+        assert got[c] == median(d[:, c].copy())

@@ -320,11 +320,24 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
                 facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
             return facet[k]
 
-        for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
-            (pi, zi, si), (pj, zj, sj) = points_of(i), points_of(j)
+        fi, fj = ii[far], jj[far]
+        # the median distance of each facet's points to the other's plane, for both facets
+        # of every pair: per facet, one matrix against all its partners' planes
+        own, other = np.concatenate([fi, fj]), np.concatenate([fj, fi])
+        med = np.empty(len(own))
+        for a in np.unique(own).tolist():
+            sel = np.flatnonzero(own == a)
+            pa = points_of(a)[0]
+            step = max(1, _MEDIAN_CHUNK // max(len(pa), 1))
+            for s0 in range(0, len(sel), step):
+                part = sel[s0:s0 + step]
+                med[part] = _column_medians(_point_plane_dist(pa, planes[other[part]]))
+        for m, (i, j) in enumerate(zip(fi.tolist(), fj.tolist(), strict=True)):
+            (_, zi, si), (_, zj, sj) = points_of(i), points_of(j)
             level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
-            ok[m] = level or min(median(_point_plane_dist(pi, planes[j:j + 1]).ravel()),
-                                 median(_point_plane_dist(pj, planes[i:i + 1]).ravel())) <= dist_tol / 2
+            # min() of the two medians as Python takes it (the first unless the second is less)
+            mi, mj = med[m], med[len(fi) + m]
+            ok[m] = level or (mj if mj < mi else mi) <= dist_tol / 2
         far, rms = far[ok], rms[ok]
         pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
         cos = np.concatenate([cos, cos_merge - 1.0 - rms])
@@ -359,6 +372,24 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)
     return out, len(uniq)
+
+
+#: point-plane distances per block of :func:`_column_medians` in the coplanar merge
+_MEDIAN_CHUNK = 1 << 18
+
+
+def _column_medians(d):
+    """:func:`lidar2city._stats.median` of every column of ``d`` (n, m), the same values: one
+    ``np.partition`` along the rows at the same positions (an order statistic does not
+    depend on how it is selected), the middle one or ``(0 + a + b) / 2``; NaN for a column
+    holding NaN."""
+    n = d.shape[0]
+    if n == 0:
+        return np.array([median(c) for c in d.T])
+    half = n // 2
+    part = np.partition(d, [half - 1, half, n - 1] if n % 2 == 0 else [half, n - 1], axis=0)
+    out = 0.0 + part[half] if n % 2 else (0.0 + part[half - 1] + part[half]) / 2
+    return np.where(np.isnan(part[-1]), np.nan, out)
 
 
 def _absorb_small(xyz, labels, planes, nbrs, dist_tol, small):
