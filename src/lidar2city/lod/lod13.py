@@ -126,7 +126,7 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         # linear-interpolated percentile of each region's sorted heights (as np.percentile);
         # a region's position in the sorted heights enters the float sum, so every region
         # is measured again (vectorised) and the changed ones reported
-        first = np.r_[0, np.cumsum(sizes)[:-1]]
+        first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
         pos = first + (sizes - 1) * frac
         lo = np.floor(pos).astype(np.int64)
         hi = np.minimum(lo + 1, len(z) - 1)

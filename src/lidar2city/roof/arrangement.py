@@ -416,7 +416,7 @@ def _step_polyline(chain, *, tol, direction, snap_angle, closed):
     parallel, in a short jog at the vertex they share).
     """
     raw = np.asarray(chain, dtype=float)
-    raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+    raw = raw[np.concatenate(([True], np.any(np.diff(raw, axis=0) != 0, axis=1)))]
     if len(raw) < 2 or (closed and len(raw) < 5):
         return None
     spans, fits = [], {}
@@ -522,7 +522,7 @@ def _refit_lines(polys, raws, *, max_shift):
 def _straight(pts, closed):
     """Vertices (k, 2) without repeats and without collinear interior vertices."""
     while len(pts) > 1:
-        pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
+        pts = pts[np.concatenate(([True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9))]
         if closed and len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) <= 1e-9:
             pts = pts[:-1]
         if len(pts) <= 2:
@@ -600,7 +600,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     xy, ids, segs, ends = [], [], [], {}
     for raw, cl in zip(chains, closed, strict=True):
         raw = np.asarray(raw, dtype=float)
-        raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+        raw = raw[np.concatenate(([True], np.any(np.diff(raw, axis=0) != 0, axis=1)))]
         # the fewest straight pieces within tol, their directions as the data give them
         # (no snapping: the direction energy decides which become parallel to the axes)
         s = _step_polyline(raw, tol=tol, direction=direction, snap_angle=0.0, closed=cl) \
@@ -689,7 +689,7 @@ def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
 def _runs(flags):
     """Maximal runs of equal flags: list of [lo, hi) index pairs."""
     cut = np.flatnonzero(flags[1:] != flags[:-1]) + 1
-    bounds = np.r_[0, cut, len(flags)]
+    bounds = np.concatenate(([0], cut, [len(flags)]))
     return list(zip(bounds[:-1], bounds[1:], strict=True))
 
 
@@ -715,7 +715,7 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
         return np.maximum(np.minimum(prev, a), np.minimum(np.maximum(prev, a), nxt))
 
     step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
+    along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
     # a wall leaves the line at a chain's end (at the outline or a junction); a step
     # between two stretches on the line is the staircase of the label grid
     for lo, hi in _runs(step)[1:-1]:
@@ -885,8 +885,8 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     owner = np.repeat(ir, counts)  # sorted: the query returns the rays in order
     if not len(owner):
         return out
-    starts = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
-    for a, b in zip(starts, np.r_[starts[1:], len(owner)], strict=True):
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(owner)) + 1))
+    for a, b in zip(starts, np.concatenate((starts[1:], [len(owner)])), strict=True):
         k, i, d = where[owner[a]]
         t = (coords[a:b] - segments[k][i]) @ d
         out[k][i] = segments[k][i] + d * (t.min() + eps)
@@ -1297,7 +1297,7 @@ def collapse_short_edges(faces, footprint, *, min_length):
                 pts[[i for i, _ in moved]] = [q for _, q in moved]
             # a vertex equal to the one before it (moved onto it) goes
             step = pts[1:] - pts[:-1]
-            pts = pts[np.r_[True, np.hypot(step[:, 0], step[:, 1]) > 1e-9]]
+            pts = pts[np.concatenate(([True], np.hypot(step[:, 0], step[:, 1]) > 1e-9))]
             if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
                 pts = pts[:-1]
             new_rs.append(_spike_free(pts))
