@@ -126,3 +126,21 @@ def test_column_medians_are_the_medians(seed, n, m, ties):
     got = _column_medians(d)
     for c in range(m):
         assert got[c] == median(d[:, c].copy())
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 50), q=st.sampled_from([0.5, 0.9, 0.95]),
+       rounded=st.booleans())
+def test_quantile_side_agrees_with_numpy(seed, n, q, rounded):
+    from lidar2city.roof.facets import quantile_side
+
+    rng = np.random.default_rng(seed)
+    a = rng.random(n) * 2
+    if rounded:  # limits right on order statistics and ties
+        a = np.round(a, 1)
+    for limit in (0.5, 1.0, float(a[0]), float(np.quantile(a, q))):
+        side = quantile_side(a.copy(), q, limit)
+        if side is not None:
+            assert side == bool(np.quantile(a, q) <= limit)
+    # a limit far from the order statistics is decided without numpy
+    assert quantile_side(a.copy(), q, 10.0) is True and quantile_side(a.copy(), q, -1.0) is False

@@ -45,6 +45,7 @@ import numpy as np
 
 from .._stats import median
 from ..errors import AlgorithmError, InputError
+from .facets import quantile_side
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
 
@@ -789,7 +790,9 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         if line is not None:
             g, c0 = line
             dist = np.abs(c @ g + c0)
-            near_line = np.percentile(dist, 90) <= max_shift
+            near_line = quantile_side(dist, 0.9, max_shift)  # np.percentile(dist, 90) <= max_shift
+            if near_line is None:
+                near_line = np.percentile(dist, 90) <= max_shift
             runs = None
             if near_line and not closed:
                 runs = _mixed_runs(c, dz, dist, t_step, step_tol * cell, 2 * cell)

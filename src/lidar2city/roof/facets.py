@@ -364,7 +364,7 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         if p is None:
             continue
         r = _point_plane_dist(xyz[members], p[None])[:, 0]
-        if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and np.quantile(r, 0.95) <= dist_tol:
+        if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and _quantile_le(r, 0.95, dist_tol):
             parent[b] = a
             group[a] = members
             del group[b]
@@ -372,6 +372,40 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)
     return out, len(uniq)
+
+
+def quantile_side(values, q, limit):
+    """Whether ``np.quantile(values, q) <= limit`` (True / False) for a 1-D float64 array
+    when one ``np.partition`` decides it, else None (ask numpy).
+
+    numpy's linear quantile lies between the two order statistics it interpolates
+    (up to a rounding): when both are clearly on one side of ``limit`` (by a relative
+    1e-9) the answer is theirs; anything closer, NaN, an empty array or another dtype
+    gives None. Taken per chain and per facet merge, where ``np.quantile``'s set-up
+    costs more than its work.
+    """
+    a = values
+    n = a.size if isinstance(a, np.ndarray) else 0
+    if not n or a.dtype != np.float64 or a.ndim != 1:
+        return None
+    k = min(int(math.floor((n - 1) * q)), n - 1)
+    part = np.partition(a, [k, n - 1] if k + 1 >= n else [k, k + 1, n - 1])
+    if np.isnan(part[-1]):
+        return None
+    lo, hi = float(part[k]), float(part[min(k + 1, n - 1)])
+    big, small = max(lo, hi), min(lo, hi)
+    margin = 1e-9 * max(abs(limit), abs(big), abs(small))
+    if big < limit - margin:
+        return True
+    if small > limit + margin:
+        return False
+    return None
+
+
+def _quantile_le(values, q, limit) -> bool:
+    """``np.quantile(values, q) <= limit``, by :func:`quantile_side` where it decides."""
+    side = quantile_side(values, q, limit)
+    return bool(np.quantile(values, q) <= limit) if side is None else side
 
 
 #: point-plane distances per block of :func:`_column_medians` in the coplanar merge
