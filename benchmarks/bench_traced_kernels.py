@@ -91,7 +91,8 @@ def main():
             t = time.process_time()
             outs = [f(*a, **k) for a, k in todo]
             best = min(best, time.process_time() - t)
-            identical &= all(_same(_frozen(o), r) for o, (_, _, r) in zip(outs, calls[name], strict=True))
+            identical &= all(_same(_frozen(o), r)
+                             for o, (_, _, r) in zip(outs, calls[name], strict=True))
         print(f"{name}: {len(calls[name])} calls, least of {args.repeat} replays {best:.3f} CPU s; "
               f"replays identical to the run: {identical}")
     print(f"output MD5 {md5}")

@@ -6,7 +6,13 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from lidar2city.roof.arrangement import _close_points, _nearest, _point_cells, _spike_free, arrangement_cells
+from lidar2city.roof.arrangement import (
+    _close_points,
+    _nearest,
+    _point_cells,
+    _spike_free,
+    arrangement_cells,
+)
 from lidar2city.roof.refine import _remove_spikes
 from lidar2city.roof.topology import _cross_dilation
 

@@ -163,14 +163,16 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         ia, ib = np.searchsorted(regions, (a, b))
         sa, ea = first[ia], first[ia] + sizes[ia]
         sb, eb = first[ib], first[ib] + sizes[ib]
-        z = np.concatenate([z[:sa], np.sort(np.concatenate([z[sa:ea], z[sb:eb]])), z[ea:sb], z[eb:]])
+        run = np.sort(np.concatenate([z[sa:ea], z[sb:eb]]))
+        z = np.concatenate([z[:sa], run, z[ea:sb], z[eb:]])
         sizes[ia] += sizes[ib]
         sizes = np.delete(sizes, ib)
         regions = np.delete(regions, ib)
         first, changed = measure()
         for v in {a, *changed.tolist()}:
             for c in nbrs[v]:
-                heapq.heappush(heap, (abs(float(height[v]) - float(height[c])), min(v, c), max(v, c)))
+                new_gap = abs(float(height[v]) - float(height[c]))
+                heapq.heappush(heap, (new_gap, min(v, c), max(v, c)))
     # every merged label to its final region
     for _ in range(n_lab):
         nxt = target[target]
