@@ -1,7 +1,9 @@
-"""CPU of two array kernels of the no-footprints reconstruct on the Delft tile (issue 13),
-replayed: the LoD1.2 / 1.3 RMSE's point-to-prism distances and the arrangement's cell labels.
+"""CPU of kernels of the no-footprints reconstruct on the Delft tile (issue 13), replayed:
+the LoD1.2 / 1.3 RMSE's point-to-prism distances, the arrangement's cell labels, and
+(``--all``) the LoD2.2 plane segmentation, boundary lines, edge refinement, short-edge
+collapse and the LoD1.3 height parts.
 
-Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC]
+Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC] [--all]
 (default data $LIDAR2CITY_DATA or ../shared/data, N = 5; SRC the ``src`` folder whose
 lidar2city is measured, default this checkout's: pass another checkout's to compare)
 
@@ -33,6 +35,7 @@ def main():
     ap.add_argument("data", nargs="?")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--src", default=str(ROOT / "src"))
+    ap.add_argument("--all", action="store_true", help="also the LoD2.2 and LoD1.3 kernels")
     args = ap.parse_args()
     sys.path.insert(0, args.src)
     data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
@@ -43,10 +46,16 @@ def main():
 
     import lidar2city.lod.lod1 as lod1
     import lidar2city.roof.arrangement as arr
+    import lidar2city.roof.building as bld
     from lidar2city.cli.main import cli
 
-    calls = {"prism_distance": [], "_cell_labels": []}
-    kernels = {"prism_distance": lod1.prism_distance, "_cell_labels": arr._cell_labels}
+    # name -> the module whose attribute the run calls it by
+    where = {"prism_distance": lod1, "_cell_labels": arr}
+    if args.all:
+        where.update(segment_planes=bld, roof_lines=bld, refine_partition=bld,
+                     collapse_short_edges=bld, height_parts=lod1)
+    calls = {name: [] for name in where}
+    kernels = {name: getattr(mod, name) for name, mod in where.items()}
 
     def recorder(name):
         f = kernels[name]
@@ -57,26 +66,21 @@ def main():
             rec = (shapely.to_wkb(np.asarray(a[0], dtype=object)), *a[1:]) if name == "_cell_labels" else a
             out = f(*a, **k)
             # a copy: the caller may change the arrays it was given (the cell labels are)
-            calls[name].append((rec, k, tuple(np.copy(o) for o in out) if isinstance(out, tuple)
-                                else np.copy(out)))
+            calls[name].append((rec, k, _frozen(out)))
             return out
         return g
 
-    lod1.prism_distance = recorder("prism_distance")
-    arr._cell_labels = recorder("_cell_labels")
+    for name, mod in where.items():
+        setattr(mod, name, recorder(name))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "traced.city.json"
         try:
             cli.main(["reconstruct", str(laz), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
                       "-o", str(out)], standalone_mode=False)
         finally:
-            lod1.prism_distance, arr._cell_labels = kernels["prism_distance"], kernels["_cell_labels"]
+            for name, mod in where.items():
+                setattr(mod, name, kernels[name])
         md5 = hashlib.md5(out.read_bytes()).hexdigest()
-
-    def same(a, b):
-        if isinstance(a, tuple):
-            return all(same(x, y) for x, y in zip(a, b, strict=True))
-        return np.array_equal(a, b)
 
     print(f"lidar2city from {args.src}; Delft reconstruct LoD 1.2+1.3+2.2, traced footprints")
     for name, f in kernels.items():
@@ -87,10 +91,38 @@ def main():
             t = time.process_time()
             outs = [f(*a, **k) for a, k in todo]
             best = min(best, time.process_time() - t)
-            identical &= all(same(o, r) for o, (_, _, r) in zip(outs, calls[name], strict=True))
+            identical &= all(_same(_frozen(o), r)
+                             for o, (_, _, r) in zip(outs, calls[name], strict=True))
         print(f"{name}: {len(calls[name])} calls, least of {args.repeat} replays {best:.3f} CPU s; "
               f"replays identical to the run: {identical}")
     print(f"output MD5 {md5}")
+
+
+def _frozen(out):
+    """A kernel's answer as compared between runs: arrays copied (the caller may change
+    them), geometries as well-known binary, containers item by item."""
+    import numpy as np
+    import shapely
+
+    if isinstance(out, np.ndarray):
+        return np.copy(out)
+    if isinstance(out, shapely.Geometry):
+        return ("wkb", shapely.to_wkb(out))
+    if isinstance(out, (list, tuple)):
+        return tuple(_frozen(o) for o in out)
+    if isinstance(out, dict):
+        return tuple((k, _frozen(v)) for k, v in out.items())
+    return out
+
+
+def _same(a, b) -> bool:
+    import numpy as np
+
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.array_equal(a, b)
+    if isinstance(a, tuple):
+        return isinstance(b, tuple) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b or (a != a and b != b)  # NaN equals NaN here
 
 
 if __name__ == "__main__":

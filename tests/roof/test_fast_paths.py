@@ -6,7 +6,14 @@ from hypothesis import strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from lidar2city.roof.arrangement import _close_points, _nearest, _point_cells, arrangement_cells
+from lidar2city.roof.arrangement import (
+    _close_points,
+    _nearest,
+    _point_cells,
+    _spike_free,
+    arrangement_cells,
+)
+from lidar2city.roof.refine import _remove_spikes
 from lidar2city.roof.topology import _cross_dilation
 
 coord = st.floats(-1e4, 1e4, allow_nan=False)
@@ -94,3 +101,52 @@ def test_point_cells_is_the_trees_query(seed, n, lines):
     got = _point_cells(cells, xy)
     np.testing.assert_array_equal(got[0], ip[first])
     np.testing.assert_array_equal(got[1], ic[first])
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(0, 12), spikes=st.integers(0, 3))
+def test_spike_free_is_remove_spikes(seed, m, spikes):
+
+    rng = np.random.default_rng(seed)
+    ring = list(np.round(rng.random((m, 2)) * 4, 1))
+    for _ in range(spikes):  # A, X, A back and forth
+        if len(ring) >= 2:
+            i = int(rng.integers(1, len(ring)))
+            ring[i:i] = [rng.random(2), ring[i - 1].copy()]
+    ring = np.asarray(ring, dtype=float).reshape(-1, 2)
+    want = np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
+    np.testing.assert_array_equal(_spike_free(ring), want)
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40), m=st.integers(1, 6),
+       ties=st.booleans())
+def test_column_medians_are_the_medians(seed, n, m, ties):
+    from lidar2city._stats import median
+    from lidar2city.roof.facets import _column_medians
+
+    rng = np.random.default_rng(seed)
+    d = rng.random((n, m))
+    if ties:  # repeated values
+        d = np.round(d * 3) / 3
+    got = _column_medians(d)
+    for c in range(m):
+        assert got[c] == median(d[:, c].copy())
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 50), q=st.sampled_from([0.5, 0.9, 0.95]),
+       rounded=st.booleans())
+def test_quantile_side_agrees_with_numpy(seed, n, q, rounded):
+    from lidar2city.roof.facets import quantile_side
+
+    rng = np.random.default_rng(seed)
+    a = rng.random(n) * 2
+    if rounded:  # limits right on order statistics and ties
+        a = np.round(a, 1)
+    for limit in (0.5, 1.0, float(a[0]), float(np.quantile(a, q))):
+        side = quantile_side(a.copy(), q, limit)
+        if side is not None:
+            assert side == bool(np.quantile(a, q) <= limit)
+    # a limit far from the order statistics is decided without numpy
+    assert quantile_side(a.copy(), q, 10.0) is True and quantile_side(a.copy(), q, -1.0) is False

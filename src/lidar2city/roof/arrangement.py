@@ -45,6 +45,7 @@ import numpy as np
 
 from .._stats import median
 from ..errors import AlgorithmError, InputError
+from .facets import quantile_side
 from .refine import _plane_line
 from .topology import boundary_chains, label_grid
 
@@ -378,11 +379,11 @@ def _fit_line(sub, direction, snap_angle):
     return m, d, float(np.abs((sub - m) @ normal).max())
 
 
-def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
+def _split_fit(raw, lo, hi, tol, direction, snap_angle, out, fits):
     """Pieces (lo, hi) of raw[lo..hi] each fitted by one line within ``tol`` (split at the point
-    farthest from the chord, as Douglas-Peucker)."""
+    farthest from the chord, as Douglas-Peucker). ``fits``: :func:`_span_fit`'s memo."""
     sub = raw[lo:hi + 1]
-    fit = _fit_line(sub, direction, snap_angle)
+    fit = _span_fit(raw, lo, hi, direction, snap_angle, fits)
     if hi - lo < 3 or (fit is not None and fit[2] <= tol):
         out.append((lo, hi))
         return
@@ -394,8 +395,17 @@ def _split_fit(raw, lo, hi, tol, direction, snap_angle, out):
     else:
         dist = np.abs((sub - a) @ np.array([-d[1], d[0]]) / n)
     k = lo + int(np.argmax(dist[1:-1])) + 1
-    _split_fit(raw, lo, k, tol, direction, snap_angle, out)
-    _split_fit(raw, k, hi, tol, direction, snap_angle, out)
+    _split_fit(raw, lo, k, tol, direction, snap_angle, out, fits)
+    _split_fit(raw, k, hi, tol, direction, snap_angle, out, fits)
+
+
+def _span_fit(raw, lo, hi, direction, snap_angle, fits):
+    """:func:`_fit_line` of raw[lo..hi], memoised in the dict ``fits`` by ``(lo, hi)``: a
+    chain's splitting, merging and final pieces fit many spans more than once."""
+    key = (lo, hi)
+    if key not in fits:
+        fits[key] = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+    return fits[key]
 
 
 def _step_polyline(chain, *, tol, direction, snap_angle, closed):
@@ -407,23 +417,23 @@ def _step_polyline(chain, *, tol, direction, snap_angle, closed):
     parallel, in a short jog at the vertex they share).
     """
     raw = np.asarray(chain, dtype=float)
-    raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+    raw = raw[np.concatenate(([True], np.any(np.diff(raw, axis=0) != 0, axis=1)))]
     if len(raw) < 2 or (closed and len(raw) < 5):
         return None
-    spans = []
-    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans)
+    spans, fits = [], {}
+    _split_fit(raw, 0, len(raw) - 1, tol, direction, snap_angle, spans, fits)
     merged = True
     while merged and len(spans) > 1:
         merged = False
         for i in range(len(spans) - 1):
-            fit = _fit_line(raw[spans[i][0]:spans[i + 1][1] + 1], direction, snap_angle)
+            fit = _span_fit(raw, spans[i][0], spans[i + 1][1], direction, snap_angle, fits)
             if fit is not None and fit[2] <= tol:
                 spans[i:i + 2] = [(spans[i][0], spans[i + 1][1])]
                 merged = True
                 break
     pieces = []
     for lo, hi in spans:
-        fit = _fit_line(raw[lo:hi + 1], direction, snap_angle)
+        fit = _span_fit(raw, lo, hi, direction, snap_angle, fits)
         if fit is not None:
             pieces.append((fit[0], fit[1], raw[lo:hi + 1]))
     if not pieces or (closed and len(pieces) < 3):
@@ -513,7 +523,7 @@ def _refit_lines(polys, raws, *, max_shift):
 def _straight(pts, closed):
     """Vertices (k, 2) without repeats and without collinear interior vertices."""
     while len(pts) > 1:
-        pts = pts[np.r_[True, np.hypot(*np.diff(pts, axis=0).T) > 1e-9]]
+        pts = pts[np.concatenate(([True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9))]
         if closed and len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) <= 1e-9:
             pts = pts[:-1]
         if len(pts) <= 2:
@@ -591,7 +601,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     xy, ids, segs, ends = [], [], [], {}
     for raw, cl in zip(chains, closed, strict=True):
         raw = np.asarray(raw, dtype=float)
-        raw = raw[np.r_[True, np.any(np.diff(raw, axis=0) != 0, axis=1)]]
+        raw = raw[np.concatenate(([True], np.any(np.diff(raw, axis=0) != 0, axis=1)))]
         # the fewest straight pieces within tol, their directions as the data give them
         # (no snapping: the direction energy decides which become parallel to the axes)
         s = _step_polyline(raw, tol=tol, direction=direction, snap_angle=0.0, closed=cl) \
@@ -680,7 +690,7 @@ def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
 def _runs(flags):
     """Maximal runs of equal flags: list of [lo, hi) index pairs."""
     cut = np.flatnonzero(flags[1:] != flags[:-1]) + 1
-    bounds = np.r_[0, cut, len(flags)]
+    bounds = np.concatenate(([0], cut, [len(flags)]))
     return list(zip(bounds[:-1], bounds[1:], strict=True))
 
 
@@ -706,7 +716,7 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
         return np.maximum(np.minimum(prev, a), np.minimum(np.maximum(prev, a), nxt))
 
     step = (med3(dz) >= t_step) & (med3(dist) >= min_dist)
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(chain, axis=0).T))]
+    along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
     # a wall leaves the line at a chain's end (at the outline or a junction); a step
     # between two stretches on the line is the staircase of the label grid
     for lo, hi in _runs(step)[1:-1]:
@@ -780,7 +790,9 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         if line is not None:
             g, c0 = line
             dist = np.abs(c @ g + c0)
-            near_line = np.percentile(dist, 90) <= max_shift
+            near_line = quantile_side(dist, 0.9, max_shift)  # np.percentile(dist, 90) <= max_shift
+            if near_line is None:
+                near_line = np.percentile(dist, 90) <= max_shift
             runs = None
             if near_line and not closed:
                 runs = _mixed_runs(c, dz, dist, t_step, step_tol * cell, 2 * cell)
@@ -876,8 +888,8 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     owner = np.repeat(ir, counts)  # sorted: the query returns the rays in order
     if not len(owner):
         return out
-    starts = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
-    for a, b in zip(starts, np.r_[starts[1:], len(owner)], strict=True):
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(owner)) + 1))
+    for a, b in zip(starts, np.concatenate((starts[1:], [len(owner)])), strict=True):
         k, i, d = where[owner[a]]
         t = (coords[a:b] - segments[k][i]) @ d
         out[k][i] = segments[k][i] + d * (t.min() + eps)
@@ -1203,6 +1215,18 @@ def _on_rims(faces, face_labels, exempt, rim_cells):
     return on
 
 
+def _spike_free(ring):
+    """:func:`.refine._remove_spikes` of a ring (m, 2) as an array; a ring without a spike
+    (the usual one) is found so by one vectorised test and returned as it is."""
+    from .refine import _remove_spikes
+
+    if len(ring) >= 3:
+        gap = np.concatenate([ring[-1:], ring[:-1]]) - np.concatenate([ring[1:], ring[:1]])
+        if not (np.hypot(gap[:, 0], gap[:, 1]) < 1e-6).any():
+            return ring
+    return np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
+
+
 def collapse_short_edges(faces, footprint, *, min_length):
     """A partition without edges shorter than ``min_length`` where they can go.
 
@@ -1229,7 +1253,6 @@ def collapse_short_edges(faces, footprint, *, min_length):
     """
     import shapely
 
-    from .refine import _remove_spikes
     from .solid import _key, _ring_keys
 
     rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
@@ -1271,11 +1294,16 @@ def collapse_short_edges(faces, footprint, *, min_length):
     def rebuild_face(fi, mp):
         new_rs = []
         for r, keys in zip(rings[fi], ring_keys[fi], strict=True):
-            pts = [mp.get(k, p) for k, p in zip(keys, r, strict=True)]
-            pts = [q for i, q in enumerate(pts) if i == 0 or np.hypot(*(q - pts[i - 1])) > 1e-9]
+            pts = np.array(r, dtype=float)
+            moved = [(i, mp[k]) for i, k in enumerate(keys) if k in mp] if mp else ()
+            if moved:
+                pts[[i for i, _ in moved]] = [q for _, q in moved]
+            # a vertex equal to the one before it (moved onto it) goes
+            step = pts[1:] - pts[:-1]
+            pts = pts[np.concatenate(([True], np.hypot(step[:, 0], step[:, 1]) > 1e-9))]
             if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-9:
-                pts.pop()
-            new_rs.append(_remove_spikes(pts))
+                pts = pts[:-1]
+            new_rs.append(_spike_free(pts))
         if len(new_rs[0]) < 3:
             return None
         poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
@@ -1302,7 +1330,7 @@ def collapse_short_edges(faces, footprint, *, min_length):
 
     for members in sorted(clusters.values()):
         pts = np.array([xy_of[k] for k in members])
-        on = np.array([outline.distance(shapely.Point(p)) < 1e-6 for p in pts])
+        on = shapely.distance(outline, shapely.points(pts)) < 1e-6
         fixed = [k for k in members if k in corners]
         if len(fixed) > 1 or (not fixed and on.sum() > 1):
             continue

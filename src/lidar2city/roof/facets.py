@@ -320,11 +320,24 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
                 facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
             return facet[k]
 
-        for m, (i, j) in enumerate(zip(ii[far], jj[far], strict=True)):
-            (pi, zi, si), (pj, zj, sj) = points_of(i), points_of(j)
+        fi, fj = ii[far], jj[far]
+        # the median distance of each facet's points to the other's plane, for both facets
+        # of every pair: per facet, one matrix against all its partners' planes
+        own, other = np.concatenate([fi, fj]), np.concatenate([fj, fi])
+        med = np.empty(len(own))
+        for a in np.unique(own).tolist():
+            sel = np.flatnonzero(own == a)
+            pa = points_of(a)[0]
+            step = max(1, _MEDIAN_CHUNK // max(len(pa), 1))
+            for s0 in range(0, len(sel), step):
+                part = sel[s0:s0 + step]
+                med[part] = _column_medians(_point_plane_dist(pa, planes[other[part]]))
+        for m, (i, j) in enumerate(zip(fi.tolist(), fj.tolist(), strict=True)):
+            (_, zi, si), (_, zj, sj) = points_of(i), points_of(j)
             level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
-            ok[m] = level or min(median(_point_plane_dist(pi, planes[j:j + 1]).ravel()),
-                                 median(_point_plane_dist(pj, planes[i:i + 1]).ravel())) <= dist_tol / 2
+            # min() of the two medians as Python takes it (the first unless the second is less)
+            mi, mj = med[m], med[len(fi) + m]
+            ok[m] = level or (mj if mj < mi else mi) <= dist_tol / 2
         far, rms = far[ok], rms[ok]
         pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
         cos = np.concatenate([cos, cos_merge - 1.0 - rms])
@@ -351,7 +364,7 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         if p is None:
             continue
         r = _point_plane_dist(xyz[members], p[None])[:, 0]
-        if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and np.quantile(r, 0.95) <= dist_tol:
+        if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and _quantile_le(r, 0.95, dist_tol):
             parent[b] = a
             group[a] = members
             del group[b]
@@ -359,6 +372,58 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)
     return out, len(uniq)
+
+
+def quantile_side(values, q, limit):
+    """Whether ``np.quantile(values, q) <= limit`` (True / False) for a 1-D float64 array
+    when one ``np.partition`` decides it, else None (ask numpy).
+
+    numpy's linear quantile lies between the two order statistics it interpolates
+    (up to a rounding): when both are clearly on one side of ``limit`` (by a relative
+    1e-9) the answer is theirs; anything closer, NaN, an empty array or another dtype
+    gives None. Taken per chain and per facet merge, where ``np.quantile``'s set-up
+    costs more than its work.
+    """
+    a = values
+    n = a.size if isinstance(a, np.ndarray) else 0
+    if not n or a.dtype != np.float64 or a.ndim != 1:
+        return None
+    k = min(int(math.floor((n - 1) * q)), n - 1)
+    part = np.partition(a, [k, n - 1] if k + 1 >= n else [k, k + 1, n - 1])
+    if np.isnan(part[-1]):
+        return None
+    lo, hi = float(part[k]), float(part[min(k + 1, n - 1)])
+    big, small = max(lo, hi), min(lo, hi)
+    margin = 1e-9 * max(abs(limit), abs(big), abs(small))
+    if big < limit - margin:
+        return True
+    if small > limit + margin:
+        return False
+    return None
+
+
+def _quantile_le(values, q, limit) -> bool:
+    """``np.quantile(values, q) <= limit``, by :func:`quantile_side` where it decides."""
+    side = quantile_side(values, q, limit)
+    return bool(np.quantile(values, q) <= limit) if side is None else side
+
+
+#: point-plane distances per block of :func:`_column_medians` in the coplanar merge
+_MEDIAN_CHUNK = 1 << 18
+
+
+def _column_medians(d):
+    """:func:`lidar2city._stats.median` of every column of ``d`` (n, m), the same values: one
+    ``np.partition`` along the rows at the same positions (an order statistic does not
+    depend on how it is selected), the middle one or ``(0 + a + b) / 2``; NaN for a column
+    holding NaN."""
+    n = d.shape[0]
+    if n == 0:
+        return np.array([median(c) for c in d.T])
+    half = n // 2
+    part = np.partition(d, [half - 1, half, n - 1] if n % 2 == 0 else [half, n - 1], axis=0)
+    out = 0.0 + part[half] if n % 2 else (0.0 + part[half - 1] + part[half]) / 2
+    return np.where(np.isnan(part[-1]), np.nan, out)
 
 
 def _absorb_small(xyz, labels, planes, nbrs, dist_tol, small):

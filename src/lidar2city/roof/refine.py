@@ -36,13 +36,6 @@ def _plane_line(pa, pb):
     return g / n, (pa[2] - pb[2]) / n
 
 
-def _shared(fa, fb):
-    inter = fa.boundary.intersection(fb.boundary)
-    if inter.is_empty or inter.length <= 1e-9:
-        return None
-    return inter
-
-
 def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
     """Classify the shared edges between faces.
 
@@ -55,32 +48,34 @@ def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
     import shapely
 
     out = {}
-    tree = shapely.STRtree(faces)
-    for i, fa in enumerate(faces):
-        for j in tree.query(fa, predicate="intersects"):
-            j = int(j)
-            if j <= i or labels[i] == labels[j]:
-                continue
-            inter = _shared(fa, faces[j])
-            if inter is None:
-                continue
-            pa, pb = planes[labels[i]], planes[labels[j]]
-            # DH: mean |h1 - h2| over points sampled along the shared edge
-            t = (np.arange(samples * max(int(inter.length), 1)) + 0.5) / (samples * max(int(inter.length), 1))
-            pts = shapely.get_coordinates(shapely.line_interpolate_point(inter, t, normalized=True))
-            dh = float(np.mean(np.abs((pa[0] - pb[0]) * pts[:, 0] + (pa[1] - pb[1]) * pts[:, 1] + pa[2] - pb[2])))
-            line = _plane_line(pa, pb)
-            kind = "step"
-            if dh < t_step:
+    arr = np.asarray(faces, dtype=object)
+    # every touching pair (i, j), i < j, of different labels, in the order of a query per
+    # face, and the boundary they share (longer than 1e-9 m), in vectorised calls
+    ii, jj = shapely.STRtree(arr).query(arr, predicate="intersects")
+    lab = np.asarray(labels)
+    keep = (jj > ii) & (lab[ii] != lab[jj]) if len(ii) else np.zeros(0, dtype=bool)
+    ii, jj = ii[keep], jj[keep]
+    bounds = shapely.boundary(arr)
+    shared = shapely.intersection(bounds[ii], bounds[jj])
+    ok = ~shapely.is_empty(shared) & (shapely.length(shared) > 1e-9)
+    for i, j, inter in zip(ii[ok].tolist(), jj[ok].tolist(), shared[ok], strict=True):
+        pa, pb = planes[labels[i]], planes[labels[j]]
+        # DH: mean |h1 - h2| over points sampled along the shared edge
+        t = (np.arange(samples * max(int(inter.length), 1)) + 0.5) / (samples * max(int(inter.length), 1))
+        pts = shapely.get_coordinates(shapely.line_interpolate_point(inter, t, normalized=True))
+        dh = float(np.mean(np.abs((pa[0] - pb[0]) * pts[:, 0] + (pa[1] - pb[1]) * pts[:, 1] + pa[2] - pb[2])))
+        line = _plane_line(pa, pb)
+        kind = "step"
+        if dh < t_step:
+            kind = "intersection"
+        elif line is not None:
+            coords = shapely.get_coordinates(inter)
+            dist = np.abs(coords @ line[0] + line[1])
+            if dist.max() <= max_shift:
                 kind = "intersection"
-            elif line is not None:
-                coords = shapely.get_coordinates(inter)
-                dist = np.abs(coords @ line[0] + line[1])
-                if dist.max() <= max_shift:
-                    kind = "intersection"
-            if kind == "intersection" and line is None:
-                kind = "step"  # coplanar-parallel planes only meet as steps
-            out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter, "planes": (pa, pb)}
+        if kind == "intersection" and line is None:
+            kind = "step"  # coplanar-parallel planes only meet as steps
+        out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter, "planes": (pa, pb)}
     return out
 
 
