@@ -36,6 +36,9 @@ Protocol (the BGT footprints cover only the two central blocks of the tile):
   cell of a reference edge (edge placement) and farther than two cells
   (whole objects: trees, sheds and annexes without a footprint, missed low
   annexes);
+* area budget by cause, per half: false positives / negatives within 0.5 m
+  of a reference edge and deeper, by the roof region they fall in (or none),
+  its height and roughness (:func:`cause_budget`);
 * object-level ceiling: the same outlines keeping only those with at least
   30 % of their area on a reference footprint - what a perfect tree / shed
   test on whole regions could reach (it uses the reference: a bound, not a
@@ -195,6 +198,74 @@ def edge_study(pred, ref_union, hull, nd, transform, cell, y_split, band=1.5):
     return "; ".join(out)
 
 
+def cause_budget(pred, ref, hull, dsm, dtm, transform, cell, split_row, *, roofs=None, sup=4):
+    """False positive / negative area of the scored outlines by cause, per half (m2).
+
+    The scored outlines (touching a reference, clipped to the hull) and the
+    references are rasterised at ``cell / sup``. An error within 0.5 m of a
+    reference edge is edge placement; deeper, a false positive lies in a roof
+    region (:func:`~lidar2city.tools.dsm.segment_dsm`, the run's ``roofs`` options) with
+    at least 30 % of its pixels on a reference -- at 0.6 of its roof height
+    (75th nDSM percentile) or more, or lower -- or in one mostly off the
+    references (sheds, annexes, crowns touching a reference), or on no region
+    (the fit reaching past its pixels); a false negative is on a region (lost
+    by the fit) or on none: nDSM below 2 m, rough (slope spread 0.4 or more:
+    crowns over roofs), or smooth.
+    """
+    from affine import Affine
+    from rasterio import features
+    from scipy import ndimage
+
+    from lidar2city.segment.dsm import slope_spread
+    from lidar2city.tools.dsm import segment_dsm
+
+    seg = segment_dsm(dsm, cell=cell, dtm=dtm, segment_config=roofs)
+    lab, nd = seg["labels"], np.nan_to_num(seg["ndsm"])
+    ts = transform * Affine.scale(1 / sup)
+    shp = (lab.shape[0] * sup, lab.shape[1] * sup)
+
+    def raster(gs):
+        gs = [g for g in gs if not g.is_empty]
+        return features.rasterize([(g, 1) for g in gs], out_shape=shp, transform=ts, fill=0,
+                                  dtype="uint8").astype(bool)
+
+    P, R = raster([g.intersection(hull) for g in pred]), raster(ref)
+    n = lab.max() + 1
+    centre = R[sup // 2::sup, sup // 2::sup]
+    on = np.bincount(lab.ravel(), centre.ravel().astype(float), minlength=n) / np.maximum(
+        np.bincount(lab.ravel(), minlength=n), 1)
+    roof = np.zeros(n)
+    for i, sl in enumerate(ndimage.find_objects(lab), start=1):
+        if sl is not None:
+            roof[i] = np.percentile(nd[sl][lab[sl] == i], 75)
+    up = lambda a: np.kron(a, np.ones((sup, sup), dtype=a.dtype))  # noqa: E731
+    L, Z = up(lab), up(nd)
+    low = Z < 0.6 * roof[L]
+    rough = up(slope_spread(dsm, cell=cell)) >= 0.4
+    d_out = ndimage.distance_transform_edt(~R) * cell / sup
+    d_in = ndimage.distance_transform_edt(R) * cell / sup
+    a = (cell / sup) ** 2
+    north = np.zeros(shp, bool)
+    north[:split_row * sup] = True
+    out = []
+    for name, h in (("north", north), ("south", ~north)):
+        fp, fn = P & ~R & h, R & ~P & h
+        dfp, dfn = fp & (d_out > 0.5), fn & (d_in > 0.5)
+        seg_on = (L > 0) & (on[L] >= 0.3)
+        m2 = lambda m: f"{m.sum() * a:.0f}"  # noqa: E731
+        out.append(
+            f"{name}: FP {m2(fp)} m2 = {m2(fp & (d_out <= 0.5))} within 0.5 m of a reference "
+            f"edge + deeper {m2(dfp & seg_on & ~low)} in regions mostly on a reference at "
+            f"roof height, {m2(dfp & seg_on & low)} in their parts below 0.6 x roof, "
+            f"{m2(dfp & (L > 0) & ~seg_on)} in regions mostly off the references, "
+            f"{m2(dfp & (L == 0))} on no region; FN {m2(fn)} m2 = {m2(fn & (d_in <= 0.5))} "
+            f"within 0.5 m + deeper {m2(dfn & (L > 0))} on a region (lost by the fit), "
+            f"{m2(dfn & (L == 0) & (Z < 2.0))} on none below 2 m, "
+            f"{m2(dfn & (L == 0) & (Z >= 2.0) & rough)} rough (crowns), "
+            f"{m2(dfn & (L == 0) & (Z >= 2.0) & ~rough)} smooth")
+    return "; ".join(out)
+
+
 def main(argv):
     import pyogrio
     import shapely
@@ -285,6 +356,11 @@ def main(argv):
         study = edge_study(pred, ref_all, hull, nd, d.transform, d.cell_size, y_split)
         print(f"  sub-pixel edges (outline edges against low ground within 0.8 m of a "
               f"reference edge): {study}")
+        split_row = int((rows.min() + rows.max() + 1) // 2)
+        roofs = config["dsm_roofs"] if config else None
+        budget = cause_budget(near, ref, hull, d.array, t.array, d.transform, d.cell_size,
+                              split_row, roofs=roofs)
+        print(f"  area budget by cause: {budget}")
         ref_union = ref_all
         print(f"  object-level ceiling (outlines with >= 30 % of their area on a reference): "
               f"{score(on_reference(pred, ref_union), ref, hull, tree)}")

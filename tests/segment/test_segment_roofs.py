@@ -308,3 +308,40 @@ def test_narrow_flat_roof_between_steps_is_kept_the_crown_is_not():
     assert (both[crown] > 0).mean() == 0.0
     with pytest.raises(InputError):
         roof_regions(nd + 1.0, nd, plane_tolerance=0.0, **kw)
+
+
+def test_split_at_necks_cuts_narrow_joints_keeps_wide_ones_and_every_pixel():
+    from lidar2city.segment.dsm import split_at_necks
+
+    lab = np.zeros((24, 46), np.int32)
+    lab[2:22, 2:20] = 1                  # two 9 m x 10 m sheds (0.5 m cells) ...
+    lab[2:22, 26:44] = 1
+    lab[10:13, 20:26] = 1                # ... joined by a 1.5 m wide, 3 m long fence
+    out, n = split_at_necks(lab, cell=0.5, width=2.0, min_pixels=40)
+    assert n == 2
+    assert np.array_equal(out > 0, lab > 0)                        # no pixel lost or added
+    assert len(np.unique(out[2:22, 2:20])) == 1 and len(np.unique(out[2:22, 26:44])) == 1
+    assert out[5, 5] != out[5, 30]
+    for a in (1, 2):                                               # each part is connected
+        assert ndimage.label(out == a)[1] == 1
+    wide = lab.copy()
+    wide[7:16, 20:26] = 1                                          # a 4.5 m wide joint holds
+    assert split_at_necks(wide, cell=0.5, width=2.0, min_pixels=40)[1] == 1
+    # a part smaller than min_pixels is not a part; width 0 or below two cells: no split
+    assert split_at_necks(lab, cell=0.5, width=2.0, min_pixels=400)[1] == 1
+    assert split_at_necks(lab, cell=0.5, width=0.0)[1] == 1
+    assert split_at_necks(lab, cell=2.0, width=2.0)[1] == 1
+    with pytest.raises(InputError):
+        split_at_necks(lab, cell=0.5, width=-1.0)
+
+
+def test_roof_regions_two_sheds_joined_by_a_wall_are_two_regions():
+    # 0.5 m grid: two flat 2.5 m sheds joined by a garden wall as high as they are
+    nd = np.zeros((30, 50))
+    nd[4:26, 4:22] = 2.5
+    nd[4:26, 28:46] = 2.5
+    nd[14:16, 22:28] = 2.5
+    kw = dict(cell=0.5, edge_inset=0.0, saddle_depth=0.0)
+    labels, n = roof_regions(nd + 1.0, nd, **kw)
+    assert n == 2 and labels[10, 10] != labels[10, 40] and labels[10, 10] > 0
+    assert roof_regions(nd + 1.0, nd, neck_width=0.0, **kw)[1] == 1

@@ -45,6 +45,7 @@ __all__ = [
     "plane_share",
     "trim_to_edges",
     "split_at_saddles",
+    "split_at_necks",
     "label_buildings",
     "grid_points",
 ]
@@ -552,6 +553,11 @@ class RoofRegionsConfig:
     plane_tolerance: float = field(0.2, "distance (m) from the region's plane within which a "
                                         "pixel counts as on it (the spread of a highest-point "
                                         "DSM on a roof face)")
+    neck_width: float = field(2.0, "a region made of parts of at least min_area joined only "
+                                   "through necks narrower than this (m) is split into those "
+                                   "parts (two sheds joined by a fence, a wing reached through "
+                                   "a passage): each is fitted on its own; 0: off (off where "
+                                   "half of it is less than a cell)")
 
 
 def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
@@ -614,6 +620,72 @@ def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
                 parts = watershed(-z, np.where(np.isin(markers, big), markers, 0), mask=m)
         for j in np.unique(parts[parts > 0]):
             out[sl][parts == j] = nxt
+            nxt += 1
+    return out, nxt - 1
+
+
+def split_at_necks(labels, *, cell, width=2.0, min_pixels=1):
+    """Split regions whose parts are joined only through necks narrower than ``width``.
+
+    Each region is opened (morphological opening, a disk of diameter
+    ``width`` metres): what survives is its cores, the parts at least
+    ``width`` wide. When two or more cores of at least ``min_pixels`` each
+    remain, the region is split and every one of its pixels joins the core
+    it reaches first inside the region (a geodesic flood from the cores), so
+    the necks and thin appendages go to their nearest core. One outline
+    drawn around two sheds joined by a fence or a narrow passage fits
+    neither; their own outlines fit both. A region with one core stays whole,
+    as do all regions when ``width / 2`` is less than one cell.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    cell : float
+        Pixel size (m).
+    width : float
+        Narrowest part (m) that still holds a region together; 0: no split.
+    min_pixels : int
+        Smallest core that counts as a part.
+
+    Returns
+    -------
+    labels : ndarray of int32, shape (H, W)
+        Relabelled 1..m (m >= n) in the order of the input regions.
+    m : int
+
+    Examples
+    --------
+    >>> lab = np.zeros((8, 17), int); lab[1:7, 1:7] = 1; lab[1:7, 10:16] = 1; lab[3, 7:10] = 1
+    >>> split_at_necks(lab, cell=0.5, width=2.0, min_pixels=10)[1]
+    2
+    """
+    from skimage.segmentation import watershed
+
+    labels = np.asarray(labels)
+    cell = _check_cell(cell)
+    if not width >= 0:
+        raise InputError(f"width must be >= 0 m, got {width}")
+    disk = _disk(0.5 * float(width) / cell)
+    out = np.zeros(labels.shape, dtype=np.int32)
+    nxt = 1
+    pad = 0 if disk is None else disk.shape[0]
+    for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        r0, r1 = max(sl[0].start - pad, 0), min(sl[0].stop + pad, labels.shape[0])
+        c0, c1 = max(sl[1].start - pad, 0), min(sl[1].stop + pad, labels.shape[1])
+        m = labels[r0:r1, c0:c1] == i
+        parts = m.astype(np.int32)
+        if disk is not None:
+            cores, k = ndimage.label(ndimage.binary_opening(m, structure=disk))
+            if k > 1:
+                big = np.nonzero(np.bincount(cores.ravel())[1:] >= max(1, int(min_pixels)))[0] + 1
+                if len(big) > 1:
+                    markers = np.where(np.isin(cores, big), cores, 0)
+                    parts = watershed(np.zeros(m.shape), markers, mask=m)
+        for j in np.unique(parts[parts > 0]):
+            out[r0:r1, c0:c1][parts == j] = nxt
             nxt += 1
     return out, nxt - 1
 
@@ -799,7 +871,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
                  min_area=10.0, expand=2.0, max_hole_area=12.0, roughness_threshold=0.0,
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
                  expand_roughness=0.2, merge_area=5.0, min_planar_share=0.4,
-                 planar_spread=0.4, min_plane_share=0.5, plane_tolerance=0.2):
+                 planar_spread=0.4, min_plane_share=0.5, plane_tolerance=0.2,
+                 neck_width=2.0):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -821,7 +894,9 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     a share of their roof height (:func:`trim_to_edges` with
     ``edge_fraction``), small holes are filled and large ones kept as
     courtyards, and their outer edges are moved in by ``edge_inset`` metres
-    (:func:`inset_regions`: the highest point per cell overstates roofs).
+    (:func:`inset_regions`: the highest point per cell overstates roofs),
+    and regions whose parts are joined only through necks narrower than
+    ``neck_width`` metres are split into those parts (:func:`split_at_necks`).
     Last, a region is dropped when less than ``min_planar_share`` of its
     pixels are planar (:func:`slope_spread` below ``planar_spread``): tree
     crowns and bushes whose heights grew into a smooth-enough region (only on
@@ -862,6 +937,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         raise InputError(f"saddle_depth must be >= 0, got {saddle_depth}")
     if edge_inset < 0:
         raise InputError(f"edge_inset must be >= 0, got {edge_inset}")
+    if not neck_width >= 0:
+        raise InputError(f"neck_width must be >= 0 m, got {neck_width}")
     if not 0 <= min_planar_share <= 1 or not planar_spread > 0:
         raise InputError(f"min_planar_share must be in [0, 1] and planar_spread > 0, got "
                          f"{min_planar_share} and {planar_spread}")
@@ -926,6 +1003,9 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
             lab = np.where(fill, near, lab)
     if edge_inset > 0:
         lab = inset_regions(lab, cell=cell, inset=edge_inset)
+    if neck_width > 0:
+        # parts joined by a neck are fitted, and tested for planarity, on their own
+        lab, _ = split_at_necks(lab, cell=cell, width=neck_width, min_pixels=min_px)
     if min_planar_share > 0 and cell <= 1.0 and lab.any():
         planar = (lab > 0) & (slope_spread(dsm, cell=cell) < planar_spread)
         n_all = np.bincount(lab.ravel())
