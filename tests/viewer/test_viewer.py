@@ -203,3 +203,95 @@ def test_background_rmse_arrives_and_matches(edit_town, tmp_path, port):
         assert v.legend.content.startswith("**RMSE**")
     finally:
         v.stop()
+
+
+def test_a_port_in_use_gives_the_real_url_and_a_warning(edit_town, port, caplog):
+    """viser takes the next free port when the one asked for is taken: the URL printed
+    (and opened) must be the one listened on, not another viewer's page."""
+    import logging
+    import socket
+
+    from lidar2city.viewer.app import Viewer
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", port))
+        busy.listen()
+        v = Viewer(edit_town.model, port=port)
+        with caplog.at_level(logging.WARNING, logger="lidar2city.viewer.app"):
+            url = v.start()
+        try:
+            real = v.server.get_port()
+            assert real != port and url == f"http://127.0.0.1:{real}"
+            assert f"port {port} is in use" in caplog.text
+        finally:
+            v.stop()
+
+
+def _rewrite(src, dst, change):
+    doc = json.loads(src.read_text())
+    change(doc)
+    dst.write_text(json.dumps(doc))
+    return dst
+
+
+def test_cityjson_1_lod_numbers_are_shown(edit_town, tmp_path, port):
+    """3dfier writes CityJSON 1.0 with ``"lod": 1``: its buildings are drawn at LoD 1."""
+    from lidar2city.viewer.app import Viewer
+
+    def lod1(doc):
+        doc["version"] = "1.0"
+        for o in doc["CityObjects"].values():
+            o["geometry"] = [dict(g, lod=1) for g in o.get("geometry", []) if g["lod"] == "1.2"]
+
+    v = Viewer(_rewrite(edit_town.model, tmp_path / "old.city.json", lod1), port=port)
+    v.start()
+    try:
+        assert v.lods == ["1"] and v.lod_choice.value == "1"
+        drawn = sorted(b for ids, _ in v.groups["1"].values() for b in ids)
+        assert drawn == sorted(v.attrs)
+        assert all(h.name.startswith("/lod1/") for _, h in v.groups["1"].values())
+    finally:
+        v.stop()
+
+
+def test_points_of_another_area_are_a_one_line_error(edit_town, tmp_path, port):
+    from lidar2city.errors import InputError
+    from lidar2city.viewer.app import Viewer
+
+    def far(doc):
+        doc["transform"]["translate"][0] += 50_000.0
+
+    with pytest.raises(InputError, match="do not cover the model"):
+        Viewer(_rewrite(edit_town.model, tmp_path / "far.city.json", far),
+               points=[edit_town.laz], port=port)
+
+
+@pytest.mark.parametrize("case", ["no configuration", "no transform"])
+def test_a_model_from_another_tool_is_shown_read_only_with_its_points(edit_town, tmp_path,
+                                                                      port, case):
+    """A 3DBAG or 3dfier model with --points: drawn with its points, and an edit says
+    why it cannot apply (reconstruct --edits could not reproduce it)."""
+    from lidar2city.io.cityjson import _apply_transform
+    from lidar2city.viewer.app import Viewer
+
+    def foreign(doc):
+        doc.pop("+lidar2city", None)
+        if case == "no transform":
+            v = _apply_transform(doc["vertices"], doc.pop("transform"))
+            doc["vertices"] = v.round(3).tolist()
+
+    model = _rewrite(edit_town.model, tmp_path / "other.city.json", foreign)
+    before = model.read_bytes()
+    v = Viewer(model, points=[edit_town.laz], port=port, max_points=5_000)
+    v.start(compute_rmse=False)
+    try:
+        assert v.points_handle.points.shape[0] > 0
+        assert "view only" in v.status_md.content.lower()
+        assert v.refit_btn.disabled and v.outline_btn.disabled
+        v.select("b00")
+        assert v.refit_primitive("box") is None and "not made by lidar2city" in v.status
+        v.start_outline()
+        assert v.outline is None and "not made by lidar2city" in v.status
+        assert model.read_bytes() == before
+    finally:
+        v.stop()

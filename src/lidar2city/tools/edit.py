@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError, FitError, InputError, Lidar2CityError
+from ..errors import FileFormatError, FitError, InputError, Lidar2CityError, NotEditableError
 
 logger = logging.getLogger(__name__)
 
@@ -441,7 +441,10 @@ class EditSession:
     Raises
     ------
     FileFormatError, InputError
-        Unreadable model or tiles; a model without the transform lidar2city writes.
+        Unreadable model or tiles.
+    NotEditableError
+        A CityJSONSeq, or a model not made by ``lidar2city reconstruct`` (no transform
+        or no ``"+lidar2city"`` run record).
     """
 
     def __init__(self, model, points, *, footprints=None, crs=None, id_field=None, layer=None):
@@ -452,11 +455,15 @@ class EditSession:
         docs = read_json_documents(self.path)
         doc = docs[0] if len(docs) == 1 else None
         if not isinstance(doc, dict) or doc.get("type") != "CityJSON":
-            raise FileFormatError(f"{str(self.path)!r} is not a CityJSON file (CityJSONSeq "
-                                  "models cannot be edited)")
+            raise NotEditableError(f"{str(self.path)!r} is not a CityJSON file (CityJSONSeq "
+                                   "models cannot be edited)")
         if "transform" not in doc:
-            raise FileFormatError(f"{str(self.path)!r} has no transform: edit the models "
-                                  "lidar2city reconstruct writes")
+            raise NotEditableError(f"{str(self.path)!r} has no transform: it was not made by "
+                                   "lidar2city reconstruct, whose models can be edited")
+        if not isinstance(doc.get("+lidar2city"), dict):
+            raise NotEditableError(f"{str(self.path)!r} was not made by lidar2city reconstruct "
+                                   "(no \"+lidar2city\" run record): an edit could not be "
+                                   "re-applied by reconstruct --edits")
         self.doc = doc
         if crs is None:
             crs = (doc.get("metadata") or {}).get("referenceSystem")

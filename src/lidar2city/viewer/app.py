@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DependencyError, InputError, Lidar2CityError
+from ..errors import DependencyError, InputError, Lidar2CityError, NotEditableError
 from . import scene
 
 logger = logging.getLogger(__name__)
@@ -28,7 +28,18 @@ logger = logging.getLogger(__name__)
 __all__ = ["Viewer", "require_viser"]
 
 _SELECTED = (255, 225, 0)
-_LOD_NAMES = {"1.2": "lod12", "1.3": "lod13", "2.2": "lod22"}
+
+
+def _lod_node(lod) -> str:
+    """The scene node prefix of a LoD's meshes: ``"1.2"`` -> ``"lod12"``, ``1`` -> ``"lod1"``."""
+    return "lod" + "".join(c for c in str(lod) if c.isalnum())
+
+
+def _lod_key(lod):
+    try:
+        return (float(lod), str(lod))
+    except ValueError:
+        return (math.inf, str(lod))
 
 
 def require_viser():
@@ -103,13 +114,19 @@ class Viewer:
 
         self.path = Path(model)
         self.session = None
+        #: why edits cannot apply (None: they can)
+        self.read_only = None if points else "View only: start with --points to edit."
         if points:
             from ..tools.edit import EditSession
 
-            self.session = EditSession(model, list(points), footprints=footprints, crs=crs,
-                                       id_field=id_field)
-            self.model = _model_from_doc(self.session.doc)
-        else:
+            try:
+                self.session = EditSession(model, list(points), footprints=footprints,
+                                           crs=crs, id_field=id_field)
+                self.model = _model_from_doc(self.session.doc)
+            except NotEditableError as exc:  # another tool's model: shown with its points
+                self.read_only = f"View only: {exc}."
+                logger.warning("%s", self.read_only)
+        if self.session is None:
             self.model = read_cityjson(model)
         name = self.path.name
         for end in (".city.json", ".city.jsonl", ".json"):
@@ -131,11 +148,19 @@ class Viewer:
         self._dirty: dict[str, set] = {}     # LoD -> ids whose mesh changed since drawn
         self.attrs = {bid: dict(self.model.objects[bid].get("attributes") or {})
                       for bid in self.model.buildings()}
+        # CityJSON 1.0 (3dfier) writes "lod": 1
         self.lods = sorted({str(g.get("lod")) for o in self.model.objects.values()
-                            for g in o.get("geometry", []) or []} & set(_LOD_NAMES))
+                            if o.get("type") in ("Building", "BuildingPart")
+                            for g in o.get("geometry", []) or [] if g.get("lod") is not None},
+                           key=_lod_key)
         v = self.model.vertices
         self.origin = (np.floor(v.min(axis=0)) if len(v) else np.zeros(3))
         self.extent = (v.max(axis=0) - v.min(axis=0)) if len(v) else np.ones(3)
+        self._reader = None
+        if points:
+            self._reader = (self.session.reader if self.session is not None else
+                            self._points_reader(list(points), crs))
+            self._check_points_cover(v)
         self.selected = None
         self.pending = None          # (edit, result, previous attributes, previous meshes)
         self.outline = None          # (N, 2) world vertices of the outline being edited
@@ -151,6 +176,28 @@ class Viewer:
         self._candidate = {}   # LoD -> {id: mesh} of the pending refit
 
     # ------------------------------------------------------------------ data
+    def _points_reader(self, points, crs):
+        """The tiles of a model that cannot be edited, read only to be shown."""
+        from ..io.las import TileReader, scan_tiles
+
+        if crs is None:
+            crs = (self.model.metadata or {}).get("referenceSystem")
+        return TileReader(scan_tiles(points, crs=crs), origin=self.origin)
+
+    def _check_points_cover(self, vertices):
+        """Refuse tiles that do not meet the model (another area, or another CRS)."""
+        if not len(vertices):
+            return
+        wb = self._reader.world_bounds()
+        lo, hi = vertices[:, :2].min(axis=0), vertices[:, :2].max(axis=0)
+        if wb[0] > hi[0] or wb[2] < lo[0] or wb[1] > hi[1] or wb[3] < lo[1]:
+            model_crs = (self.model.metadata or {}).get("referenceSystem") or "no CRS"
+            raise InputError(
+                f"the points (--points) do not cover the model: points x {wb[0]:.0f}..{wb[2]:.0f}"
+                f" y {wb[1]:.0f}..{wb[3]:.0f}, model x {lo[0]:.0f}..{hi[0]:.0f} y "
+                f"{lo[1]:.0f}..{hi[1]:.0f} (model CRS: {model_crs}): tiles of another area "
+                "or CRS?")
+
     def _world_solids(self, bid, lod):
         return self.model.solids(bid, lod=lod, include_children=True)
 
@@ -248,14 +295,19 @@ class Viewer:
     def start(self, *, compute_rmse: bool = True) -> str:
         """Start the server, build the scene and GUI; returns the URL."""
         viser = self.viser
-        if self.session is not None:
+        if self._reader is not None:
             self._load_points()
+        if self.session is not None:
             if compute_rmse:
                 self._start_rmse()  # (forks before the server starts its threads)
         # the RMSEs may arrive while the GUI and scene are built: they wait for the lock
         with self.lock:
             self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
             srv = self.server
+            if srv.get_port() != self.port:  # viser takes the next free port
+                logger.warning("port %d is in use: the viewer listens on %d", self.port,
+                               srv.get_port())
+                self.port = srv.get_port()
             srv.scene.set_up_direction("+z")
             _plain_lighting(srv.scene)
             d = float(max(self.extent[0], self.extent[1], 10.0))
@@ -265,7 +317,7 @@ class Viewer:
             cam.look_at = (centre[0], centre[1], 0.0)
             self._build_gui()
             self._draw_buildings()
-            if self.session is not None:
+            if self._reader is not None:
                 self._draw_points()
         return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
 
@@ -318,7 +370,7 @@ class Viewer:
                 if old is not None and old[0] == tuple(ids) and not dirty.intersection(ids):
                     continue
                 v, t, _ = scene.merge_meshes(meshes, ids)
-                name = "/{}/{:02x}{:02x}{:02x}".format(_LOD_NAMES[lod], *colour)
+                name = "/{}/{:02x}{:02x}{:02x}".format(_lod_node(lod), *colour)
                 h = self.server.scene.add_mesh_simple(
                     name, v, t, color=colour, flat_shading=True, cast_shadow=False,
                     receive_shadow=False, visible=visible)
@@ -338,7 +390,7 @@ class Viewer:
         """:meth:`scene_nodes` as name prefixes (``"/lod22/"``, ``"/points"``), which stay
         right when a recolour renames the meshes."""
         with self.lock:
-            names = [f"/{_LOD_NAMES[self.lod_choice.value]}/"] if self.groups else []
+            names = [f"/{_lod_node(self.lod_choice.value)}/"] if self.groups else []
             if getattr(self, "points_handle", None) is not None and self.show_points.value:
                 names.append(self.points_handle.name)
             return names
@@ -364,6 +416,14 @@ class Viewer:
         return None if k is None else ids[owner[k]]
 
     def _load_points(self):
+        if self.session is None:  # shown only: the file's classes
+            r = self._reader
+            cloud = r.box(*r.world_bounds())
+            world = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
+                                     cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
+            classes = cloud.attributes.get("classification", np.zeros(len(cloud), np.uint8))
+            self.cloud, self.classes, self._world_xyz = cloud, classes, world
+            return
         world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
         self._world_xyz = world
@@ -388,8 +448,8 @@ class Viewer:
             self.lod_choice = gui.add_dropdown("LoD", [f"{v}" for v in self.lods] or ["-"],
                                                initial_value=self.lods[-1] if self.lods else "-")
             self.colour_by = gui.add_dropdown("Colour by", scene.COLOUR_BY, initial_value="RMSE")
-            self.show_points = gui.add_checkbox("Points", self.session is not None,
-                                                disabled=self.session is None)
+            self.show_points = gui.add_checkbox("Points", self._reader is not None,
+                                                disabled=self._reader is None)
             self.legend = gui.add_markdown("")
         with gui.add_folder("Worst buildings"):
             worst = scene.worst_buildings(self.attrs)
@@ -397,8 +457,7 @@ class Viewer:
                                           or ["-"])
             self.next_worst = gui.add_button("Next worst")
         with gui.add_folder("Edit", visible=True):
-            self.status_md = gui.add_markdown("Click a building." if self.session is not None else
-                                              "View only: start with --points to edit.")
+            self.status_md = gui.add_markdown(self.read_only or "Click a building.")
             self.kind = gui.add_dropdown("Primitive", ("auto", "box", "gable", "hip", "shed",
                                                        "prism"), initial_value="auto")
             self.place = gui.add_checkbox("Start from a placed primitive", False)
@@ -510,7 +569,7 @@ class Viewer:
 
     def _need(self, what="edit"):
         if self.session is None:
-            raise InputError("start the viewer with --points to edit")
+            raise InputError(self.read_only)
         if self.selected is None:
             raise InputError(f"click a building to {what} first")
 
