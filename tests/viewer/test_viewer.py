@@ -295,3 +295,23 @@ def test_a_model_from_another_tool_is_shown_read_only_with_its_points(edit_town,
         assert model.read_bytes() == before
     finally:
         v.stop()
+
+
+@pytest.mark.slow
+def test_rmse_is_in_metres_in_a_feet_crs(data, tmp_path, port):
+    """A model in US survey feet (EPSG:6880): the viewer's RMSE is in metres, as labelled
+    and as reconstruct's own rmse_lod12 (it was in feet, 3.3 times larger)."""
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.viewer.app import Viewer
+
+    tile = data / "misc" / "file_with_both_wkt_and_geotiff_vlrs.las"
+    model = tmp_path / "feet.city.json"
+    reconstruct([tile], model, lods=("1.2",))
+    v = Viewer(model, points=[tile], port=port)
+    v.start(compute_rmse=False)
+    try:
+        for bid, a in v.attrs.items():
+            assert v._rmse_of(bid, v._world_solids(bid, "1.2")) == pytest.approx(
+                a["rmse_lod12"], abs=0.002)
+    finally:
+        v.stop()

@@ -226,12 +226,19 @@ class Viewer:
         return xyz[idx[shapely.contains_xy(fp, xyz[idx, 0], xyz[idx, 1])]]
 
     def _rmse_of(self, bid, solids):
+        """RMSE in metres of the building's points to ``solids`` (world coordinates)."""
+        from ..datamodel import Solid
         from ..metrics.model import model_rmse
 
         pts = self._building_points(bid)
         if pts is None or not len(pts) or not solids:
             return None
-        return round(float(model_rmse(pts, solids)), 4)
+        # in metres about the viewer's origin, as reconstruct's rmse_lod* (a feet CRS)
+        r = self._reader
+        unit = np.array([r.xy_unit, r.xy_unit, r.z_unit])
+        solids = [Solid((np.asarray(s.vertices) - self.origin) * unit, s.surfaces)
+                  for s in solids]
+        return round(float(model_rmse((pts - self.origin) * unit, solids)), 4)
 
     def _rmse_values(self) -> dict:
         """``{id: RMSE}`` of each building's points to its model at the top LoD."""
