@@ -266,7 +266,7 @@ def test_points_of_another_area_are_a_one_line_error(edit_town, tmp_path, port):
                points=[edit_town.laz], port=port)
 
 
-@pytest.mark.parametrize("case", ["no configuration", "no transform"])
+@pytest.mark.parametrize("case", ["no configuration", "no transform", "CityJSONSeq"])
 def test_a_model_from_another_tool_is_shown_read_only_with_its_points(edit_town, tmp_path,
                                                                       port, case):
     """A 3DBAG or 3dfier model with --points: drawn with its points, and an edit says
@@ -280,7 +280,13 @@ def test_a_model_from_another_tool_is_shown_read_only_with_its_points(edit_town,
             v = _apply_transform(doc["vertices"], doc.pop("transform"))
             doc["vertices"] = v.round(3).tolist()
 
-    model = _rewrite(edit_town.model, tmp_path / "other.city.json", foreign)
+    if case == "CityJSONSeq":
+        from lidar2city.tools.reconstruct import reconstruct
+
+        model = tmp_path / "m.city.jsonl"
+        reconstruct([edit_town.laz], model, footprints=edit_town.footprints, lods=("1.2",))
+    else:
+        model = _rewrite(edit_town.model, tmp_path / "other.city.json", foreign)
     before = model.read_bytes()
     v = Viewer(model, points=[edit_town.laz], port=port, max_points=5_000)
     v.start(compute_rmse=False)
@@ -289,9 +295,10 @@ def test_a_model_from_another_tool_is_shown_read_only_with_its_points(edit_town,
         assert "view only" in v.status_md.content.lower()
         assert v.refit_btn.disabled and v.outline_btn.disabled
         v.select("b00")
-        assert v.refit_primitive("box") is None and "not made by lidar2city" in v.status
+        why = "CityJSONSeq cannot be edited" if case == "CityJSONSeq" else "not made by lidar2city"
+        assert v.refit_primitive("box") is None and why in v.status
         v.start_outline()
-        assert v.outline is None and "not made by lidar2city" in v.status
+        assert v.outline is None and why in v.status
         assert model.read_bytes() == before
     finally:
         v.stop()

@@ -455,8 +455,9 @@ class EditSession:
         docs = read_json_documents(self.path)
         doc = docs[0] if len(docs) == 1 else None
         if not isinstance(doc, dict) or doc.get("type") != "CityJSON":
-            raise NotEditableError(f"{str(self.path)!r} is not a CityJSON file (CityJSONSeq "
-                                   "models cannot be edited)")
+            raise NotEditableError(f"{str(self.path)!r} is not one CityJSON document (a "
+                                   "CityJSONSeq cannot be edited: reconstruct -o NAME.city.json "
+                                   "for a model to edit)")
         if "transform" not in doc:
             raise NotEditableError(f"{str(self.path)!r} has no transform: it was not made by "
                                    "lidar2city reconstruct, whose models can be edited")
