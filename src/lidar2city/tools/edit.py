@@ -495,6 +495,7 @@ class EditSession:
             self._footprints = dict(zip(map(str, fps.ids), fps.geometries, strict=True))
         self.edits_cache: dict[str, dict] = {}
         self._area = None
+        self._vertices = None  # (doc, its world vertices) for outlines from the model
 
     # -- reading
     def buildings(self) -> list[str]:
@@ -528,7 +529,9 @@ class EditSession:
 
         doc = self.doc
         obj = doc["CityObjects"][bid]
-        verts = _apply_transform(doc["vertices"], doc["transform"])
+        if self._vertices is None or self._vertices[0] is not doc:  # once per document
+            self._vertices = (doc, _apply_transform(doc["vertices"], doc["transform"]))
+        verts = self._vertices[1]
         model = CityModel("2.0", verts, {bid: obj})
         polys = []
         lods = sorted({str(g.get("lod")) for g in obj.get("geometry", []) or []})

@@ -219,10 +219,13 @@ class Viewer:
         if self.cloud is None or self.session is None:
             return None
         fp = shape(self.session.footprint(bid))
-        xyz, build = self._world_xyz, self._building_mask
+        xyz = self._world_xyz
         x0, y0, x1, y1 = fp.bounds
-        idx = np.flatnonzero(build & (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1)
-                             & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1))
+        # the building points' x strip of the outline, in the cloud's order
+        lo = np.searchsorted(self._build_x, x0, side="left")
+        hi = np.searchsorted(self._build_x, x1, side="right")
+        idx = self._build_idx[lo:hi]
+        idx = np.sort(idx[(xyz[idx, 1] >= y0) & (xyz[idx, 1] <= y1)])
         return xyz[idx[shapely.contains_xy(fp, xyz[idx, 0], xyz[idx, 1])]]
 
     def _rmse_of(self, bid, solids):
@@ -435,6 +438,10 @@ class Viewer:
         self.cloud, self.classes = cloud, classes
         self._world_xyz = world
         self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
+        # the building points sorted by x: a building's points are a strip, not a scan
+        build = np.flatnonzero(self._building_mask)
+        self._build_idx = build[np.argsort(world[build, 0], kind="stable")]
+        self._build_x = world[self._build_idx, 0]
 
     def _draw_points(self):
         classes = self.classes
