@@ -352,3 +352,37 @@ def test_footprints_from_the_model_transform_its_vertices_once(edit_town, tmp_pa
     monkeypatch.setattr(cj, "_apply_transform", lambda *a: calls.append(1) or real(*a))
     got = [s.footprint(b) for b in s.buildings()]
     assert len(calls) <= 1 and all(g["type"] in ("Polygon", "MultiPolygon") for g in got)
+
+
+def test_a_large_area_is_within_the_camera_far_plane(edit_town, tmp_path, port):
+    """viser's camera sees 1,000 m: the 144-tile area (2.4 x 1.8 km) was a blank page.
+    The far plane reaches past the whole model from the initial camera."""
+    from lidar2city.viewer.app import Viewer
+
+    def spread(doc):  # one building 3 km away
+        used = set()
+
+        def walk(b):
+            if isinstance(b, list):
+                for x in b:
+                    walk(x)
+            else:
+                used.add(b)
+
+        for g in doc["CityObjects"]["b03"]["geometry"]:
+            walk(g["boundaries"])
+        scale = doc["transform"]["scale"][0]
+        for i in used:
+            doc["vertices"][i][0] += round(3000.0 / scale)
+
+    v = Viewer(_rewrite(edit_town.model, tmp_path / "wide.city.json", spread), port=port)
+    v.start()
+    try:
+        cam = v.server.initial_camera
+        pos, at = np.asarray(cam.position), np.asarray(cam.look_at)
+        corners = np.array([[x, y, z] for x in (0, v.extent[0]) for y in (0, v.extent[1])
+                            for z in (0, v.extent[2])])
+        assert cam.far > np.linalg.norm(corners - pos, axis=1).max()
+        assert cam.near <= max(0.01, max(v.extent[:2]) / 1000)  # roofs 1 m apart stay apart
+    finally:
+        v.stop()

@@ -325,6 +325,9 @@ class Viewer:
             cam = srv.initial_camera
             cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
             cam.look_at = (centre[0], centre[1], 0.0)
+            # viser's far plane is 1,000 units: a 2 km area was drawn blank from 2.9 km away
+            cam.far = max(1000.0, 4.0 * float(np.hypot(d, max(self.extent[2], 1.0))) + 100.0)
+            cam.near = max(0.01, d / 4000.0)  # and the depth buffer's precision kept
             self._build_gui()
             self._draw_buildings()
             if self._reader is not None:
