@@ -217,7 +217,7 @@ def main():
         t0 = time.perf_counter()
         viewer = Viewer(model, points=[TILE], crs="EPSG:7415", port=_port())
         viewer.start()  # as `lidar2city view` does: RMSEs computed in the background
-        print(f"server start (model + {len(viewer.cloud)} points read, scene built): "
+        print(f"server start (model + {viewer._reader.count} points read, scene built): "
               f"{time.perf_counter() - t0:.2f} s")
         try:
             page_ready(viewer, args.screenshot,

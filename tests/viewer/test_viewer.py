@@ -386,3 +386,33 @@ def test_a_large_area_is_within_the_camera_far_plane(edit_town, tmp_path, port):
         assert cam.near <= max(0.01, max(v.extent[:2]) / 1000)  # roofs 1 m apart stay apart
     finally:
         v.stop()
+
+
+def test_a_big_area_reads_its_points_per_building(edit_town, tmp_path, port, viewer,
+                                                 monkeypatch):
+    """Over LOAD_ALL_POINTS (a 144-tile area holds 17 M) the viewer keeps only the points
+    it shows and reads a building's points when needed: the same RMSEs and refits."""
+    import lidar2city.viewer.app as app
+
+    monkeypatch.setattr(app, "LOAD_ALL_POINTS", 1000)
+    model = tmp_path / "lazy.city.json"
+    model.write_bytes(edit_town.model.read_bytes())
+    lazy = app.Viewer(model, points=[edit_town.laz], footprints=edit_town.footprints,
+                      port=port, max_points=20_000)
+    lazy.start(compute_rmse=False)
+    try:
+        assert lazy._lazy and lazy.session._area is None
+        assert 0 < lazy.points_handle.points.shape[0] <= 20_000
+        got = lazy._rmse_values()
+        want = {b: a["viewer_rmse"] for b, a in viewer.attrs.items()}
+        assert got.keys() == want.keys()
+        assert all(abs(got[b] - want[b]) <= 1e-4 for b in got)
+        lazy.select("b00")
+        viewer.select("b00")
+        assert lazy.refit_primitive("gable") is not None, lazy.status
+        assert viewer.refit_primitive("gable") is not None
+        timing = ("reconstruction_time",)
+        assert ({k: v for k, v in lazy.attrs["b00"].items() if k not in timing}
+                == {k: v for k, v in viewer.attrs["b00"].items() if k not in timing})
+    finally:
+        lazy.stop()

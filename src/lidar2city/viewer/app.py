@@ -28,6 +28,11 @@ logger = logging.getLogger(__name__)
 __all__ = ["Viewer", "require_viser"]
 
 _SELECTED = (255, 225, 0)
+#: above this many points in the tiles the viewer holds only the points it shows (an even
+#: sample read tile by tile) and reads a building's points when it needs them (its RMSE, a
+#: refit), as ``lidar2city edit`` does: all 17 M points of a 144-tile area held at once
+#: would take ~2 GB and a minute to start
+LOAD_ALL_POINTS = 5_000_000
 
 
 def _lod_node(lod) -> str:
@@ -170,6 +175,7 @@ class Viewer:
         self._gizmos = []
         self._placed = None
         self.cloud = self.classes = None
+        self._lazy = False           # the tiles' points are read per building (big areas)
         self._rmse_thread = self._rmse_child = None
         self._refitted = set()       # ids whose refit was accepted (their RMSE is their own)
         self._quiet_worst = False
@@ -214,11 +220,19 @@ class Viewer:
     def _building_points(self, bid):
         """World building points inside the building's outline (for its RMSE)."""
         import shapely
-        from shapely.geometry import shape
+        from shapely.geometry import mapping, shape
 
-        if self.cloud is None or self.session is None:
+        if self.classes is None or self.session is None:
             return None
         fp = shape(self.session.footprint(bid))
+        if self._lazy:  # read around the building, classified as a refit sees it
+            cloud, classes = self.session.points(mapping(fp))
+            r = self.session.reader
+            xyz = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
+                                   cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
+            keep = np.isin(classes, self.session.context.lod1.building_classes)
+            xyz = xyz[keep]
+            return xyz[shapely.contains_xy(fp, xyz[:, 0], xyz[:, 1])]
         xyz = self._world_xyz
         x0, y0, x1, y1 = fp.bounds
         # the building points' x strip of the outline, in the cloud's order
@@ -428,14 +442,28 @@ class Viewer:
         k = scene.ray_pick(v, t, origin, direction)
         return None if k is None else ids[owner[k]]
 
+    def _sampled_points(self):
+        """An even sample of about ``max_points`` of the tiles' points, read tile by tile:
+        ``(world xyz, classes from the files)``."""
+        from ..io.las import read_tile
+
+        r = self._reader
+        total = max(r.count, 1)
+        worlds, classes = [np.zeros((0, 3))], [np.zeros(0, np.uint8)]
+        for t in r.tiles:
+            if not t.count:
+                continue
+            tile = read_tile(t.path)
+            part = tile.take(scene.subsample(len(tile), -(-len(tile) * self.max_points // total)))
+            worlds.append(part.world())
+            classes.append(part.attrs.get("classification", np.zeros(len(part), np.uint8)))
+        return np.concatenate(worlds), np.concatenate(classes).astype(np.uint8)
+
     def _load_points(self):
-        if self.session is None:  # shown only: the file's classes
-            r = self._reader
-            cloud = r.box(*r.world_bounds())
-            world = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
-                                     cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
-            classes = cloud.attributes.get("classification", np.zeros(len(cloud), np.uint8))
-            self.cloud, self.classes, self._world_xyz = cloud, classes, world
+        if self.session is None or self._reader.count > LOAD_ALL_POINTS:
+            # shown only (the files' classes); a big area's buildings are read when needed
+            self._lazy = self.session is not None
+            self._world_xyz, self.classes = self._sampled_points()
             return
         world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
@@ -448,7 +476,7 @@ class Viewer:
 
     def _draw_points(self):
         classes = self.classes
-        idx = scene.subsample(len(self.cloud), self.max_points)
+        idx = scene.subsample(len(self._world_xyz), self.max_points)
         pts = self._world_xyz[idx] - self.origin
         # about the cloud's centre, float16 keeps 6 cm within 128 m (half the bytes)
         mid = np.round((pts.min(axis=0) + pts.max(axis=0)) / 2) if len(pts) else np.zeros(3)
