@@ -416,3 +416,17 @@ def test_a_big_area_reads_its_points_per_building(edit_town, tmp_path, port, vie
                 == {k: v for k, v in viewer.attrs["b00"].items() if k not in timing})
     finally:
         lazy.stop()
+
+
+def test_no_points_shown_is_no_cloud(edit_town, port):
+    """--max-points 0: points kept for editing, none drawn, and the scene's expected nodes
+    do not wait for an empty cloud (the page was never 'complete')."""
+    from lidar2city.viewer.app import Viewer
+
+    v = Viewer(edit_town.model, points=[edit_town.laz], port=port, max_points=0)
+    v.start(compute_rmse=False)
+    try:
+        assert getattr(v, "points_handle", None) is None
+        assert v.scene_prefixes() == ["/lod22/"]
+    finally:
+        v.stop()

@@ -477,12 +477,15 @@ class Viewer:
     def _draw_points(self):
         classes = self.classes
         idx = scene.subsample(len(self._world_xyz), self.max_points)
+        if not len(idx):  # --max-points 0: no cloud (an empty one is never "drawn")
+            return
         pts = self._world_xyz[idx] - self.origin
         # about the cloud's centre, float16 keeps 6 cm within 128 m (half the bytes)
         mid = np.round((pts.min(axis=0) + pts.max(axis=0)) / 2) if len(pts) else np.zeros(3)
         half = float(np.abs(pts - mid).max()) if len(pts) else 0.0
         self.points_handle = self.server.scene.add_point_cloud(
-            "/points", pts - mid, scene.class_colours(classes[idx]), point_size=0.25,
+            "/points", pts - mid, scene.class_colours(classes[idx]),
+            point_size=0.25 / self._reader.xy_unit,  # 25 cm in the CRS's unit
             precision="float16" if half <= 128.0 else "float32", position=tuple(mid),
             visible=self.show_points.value)
 
