@@ -651,8 +651,11 @@ class EditSession:
         doc = self.updated_document(result)
         _check_document(doc, str(result.id))
         out = Path(output) if output is not None else self.path
+        # json.dumps, not json.dump: the same text, from the C encoder (dump streams
+        # through the pure-Python one: 1 s of a 1.4 s accept on a 2,160-building model)
+        text = json.dumps(doc, separators=(",", ":"))
         with atomic_path(out) as tmp, open(tmp, "w", encoding="utf-8") as f:
-            json.dump(doc, f, separators=(",", ":"))
+            f.write(text)
         if edits is not None:
             append_edit(edits, edit)
         self.doc = doc
