@@ -430,3 +430,17 @@ def test_no_points_shown_is_no_cloud(edit_town, port):
         assert v.scene_prefixes() == ["/lod22/"]
     finally:
         v.stop()
+
+
+def test_without_footprints_the_page_says_what_edits_can_reproduce(edit_town, port):
+    """A traced model's edits cannot be re-applied by reconstruct --edits (it needs the
+    footprint file): the page says so before the user edits, not the re-run after."""
+    from lidar2city.viewer.app import Viewer
+
+    v = Viewer(edit_town.model, points=[edit_town.laz], port=port, max_points=0)
+    v.start(compute_rmse=False)
+    try:
+        assert "reconstruct --edits` re-applies edits only with the footprint file" in \
+            v.status_md.content
+    finally:
+        v.stop()

@@ -505,7 +505,11 @@ class Viewer:
                                           or ["-"])
             self.next_worst = gui.add_button("Next worst")
         with gui.add_folder("Edit", visible=True):
-            self.status_md = gui.add_markdown(self.read_only or "Click a building.")
+            self.status_md = gui.add_markdown(self.read_only or "Click a building." + (
+                "" if self.session is None or self.session._footprints is not None else
+                " Without --footprints the outlines are the model's; `reconstruct --edits` "
+                "re-applies edits only with the footprint file the model was made from (a "
+                "model with traced footprints keeps its edits in this file and EDITS.json)."))
             self.kind = gui.add_dropdown("Primitive", ("auto", "box", "gable", "hip", "shed",
                                                        "prism"), initial_value="auto")
             self.place = gui.add_checkbox("Start from a placed primitive", False)
