@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import DependencyError, Lidar2CityError
 
-__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "time_page"]
+__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "probe_script",
+           "time_page"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
@@ -282,6 +283,12 @@ _PROBE = """(() => {
 })();"""
 
 
+def probe_script(expect, spin: float = 0.0) -> str:
+    """The page script that times the scene (see :func:`time_page`), to install before
+    the page's own scripts: it fills ``window.__l2cTiming``."""
+    return _PROBE % (json.dumps(list(expect)), float(spin), float(spin), float(spin))
+
+
 def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
               width: int = 1280, height: int = 800, settle: float = 0.0,
               spin: float = 0.0, chromium: str | None = None) -> PageTiming:
@@ -326,8 +333,7 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
     with browser as (proc, dev):
         started = time.perf_counter() - browser.launched
         dev.call("Page.enable")  # (without it the script below is not installed)
-        dev.call("Page.addScriptToEvaluateOnNewDocument",
-                 source=_PROBE % (json.dumps(list(expect)), spin, spin, spin))
+        dev.call("Page.addScriptToEvaluateOnNewDocument", source=probe_script(expect, spin))
         t0 = time.perf_counter()
         dev.call("Page.navigate", url=url)
         got, seen = {}, None
