@@ -15,12 +15,22 @@ Prints:
 - edit time: one refit of a building (automatic primitive, a chosen gable, and
   a re-run from a moved outline) as the viewer does it, median and max over
   buildings after one warm-up;
-- reproduction: those edits accepted, then ``reconstruct --edits`` re-run;
-  the largest vertex difference over the edited buildings and whether the two
-  files are byte-identical.
+- frame time: once drawn, the page's milliseconds per rendered frame while the
+  camera turns for 3 s with the whole model in view, beside a bare viser page's;
+- LoD switch: seconds to show each other LoD the first time (meshed then);
+- reproduction: those edits accepted (the seconds of each accept: model checked and
+  written, edit appended), then ``reconstruct --edits`` re-run; the largest vertex
+  difference over the edited buildings and whether the two files are byte-identical.
+
+The Delft model has LoD1.2, 1.3 and 2.2. With ``--big DIR`` instead: the 144-tile
+synthetic area of ``bench_engine.py`` (2,160 buildings, 17.4 M points; made in DIR
+once, ~4 min, then reused), viewed without and with its points: server start and
+this process's peak memory, page drawn and frame time, LoD switch, the RMSE of one
+building, edits and accepts.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_viewer.py [--model M.city.json] [--quick]``
-(without ``--model`` the Delft model is reconstructed first, ~1 min).
+(without ``--model`` the Delft model is reconstructed first, ~1 min), or
+``... bench_viewer.py --big DIR``.
 """
 
 from __future__ import annotations
@@ -39,6 +49,7 @@ import numpy as np
 DATA = Path(os.environ.get("LIDAR2CITY_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 TILE = DATA / "delft" / "ahn3_cropped_1.laz"
 FOOTPRINTS = DATA / "delft" / "footprints_bgt.gpkg"
+LODS = ("1.2", "1.3", "2.2")
 
 
 def _port() -> int:
@@ -54,7 +65,7 @@ def _model(folder: Path, given):
     if given:
         shutil.copy(given, path)
     else:
-        reconstruct([TILE], path, footprints=FOOTPRINTS, lods=("1.2", "2.2"), crs="EPSG:7415")
+        reconstruct([TILE], path, footprints=FOOTPRINTS, lods=LODS, crs="EPSG:7415")
     return path
 
 
@@ -138,6 +149,109 @@ def page_ready(viewer, screenshot=None, repeat=1):
               f"{_median(mine, 'chromium_cpu') - _median(bare, 'chromium_cpu'):.1f} chromium CPU s")
 
 
+def frame_times(viewer, label, spin=3.0):
+    """Page milliseconds per frame while the camera turns, the whole model in view: the
+    viewer's page and a bare viser page (one box, the same lights) in the same run."""
+    from lidar2city.viewer.browser import find_chromium, time_page
+
+    if find_chromium() is None:
+        print("frame time: chromium not installed, not measured")
+        return
+    url = f"http://127.0.0.1:{viewer.port}"
+    ours = time_page(url, viewer.scene_prefixes(), timeout=120.0, width=1100, height=700,
+                     spin=spin)
+    bare = _bare_page(True)
+    try:
+        floor = time_page(f"http://127.0.0.1:{bare.get_port()}", ["/box"], timeout=90.0,
+                          width=1100, height=700, spin=spin)
+    finally:
+        bare.stop()
+
+    def ms(v):
+        return "not measured" if v is None else f"{v:.0f} ms"
+
+    drawn = "not reached" if ours.page_complete is None else f"{ours.page_complete:.2f} s"
+    print(f"frame time [{label}]: drawn {drawn} page clock, then {ms(ours.frame_ms)} per frame "
+          f"while the camera turns for {spin:.0f} s (bare page, one box: "
+          f"{ms(floor.frame_ms)}); screenshot shows buildings: {ours.drawn}")
+
+
+def lod_switch(viewer):
+    """Seconds to show each other LoD the first time (meshed then), then back."""
+    took = []
+    for lod in [*viewer.lods[:-1], viewer.lods[-1]]:
+        t0 = time.perf_counter()
+        viewer.lod_choice.value = lod
+        viewer._show_lod()
+        took.append(f"{lod} {time.perf_counter() - t0:.3f} s")
+    print(f"LoD switch (first time each, meshed then): {', '.join(took)}")
+
+
+def big_area(folder: Path):
+    """The 144-tile synthetic area of bench_engine.py (2,160 buildings, 17 M points) at
+    LoD1.2 + 2.2, made in ``folder`` once (~4 min), viewed without and with its points."""
+    import resource
+    import sys
+
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.viewer.app import Viewer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_engine import make_area
+
+    folder.mkdir(parents=True, exist_ok=True)
+    made = folder / "area.city.json"
+    if not made.exists():
+        tiles, fp = make_area(folder, 12)
+        reconstruct(tiles, made, footprints=fp, lods=("1.2", "2.2"), crs="EPSG:7415")
+    tiles = sorted(str(p) for p in folder.glob("tile_*.laz"))
+    model = folder / "view.city.json"
+    shutil.copy(made, model)
+    model.with_name("view.edits.json").unlink(missing_ok=True)
+    for pts in ([], tiles):
+        t0 = time.perf_counter()
+        v = Viewer(model, points=pts, crs="EPSG:7415", port=_port())
+        v.start(compute_rmse=False)
+        what = (f"{len(v.attrs)} buildings, " +
+                (f"{v._reader.count} points ({'read per building' if v._lazy else 'held'})"
+                 if pts else "no points"))
+        print(f"big area [{what}]: server start {time.perf_counter() - t0:.2f} s; peak memory "
+              f"of this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+        try:
+            frame_times(v, f"big area, {what}")
+            lod_switch(v)
+            if pts:
+                ids = [b for b, _ in v.worst_order()][:4]
+                t0 = time.perf_counter()
+                for b in ids:
+                    v._rmse_of(b, v._world_solids(b, v.lods[-1]))
+                print(f"big area: RMSE of one building (points read around it) "
+                      f"{(time.perf_counter() - t0) / len(ids):.3f} s")
+                edit_times(v, ids)
+                reproduction_saves(v, ids[:2])
+        finally:
+            v.stop()
+    print(f"big area: peak memory of this process "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+def _print_saves(saves):
+    if saves:
+        print(f"accept (model validated and written, edit appended): median "
+              f"{statistics.median(saves):.3f} s, max {max(saves):.3f} s wall over {len(saves)}")
+
+
+def reproduction_saves(viewer, ids):
+    saves = []
+    for bid in ids:
+        viewer.select(bid)
+        if viewer.refit_primitive("auto") is not None:
+            t0 = time.perf_counter()
+            if viewer.accept() is not None:
+                saves.append(time.perf_counter() - t0)
+    _print_saves(saves)
+
+
 def edit_times(viewer, ids):
     """Seconds of refits as the viewer runs them (each undone)."""
     out = {"auto primitive": [], "gable primitive": [], "outline re-run": []}
@@ -173,10 +287,17 @@ def reproduction(viewer, folder, ids):
     from lidar2city.io.cityjson import read_cityjson
     from lidar2city.tools.reconstruct import reconstruct
 
-    done = []
+    done, saves = [], []
+
+    def accept():
+        t0 = time.perf_counter()
+        out = viewer.accept()
+        saves.append(time.perf_counter() - t0)
+        return out
+
     for bid in ids:
         viewer.select(bid)
-        if viewer.refit_primitive("auto") is not None and viewer.accept() is not None:
+        if viewer.refit_primitive("auto") is not None and accept() is not None:
             done.append(bid)
     if ids:
         viewer.select(ids[-1])
@@ -184,15 +305,16 @@ def reproduction(viewer, folder, ids):
         c = viewer.outline.mean(axis=0)
         d = viewer.outline[1] - c
         viewer.move_vertex(1, viewer.outline[1] + 0.5 * d / np.linalg.norm(d))
-        if viewer.rebuild_from_outline() is not None and viewer.accept() is not None:
+        if viewer.rebuild_from_outline() is not None and accept() is not None:
             done.append(ids[-1])
+    _print_saves(saves)
     rerun = folder / "rerun.city.json"
-    reconstruct([TILE], rerun, footprints=FOOTPRINTS, lods=("1.2", "2.2"), crs="EPSG:7415",
+    reconstruct([TILE], rerun, footprints=FOOTPRINTS, lods=LODS, crs="EPSG:7415",
                 edits=viewer.edits_path)
     a, b = read_cityjson(viewer.path), read_cityjson(rerun)
     worst = 0.0
     for bid in set(done):
-        for lod in ("1.2", "2.2"):
+        for lod in LODS:
             va = np.concatenate([s.vertices for s in a.solids(bid, lod=lod)])
             vb = np.concatenate([s.vertices for s in b.solids(bid, lod=lod)])
             worst = max(worst, float(np.abs(va - vb).max()) if va.shape == vb.shape else np.inf)
@@ -206,10 +328,17 @@ def main():
     ap.add_argument("--model", default=None, help="an existing Delft model (LoD1.2 + 2.2)")
     ap.add_argument("--quick", action="store_true", help="fewer buildings")
     ap.add_argument("--screenshot", default=None, help="write the page's screenshot here")
+    ap.add_argument("--big", default=None, metavar="DIR",
+                    help="instead: the 144-tile synthetic area (made in DIR once, ~4 min)")
     ap.add_argument("--repeat", type=int, default=None,
                     help="page-ready runs of each page (default 1 with --quick, else 3)")
     args = ap.parse_args()
     from lidar2city.viewer.app import Viewer
+
+    print(f"load average: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    if args.big:
+        big_area(Path(args.big))
+        return
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -217,12 +346,14 @@ def main():
         t0 = time.perf_counter()
         viewer = Viewer(model, points=[TILE], crs="EPSG:7415", port=_port())
         viewer.start()  # as `lidar2city view` does: RMSEs computed in the background
-        print(f"server start (model + {len(viewer.cloud)} points read, scene built): "
+        print(f"server start (model + {viewer._reader.count} points read, scene built): "
               f"{time.perf_counter() - t0:.2f} s")
         try:
             page_ready(viewer, args.screenshot,
                        repeat=args.repeat or (1 if args.quick else 3))
             viewer._rmse_thread.join()
+            frame_times(viewer, "Delft model + points")
+            lod_switch(viewer)
             ids = [b for b, _ in viewer.worst_order()][: 4 if args.quick else 12]
             edit_times(viewer, ids)
             reproduction(viewer, folder, ids[:3])

@@ -11,6 +11,7 @@ __all__ = [
     "Lidar2CityError",
     "InputError",
     "FileFormatError",
+    "NotEditableError",
     "CRSError",
     "ConfigError",
     "EmptyInputError",
@@ -43,6 +44,10 @@ class CRSError(InputError):
 
 class FileFormatError(Lidar2CityError, OSError):
     """A file is missing, unreadable or not in the expected format."""
+
+
+class NotEditableError(FileFormatError):
+    """A model that can be shown but not edited (from another tool, or a CityJSONSeq)."""
 
 
 class DependencyError(Lidar2CityError, ImportError):

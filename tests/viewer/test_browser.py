@@ -116,7 +116,7 @@ def test_a_click_in_the_page_selects_the_building_under_it(viewer):
     with browser._Browser(find_chromium(), 1280, 800) as (_, dev):
         dev.call("Page.enable")
         dev.call("Page.addScriptToEvaluateOnNewDocument",
-                 source=browser._PROBE % json.dumps(viewer.scene_nodes()))
+                 source=browser.probe_script(viewer.scene_nodes()))
         dev.call("Page.navigate", url=f"http://127.0.0.1:{viewer.port}")
         end = time.monotonic() + 60
         while time.monotonic() < end:

@@ -34,3 +34,15 @@ def test_building_meshes_are_in_the_display_frame():
     v, t = meshes["x"]
     assert v.dtype == np.float32 and v.max() <= 10.0 and t.shape[1] == 3
     assert len(t) == 12  # 6 rectangles, 2 triangles each
+
+
+def test_reasons_are_shown_whole_and_do_not_break_the_table():
+    """A fallback reason ('LoD1.2 prism: LoD2.2 solid invalid (...)') is what a user
+    clicks a building to read: it is not cut at 60 characters, and a '|' in a value
+    does not split the row."""
+    reason = "LoD1.2 prism: LoD2.2 solid invalid (303 NON_MANIFOLD_EDGE edge 12-13 used 3 times)"
+    md = scene.attributes_markdown("b", {"lod22_fallback": reason, "note": "a | b",
+                                         "long": "x" * 100})
+    assert f"| lod22_fallback | {reason} |" in md
+    assert "| note | a \\| b |" in md
+    assert "| long | " + "x" * 60 + "... |" in md

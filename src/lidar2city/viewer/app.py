@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DependencyError, InputError, Lidar2CityError
+from ..errors import DependencyError, InputError, Lidar2CityError, NotEditableError
 from . import scene
 
 logger = logging.getLogger(__name__)
@@ -28,7 +28,23 @@ logger = logging.getLogger(__name__)
 __all__ = ["Viewer", "require_viser"]
 
 _SELECTED = (255, 225, 0)
-_LOD_NAMES = {"1.2": "lod12", "1.3": "lod13", "2.2": "lod22"}
+#: above this many points in the tiles the viewer holds only the points it shows (an even
+#: sample read tile by tile) and reads a building's points when it needs them (its RMSE, a
+#: refit), as ``lidar2city edit`` does: all 17 M points of a 144-tile area held at once
+#: would take ~2 GB and a minute to start
+LOAD_ALL_POINTS = 5_000_000
+
+
+def _lod_node(lod) -> str:
+    """The scene node prefix of a LoD's meshes: ``"1.2"`` -> ``"lod12"``, ``1`` -> ``"lod1"``."""
+    return "lod" + "".join(c for c in str(lod) if c.isalnum())
+
+
+def _lod_key(lod):
+    try:
+        return (float(lod), str(lod))
+    except ValueError:
+        return (math.inf, str(lod))
 
 
 def require_viser():
@@ -103,13 +119,19 @@ class Viewer:
 
         self.path = Path(model)
         self.session = None
+        #: why edits cannot apply (None: they can)
+        self.read_only = None if points else "View only: start with --points to edit."
         if points:
             from ..tools.edit import EditSession
 
-            self.session = EditSession(model, list(points), footprints=footprints, crs=crs,
-                                       id_field=id_field)
-            self.model = _model_from_doc(self.session.doc)
-        else:
+            try:
+                self.session = EditSession(model, list(points), footprints=footprints,
+                                           crs=crs, id_field=id_field)
+                self.model = _model_from_doc(self.session.doc)
+            except NotEditableError as exc:  # another tool's model: shown with its points
+                self.read_only = f"View only: {exc}."
+                logger.warning("%s", self.read_only)
+        if self.session is None:
             self.model = read_cityjson(model)
         name = self.path.name
         for end in (".city.json", ".city.jsonl", ".json"):
@@ -131,11 +153,19 @@ class Viewer:
         self._dirty: dict[str, set] = {}     # LoD -> ids whose mesh changed since drawn
         self.attrs = {bid: dict(self.model.objects[bid].get("attributes") or {})
                       for bid in self.model.buildings()}
+        # CityJSON 1.0 (3dfier) writes "lod": 1
         self.lods = sorted({str(g.get("lod")) for o in self.model.objects.values()
-                            for g in o.get("geometry", []) or []} & set(_LOD_NAMES))
+                            if o.get("type") in ("Building", "BuildingPart")
+                            for g in o.get("geometry", []) or [] if g.get("lod") is not None},
+                           key=_lod_key)
         v = self.model.vertices
         self.origin = (np.floor(v.min(axis=0)) if len(v) else np.zeros(3))
         self.extent = (v.max(axis=0) - v.min(axis=0)) if len(v) else np.ones(3)
+        self._reader = None
+        if points:
+            self._reader = (self.session.reader if self.session is not None else
+                            self._points_reader(list(points), crs))
+            self._check_points_cover(v)
         self.selected = None
         self.pending = None          # (edit, result, previous attributes, previous meshes)
         self.outline = None          # (N, 2) world vertices of the outline being edited
@@ -145,12 +175,35 @@ class Viewer:
         self._gizmos = []
         self._placed = None
         self.cloud = self.classes = None
+        self._lazy = False           # the tiles' points are read per building (big areas)
         self._rmse_thread = self._rmse_child = None
         self._refitted = set()       # ids whose refit was accepted (their RMSE is their own)
         self._quiet_worst = False
         self._candidate = {}   # LoD -> {id: mesh} of the pending refit
 
     # ------------------------------------------------------------------ data
+    def _points_reader(self, points, crs):
+        """The tiles of a model that cannot be edited, read only to be shown."""
+        from ..io.las import TileReader, scan_tiles
+
+        if crs is None:
+            crs = (self.model.metadata or {}).get("referenceSystem")
+        return TileReader(scan_tiles(points, crs=crs), origin=self.origin)
+
+    def _check_points_cover(self, vertices):
+        """Refuse tiles that do not meet the model (another area, or another CRS)."""
+        if not len(vertices):
+            return
+        wb = self._reader.world_bounds()
+        lo, hi = vertices[:, :2].min(axis=0), vertices[:, :2].max(axis=0)
+        if wb[0] > hi[0] or wb[2] < lo[0] or wb[1] > hi[1] or wb[3] < lo[1]:
+            model_crs = (self.model.metadata or {}).get("referenceSystem") or "no CRS"
+            raise InputError(
+                f"the points (--points) do not cover the model: points x {wb[0]:.0f}..{wb[2]:.0f}"
+                f" y {wb[1]:.0f}..{wb[3]:.0f}, model x {lo[0]:.0f}..{hi[0]:.0f} y "
+                f"{lo[1]:.0f}..{hi[1]:.0f} (model CRS: {model_crs}): tiles of another area "
+                "or CRS?")
+
     def _world_solids(self, bid, lod):
         return self.model.solids(bid, lod=lod, include_children=True)
 
@@ -167,24 +220,42 @@ class Viewer:
     def _building_points(self, bid):
         """World building points inside the building's outline (for its RMSE)."""
         import shapely
-        from shapely.geometry import shape
+        from shapely.geometry import mapping, shape
 
-        if self.cloud is None or self.session is None:
+        if self.classes is None or self.session is None:
             return None
         fp = shape(self.session.footprint(bid))
-        xyz, build = self._world_xyz, self._building_mask
+        if self._lazy:  # read around the building, classified as a refit sees it
+            cloud, classes = self.session.points(mapping(fp))
+            r = self.session.reader
+            xyz = np.column_stack([r.origin[:2] + cloud.xyz[:, :2] / r.xy_unit,
+                                   cloud.xyz[:, 2:] / r.z_unit + r.origin[2]])
+            keep = np.isin(classes, self.session.context.lod1.building_classes)
+            xyz = xyz[keep]
+            return xyz[shapely.contains_xy(fp, xyz[:, 0], xyz[:, 1])]
+        xyz = self._world_xyz
         x0, y0, x1, y1 = fp.bounds
-        idx = np.flatnonzero(build & (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1)
-                             & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1))
+        # the building points' x strip of the outline, in the cloud's order
+        lo = np.searchsorted(self._build_x, x0, side="left")
+        hi = np.searchsorted(self._build_x, x1, side="right")
+        idx = self._build_idx[lo:hi]
+        idx = np.sort(idx[(xyz[idx, 1] >= y0) & (xyz[idx, 1] <= y1)])
         return xyz[idx[shapely.contains_xy(fp, xyz[idx, 0], xyz[idx, 1])]]
 
     def _rmse_of(self, bid, solids):
+        """RMSE in metres of the building's points to ``solids`` (world coordinates)."""
+        from ..datamodel import Solid
         from ..metrics.model import model_rmse
 
         pts = self._building_points(bid)
         if pts is None or not len(pts) or not solids:
             return None
-        return round(float(model_rmse(pts, solids)), 4)
+        # in metres about the viewer's origin, as reconstruct's rmse_lod* (a feet CRS)
+        r = self._reader
+        unit = np.array([r.xy_unit, r.xy_unit, r.z_unit])
+        solids = [Solid((np.asarray(s.vertices) - self.origin) * unit, s.surfaces)
+                  for s in solids]
+        return round(float(model_rmse((pts - self.origin) * unit, solids)), 4)
 
     def _rmse_values(self) -> dict:
         """``{id: RMSE}`` of each building's points to its model at the top LoD."""
@@ -248,14 +319,19 @@ class Viewer:
     def start(self, *, compute_rmse: bool = True) -> str:
         """Start the server, build the scene and GUI; returns the URL."""
         viser = self.viser
-        if self.session is not None:
+        if self._reader is not None:
             self._load_points()
+        if self.session is not None:
             if compute_rmse:
                 self._start_rmse()  # (forks before the server starts its threads)
         # the RMSEs may arrive while the GUI and scene are built: they wait for the lock
         with self.lock:
             self.server = viser.ViserServer(host=self.host, port=self.port, verbose=False)
             srv = self.server
+            if srv.get_port() != self.port:  # viser takes the next free port
+                logger.warning("port %d is in use: the viewer listens on %d", self.port,
+                               srv.get_port())
+                self.port = srv.get_port()
             srv.scene.set_up_direction("+z")
             _plain_lighting(srv.scene)
             d = float(max(self.extent[0], self.extent[1], 10.0))
@@ -263,9 +339,12 @@ class Viewer:
             cam = srv.initial_camera
             cam.position = (centre[0] - 0.3 * d, centre[1] - 1.1 * d, centre[2] + 0.9 * d)
             cam.look_at = (centre[0], centre[1], 0.0)
+            # viser's far plane is 1,000 units: a 2 km area was drawn blank from 2.9 km away
+            cam.far = max(1000.0, 4.0 * float(np.hypot(d, max(self.extent[2], 1.0))) + 100.0)
+            cam.near = max(0.01, d / 4000.0)  # and the depth buffer's precision kept
             self._build_gui()
             self._draw_buildings()
-            if self.session is not None:
+            if self._reader is not None:
                 self._draw_points()
         return f"http://{'127.0.0.1' if self.host in ('0.0.0.0', '::') else self.host}:{self.port}"
 
@@ -318,7 +397,7 @@ class Viewer:
                 if old is not None and old[0] == tuple(ids) and not dirty.intersection(ids):
                     continue
                 v, t, _ = scene.merge_meshes(meshes, ids)
-                name = "/{}/{:02x}{:02x}{:02x}".format(_LOD_NAMES[lod], *colour)
+                name = "/{}/{:02x}{:02x}{:02x}".format(_lod_node(lod), *colour)
                 h = self.server.scene.add_mesh_simple(
                     name, v, t, color=colour, flat_shading=True, cast_shadow=False,
                     receive_shadow=False, visible=visible)
@@ -338,7 +417,7 @@ class Viewer:
         """:meth:`scene_nodes` as name prefixes (``"/lod22/"``, ``"/points"``), which stay
         right when a recolour renames the meshes."""
         with self.lock:
-            names = [f"/{_LOD_NAMES[self.lod_choice.value]}/"] if self.groups else []
+            names = [f"/{_lod_node(self.lod_choice.value)}/"] if self.groups else []
             if getattr(self, "points_handle", None) is not None and self.show_points.value:
                 names.append(self.points_handle.name)
             return names
@@ -363,21 +442,50 @@ class Viewer:
         k = scene.ray_pick(v, t, origin, direction)
         return None if k is None else ids[owner[k]]
 
+    def _sampled_points(self):
+        """An even sample of about ``max_points`` of the tiles' points, read tile by tile:
+        ``(world xyz, classes from the files)``."""
+        from ..io.las import read_tile
+
+        r = self._reader
+        total = max(r.count, 1)
+        worlds, classes = [np.zeros((0, 3))], [np.zeros(0, np.uint8)]
+        for t in r.tiles:
+            if not t.count:
+                continue
+            tile = read_tile(t.path)
+            part = tile.take(scene.subsample(len(tile), -(-len(tile) * self.max_points // total)))
+            worlds.append(part.world())
+            classes.append(part.attrs.get("classification", np.zeros(len(part), np.uint8)))
+        return np.concatenate(worlds), np.concatenate(classes).astype(np.uint8)
+
     def _load_points(self):
+        if self.session is None or self._reader.count > LOAD_ALL_POINTS:
+            # shown only (the files' classes); a big area's buildings are read when needed
+            self._lazy = self.session is not None
+            self._world_xyz, self.classes = self._sampled_points()
+            return
         world, cloud, classes = self.session.load_area()
         self.cloud, self.classes = cloud, classes
         self._world_xyz = world
         self._building_mask = np.isin(classes, self.session.context.lod1.building_classes)
+        # the building points sorted by x: a building's points are a strip, not a scan
+        build = np.flatnonzero(self._building_mask)
+        self._build_idx = build[np.argsort(world[build, 0], kind="stable")]
+        self._build_x = world[self._build_idx, 0]
 
     def _draw_points(self):
         classes = self.classes
-        idx = scene.subsample(len(self.cloud), self.max_points)
+        idx = scene.subsample(len(self._world_xyz), self.max_points)
+        if not len(idx):  # --max-points 0: no cloud (an empty one is never "drawn")
+            return
         pts = self._world_xyz[idx] - self.origin
         # about the cloud's centre, float16 keeps 6 cm within 128 m (half the bytes)
         mid = np.round((pts.min(axis=0) + pts.max(axis=0)) / 2) if len(pts) else np.zeros(3)
         half = float(np.abs(pts - mid).max()) if len(pts) else 0.0
         self.points_handle = self.server.scene.add_point_cloud(
-            "/points", pts - mid, scene.class_colours(classes[idx]), point_size=0.25,
+            "/points", pts - mid, scene.class_colours(classes[idx]),
+            point_size=0.25 / self._reader.xy_unit,  # 25 cm in the CRS's unit
             precision="float16" if half <= 128.0 else "float32", position=tuple(mid),
             visible=self.show_points.value)
 
@@ -388,8 +496,8 @@ class Viewer:
             self.lod_choice = gui.add_dropdown("LoD", [f"{v}" for v in self.lods] or ["-"],
                                                initial_value=self.lods[-1] if self.lods else "-")
             self.colour_by = gui.add_dropdown("Colour by", scene.COLOUR_BY, initial_value="RMSE")
-            self.show_points = gui.add_checkbox("Points", self.session is not None,
-                                                disabled=self.session is None)
+            self.show_points = gui.add_checkbox("Points", self._reader is not None,
+                                                disabled=self._reader is None)
             self.legend = gui.add_markdown("")
         with gui.add_folder("Worst buildings"):
             worst = scene.worst_buildings(self.attrs)
@@ -397,8 +505,11 @@ class Viewer:
                                           or ["-"])
             self.next_worst = gui.add_button("Next worst")
         with gui.add_folder("Edit", visible=True):
-            self.status_md = gui.add_markdown("Click a building." if self.session is not None else
-                                              "View only: start with --points to edit.")
+            self.status_md = gui.add_markdown(self.read_only or "Click a building." + (
+                "" if self.session is None or self.session._footprints is not None else
+                " Without --footprints the outlines are the model's; `reconstruct --edits` "
+                "re-applies edits only with the footprint file the model was made from (a "
+                "model with traced footprints keeps its edits in this file and EDITS.json)."))
             self.kind = gui.add_dropdown("Primitive", ("auto", "box", "gable", "hip", "shed",
                                                        "prism"), initial_value="auto")
             self.place = gui.add_checkbox("Start from a placed primitive", False)
@@ -510,7 +621,7 @@ class Viewer:
 
     def _need(self, what="edit"):
         if self.session is None:
-            raise InputError("start the viewer with --points to edit")
+            raise InputError(self.read_only)
         if self.selected is None:
             raise InputError(f"click a building to {what} first")
 

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import DependencyError, Lidar2CityError
 
-__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "time_page"]
+__all__ = ["find_chromium", "chromium_flags", "scene_drawn", "PageTiming", "probe_script",
+           "time_page"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
@@ -201,6 +202,8 @@ class PageTiming:
     wall_browser_start: float
     #: CPU seconds (user + system) of chromium's processes at the end (Linux; else None)
     chromium_cpu: float | None
+    #: with ``spin``: page milliseconds per frame while the camera turns (else None)
+    frame_ms: float | None
     #: the final screenshot shows buildings (:func:`scene_drawn`)
     drawn: bool
     #: that screenshot (PNG bytes)
@@ -215,7 +218,8 @@ class PageTiming:
 # until its environment map is ready, then fades it in).
 _PROBE = """(() => {
   const expect = %s;
-  const out = window.__l2cTiming = {booted: null, nodes: null, complete: null};
+  const out = window.__l2cTiming = {booted: null, nodes: null, complete: null,
+                                     frameMs: null};
   const filled = (o) => {
     let n = 0;
     o.traverse((c) => { const g = c.geometry;
@@ -254,17 +258,40 @@ _PROBE = """(() => {
         parseFloat(getComputedStyle(m.canvas).opacity) >= 0.999) {
       out.complete = performance.now();
       performance.mark("lidar2city-scene-complete");
+      if (%s > 0) requestAnimationFrame(spin);
       return;
     }
     requestAnimationFrame(tick);
+  };
+  // then the frame time with the whole scene in view: the camera turned a little every
+  // animation frame for %s s (a redraw each time), page milliseconds per rendered frame
+  let spinFrom = null, spinFrame = null;
+  const spin = () => {
+    const m = window.__viserMutable;
+    if (m && m.cameraControl) m.cameraControl.rotate(0.01, 0, false);
+    if (m && m.requestRender) m.requestRender();
+    const now = performance.now();
+    if (spinFrom === null) { spinFrom = now; spinFrame = frame(); }
+    else if (now - spinFrom >= %s * 1000) {
+      const n = frame() - spinFrame;
+      out.frameMs = n > 0 ? (now - spinFrom) / n : null;
+      return;
+    }
+    requestAnimationFrame(spin);
   };
   requestAnimationFrame(tick);
 })();"""
 
 
+def probe_script(expect, spin: float = 0.0) -> str:
+    """The page script that times the scene (see :func:`time_page`), to install before
+    the page's own scripts: it fills ``window.__l2cTiming``."""
+    return _PROBE % (json.dumps(list(expect)), float(spin), float(spin), float(spin))
+
+
 def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
               width: int = 1280, height: int = 800, settle: float = 0.0,
-              chromium: str | None = None) -> PageTiming:
+              spin: float = 0.0, chromium: str | None = None) -> PageTiming:
     """Open ``url`` (a viser page) in headless chromium and time it until drawn.
 
     Parameters
@@ -283,6 +310,10 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
     settle : float
         Seconds to wait, once timed, before the screenshot (for a picture of the page
         at rest: its control panel animates as it opens).
+    spin : float
+        When > 0: once drawn, turn the camera a little every animation frame for this
+        many seconds and report the page's milliseconds per rendered frame
+        (``frame_ms``: how fluid the page is with the whole scene in view).
 
     Returns
     -------
@@ -302,7 +333,7 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
     with browser as (proc, dev):
         started = time.perf_counter() - browser.launched
         dev.call("Page.enable")  # (without it the script below is not installed)
-        dev.call("Page.addScriptToEvaluateOnNewDocument", source=_PROBE % json.dumps(list(expect)))
+        dev.call("Page.addScriptToEvaluateOnNewDocument", source=probe_script(expect, spin))
         t0 = time.perf_counter()
         dev.call("Page.navigate", url=url)
         got, seen = {}, None
@@ -313,8 +344,10 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
                 got = json.loads(r.get("result", {}).get("value") or "null") or {}
             except Lidar2CityError:  # between documents
                 got = {}
-            if got.get("complete") is not None:
+            if got.get("complete") is not None and seen is None:
                 seen = time.perf_counter()
+            if seen is not None and (spin <= 0 or got.get("frameMs") is not None
+                                     or time.perf_counter() - seen > spin + 10.0):
                 break
             time.sleep(poll)
         cpu = _tree_cpu_seconds(proc.pid)
@@ -330,4 +363,5 @@ def time_page(url: str, expect, *, timeout: float = 60.0, poll: float = 0.05,
                       wall_from_navigate=None if seen is None else seen - t0,
                       wall_from_launch=None if seen is None else seen - browser.launched,
                       wall_browser_start=started, chromium_cpu=cpu,
+                      frame_ms=got.get("frameMs"),
                       drawn=bool(len(png)) and scene_drawn(img), png=png)

@@ -250,9 +250,13 @@ def attributes_markdown(bid: str, a: dict) -> str:
              "primitive", "roof_height", "ground_height", "point_count", "point_density")
     keys = [k for k in first if k in a] + sorted(k for k in a if k not in first)
     rows = [f"**Building {bid}**", "", "| attribute | value |", "|---|---|"]
+    whole = ("status", "reason", "edit", "validity_errors", "lod22_fallback")
     for k in keys:
         v = a[k]
         if isinstance(v, float):
             v = f"{v:.3f}" if abs(v) < 1e5 else f"{v:.1f}"
-        rows.append(f"| {k} | {str(v)[:60]} |")
+        v = str(v)
+        if k not in whole and len(v) > 60:  # the reasons are read whole
+            v = v[:60] + "..."
+        rows.append(f"| {k} | {v.replace('|', chr(92) + '|')} |")
     return "\n".join(rows)
