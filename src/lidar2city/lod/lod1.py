@@ -18,6 +18,7 @@ import numpy as np
 from ..config import field
 from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
+from .coverage import reach_coverage
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
 from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distance,
@@ -25,7 +26,8 @@ from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distanc
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FEWEST_POINTS", "Lod1Config", "LODS", "points_needed", "reconstruct_building"]
+__all__ = ["COVERAGE_REACH", "FEWEST_POINTS", "MIN_COVERAGE", "Lod1Config", "LODS",
+           "points_needed", "reconstruct_building"]
 
 #: LoDs this module builds.
 LODS = ("1.2", "1.3")
@@ -107,6 +109,17 @@ class Lod1Config:
 #: the fewest building points a model is made from on any survey: one or two returns
 #: in a footprint are as likely a wire, a bird or a branch as a roof
 FEWEST_POINTS = 3
+
+#: share of a footprint's area within reach of its building points below which it gets its
+#: LoD1.2 prism only (LoD1.3 and LoD2.2 stand in with that prism, saying why): a
+#: footprint is the user's statement that a building is there, but its roof parts and
+#: planes drawn from a corner of points would be invented for the rest. Module constants,
+#: not config fields, so the configuration written into every output stays as it was.
+MIN_COVERAGE = 0.25
+
+#: the reach around each building point counted as covered, in point spacings measured
+#: from those points: scan-line gaps of a 1-2 pts/m2 survey stay covered
+COVERAGE_REACH = 3.0
 
 
 def points_needed(config: Lod1Config, density: float | None) -> int:
@@ -235,6 +248,14 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
                 why = "" if need == cfg.min_points else (
                     f": {cfg.min_area:g} m2 at the measured {density:.1f} pts/m2")
                 return _failed(result, f"too few points ({n} < {need}{why})", t0)
+        share, reach_m = reach_coverage(fp, inside[:, :2], reach=COVERAGE_REACH)
+        low_coverage = ""
+        if share < MIN_COVERAGE:
+            low_coverage = (f"its {n} building points cover {100 * share:.1f} % of its "
+                            f"{area:.0f} m2 (within {reach_m:.1f} m; less than "
+                            f"{100 * MIN_COVERAGE:.0f} %)")
+            result.attributes["point_coverage"] = round(share, 4)
+            result.attributes["low_coverage"] = low_coverage
         z = inside[:, 2]
         roof = roof_height(z, cfg.roof_statistic)
         ground, source = ground_height(
@@ -260,7 +281,16 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             if cfg.validate:
                 codes12 = _codes(solids)
                 issues += codes12
-        if "1.3" in cfg.lods:
+        if "1.3" in cfg.lods and low_coverage:
+            # the LoD1.2 prism stands in: no roof parts invented where there are no points
+            prisms = solids or [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
+            result.parts["1.3"] = list(prisms)
+            result.attributes["lod13_parts"] = len(prisms)
+            result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"] if solids else round(
+                _rmse(inside, prisms), 4)
+            if cfg.validate:
+                issues += codes12 if solids else _codes(prisms)
+        elif "1.3" in cfg.lods:
             parts = _lod13(polys, inside, ground, cfg)
             result.parts["1.3"] = parts
             result.attributes["lod13_parts"] = len(parts)
