@@ -26,8 +26,8 @@ from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distanc
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["COVERAGE_REACH", "FEWEST_POINTS", "MIN_COVERAGE", "Lod1Config", "LODS",
-           "points_needed", "reconstruct_building"]
+__all__ = ["COVERAGE_REACH", "FEWEST_POINTS", "MIN_COVERAGE", "MIN_WALL_HEIGHT", "Lod1Config",
+           "LODS", "points_needed", "reconstruct_building"]
 
 #: LoDs this module builds.
 LODS = ("1.2", "1.3")
@@ -120,6 +120,10 @@ MIN_COVERAGE = 0.25
 #: the reach around each building point counted as covered, in point spacings measured
 #: from those points: scan-line gaps of a 1-2 pts/m2 survey stay covered
 COVERAGE_REACH = 3.0
+
+#: the least height (m) of a wall: without ground around a footprint, its lowest building
+#: point stands for the ground only when it lies at least this far under the roof
+MIN_WALL_HEIGHT = 2.0
 
 
 def points_needed(config: Lod1Config, density: float | None) -> int:
@@ -262,6 +266,19 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             fp, gxyz, percentile=cfg.ground_percentile, ring_width=cfg.ground_ring,
             wide_ring_width=cfg.ground_wide_ring, min_points=cfg.min_ground_points,
             building_z=z, fallback_z=fallback_ground_z)
+        if source == "lowest building point" and roof - ground < MIN_WALL_HEIGHT:
+            # no ground point near it, and its lowest point is too close under its roof to be
+            # at the foot of a wall: it is on the roof. The area's ground level, else no model
+            # (a prism standing on its own roof is no building)
+            below = roof - ground
+            fz = fallback_ground_z() if callable(fallback_ground_z) else fallback_ground_z
+            if fz is not None and np.isfinite(fz) and roof - fz >= cfg.min_height:
+                ground, source = float(fz), "fallback"
+            else:
+                return _failed(result, f"no ground height: no ground point within "
+                                       f"{cfg.ground_wide_ring:g} m, and its lowest point is "
+                                       f"{below:.2f} m under its roof (less than a wall's "
+                                       f"{MIN_WALL_HEIGHT:g} m): on the roof", t0)
         result.attributes.update(
             roof_height=round(roof, 3), roof_height_min=round(float(z.min()), 3),
             roof_height_max=round(float(z.max()), 3),
