@@ -61,3 +61,30 @@ def test_a_covered_footprint_has_no_coverage_attribute():
                                config=Lod1Config(lods=("1.2", "1.3")), id="a")
     assert res.ok
     assert "low_coverage" not in res.attributes and "point_coverage" not in res.attributes
+
+
+def test_the_lod13_raster_of_a_huge_covered_footprint_is_capped(monkeypatch):
+    # a 1 km2 footprint its (sparse) points cover: a real, huge building; its LoD1.3 raster
+    # at the 0.5 m cell would hold 4 million cells
+    import lidar2city.lod.lod1 as lod1
+
+    cells = []
+    real = lod1.height_parts
+
+    def spy(poly, pts, *, cell, **kw):
+        x0, y0, x1, y1 = poly.bounds
+        cells.append((x1 - x0) * (y1 - y0) / cell ** 2)
+        return real(poly, pts, cell=cell, **kw)
+
+    monkeypatch.setattr(lod1, "height_parts", spy)
+    fp = box(0, 0, 1000, 1000)
+    pts = _points(0, 0, 1000, 1000, 9.0, 0.05)
+    res = reconstruct_building(fp, pts, _ground(0, 0, 1000, 1000, 0.05),
+                               config=Lod1Config(lods=("1.2", "1.3")), id="estate")
+    assert res.ok and "low_coverage" not in res.attributes
+    assert cells and max(cells) <= 512 * 512
+    # a normal building keeps the configured cell
+    cells.clear()
+    reconstruct_building(box(0, 0, 30, 20), _points(0, 0, 30, 20, 9.0, 5.0),
+                         _ground(0, 0, 30, 20), config=Lod1Config(lods=("1.2", "1.3")))
+    assert cells == [pytest.approx(30 * 20 / 0.25)]

@@ -27,7 +27,7 @@ from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distanc
 logger = logging.getLogger(__name__)
 
 __all__ = ["COVERAGE_REACH", "FEWEST_POINTS", "MIN_COVERAGE", "MIN_WALL_HEIGHT", "Lod1Config",
-           "LODS", "points_needed", "reconstruct_building"]
+           "LOD13_MAX_CELLS", "LODS", "lod13_cell", "points_needed", "reconstruct_building"]
 
 #: LoDs this module builds.
 LODS = ("1.2", "1.3")
@@ -124,6 +124,10 @@ COVERAGE_REACH = 3.0
 #: the least height (m) of a wall: without ground around a footprint, its lowest building
 #: point stands for the ground only when it lies at least this far under the roof
 MIN_WALL_HEIGHT = 2.0
+
+#: the most cells of a LoD1.3 height raster (512 x 512: at the 0.5 m cell, a footprint
+#: whose bounding box is 256 m x 256 m); a larger footprint's cell grows to fit
+LOD13_MAX_CELLS = 512 * 512
 
 
 def points_needed(config: Lod1Config, density: float | None) -> int:
@@ -367,6 +371,21 @@ def _codes(solids) -> list[int]:
     return out
 
 
+def lod13_cell(polygon, cell: float) -> float:
+    """The LoD1.3 raster cell for ``polygon``: ``cell``, grown so the raster over its bounding
+    box holds at most :data:`LOD13_MAX_CELLS` cells (a footprint of an industrial estate or a
+    whole block must not stall its batch on a raster of millions of cells).
+
+    Examples
+    --------
+    >>> from shapely.geometry import box
+    >>> lod13_cell(box(0, 0, 30, 20), 0.5), lod13_cell(box(0, 0, 1000, 1000), 0.5)
+    (0.5, 1.953125)
+    """
+    x0, y0, x1, y1 = polygon.bounds
+    return max(cell, float(np.sqrt((x1 - x0) * (y1 - y0) / LOD13_MAX_CELLS)))
+
+
 def _lod13(polys, inside, ground, cfg) -> list:
     """Prisms of the roof-height parts of each footprint polygon."""
     import shapely
@@ -376,7 +395,7 @@ def _lod13(polys, inside, ground, cfg) -> list:
     for poly in polys:
         sel = shapely.contains_xy(poly, inside[:, 0], inside[:, 1])
         pts = inside[sel]
-        parts = height_parts(poly, pts, cell=cfg.lod13_cell, step=cfg.lod13_step,
+        parts = height_parts(poly, pts, cell=lod13_cell(poly, cfg.lod13_cell), step=cfg.lod13_step,
                              min_area=cfg.lod13_min_area, grid=cfg.precision)
         tol = 2.5 * max(cfg.precision, 0.001)
         # a part whose holes touch each other or its outline at a point (height regions
