@@ -12,6 +12,9 @@ Usage: ``PYTHONPATH=src python benchmarks/bench_coverage.py [DATA_DIR]``
    to 2 and 1 pts/m2 and to 2 pts/m2 in scan lines 1.4 m apart: the smallest
    share and how many fall under :data:`lidar2city.lod.lod1.MIN_COVERAGE`;
    then the LoD1.2 run on each thinned crop: buildings modelled.
+4. A synthetic 300 m x 300 m footprint covered by points (0.3 pts/m2, roof heights random
+   per 6 m block, seed 0) at LoD1.2 + 1.3: CPU seconds with the LoD1.3 raster capped
+   (:data:`lidar2city.lod.lod1.LOD13_MAX_CELLS`) and without the cap.
 3. A 1 m x 1 m crop (x 84923-84924, y 447499-447500, inside a 69 m2 footprint) with the BGT footprints:
    what each footprint got.
 """
@@ -123,6 +126,35 @@ def main():
                               for k, v in _buildings(tmp / "tiny.city.json").items()))
         except Exception as exc:  # noqa: BLE001  (a one-line error is an answer here)
             print(f"1 m x 1 m crop: {type(exc).__name__}: {exc}")
+
+    huge_covered_footprint()
+
+
+def huge_covered_footprint():
+    """Section 4: the LoD1.3 raster cap on a huge footprint its points cover."""
+    from shapely.geometry import box
+
+    import lidar2city.lod.lod1 as lod1
+
+    w, d = 300.0, 0.3
+    rng = np.random.default_rng(0)
+    n = int(w * w * d)
+    xy = rng.uniform(0, w, (n, 2))
+    blocks = (xy[:, 0] // 6).astype(int) * 1000 + (xy[:, 1] // 6).astype(int)
+    z = 8 + rng.uniform(0, 6, 10**6)[blocks]
+    g = rng.uniform(-5, w + 5, (4000, 2))
+    g[:, 1] = np.where(rng.random(4000) < 0.5, -2.0, w + 2)
+    ground = np.column_stack([g, np.zeros(len(g))])
+    cap = lod1.LOD13_MAX_CELLS
+    for name, cells in (("capped", cap), ("no cap", 10**12)):
+        lod1.LOD13_MAX_CELLS = cells
+        t0 = _cpu()
+        r = lod1.reconstruct_building(box(0, 0, w, w), np.column_stack([xy, z]), ground,
+                                      config=lod1.Lod1Config(lods=("1.2", "1.3")))
+        print(f"300 m x 300 m covered footprint, LoD1.3 {name}: {_cpu() - t0:.1f} CPU s, "
+              f"{r.attributes.get('lod13_parts')} parts, cell "
+              f"{lod1.lod13_cell(box(0, 0, w, w), 0.5):.3f} m")
+    lod1.LOD13_MAX_CELLS = cap
 
 
 if __name__ == "__main__":
