@@ -116,9 +116,13 @@ def test_failures_have_reasons_and_never_raise():
 def test_ground_fallbacks():
     fp = box(0, 0, 10, 10)
     pts = _grid_points(fp, 8.0)
-    r = reconstruct_building(fp, pts, np.zeros((0, 3)), fallback_ground_z=lambda: 1.5)
+    walls = np.vstack([pts, [[0.1, 0.1, 0.5], [9.9, 9.9, 0.6]]])  # points at a wall's foot
+    r = reconstruct_building(fp, walls, np.zeros((0, 3)), fallback_ground_z=lambda: 1.5)
     # no ground point: lowest building point comes before the area fallback
     assert r.attributes["ground_source"] == "lowest building point"
+    # ... unless it lies on the roof (less than a wall's height under it)
+    r = reconstruct_building(fp, pts, np.zeros((0, 3)), fallback_ground_z=lambda: 1.5)
+    assert r.attributes["ground_source"] == "fallback"
     far = _ground_ring(box(-8, -8, 18, 18).difference(box(-5, -5, 15, 15)).envelope.difference(fp))
     r = reconstruct_building(fp, pts, far[np.hypot(*(far[:, :2] - 5).T) > 9])
     assert r.attributes["ground_source"] in ("ring", "wide ring")

@@ -18,6 +18,7 @@ import numpy as np
 from ..config import field
 from ..datamodel import BuildingResult
 from ..errors import ConfigError, InputError
+from .coverage import reach_coverage
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
 from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distance,
@@ -25,7 +26,8 @@ from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distanc
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FEWEST_POINTS", "Lod1Config", "LODS", "points_needed", "reconstruct_building"]
+__all__ = ["COVERAGE_REACH", "FEWEST_POINTS", "MIN_COVERAGE", "MIN_WALL_HEIGHT", "Lod1Config",
+           "LOD13_MAX_CELLS", "LODS", "lod13_cell", "points_needed", "reconstruct_building"]
 
 #: LoDs this module builds.
 LODS = ("1.2", "1.3")
@@ -107,6 +109,25 @@ class Lod1Config:
 #: the fewest building points a model is made from on any survey: one or two returns
 #: in a footprint are as likely a wire, a bird or a branch as a roof
 FEWEST_POINTS = 3
+
+#: share of a footprint's area within reach of its building points below which it gets its
+#: LoD1.2 prism only (LoD1.3 and LoD2.2 stand in with that prism, saying why): a
+#: footprint is the user's statement that a building is there, but its roof parts and
+#: planes drawn from a corner of points would be invented for the rest. Module constants,
+#: not config fields, so the configuration written into every output stays as it was.
+MIN_COVERAGE = 0.25
+
+#: the reach around each building point counted as covered, in point spacings measured
+#: from those points: scan-line gaps of a 1-2 pts/m2 survey stay covered
+COVERAGE_REACH = 3.0
+
+#: the least height (m) of a wall: without ground around a footprint, its lowest building
+#: point stands for the ground only when it lies at least this far under the roof
+MIN_WALL_HEIGHT = 2.0
+
+#: the most cells of a LoD1.3 height raster (512 x 512: at the 0.5 m cell, a footprint
+#: whose bounding box is 256 m x 256 m); a larger footprint's cell grows to fit
+LOD13_MAX_CELLS = 512 * 512
 
 
 def points_needed(config: Lod1Config, density: float | None) -> int:
@@ -235,12 +256,33 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
                 why = "" if need == cfg.min_points else (
                     f": {cfg.min_area:g} m2 at the measured {density:.1f} pts/m2")
                 return _failed(result, f"too few points ({n} < {need}{why})", t0)
+        share, reach_m = reach_coverage(fp, inside[:, :2], reach=COVERAGE_REACH)
+        low_coverage = ""
+        if share < MIN_COVERAGE:
+            low_coverage = (f"its {n} building points cover {100 * share:.1f} % of its "
+                            f"{area:.0f} m2 (within {reach_m:.1f} m; less than "
+                            f"{100 * MIN_COVERAGE:.0f} %)")
+            result.attributes["point_coverage"] = round(share, 4)
+            result.attributes["low_coverage"] = low_coverage
         z = inside[:, 2]
         roof = roof_height(z, cfg.roof_statistic)
         ground, source = ground_height(
             fp, gxyz, percentile=cfg.ground_percentile, ring_width=cfg.ground_ring,
             wide_ring_width=cfg.ground_wide_ring, min_points=cfg.min_ground_points,
             building_z=z, fallback_z=fallback_ground_z)
+        if source == "lowest building point" and roof - ground < MIN_WALL_HEIGHT:
+            # no ground point near it, and its lowest point is too close under its roof to be
+            # at the foot of a wall: it is on the roof. The area's ground level, else no model
+            # (a prism standing on its own roof is no building)
+            below = roof - ground
+            fz = fallback_ground_z() if callable(fallback_ground_z) else fallback_ground_z
+            if fz is not None and np.isfinite(fz) and roof - fz >= cfg.min_height:
+                ground, source = float(fz), "fallback"
+            else:
+                return _failed(result, f"no ground height: no ground point within "
+                                       f"{cfg.ground_wide_ring:g} m, and its lowest point is "
+                                       f"{below:.2f} m under its roof (less than a wall's "
+                                       f"{MIN_WALL_HEIGHT:g} m): on the roof", t0)
         result.attributes.update(
             roof_height=round(roof, 3), roof_height_min=round(float(z.min()), 3),
             roof_height_max=round(float(z.max()), 3),
@@ -260,7 +302,16 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             if cfg.validate:
                 codes12 = _codes(solids)
                 issues += codes12
-        if "1.3" in cfg.lods:
+        if "1.3" in cfg.lods and low_coverage:
+            # the LoD1.2 prism stands in: no roof parts invented where there are no points
+            prisms = solids or [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
+            result.parts["1.3"] = list(prisms)
+            result.attributes["lod13_parts"] = len(prisms)
+            result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"] if solids else round(
+                _rmse(inside, prisms), 4)
+            if cfg.validate:
+                issues += codes12 if solids else _codes(prisms)
+        elif "1.3" in cfg.lods:
             parts = _lod13(polys, inside, ground, cfg)
             result.parts["1.3"] = parts
             result.attributes["lod13_parts"] = len(parts)
@@ -320,6 +371,21 @@ def _codes(solids) -> list[int]:
     return out
 
 
+def lod13_cell(polygon, cell: float) -> float:
+    """The LoD1.3 raster cell for ``polygon``: ``cell``, grown so the raster over its bounding
+    box holds at most :data:`LOD13_MAX_CELLS` cells (a footprint of an industrial estate or a
+    whole block must not stall its batch on a raster of millions of cells).
+
+    Examples
+    --------
+    >>> from shapely.geometry import box
+    >>> lod13_cell(box(0, 0, 30, 20), 0.5), lod13_cell(box(0, 0, 1000, 1000), 0.5)
+    (0.5, 1.953125)
+    """
+    x0, y0, x1, y1 = polygon.bounds
+    return max(cell, float(np.sqrt((x1 - x0) * (y1 - y0) / LOD13_MAX_CELLS)))
+
+
 def _lod13(polys, inside, ground, cfg) -> list:
     """Prisms of the roof-height parts of each footprint polygon."""
     import shapely
@@ -329,7 +395,7 @@ def _lod13(polys, inside, ground, cfg) -> list:
     for poly in polys:
         sel = shapely.contains_xy(poly, inside[:, 0], inside[:, 1])
         pts = inside[sel]
-        parts = height_parts(poly, pts, cell=cfg.lod13_cell, step=cfg.lod13_step,
+        parts = height_parts(poly, pts, cell=lod13_cell(poly, cfg.lod13_cell), step=cfg.lod13_step,
                              min_area=cfg.lod13_min_area, grid=cfg.precision)
         tol = 2.5 * max(cfg.precision, 0.001)
         # a part whose holes touch each other or its outline at a point (height regions

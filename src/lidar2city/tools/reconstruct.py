@@ -482,6 +482,9 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
     from ..lod.roofcheck import worse_than_prism
     from ..roof.building import reconstruct_lod22
 
+    if result.attributes.get("low_coverage"):  # no roof planes drawn from a corner of points
+        set_lod22(result, None, {}, result.attributes["low_coverage"])
+        return
     ground_z = result.attributes.get("ground_height")
     try:
         out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config,
@@ -995,6 +998,9 @@ class _Tally:
     def add(self, r):
         s = self.summary
         s.total += 1
+        if r.attributes.get("low_coverage"):
+            logger.warning("footprint %r: %s: LoD1.2 prism only", r.id,
+                           r.attributes["low_coverage"])
         if r.ok:
             s.done += 1
             if r.attributes.get("valid") is False:

@@ -1,0 +1,34 @@
+"""A footprint without ground around it whose lowest building point is on its roof."""
+
+import numpy as np
+from shapely.geometry import box
+
+from lidar2city.lod import reconstruct_building
+
+
+def _points(x0, y0, x1, y1, z, density, seed=0):
+    rng = np.random.default_rng(seed)
+    n = int(round((x1 - x0) * (y1 - y0) * density))
+    xy = np.column_stack([rng.uniform(x0, x1, n), rng.uniform(y0, y1, n)])
+    return np.column_stack([xy, np.full(n, float(z)) + rng.normal(0, 0.02, n)])
+
+
+def test_the_lowest_roof_point_is_no_ground():
+    # a 1 m x 1 m crop of a roof: no ground anywhere, the lowest point 0.9 m under the roof
+    pts = _points(0, 0, 1, 1, 10.0, 12.0)
+    pts[:, 2] = np.linspace(9.1, 10.0, len(pts))
+    res = reconstruct_building(box(-2, -2, 3, 3), pts, np.zeros((0, 3)), id="tiny")
+    assert res.status == "failed"
+    assert "no ground height" in res.reason and "on the roof" in res.reason
+    # the area's ground level, when known, stands in
+    res = reconstruct_building(box(-2, -2, 3, 3), pts, np.zeros((0, 3)), id="tiny",
+                               fallback_ground_z=1.0)
+    assert res.ok and res.attributes["ground_source"] == "fallback"
+    assert res.attributes["ground_height"] == 1.0
+
+
+def test_a_roof_only_building_with_walls_keeps_its_lowest_point():
+    pts = _points(0, 0, 10, 10, 9.0, 5.0)
+    pts[:5, 2] = 0.5  # wall foot points
+    res = reconstruct_building(box(0, 0, 10, 10), pts, np.zeros((0, 3)), id="w")
+    assert res.ok and res.attributes["ground_source"] == "lowest building point"
