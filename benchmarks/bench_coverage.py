@@ -122,7 +122,7 @@ def main():
             r = reconstruct([tmp / "tiny.laz"], tmp / "tiny.city.json", footprints=bgt,
                             crs="EPSG:28992", lods=("1.2",))
             print(f"1 m x 1 m crop: {r.done}/{r.total} modelled; "
-                  + "; ".join(f"{k}: {v.get('reason') or v.get('roof_height')}"
+                  + "; ".join(f"{k}: {v.get('reason') or v.get('ground_note') or v.get('roof_height')}"
                               for k, v in _buildings(tmp / "tiny.city.json").items()))
         except Exception as exc:  # noqa: BLE001  (a one-line error is an answer here)
             print(f"1 m x 1 m crop: {type(exc).__name__}: {exc}")

@@ -18,8 +18,10 @@ def test_the_lowest_roof_point_is_no_ground():
     pts = _points(0, 0, 1, 1, 10.0, 12.0)
     pts[:, 2] = np.linspace(9.1, 10.0, len(pts))
     res = reconstruct_building(box(-2, -2, 3, 3), pts, np.zeros((0, 3)), id="tiny")
-    assert res.status == "failed"
-    assert "no ground height" in res.reason and "on the roof" in res.reason
+    # a roof-only cloud: the floor stays at its lowest point (as documented), and the
+    # model says it stands on its roof
+    assert res.ok and res.attributes["ground_source"] == "lowest building point"
+    assert "on the roof" in res.attributes["ground_note"]
     # the area's ground level, when known, stands in
     res = reconstruct_building(box(-2, -2, 3, 3), pts, np.zeros((0, 3)), id="tiny",
                                fallback_ground_z=1.0)

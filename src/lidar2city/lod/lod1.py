@@ -272,17 +272,18 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             building_z=z, fallback_z=fallback_ground_z)
         if source == "lowest building point" and roof - ground < MIN_WALL_HEIGHT:
             # no ground point near it, and its lowest point is too close under its roof to be
-            # at the foot of a wall: it is on the roof. The area's ground level, else no model
-            # (a prism standing on its own roof is no building)
+            # at the foot of a wall: it is on the roof. The area's ground level stands in when
+            # known; else (a roof-only cloud: no ground anywhere) the floor stays at the lowest
+            # point, as documented for roof-only clouds, and the model says so
             below = roof - ground
             fz = fallback_ground_z() if callable(fallback_ground_z) else fallback_ground_z
             if fz is not None and np.isfinite(fz) and roof - fz >= cfg.min_height:
                 ground, source = float(fz), "fallback"
             else:
-                return _failed(result, f"no ground height: no ground point within "
-                                       f"{cfg.ground_wide_ring:g} m, and its lowest point is "
-                                       f"{below:.2f} m under its roof (less than a wall's "
-                                       f"{MIN_WALL_HEIGHT:g} m): on the roof", t0)
+                result.attributes["ground_note"] = (
+                    f"no ground point within {cfg.ground_wide_ring:g} m, and its lowest point "
+                    f"is {below:.2f} m under its roof (less than a wall's {MIN_WALL_HEIGHT:g} m):"
+                    f" the floor is at that point, on the roof")
         result.attributes.update(
             roof_height=round(roof, 3), roof_height_min=round(float(z.min()), 3),
             roof_height_max=round(float(z.max()), 3),
