@@ -900,3 +900,34 @@ def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tm
     assert len(calls) == 1 and len(calls[0]) == 1
     assert s2.blocks > 1 and two.read_bytes() == one.read_bytes()
     assert not [p for p in scratch.iterdir() if p.name.startswith("lidar2city-tile-")]
+
+
+def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, monkeypatch):
+    """``workers="auto"``: 1 on one core or for an input whose expected work (header
+    points x the cost of what is built) is under the threshold; the cores above it,
+    the headers opened only until the threshold is reached."""
+    from lidar2city.io import las
+    from lidar2city.tools import reconstruct as R
+
+    laz = area / "town.laz"
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",))
+    assert R.auto_workers([laz], cores=2, **kw) == 1  # a small synthetic town
+    assert R.auto_workers([laz], cores=1, **kw) == 1
+    n = las.count_points([laz])
+    # LoD2.2 and traced footprints cost more per point than LoD1 alone
+    rates = R.AUTO_SECONDS_PER_POINT
+    assert rates["lod1"] < rates["lod22"] < rates["traced"]
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", n * rates["lod22"] * 0.99)
+    assert R.auto_workers([laz], cores=3, **kw) == 1
+    assert R.auto_workers([laz], cores=3, footprints=kw["footprints"], lods=("1.2", "2.2")) == 3
+    assert R.auto_workers([laz], cores=3) == 3  # traced
+    opened = []
+    real = las.check_input_file
+
+    def counted(p):
+        opened.append(p)
+        return real(p)
+
+    monkeypatch.setattr(las, "check_input_file", counted)
+    assert las.count_points([laz] * 5, at_least=n + 1) == 2 * n and len(opened) == 2
+    assert R.usable_cores() >= 1
