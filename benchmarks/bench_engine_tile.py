@@ -19,7 +19,9 @@ CPU seconds of the process and of every process it started and reaped (Dask
 workers and the server they are forked from), the largest peak RSS among
 them, and the sum of every process's own peak (``VmHWM`` of the command's
 process tree, sampled every 10 ms from /proc: what the run takes of the
-user's memory; Linux only). The laspy floor (a fresh Python running ``laspy.read`` of the tile,
+user's memory; forked processes' shared pages are counted in each) and the
+most they held at one moment (the sum of their ``VmRSS``, same samples; Linux
+only). The laspy floor (a fresh Python running ``laspy.read`` of the tile,
 as ``bench_speed.py``) and the runs alternate, ``--runs`` rounds of (floor,
 1 worker, 2 workers), so that the ratios are taken round by round while the
 shared machine's speed drifts. Printed per round and as medians: the wall
@@ -55,32 +57,37 @@ def _children(pid) -> list:
         return []
 
 
-def _hwm(pid) -> float:
-    """Peak resident memory of ``pid`` so far (MB), 0 when gone."""
+def _memory(pid) -> tuple:
+    """``(peak so far, now)`` resident memory of ``pid`` (MB; VmHWM, VmRSS), zeros when gone."""
+    out = {}
     try:
         with open(f"/proc/{pid}/status") as f:
             for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
+                if line.startswith(("VmHWM:", "VmRSS:")):
+                    out[line[:5]] = int(line.split()[1]) / 1024.0
     except OSError:
         pass
-    return 0.0
+    return out.get("VmHWM", 0.0), out.get("VmRSS", 0.0)
 
 
 def run(cmd, env) -> tuple:
     """``(wall seconds, largest peak RSS MB, user + system CPU seconds, sum of the
-    process tree's peaks MB)`` of one command (fails loudly)."""
+    process tree's peaks MB, largest sum of the tree's resident memory at one
+    moment MB)`` of one command (fails loudly)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    peaks, done = {}, threading.Event()
+    peaks, together, done = {}, [0.0], threading.Event()
 
     def sample():
         while not done.is_set():
-            todo = [proc.pid]
+            todo, now = [proc.pid], 0.0
             while todo:
                 pid = todo.pop()
-                peaks[pid] = max(peaks.get(pid, 0.0), _hwm(pid))
+                hwm, rss = _memory(pid)
+                peaks[pid] = max(peaks.get(pid, 0.0), hwm)
+                now += rss
                 todo += _children(pid)
+            together[0] = max(together[0], now)
             done.wait(0.01)
 
     sampler = threading.Thread(target=sample, daemon=True)
@@ -95,7 +102,7 @@ def run(cmd, env) -> tuple:
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(map(str, cmd))} failed ({proc.returncode}):\n{err}")
     return (wall, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime,
-            sum(peaks.values()))
+            sum(peaks.values()), together[0])
 
 
 def main():
@@ -140,7 +147,7 @@ def main():
             md5.setdefault(w, set()).add(hashlib.md5(out.read_bytes()).hexdigest())
             line.append(f"{w} worker(s) {r[0]:.2f} s ({r[0] / f[0]:.1f}x floor) "
                         f"{r[2]:.2f} CPU s ({r[2] / f[2]:.1f}x) {r[1]:.0f} MB, all processes "
-                        f"{r[3]:.0f} MB")
+                        f"{r[3]:.0f} MB (at once {r[4]:.0f} MB)")
         if 1 in rows and len(workers) > 1:
             one = rows[1][-1][0][0]
             line += [f"speed-up {w}/1 {one / rows[w][-1][0][0]:.2f}" for w in workers if w != 1]
@@ -155,7 +162,8 @@ def main():
               f"{statistics.median(r[0] / f[0] for r, f in rs):.1f}x, CPU / floor CPU median "
               f"{statistics.median(r[2] / f[2] for r, f in rs):.1f}x; peak RSS "
               f"{max(r[1] for r, _ in rs):.0f} MB (largest process), "
-              f"{max(r[3] for r, _ in rs):.0f} MB (sum of the processes' peaks); "
+              f"{max(r[3] for r, _ in rs):.0f} MB (sum of the processes' peaks), "
+              f"{max(r[4] for r, _ in rs):.0f} MB (most held at one moment by all); "
               f"md5 {' '.join(sorted(md5[w]))}")
     if 1 in rows:
         for w in workers:

@@ -833,6 +833,7 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
 
             plan = dataclasses.replace(plan, options=dataclasses.replace(
                 plan.options, decoded=predecode(shared, scratch)))
+            give_back_memory()  # the decoding's arrays: the client holds no point
     first = {}
     if plan.trace_first:  # traced blocks too few for the workers: traced first, built in parts
         plan = trace_then_split(executor, plan, first)
