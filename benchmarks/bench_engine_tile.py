@@ -1,6 +1,6 @@
 """One large tile on 1 and 2 workers: the Delft tile's 132 buildings, against the laspy floor.
 
-Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2,auto] [--traced]``
+Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2,auto] [--traced] [--lod 1.2,1.3,2.2]``
 (default $LIDAR2CITY_DATA or ../shared/data)
 
 ``--traced``: the same without ``--footprints`` (footprints traced from the
@@ -110,6 +110,8 @@ def main():
     ap.add_argument("data", nargs="?")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--workers", default="1,2", help="comma-separated counts, or auto")
+    ap.add_argument("--lod", default="1.2,1.3,2.2",
+                    help="the LoDs built, comma-separated (less work: where a cluster stops paying)")
     ap.add_argument("--traced", action="store_true",
                     help="no footprint file: footprints traced from the points")
     args = ap.parse_args()
@@ -126,10 +128,11 @@ def main():
         out = tmp / f"w{w}.city.json"
         given = [] if args.traced else ["--footprints", str(fps)]
         return out, [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), *given,
-                     "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(out),
+                     *(a for lod in args.lod.split(",") for a in ("--lod", lod)), "-o", str(out),
                      "--workers", str(w)]
 
-    print(f"{'traced footprints' if args.traced else 'given footprints'}; load average before: "
+    print(f"{'traced footprints' if args.traced else 'given footprints'}, LoD {args.lod}; "
+          f"load average before: "
           f"{' '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     run(floor, env)  # warm the file cache and the bytecode
     for w in workers:
