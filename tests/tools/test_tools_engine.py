@@ -903,14 +903,15 @@ def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tm
 
 
 def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, monkeypatch):
-    """``workers="auto"``: 1 on one core or for an input whose expected work (header
-    points x the cost of what is built) is under the threshold; the cores above it,
-    the headers opened only until the threshold is reached."""
+    """``workers="auto"``: 1 on one core, on a machine whose cores are busy, or for an
+    input whose expected work (header points x the cost of what is built) is under
+    the threshold; the cores above it, the headers opened only until the threshold
+    is reached."""
     from lidar2city.io import las
     from lidar2city.tools import reconstruct as R
 
     laz = area / "town.laz"
-    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",))
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",), load=0.0)
     assert R.auto_workers([laz], cores=2, **kw) == 1  # a small synthetic town
     assert R.auto_workers([laz], cores=1, **kw) == 1
     n = las.count_points([laz])
@@ -919,8 +920,11 @@ def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, mo
     assert rates["lod1"] < rates["lod22"] < rates["traced"]
     monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", n * rates["lod22"] * 0.99)
     assert R.auto_workers([laz], cores=3, **kw) == 1
-    assert R.auto_workers([laz], cores=3, footprints=kw["footprints"], lods=("1.2", "2.2")) == 3
-    assert R.auto_workers([laz], cores=3) == 3  # traced
+    lod22 = dict(footprints=kw["footprints"], lods=("1.2", "2.2"))
+    assert R.auto_workers([laz], cores=3, load=0.0, **lod22) == 3
+    assert R.auto_workers([laz], cores=3, load=2.0, **lod22) == 3  # one core idle
+    assert R.auto_workers([laz], cores=3, load=2.5, **lod22) == 1  # the cores busy
+    assert R.auto_workers([laz], cores=3, load=0.5) == 3  # traced
     opened = []
     real = las.check_input_file
 
