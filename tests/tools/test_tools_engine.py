@@ -861,6 +861,15 @@ def test_a_tile_decoded_by_the_client_is_loaded_by_the_workers_bit_for_bit(area,
     monkeypatch.setattr(task, "PREDECODE_POINTS", tile.count - 1)
     with contextlib.ExitStack() as stack:
         assert task.predecode([tile], stack) == ()
+    # a tile that cannot be decoded is left to the blocks (they state its reason)
+    import dataclasses
+
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(b"LASF" + bytes(300))
+    monkeypatch.setattr(task, "PREDECODE_POINTS", 10 ** 9)
+    with contextlib.ExitStack() as stack:
+        assert task.predecode([dataclasses.replace(tile, path=str(bad))], stack) == ()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith("lidar2city-tile-")]
 
 
 def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tmp_path,

@@ -330,7 +330,9 @@ def predecode(tiles, stack) -> tuple:
     :data:`PREDECODE_POINTS`. Each is saved to a scratch file in the
     temporary folder, registered with ``stack`` (a
     :class:`contextlib.ExitStack`) to be removed when the run ends, or by an
-    interrupted run's clean-up. Returns :attr:`BlockOptions.decoded`.
+    interrupted run's clean-up. A tile that cannot be decoded is left to the
+    blocks, whose failure gives their buildings its reason as before.
+    Returns :attr:`BlockOptions.decoded`.
     """
     import tempfile
 
@@ -342,11 +344,17 @@ def predecode(tiles, stack) -> tuple:
         total += int(t.count)
         if total > PREDECODE_POINTS:
             break
-        st = os.stat(t.path)
+        try:
+            st = os.stat(t.path)
+            tile = read_tile(t.path)
+        except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
+            logger.debug("%s not decoded ahead: %s", t.path, exc)
+            continue
         fd, name = tempfile.mkstemp(prefix="lidar2city-tile-", suffix=".npz")
         os.close(fd)
         path = str(stack.enter_context(scratch_path(name)))
-        save_tile(read_tile(t.path), path)
+        save_tile(tile, path)
+        del tile
         out.append(((t.path, st.st_size, st.st_mtime_ns), path))
     return tuple(out)
 
