@@ -1,6 +1,6 @@
 """Paired runs of ``reconstruct`` on the Delft tile: this tree against another source tree.
 
-Usage: python benchmarks/bench_speed_pairs.py OTHER_SRC [DATA_DIR] [--runs N] [--traced]
+Usage: python benchmarks/bench_speed_pairs.py OTHER_SRC [DATA_DIR] [--runs N] [--traced] [--workers N]
 (OTHER_SRC: the ``src`` folder of another checkout, e.g. one of main made with
 ``git worktree add /tmp/main main``; DATA_DIR default $LIDAR2CITY_DATA or ../shared/data)
 
@@ -12,7 +12,8 @@ from os.wait4's resource usage and time.perf_counter. Pairs make the ratio hold
 when a shared machine's speed drifts; CPU seconds drift less than wall time.
 Prints every pair, the medians, the load average before and after, and whether
 the two trees wrote the same bytes. ``--traced`` pairs the same command without
-footprints (traced from the points, issue 13's no-footprints target) instead.
+footprints (traced from the points, issue 13's no-footprints target) instead;
+``--workers N`` runs both with ``--workers N`` (the processes they start counted).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ def main():
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--traced", action="store_true",
                     help="without footprints: traced from the points")
+    ap.add_argument("--workers", default="1", help="reconstruct's --workers for both trees")
     args = ap.parse_args()
     data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
     d = data / "delft"
@@ -63,7 +65,8 @@ def main():
         given = [] if args.traced else ["--footprints", str(d / "footprints_bgt.gpkg")]
         cmds[name] = [sys.executable, "-m", "lidar2city.cli.main", "reconstruct",
                       str(d / "ahn3_cropped_1.laz"), *given,
-                      "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(tmp / f"{name}.city.json")]
+                      "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(tmp / f"{name}.city.json"),
+                      "--workers", args.workers]
     load0 = os.getloadavg()[0]
     for name in trees:  # warm-up: file cache and bytecode
         run(cmds[name], envs[name])
@@ -78,7 +81,8 @@ def main():
     wall = statistics.median(a[0] / b[0] for a, b in pairs)
     same = hashlib.md5((tmp / "A.city.json").read_bytes()).hexdigest() == \
         hashlib.md5((tmp / "B.city.json").read_bytes()).hexdigest()
-    what = "without footprints (traced)" if args.traced else "132 footprints"
+    what = (("without footprints (traced)" if args.traced else "132 footprints")
+            + f", --workers {args.workers}")
     print(f"reconstruct LoD1.2+1.3+2.2, {what}, this tree (A) / {trees['B']} (B), "
           f"{len(pairs)} pairs: median A/B CPU {cpu:.3f}, wall {wall:.3f}; A median "
           f"{statistics.median(a[1] for a, _ in pairs):.2f} CPU s, B "

@@ -61,3 +61,27 @@ def test_two_workers_quiet_print_no_cluster_log_or_traceback(tile, tmp_path):
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr and "distributed" not in r.stderr, r.stderr
     assert out.exists()
+
+
+def test_workers_auto_runs_a_small_input_in_this_process_with_the_same_bytes(runner, tile,
+                                                                             tmp_path,
+                                                                             monkeypatch):
+    """``--workers auto`` on an input too small to gain from a cluster starts none (no
+    Dask executor is made) and writes the bytes of ``--workers 1``; a word other than
+    a whole number >= 1 or ``auto`` is a usage error naming the option."""
+    from lidar2city.tools import engine
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(engine.DaskExecutor, "__init__", no_cluster)
+    one, auto = tmp_path / "w1.city.json", tmp_path / "auto.city.json"
+    for out, w in ((one, "1"), (auto, "auto")):
+        r = runner.invoke(cli, ["reconstruct", str(tile), "--block-size", "60", "--workers", w,
+                                "-o", str(out)])
+        assert r.exit_code == 0, r.output
+    assert auto.read_bytes() == one.read_bytes()
+    for bad in ("many", "0", "-2", "1.5"):
+        r = runner.invoke(cli, ["reconstruct", str(tile), "--workers", bad, "-o",
+                                str(tmp_path / "x.city.json")])
+        assert r.exit_code == 2 and "--workers" in r.output, (bad, r.output)

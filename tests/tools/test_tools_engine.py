@@ -812,3 +812,135 @@ def test_a_traced_part_reads_its_footprints_surroundings_inside_its_blocks_box()
     assert parts[0].world_box == (1000.0, 2000.0, 1071.0, 2071.0)  # cut to the block's box
     assert parts[1].world_box == (1099.0, 2099.0, 1200.0, 2200.0)
     assert [p.cost for p in parts] == [1.0, 1.0] and parts[1].footprints.ids == ["b2"]
+
+
+def test_a_tile_decoded_by_the_client_is_loaded_by_the_workers_bit_for_bit(area, tmp_path,
+                                                                           monkeypatch):
+    """The tiles every worker would decode first are decoded once by the run's client
+    (:func:`task.predecode`): a worker loads the saved file instead of decoding the
+    LAZ (the same points, bit for bit), decodes the tile itself when the file has
+    changed since, and the saved files are gone when the run ends."""
+    import contextlib
+    import tempfile
+
+    from lidar2city.io.las import read_tile, scan_tiles
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    tile = scan_tiles([area / "town.laz"])[0]
+    decoded = []
+
+    def decode():
+        decoded.append(1)
+        return read_tile(tile.path)
+
+    whole = read_tile(tile.path)
+    with contextlib.ExitStack() as stack:
+        saved = task.predecode([tile, tile], stack)
+        assert len(saved) == 1 and saved[0][0][0] == tile.path
+        assert [p.name.startswith("lidar2city-tile-") for p in tmp_path.iterdir()] == [True]
+        cache = task._TileCache()
+        cache.saved = dict(saved)
+        got = cache.get(tile, decode)
+        assert not decoded
+        assert got.steps.dtype == whole.steps.dtype and np.array_equal(got.steps, whole.steps)
+        assert np.array_equal(got.base, whole.base) and np.array_equal(got.scales, whole.scales)
+        assert list(got.attrs) == list(whole.attrs)
+        assert all(np.array_equal(got.attrs[k], whole.attrs[k]) for k in whole.attrs)
+        # the tile rewritten since: its size and time no longer match, decoded here
+        st = os.stat(tile.path)
+        os.utime(tile.path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+        try:
+            task._TileCache.__init__(cache)
+            cache.saved = dict(saved)
+            cache.get(tile, decode)
+            assert decoded == [1]
+        finally:
+            os.utime(tile.path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert not list(tmp_path.iterdir())  # removed with the run
+    # over the budget: nothing decoded ahead
+    monkeypatch.setattr(task, "PREDECODE_POINTS", tile.count - 1)
+    with contextlib.ExitStack() as stack:
+        assert task.predecode([tile], stack) == ()
+    # a tile that cannot be decoded is left to the blocks (they state its reason)
+    import dataclasses
+
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(b"LASF" + bytes(300))
+    monkeypatch.setattr(task, "PREDECODE_POINTS", 10 ** 9)
+    with contextlib.ExitStack() as stack:
+        assert task.predecode([dataclasses.replace(tile, path=str(bad))], stack) == ()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith("lidar2city-tile-")]
+
+
+def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tmp_path,
+                                                                        monkeypatch):
+    """A plan of whole blocks decodes nothing in the client; a block cut into parts
+    for two workers has its tiles decoded ahead; a 2-worker run of it gives the
+    bytes of one process and leaves no saved tile behind."""
+    import tempfile
+
+    from lidar2city.tools import blocks
+    from lidar2city.tools.reconstruct import plan_reconstruct, shared_tiles
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2", "1.3"))
+    whole = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=BLOCK,
+                             workers=2, **kw)
+    assert whole.split is None and shared_tiles(whole) == []
+    cut = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=1000.0,
+                           workers=2, **kw)
+    assert cut.split is not None
+    assert {t.path for t in shared_tiles(cut)} == {str(area / "town.laz")}
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    calls = []
+
+    def predecode(tiles, stack):
+        calls.append(saved := real(tiles, stack))
+        return saved
+
+    real = task.predecode
+    monkeypatch.setattr(task, "predecode", predecode)
+    one, two = tmp_path / "w1.city.json", tmp_path / "w2.city.json"
+    _run(area, one, block_size=1000.0)
+    assert not calls  # one process decodes each tile once anyway
+    s2 = _run(area, two, block_size=1000.0, workers=2)
+    assert len(calls) == 1 and len(calls[0]) == 1
+    assert s2.blocks > 1 and two.read_bytes() == one.read_bytes()
+    assert not [p for p in scratch.iterdir() if p.name.startswith("lidar2city-tile-")]
+
+
+def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, monkeypatch):
+    """``workers="auto"``: 1 on one core, on a machine whose cores are busy, or for an
+    input whose expected work (header points x the cost of what is built) is under
+    the threshold; the cores above it, the headers opened only until the threshold
+    is reached."""
+    from lidar2city.io import las
+    from lidar2city.tools import reconstruct as R
+
+    laz = area / "town.laz"
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",), load=0.0)
+    assert R.auto_workers([laz], cores=2, **kw) == 1  # a small synthetic town
+    assert R.auto_workers([laz], cores=1, **kw) == 1
+    n = las.count_points([laz])
+    # LoD2.2 and traced footprints cost more per point than LoD1 alone
+    rates = R.AUTO_SECONDS_PER_POINT
+    assert rates["lod1"] < rates["lod22"] < rates["traced"]
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", n * rates["lod22"] * 0.99)
+    assert R.auto_workers([laz], cores=3, **kw) == 1
+    lod22 = dict(footprints=kw["footprints"], lods=("1.2", "2.2"))
+    assert R.auto_workers([laz], cores=3, load=0.0, **lod22) == 3
+    assert R.auto_workers([laz], cores=3, load=2.0, **lod22) == 3  # one core idle
+    assert R.auto_workers([laz], cores=3, load=2.5, **lod22) == 1  # the cores busy
+    assert R.auto_workers([laz], cores=3, load=0.5) == 3  # traced
+    opened = []
+    real = las.check_input_file
+
+    def counted(p):
+        opened.append(p)
+        return real(p)
+
+    monkeypatch.setattr(las, "check_input_file", counted)
+    assert las.count_points([laz] * 5, at_least=n + 1) == 2 * n and len(opened) == 2
+    assert R.usable_cores() >= 1

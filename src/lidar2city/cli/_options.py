@@ -52,12 +52,38 @@ def check_not_input(outputs, *inputs) -> None:
             raise InputError(f"output {str(o)!r} is also an input: give the output another name")
 
 
-def engine_options(f):
-    """``--workers`` and ``--scheduler``: where the tasks (blocks or tiles) run."""
+class _Workers(click.ParamType):
+    """``--workers``: a whole number >= 1, or ``auto``."""
+
+    name = "N|auto"
+
+    def convert(self, value, param, ctx):
+        if value == "auto":
+            return value
+        try:
+            n = int(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is neither a whole number nor 'auto'", param, ctx)
+        if n < 1:
+            self.fail(f"{n} is not >= 1 (or 'auto')", param, ctx)
+        return n
+
+
+def engine_options(f=None, *, auto=False):
+    """``--workers`` and ``--scheduler``: where the tasks (blocks or tiles) run;
+    ``auto``: ``--workers`` also takes ``auto`` (the command picks the count)."""
+    if f is None:
+        return lambda g: engine_options(g, auto=auto)
     f = click.option("--scheduler", default=None, metavar="ADDRESS",
                      help="Run the tasks on an existing Dask cluster (tcp://HOST:8786, started "
                           "with `dask scheduler` and `dask worker`); its workers must see the "
                           "input paths.")(f)
+    if auto:
+        return click.option("--workers", type=_Workers(), default="1", show_default=True,
+                            help="Worker processes: 1 runs the tasks in this process, N > 1 on "
+                                 "a local Dask cluster of N processes (same output bytes); "
+                                 "auto: the machine's cores when the input is large enough to "
+                                 "gain from them, else 1.")(f)
     return click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
                         help="Worker processes: 1 runs the tasks in this process, N > 1 on a "
                              "local Dask cluster of N processes (same output bytes).")(f)

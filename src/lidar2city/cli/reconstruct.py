@@ -46,7 +46,7 @@ from ._options import (EngineProgress, check_not_input, crs_option, engine_optio
 @click.option("--edits", type=click.Path(dir_okay=False), default=None,
               help="EDITS.json written by `lidar2city edit` or the viewer: re-apply every edit "
                    "(needs --footprints).")
-@engine_options
+@engine_options(auto=True)
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted run from its journal (OUT.journal): blocks already "
                    "done are kept, the output is the same bytes as an uninterrupted run.")
@@ -91,7 +91,7 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
                              "clouds")
         if any(lod != "1.2" for lod in lods):
             raise InputError("--dsm builds LoD1.2 only; drop --lod or use --lod 1.2")
-        if workers != 1 or scheduler is not None or resume:
+        if workers not in (1, "auto") or scheduler is not None or resume:
             raise InputError("--workers, --scheduler and --resume apply to point clouds")
         if crs is not None:
             raise InputError("--crs does not apply to --dsm (the raster's own CRS is used; "
@@ -104,7 +104,7 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     from ..tools.reconstruct import reconstruct
 
-    if workers != 1 and scheduler is not None:
+    if workers not in (1, "auto") and scheduler is not None:
         raise InputError("give either --workers (a local cluster) or --scheduler, not both")
     # bars over blocks and buildings on a terminal (buildings without a total when traced)
     with EngineProgress("blocks", "buildings", quiet=quiet) as bar:

@@ -52,6 +52,9 @@ class InProcess:
     workers = 1
     #: seconds it took to start the executor (a cluster's processes)
     startup_seconds = 0.0
+    #: worker processes of this machine, which read this process's temporary
+    #: files (a local cluster's): none here
+    local_workers = False
 
     def process_cpu(self) -> dict:
         """CPU seconds of each worker process so far (start-up and imports included):
@@ -151,8 +154,11 @@ class DaskExecutor:
             try:
                 self._start()
                 # the workers import the task modules now, not in their first task;
-                # those of our own cluster end without tearing their interpreter down
-                self._client.run(_warm, self.scheduler is None)
+                # those of our own cluster end without tearing their interpreter down.
+                # Workers forked from the server have both (its preload; a forked
+                # process ends so): no round trip to them before the first task
+                if self.scheduler is not None or START_METHOD != "forkserver":
+                    self._client.run(_warm, self.scheduler is None)
             except BaseException as exc:  # noqa: BLE001 - raised by ready()
                 self._error = exc
             finally:
@@ -162,6 +168,12 @@ class DaskExecutor:
                                           daemon=True)
         self._starting.start()
         return self
+
+    @property
+    def local_workers(self) -> bool:
+        """Whether the workers are processes of this machine, which read this process's
+        temporary files (a local cluster's; an existing cluster's may be anywhere)."""
+        return self.scheduler is None
 
     def ready(self):
         """Wait for the cluster started by ``__enter__``; raise its start's error."""

@@ -34,7 +34,7 @@ from ..io.las import DecodedTile, SpilledTile, TileReader
 logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
-           "give_back_memory", "run_block", "reconstruct_block", "splittable", "tile_keeper",
+           "give_back_memory", "predecode", "run_block", "reconstruct_block", "splittable", "tile_keeper",
            "TracedBlock", "worker_modules", "trace_footprints",
            "trace_block"]
 
@@ -88,6 +88,7 @@ class BlockOptions:
     edit_context: object = None
     encode: dict | None = None
     ground_filter: bool = False
+    decoded: tuple = ()
 
 
 @dataclass(eq=False)
@@ -146,6 +147,7 @@ class _TileCache:
         self.position = {}  # block index -> position in the run
         self.decoded = 0
         self.largest = 0  # points of the largest block read
+        self.saved = {}  # key -> a file of the tile decoded by the run's client
 
     def read(self, n: int) -> None:
         """Note a block's read of ``n`` points."""
@@ -168,12 +170,28 @@ class _TileCache:
                 spilled.close()
                 self.tiles[key] = hit
         if hit is None:
-            hit = decode()
+            hit = self._load_saved(key)
+            if hit is None:
+                hit = decode()
+                with self.lock:
+                    self.decoded += 1
             with self.lock:
                 self.tiles[key] = hit
                 self.covers[key] = None
-                self.decoded += 1
         return hit
+
+    def _load_saved(self, key):
+        """The tile ``key`` as the run's client decoded it (:func:`predecode`), or None."""
+        path = self.saved.get(key)
+        if path is None:
+            return None
+        from ..io.las import load_tile
+
+        try:
+            return load_tile(path)
+        except (OSError, ValueError, KeyError) as exc:  # gone or cut short: decoded here
+            logger.debug("tile %s not loaded from %s: %s", key[0], path, exc)
+            return None
 
     def holds(self, tile, index=None) -> bool:
         """Whether ``tile`` is kept with the points of the block ``index`` (no decoding)."""
@@ -295,6 +313,50 @@ def worker_modules(lods=(), method="roof") -> tuple:
     (:func:`lidar2city.tools.engine.make_executor` ``preload``)."""
     return WORKER_MODULES + (LOD22_MODULES if "2.2" in (lods or ()) and method == "roof"
                              else ())
+
+
+#: the most points the run's client decodes for its workers (:func:`predecode`):
+#: ~1 CPU-second of decoding, ~70 MB of scratch files
+PREDECODE_POINTS = 4_000_000
+
+
+def predecode(tiles, stack) -> tuple:
+    """Decode ``tiles`` once, in the run's client while its local cluster starts,
+    for every worker to load instead of decoding them again
+    (:attr:`BlockOptions.decoded`): the tiles of a block cut into parts that
+    all the workers share, whose first tasks would each decode them.
+
+    Tiles are taken in order while their points add up to at most
+    :data:`PREDECODE_POINTS`. Each is saved to a scratch file in the
+    temporary folder, registered with ``stack`` (a
+    :class:`contextlib.ExitStack`) to be removed when the run ends, or by an
+    interrupted run's clean-up. A tile that cannot be decoded is left to the
+    blocks, whose failure gives their buildings its reason as before.
+    Returns :attr:`BlockOptions.decoded`.
+    """
+    import tempfile
+
+    from ..io._atomic import scratch_path
+    from ..io.las import read_tile, save_tile
+
+    out, total = [], 0
+    for t in {t.path: t for t in tiles}.values():
+        total += int(t.count)
+        if total > PREDECODE_POINTS:
+            break
+        try:
+            st = os.stat(t.path)
+            tile = read_tile(t.path)
+        except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
+            logger.debug("%s not decoded ahead: %s", t.path, exc)
+            continue
+        fd, name = tempfile.mkstemp(prefix="lidar2city-tile-", suffix=".npz")
+        os.close(fd)
+        path = str(stack.enter_context(scratch_path(name)))
+        save_tile(tile, path)
+        del tile
+        out.append(((t.path, st.st_size, st.st_mtime_ns), path))
+    return tuple(out)
 
 
 def tile_keeper(specs, ahead=()):
@@ -449,6 +511,7 @@ def trace_footprints(spec, options: BlockOptions) -> BlockOutput:
     (:func:`_block_traced`, the block's own cloud and classes, as
     :func:`run_block` traces them) in ``footprints``, no results; the
     buildings are then built in parts (:func:`lidar2city.tools.blocks.traced_parts`)."""
+    _cache.saved = dict(options.decoded)
     return _measured(_trace_footprints, spec, options)
 
 
@@ -491,6 +554,7 @@ def block_footprints(spec):
 
 def run_block(spec, options: BlockOptions) -> BlockOutput:
     """Every building of one block (the task a worker runs); see :func:`_run_block`."""
+    _cache.saved = dict(options.decoded)
     return _measured(_encoded_block, spec, options)
 
 
