@@ -10,8 +10,10 @@ Opens the model once (as the viewer does), makes one warm-up refit, then
 times each building's automatic primitive, gable primitive and outline
 re-run (its own footprint) ``--repeat`` times and prints the median wall
 and CPU seconds (CPU: this process, all threads) of each, and the time to
-build the updated document of a refit (``replace_building``). Nothing is
-written.
+build the updated document of a refit (``replace_building``). With
+``--copies N`` the model is also enlarged N times (its objects copied side
+by side) and the updated document of the first building's automatic refit
+timed on it (a large area's accept). Nothing is written.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ def main() -> None:
     ap.add_argument("--points", default=str(data / "delft" / "ahn3_cropped_1.laz"))
     ap.add_argument("--building", action="append", default=None, help="building id (repeatable; default b4, b1)")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--copies", type=int, default=0, help="also time the updated document on an N-times model")
     args = ap.parse_args()
     session = EditSession(args.model, [args.points])
     buildings = args.building or ["b4", "b1"]
@@ -65,6 +68,42 @@ def main() -> None:
                 _, w, c = _timed(lambda result=result: session.updated_document(result))
                 line += f"; updated document {w:.2f} s wall, {c:.2f} s CPU"
             print(line, flush=True)
+    if args.copies > 1:
+        result = session.refit(session.make_edit(buildings[0], primitive="auto"))
+        session.doc = _enlarged(session.doc, args.copies)
+        n = sum(o.get("type") == "Building" for o in session.doc["CityObjects"].values())
+        times = [_timed(lambda: session.updated_document(result))[1:] for _ in range(args.repeat)]
+        print(f"updated document, model x{args.copies} ({n} buildings, {len(session.doc['vertices'])} vertices): "
+              f"median wall {statistics.median(t[0] for t in times):.2f} s, "
+              f"CPU {statistics.median(t[1] for t in times):.2f} s (of {args.repeat})", flush=True)
+
+
+def _enlarged(doc: dict, copies: int) -> dict:
+    """``doc`` with its objects copied ``copies`` times side by side (the originals kept as
+    copy 0, their ids unchanged; copy k's ids suffixed ``_k``)."""
+    import json
+
+    import numpy as np
+
+    verts = np.asarray(doc["vertices"], dtype=np.int64)
+    span = int(verts[:, 0].max() - verts[:, 0].min()) + 1
+    objects, allv = {}, []
+    for k in range(copies):
+        allv.append(verts + [k * span, 0, 0])
+        text = json.dumps(doc["CityObjects"])
+        for oid, obj in json.loads(text).items():
+            sfx = f"_{k}" if k else ""
+            for rel in ("children", "parents"):
+                if rel in obj:
+                    obj[rel] = [c + sfx for c in obj[rel]]
+            for g in obj.get("geometry", []):
+                g["boundaries"] = _shift(g["boundaries"], k * len(verts))
+            objects[oid + sfx] = obj
+    return dict(doc, CityObjects=objects, vertices=np.vstack(allv).tolist())
+
+
+def _shift(b, offset):
+    return [_shift(x, offset) for x in b] if isinstance(b, list) else b + offset
 
 
 if __name__ == "__main__":

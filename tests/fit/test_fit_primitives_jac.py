@@ -58,3 +58,31 @@ def test_polygon_jacobian_matches_finite_differences():
         num[:, j] = (_poly_residuals(fp, samples, i0, i1, flat, 0.01)
                      - _poly_residuals(fm, samples, i0, i1, flat, 0.01)) / 2e-6
     np.testing.assert_allclose(ana, num, atol=1e-6)
+
+
+def test_fit_limits_blas_threads_only_while_fitting():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import shapely
+
+    from lidar2city.fit.primitives import fit_best
+
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append(max(i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"))
+        raise AssertionError("stop")
+
+    import scipy.optimize  # noqa: F401 - scipy's BLAS loaded before counting
+
+    import lidar2city.fit.primitives as prim
+
+    before = [i["num_threads"] for i in threadpoolctl.threadpool_info()]
+    original = prim._check_inputs
+    prim._check_inputs = spy
+    try:
+        with pytest.raises(AssertionError):
+            fit_best(shapely.box(0, 0, 10, 8), np.zeros((10, 3)))
+    finally:
+        prim._check_inputs = original
+    assert seen == [1]
+    assert [i["num_threads"] for i in threadpoolctl.threadpool_info()] == before
