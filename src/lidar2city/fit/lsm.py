@@ -175,12 +175,14 @@ def _jacobian(fun, x, r0):
     return J
 
 
-def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_scale=1.0,
+def solve_least_squares(fun, x0, *, jac=None, bounds=None, loss="linear", f_scale=1.0, x_scale=1.0,
                         max_nfev=200, full=False, sigma_floor=0.0):
     """Run ``scipy.optimize.least_squares`` and derive the parameter covariance.
 
     Levenberg-Marquardt when unbounded with a plain quadratic loss and enough
-    observations, trust-region reflective otherwise.
+    observations, trust-region reflective otherwise. ``jac(x)``, when given,
+    is the analytic Jacobian of ``fun`` (dense array or scipy sparse matrix),
+    used by the solver and for the covariance; otherwise forward differences.
 
     Returns
     -------
@@ -208,12 +210,18 @@ def solve_least_squares(fun, x0, *, bounds=None, loss="linear", f_scale=1.0, x_s
             hi_in = np.where(np.isfinite(hi), hi - 1e-6 * (1 + np.abs(hi)), hi)
         x0 = np.clip(x0, lo_in, hi_in)
         kwargs["bounds"] = (lo, hi)
+    if jac is not None:
+        kwargs["jac"] = jac
     res = least_squares(fun, x0, method=method, loss=loss, f_scale=f_scale, x_scale=x_scale,
                         max_nfev=max_nfev * p if method == "lm" else max_nfev, **kwargs)
     r = fun(res.x)
     dof = max(n - p, 1)
     s02 = float(r @ r) / dof
-    J = _jacobian(fun, res.x, r)
+    if jac is None:
+        J = _jacobian(fun, res.x, r)
+    else:
+        J = jac(res.x)
+        J = J.toarray() if hasattr(J, "toarray") else np.asarray(J, dtype=np.float64)
     if loss != "linear":
         # rows weighted by the IRLS weights of the robust loss at the solution
         z = (r / f_scale) ** 2
@@ -447,6 +455,31 @@ def _poly_residuals(flat, samples, i0, i1, prior, lam):
     return np.concatenate([-r, lam * (flat - prior)])
 
 
+def _poly_jacobian(flat, samples, i0, i1, lam):
+    """Analytic Jacobian of :func:`_poly_residuals` (dense; four non-zeros per sample row)."""
+    v = flat.reshape(-1, 2)
+    a, b = v[i0], v[i1]
+    ab = b - a
+    ln = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-12)
+    d = samples - a
+    c = ab[:, 0] * d[:, 1] - ab[:, 1] * d[:, 0]
+    q = c / (ln * ln * ln)
+    # d(-c / ln) for a = (ax, ay) and b = (bx, by)
+    dax = -(ab[:, 1] - d[:, 1]) / ln - q * ab[:, 0]
+    day = -(d[:, 0] - ab[:, 0]) / ln - q * ab[:, 1]
+    dbx = -d[:, 1] / ln + q * ab[:, 0]
+    dby = d[:, 0] / ln + q * ab[:, 1]
+    n = len(samples)
+    J = np.zeros((n + flat.size, flat.size))
+    rows = np.arange(n)
+    np.add.at(J, (rows, 2 * i0), dax)
+    np.add.at(J, (rows, 2 * i0 + 1), day)
+    np.add.at(J, (rows, 2 * i1), dbx)
+    np.add.at(J, (rows, 2 * i1 + 1), dby)
+    J[n + np.arange(flat.size), np.arange(flat.size)] = lam
+    return J
+
+
 def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, prior_weight=1e-3,
                 outline: OutlineObservations | None = None, sample_sigma: float = 1.0,
                 sigma_floor: float = 0.0, callback=None) -> PlanFit:
@@ -513,7 +546,18 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
             ro = (ro[: len(outline)] - p[nv2 + fam]) / outline.sigma
             return np.concatenate([r, ro])
 
-        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat, sigma_floor=sigma_floor)
+        def jac(p, s=s, e=e):
+            J = _poly_jacobian(p[:nv2], s, i0[e], i1[e], lam)
+            J[: len(s)] /= sample_sigma
+            J = np.pad(J, ((0, 0), (0, nf)))
+            if nf == 0:
+                return J
+            Jo = _poly_jacobian(p[:nv2], outline.points, i0[outline.edge], i1[outline.edge], 0.0)[: len(outline)]
+            Jo = np.pad(Jo, ((0, 0), (0, nf)))
+            Jo[np.arange(len(outline)), nv2 + fam] = -1.0
+            return np.vstack([J, Jo / np.asarray(outline.sigma, dtype=np.float64).reshape(-1, 1)])
+
+        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat, jac=jac, sigma_floor=sigma_floor)
         r = rr[: len(s)] * sample_sigma
         nfev += nfe
         if callback is not None:

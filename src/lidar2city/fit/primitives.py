@@ -57,7 +57,9 @@ testing procedure for use in geodetic networks — data snooping.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -245,6 +247,49 @@ def _to_world(u, v, x, y, az_deg):
     return x + u * math.cos(a) - v * math.sin(a), y + u * math.sin(a) + v * math.cos(a)
 
 
+def _gable_jac(q, v, width, r):
+    """Jacobian of the perpendicular roof distances ``r`` of a gable (eave height, rise,
+    ridge offset ``q``) with respect to ``q``: rows points, columns parameters."""
+    s = 2.0 * q[1] / width
+    k2 = 1.0 + s * s
+    k = math.sqrt(k2)
+    t = v - q[2]
+    return np.column_stack([np.full(len(v), -1.0 / k),
+                            -(1.0 - 2.0 * np.abs(t) / width) / k - r * s * (2.0 / width) / k2,
+                            -s * np.sign(t) / k])
+
+
+_BLAS_CONTROLLER = None
+
+
+def _one_blas_thread(func):
+    """Run ``func`` with BLAS limited to one thread.
+
+    The fits solve many small or skinny systems (3 roof parameters over 30k
+    points, 80 polygon coordinates): multi-threaded OpenBLAS spends far more
+    time waking its threads than computing (4x the CPU on a 2-core machine).
+    Without ``threadpoolctl`` the BLAS keeps its threads.
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        global _BLAS_CONTROLLER
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # pragma: no cover - optional speed-up
+            limit = contextlib.nullcontext()
+        else:
+            if _BLAS_CONTROLLER is None:
+                import scipy.optimize  # noqa: F401 - load scipy's BLAS before the controller looks
+
+                _BLAS_CONTROLLER = ThreadpoolController()
+            limit = _BLAS_CONTROLLER.limit(limits=1, user_api="blas")
+        with limit:
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
 def _trunc_rss(r, c):
     return float(np.minimum(np.asarray(r) ** 2, c * c).sum())
 
@@ -364,6 +409,10 @@ class BoxPrimitive(_Rectangular):
     def _roof(q, u, v, length, width):
         return np.full(u.shape, q[0]), np.zeros(u.shape)
 
+    @staticmethod
+    def _roof_jac(q, u, v, length, width, r):
+        return np.full((len(u), 1), -1.0)
+
     def _local_vertices(self):
         return self._base()
 
@@ -389,6 +438,10 @@ class GablePrimitive(_Rectangular):
     def _roof(q, u, v, length, width):
         s = 2.0 * q[1] / width
         return q[0] + q[1] - s * np.abs(v - q[2]), np.full(u.shape, s)
+
+    @staticmethod
+    def _roof_jac(q, u, v, length, width, r):
+        return _gable_jac(q, v, width, r)
 
     def _local_vertices(self):
         p = self.params
@@ -425,6 +478,23 @@ class HipPrimitive(_Rectangular):
         s = np.where(use_end, rh / max(hl, 1e-9), 2.0 * rh / width)
         return ze + rh * np.minimum(side, end), s
 
+    @staticmethod
+    def _roof_jac(q, u, v, length, width, r):
+        _, rh, hl = q
+        h = max(hl, 1e-9)
+        side = 1.0 - 2.0 * np.abs(v) / width
+        e = length / 2.0 - np.abs(u)
+        use_end = e / h < side
+        s = np.where(use_end, rh / h, 2.0 * rh / width)
+        k2 = 1.0 + s * s
+        k = np.sqrt(k2)
+        ds_drh = np.where(use_end, 1.0 / h, 2.0 / width)
+        dzr_drh = np.where(use_end, e / h, side)
+        # the end faces: zr = ze + rh e / hl and s = rh / hl both move with hl
+        dr_dhl = np.where(use_end, (rh * e / (h * h)) / k + r * s * rh / (h * h * k2), 0.0) if hl > 1e-9 \
+            else np.zeros(len(u))
+        return np.column_stack([-1.0 / k, -dzr_drh / k - r * s * ds_drh / k2, dr_dhl])
+
     def _apex(self):
         return self.params["length"] - 2 * self.params["hip_length"] < 1e-3
 
@@ -460,6 +530,13 @@ class ShedPrimitive(_Rectangular):
     def _roof(q, u, v, length, width):
         s = q[1] / width
         return q[0] + s * (v + width / 2.0), np.full(u.shape, s)
+
+    @staticmethod
+    def _roof_jac(q, u, v, length, width, r):
+        s = q[1] / width
+        k2 = 1.0 + s * s
+        k = math.sqrt(k2)
+        return np.column_stack([np.full(len(u), -1.0 / k), -((v + width / 2.0) / width) / k - r * s / (width * k2)])
 
     def _local_vertices(self):
         b = self._base()
@@ -539,10 +616,8 @@ class PrismGablePrimitive(PrismPrimitive):
     kind = "prism_gable"
     roof_names = ("roof_height", "ridge_offset")
 
-    @staticmethod
-    def _roof(q, u, v, length, width):
-        s = 2.0 * q[1] / width
-        return q[0] + q[1] - s * np.abs(v - q[2]), np.full(u.shape, s)
+    _roof = staticmethod(GablePrimitive._roof)
+    _roof_jac = staticmethod(GablePrimitive._roof_jac)
 
     def roof_z(self, xy):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -578,9 +653,8 @@ class PrismShedPrimitive(PrismGablePrimitive):
     kind = "prism_shed"
     roof_names = ("roof_height",)
 
-    @staticmethod
-    def _roof(q, u, v, length, width):
-        return ShedPrimitive._roof(q, u, v, length, width)
+    _roof = staticmethod(ShedPrimitive._roof)
+    _roof_jac = staticmethod(ShedPrimitive._roof_jac)
 
     def roof_z(self, xy):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -621,9 +695,9 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
     u, v = _frame(points[:, :2], x, y, az)
     z = points[:, 2]
 
-    def resid(q, sel):
-        zr, s = cls._roof(q, u[sel], v[sel], ln, wd)
-        return (z[sel] - zr) / np.sqrt(1.0 + s * s)
+    def resid(q, uu, vv, zz):
+        zr, s = cls._roof(q, uu, vv, ln, wd)
+        return (zz - zr) / np.sqrt(1.0 + s * s)
 
     q = np.asarray(q0, dtype=np.float64)
     sel = np.ones(len(z), dtype=bool)
@@ -633,14 +707,17 @@ def _fit_roof(cls, q0, bounds, points, plan, *, buffer, loss_scale, min_points, 
     for _ in range(max_outer):
         if sel.sum() < max(min_points, len(q) + 1):
             raise FitError(f"{int(sel.sum())} roof points within {buffer} m of the {cls.kind} roof")
-        q, std, _, nf, _ = solve_least_squares(lambda qq, sel=sel: resid(qq, sel), q,
+        obs = (u[sel], v[sel], z[sel])
+        q, std, _, nf, _ = solve_least_squares(lambda qq, obs=obs: resid(qq, *obs), q,
+                                               jac=lambda qq, obs=obs: cls._roof_jac(qq, obs[0], obs[1], ln, wd,
+                                                                                     resid(qq, *obs)),
                                                bounds=bounds, loss="soft_l1", f_scale=loss_scale)
         nfev += nf
-        sel = np.abs(resid(q, np.ones(len(z), dtype=bool))) <= buffer
+        sel = np.abs(resid(q, u, v, z)) <= buffer
         if prev is not None and np.array_equal(sel, prev):
             break
         prev = sel
-    r = resid(q, sel)
+    r = resid(q, u[sel], v[sel], z[sel])
     return q, std, r, sel, nfev
 
 
@@ -790,6 +867,7 @@ def _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=False):
     return model, d
 
 
+@_one_blas_thread
 def fit_primitive(kind: str, footprint, points, *, datum=(0.0, 0.0), approx: dict | None = None,
                   context=None, config: PrimitivesConfig | None = None):
     """Fit one primitive of a chosen kind (semi-automatic mode).
@@ -1026,6 +1104,7 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
     return model, bic
 
 
+@_one_blas_thread
 def fit_best(footprint, points, *, datum=(0.0, 0.0), context=None,
              config: PrimitivesConfig | None = None):
     """Fit every candidate primitive and choose one by BIC (automatic mode).

@@ -24,6 +24,8 @@ viewer: a model file, the tiles, a refit, and an atomic save that validates.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import json
 import logging
 import math
@@ -334,17 +336,37 @@ def check_edit_ids(edits, ids, source="EDITS.json") -> None:
 
 
 def _flatten(b, out):
-    if isinstance(b, list):
-        for x in b:
-            _flatten(x, out)
-    else:
-        out.append(int(b))
+    """Append the vertex indices of nested boundaries ``b`` to the list ``out``.
+
+    Rings (lists of integers) are appended whole: one Python call per ring,
+    not per index."""
+    if b and not isinstance(b[0], list):
+        out.extend(b)
+        return
+    for x in b:
+        _flatten(x, out)
 
 
 def _remap(b, new):
-    if isinstance(b, list):
-        return [_remap(x, new) for x in b]
-    return int(new[int(b)])
+    """Nested boundaries ``b`` with every index ``i`` replaced by ``new[i]`` (``new`` a list
+    of Python ints: list look-ups in a comprehension per ring)."""
+    if b and not isinstance(b[0], list):
+        return [new[i] for i in b]
+    return [_remap(x, new) for x in b]
+
+
+@contextlib.contextmanager
+def _gc_paused():
+    """Pause the cyclic garbage collector: re-indexing a large model creates millions of
+    (acyclic) lists, and each automatic collection would walk the whole document again
+    (half the time of :func:`replace_building` on 2,000 buildings)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def replace_building(doc: dict, building_id: str, new_objects: dict, new_vertices) -> dict:
@@ -355,6 +377,11 @@ def replace_building(doc: dict, building_id: str, new_objects: dict, new_vertice
     vertices are deduplicated and sorted as the writer does, unreferenced ones
     dropped, and ``metadata.geographicalExtent`` recomputed.
     """
+    with _gc_paused():
+        return _replace_building(doc, building_id, new_objects, new_vertices)
+
+
+def _replace_building(doc, building_id, new_objects, new_vertices):
     objects = doc["CityObjects"]
     if building_id not in objects:
         raise InputError(f"unknown building id {building_id!r}")
@@ -368,8 +395,8 @@ def replace_building(doc: dict, building_id: str, new_objects: dict, new_vertice
             for nid, nobj in new_objects.items():
                 nobj = dict(nobj)
                 if "geometry" in nobj:
-                    nobj["geometry"] = [dict(g, boundaries=_remap(g["boundaries"],
-                                                                  np.arange(offset, offset + len(verts[1]))))
+                    shifted = list(range(offset, offset + len(verts[1])))
+                    nobj["geometry"] = [dict(g, boundaries=_remap(g["boundaries"], shifted))
                                         for g in nobj["geometry"]]
                 merged[nid] = nobj
         elif oid not in old:
@@ -383,6 +410,7 @@ def replace_building(doc: dict, building_id: str, new_objects: dict, new_vertice
     uniq, inverse = np.unique(allv[used], axis=0, return_inverse=True)
     new_index = np.full(len(allv), -1, dtype=np.int64)
     new_index[used] = inverse.ravel()
+    new_index = new_index.tolist()
     out_objects = {}
     for oid, obj in merged.items():
         if obj.get("geometry"):
