@@ -208,3 +208,20 @@ def test_a_wrong_header_point_count_is_found_when_the_tiles_are_scanned(tmp_path
         assert scan_tiles([less])[0].count == 2000
         assert len(read_las(less).data.points) == 2000
     assert "holds 3,000 point records, its header counts 2,000" in caplog.text
+
+
+def test_a_large_scan_reads_chunk_tables_only(tmp_path):
+    """Past EXACT_SCAN_TILES tiles the scan decodes nothing (50,000 tiles would take ~20
+    min of decoding before any block runs): a count beyond a LAZ file's chunks is still
+    an error, a count within its last chunk is left to the blocks that read the tile."""
+    from lidar2city.errors import FileFormatError
+    from lidar2city.io.las import EXACT_SCAN_TILES, scan_tiles
+
+    good = [_with_count(tmp_path, f"ok{i}.laz", 0) for i in range(EXACT_SCAN_TILES)]
+    within = _with_count(tmp_path, "within.laz", 1000)  # 4,000 counted, one chunk of 50,000
+    beyond = _with_count(tmp_path, "beyond.laz", 57000)  # 60,000 counted
+    assert scan_tiles(good + [within])[-1].count == 4000
+    with pytest.raises(FileFormatError, match="chunk table holds at most 50,000"):
+        scan_tiles(good + [beyond])
+    with pytest.raises(FileFormatError, match="header counts 4,000 points"):
+        scan_tiles(good[:3] + [within])
