@@ -206,6 +206,8 @@ def delft(data: Path, images: Path | None):
         print(f"  prism vertex std (m, RMS of the determined vertices): median {np.median(vstd):.3f}, "
               f"max {vstd.max():.3f} over {len(vstd)} prisms; undetermined vertices {sum(und)} "
               f"in {sum(1 for u in und if u)} prisms")
+    roof_und = Counter(r.attributes["primitive_undetermined"] for r in ok if "primitive_undetermined" in r.attributes)
+    print(f"  chosen models with a parameter the data do not determine (no std given): {dict(roof_und)}")
     if images is not None:
         images.mkdir(parents=True, exist_ok=True)
         n = len(write_check_images(images, cloud, res[:12]))

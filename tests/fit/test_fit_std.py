@@ -94,3 +94,25 @@ def test_prism_reports_undetermined_vertices_not_a_huge_std():
     assert m, getattr(m, "reason", "")
     assert np.isfinite(m.std["vertex"]) and m.std["vertex"] < 1.0
     assert m.info.get("n_undetermined", 0) <= 2
+
+
+def test_undetermined_roof_parameter_gets_no_std_and_no_nan_attribute():
+    """A gable with no rise: its ridge offset moves nothing, so it is named, not given a std."""
+    import json
+
+    from lidar2city.fit.primitives import _determined
+    from lidar2city.tools.primitives import result_attributes
+
+    std, info = _determined({"height": 0.01, "roof_height": 0.02, "ridge_offset": float("nan")})
+    assert std == {"height": 0.01, "roof_height": 0.02}
+    assert info == {"undetermined": "ridge_offset"}
+    m = fit_primitive("box", shapely.box(0, 0, 10, 6),
+                      np.column_stack([np.random.default_rng(0).uniform(0, 10, (300, 1)),
+                                       np.random.default_rng(1).uniform(0, 6, (300, 1)),
+                                       np.full((300, 1), 4.0)]))
+    m.std["azimuth"] = float("nan")
+    m.std, extra = _determined(m.std)
+    m.info.update(extra)
+    attrs = result_attributes(m, None)
+    json.dumps(attrs, allow_nan=False)
+    assert attrs["primitive_undetermined"] == "azimuth" and "primitive_azimuth_std" not in attrs

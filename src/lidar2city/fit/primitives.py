@@ -771,6 +771,14 @@ def _decorrelate(plan, polygon):
     return dataclasses.replace(plan, std=plan.std * f)
 
 
+def _determined(std: dict) -> tuple[dict, dict]:
+    """The finite std devs, and an info entry naming the parameters the data do not determine
+    (e.g. the ridge offset of a gable with no rise): no std is reported for those."""
+    ok = {k: float(v) for k, v in std.items() if math.isfinite(v)}
+    bad = sorted(k for k in std if k not in ok)
+    return ok, ({"undetermined": ", ".join(bad)} if bad else {})
+
+
 def _finite_max(std) -> float:
     """Largest finite standard deviation (0 when none is)."""
     std = np.asarray(std, dtype=np.float64)
@@ -880,7 +888,7 @@ def _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=False):
         if params["azimuth"] % 360.0 >= 180.0 and "ridge_offset" in params:
             params["ridge_offset"] = -params["ridge_offset"]
         params["azimuth"] %= 180.0
-    model = cls({k: float(v) for k, v in params.items()}, {k: float(v) for k, v in std.items()})
+    model = cls({k: float(v) for k, v in params.items()}, *_determined(std))
     low = float(model._local_vertices()[4:, 2].min()) - z0
     if low <= 0:
         raise FitError(f"roof below the datum (lowest eave {low:.2f} m above it)")
@@ -1119,7 +1127,7 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
             std["ridge_offset"] = float(qstd[2])
     std["vertex"] = vertex_std
     params["vertices"] = float(pp["n_vertices"])
-    model = cls({k: float(v) for k, v in params.items()}, std, rings=pp["rings"])
+    model = cls({k: float(v) for k, v in params.items()}, *_determined(std), rings=pp["rings"])
     if cls is not PrismPrimitive:
         model.to_solid()  # raises FitError when the roof does not close over the polygon
     bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], pp["n_plan_params"],
