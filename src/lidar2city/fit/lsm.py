@@ -45,6 +45,7 @@ __all__ = [
     "drop_observation",
     "outline_observations",
     "solve_least_squares",
+    "parameter_covariance",
 ]
 
 
@@ -175,21 +176,67 @@ def _jacobian(fun, x, r0):
     return J
 
 
+def parameter_covariance(J, scale=1.0, *, pseudo=None, rtol=1e-9):
+    """Covariance of the parameters the observations determine; NaN for the others.
+
+    ``N = J_d^T J_d`` over the data rows (all rows but ``pseudo``: prior or
+    regularisation rows are no measurements) is decomposed into eigenvectors;
+    directions with eigenvalue at most ``rtol`` times the largest are not
+    determined by the data. A parameter with a share above 1e-6 of such a
+    direction is undetermined: its row and column are NaN. The others get
+    ``scale * N^+`` (the pseudo-inverse is the exact covariance of every
+    parameter orthogonal to the null space).
+
+    Parameters
+    ----------
+    J : ndarray (N, P)
+        Jacobian of the weighted residuals.
+    scale : float
+        sigma0 squared.
+    pseudo : slice or ndarray of bool, optional
+        Rows that are pseudo-observations.
+
+    Returns
+    -------
+    cov : ndarray (P, P)
+    rank : int
+        Number of directions the data determine.
+    """
+    J = np.asarray(J, dtype=np.float64)
+    if pseudo is not None:
+        keep = np.ones(len(J), dtype=bool)
+        keep[pseudo] = False
+        J = J[keep]
+    w, V = np.linalg.eigh(J.T @ J)
+    top = float(w.max()) if len(w) else 0.0
+    det = w > rtol * top if top > 0 else np.zeros(len(w), dtype=bool)
+    Vd = V[:, det]
+    cov = (Vd / w[det]) @ Vd.T * scale
+    undetermined = (V[:, ~det] ** 2).sum(axis=1) > 1e-6
+    cov[undetermined, :] = np.nan
+    cov[:, undetermined] = np.nan
+    return cov, int(det.sum())
+
+
 def solve_least_squares(fun, x0, *, jac=None, bounds=None, loss="linear", f_scale=1.0, x_scale=1.0,
-                        max_nfev=200, full=False, sigma_floor=0.0):
+                        max_nfev=200, full=False, sigma_floor=0.0, pseudo=None):
     """Run ``scipy.optimize.least_squares`` and derive the parameter covariance.
 
     Levenberg-Marquardt when unbounded with a plain quadratic loss and enough
     observations, trust-region reflective otherwise. ``jac(x)``, when given,
     is the analytic Jacobian of ``fun`` (dense array or scipy sparse matrix),
     used by the solver and for the covariance; otherwise forward differences.
+    ``pseudo`` selects residual rows that are priors, not measurements: they
+    steer the solution but neither count as redundancy nor determine a
+    parameter (see :func:`parameter_covariance`).
 
     Returns
     -------
     x : ndarray (P,)
     std : ndarray (P,)
-        ``sqrt(diag((J^T J)^+ * s0^2))`` with ``s0^2 = r^T r / (n - P)``, s0 not
-        below ``sigma_floor`` (an a-priori sigma the data cannot undercut).
+        ``sqrt(diag(N^+) * s0^2)`` with ``s0^2 = r_d^T r_d / (n_d - rank)`` over
+        the data rows, s0 not below ``sigma_floor`` (an a-priori sigma the data
+        cannot undercut); NaN for a parameter the data do not determine.
     residuals : ndarray (N,)
     nfev : int
     sigma0 : float
@@ -215,13 +262,12 @@ def solve_least_squares(fun, x0, *, jac=None, bounds=None, loss="linear", f_scal
     res = least_squares(fun, x0, method=method, loss=loss, f_scale=f_scale, x_scale=x_scale,
                         max_nfev=max_nfev * p if method == "lm" else max_nfev, **kwargs)
     r = fun(res.x)
-    dof = max(n - p, 1)
-    s02 = float(r @ r) / dof
     if jac is None:
         J = _jacobian(fun, res.x, r)
     else:
         J = jac(res.x)
         J = J.toarray() if hasattr(J, "toarray") else np.asarray(J, dtype=np.float64)
+    rw = r
     if loss != "linear":
         # rows weighted by the IRLS weights of the robust loss at the solution
         z = (r / f_scale) ** 2
@@ -234,10 +280,15 @@ def solve_least_squares(fun, x0, *, jac=None, bounds=None, loss="linear", f_scal
         else:
             w = np.ones_like(z)
         rw = r * np.sqrt(w)
-        s02 = float(rw @ rw) / dof
         J = J * np.sqrt(w)[:, None]
-    cov = np.linalg.pinv(J.T @ J) * max(s02, sigma_floor ** 2)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    data = np.ones(n, dtype=bool)
+    if pseudo is not None:
+        data[pseudo] = False
+    cov, rank = parameter_covariance(J, pseudo=pseudo)
+    s02 = float(rw[data] @ rw[data]) / max(int(data.sum()) - rank, 1)
+    cov *= max(s02, sigma_floor ** 2)
+    with np.errstate(invalid="ignore"):
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     if full:
         return res.x, std, r, int(res.nfev), float(np.sqrt(s02)), cov
     return res.x, std, r, int(res.nfev), float(np.sqrt(s02))
@@ -557,7 +608,8 @@ def fit_polygon(samples, rings, *, buffer: float = 1.0, max_outer: int = 10, pri
             Jo[np.arange(len(outline)), nv2 + fam] = -1.0
             return np.vstack([J, Jo / np.asarray(outline.sigma, dtype=np.float64).reshape(-1, 1)])
 
-        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat, jac=jac, sigma_floor=sigma_floor)
+        flat, std, rr, nfe, s0 = solve_least_squares(fun, flat, jac=jac, sigma_floor=sigma_floor,
+                                                     pseudo=slice(len(s), len(s) + nv2))
         r = rr[: len(s)] * sample_sigma
         nfev += nfe
         if callback is not None:
@@ -692,8 +744,12 @@ def fit_rectilinear(samples, rings, *, azimuth=None, buffer: float = 1.0, max_ou
         pp = params[: 1 + ne].copy()
         pp[j] += h
         J[:, j] = (_rectilinear_vertices(pp, m, prev).ravel() - base) / h
-    cv = J @ cov[: 1 + ne, : 1 + ne] @ J.T
+    c = cov[: 1 + ne, : 1 + ne]
+    undetermined = np.isnan(np.diag(c))
+    cv = J @ np.nan_to_num(c) @ J.T
     vstd = np.sqrt(np.clip(np.diag(cv), 0.0, None))
+    # a vertex on an edge line the samples do not fix is undetermined too
+    vstd[np.any(J[:, undetermined] != 0.0, axis=1)] = np.nan
     extra = {"offsets": offsets, "azimuth": float(params[0]), "azimuth_std": float(std[0]),
              "n_params": 1 + ne}
     if nf:

@@ -771,6 +771,36 @@ def _decorrelate(plan, polygon):
     return dataclasses.replace(plan, std=plan.std * f)
 
 
+def _determined(std: dict) -> tuple[dict, dict]:
+    """The finite std devs, and an info entry naming the parameters the data do not determine
+    (e.g. the ridge offset of a gable with no rise): no std is reported for those."""
+    ok = {k: float(v) for k, v in std.items() if math.isfinite(v)}
+    bad = sorted(k for k in std if k not in ok)
+    return ok, ({"undetermined": ", ".join(bad)} if bad else {})
+
+
+def _finite_max(std) -> float:
+    """Largest finite standard deviation (0 when none is)."""
+    std = np.asarray(std, dtype=np.float64)
+    std = std[np.isfinite(std)]
+    return float(std.max()) if len(std) else 0.0
+
+
+def _vertex_std(plan):
+    """Standard deviations of the determined polygon vertices, their RMS, the undetermined count.
+
+    A vertex the footprint samples do not fix (e.g. the end of an edge with a
+    single sample: only the weak prior holds it) has NaN std devs from the
+    fit; it is counted, not averaged in as a huge number. The vertices the
+    data determine give the RMS (NaN when there is none).
+    """
+    vstd = plan.std.reshape(-1, 2)
+    ok = np.isfinite(vstd).all(axis=1)
+    vstd = vstd[ok]
+    rms = float(np.sqrt(np.mean(vstd ** 2))) if len(vstd) else math.nan
+    return vstd, rms, int((~ok).sum())
+
+
 def _shift_limit(cfg, corner_std):
     """Largest corner move accepted from the LiDAR outline: 3 std of the footprint-only corners
     (at least 3 a-priori footprint sigmas in 2-D), at most ``outline_max_shift``."""
@@ -858,7 +888,7 @@ def _finish_rect(cls, plan, q, qstd, datum, samples, orientation_swap=False):
         if params["azimuth"] % 360.0 >= 180.0 and "ridge_offset" in params:
             params["ridge_offset"] = -params["ridge_offset"]
         params["azimuth"] %= 180.0
-    model = cls({k: float(v) for k, v in params.items()}, {k: float(v) for k, v in std.items()})
+    model = cls({k: float(v) for k, v in params.items()}, *_determined(std))
     low = float(model._local_vertices()[4:, 2].min()) - z0
     if low <= 0:
         raise FitError(f"roof below the datum (lowest eave {low:.2f} m above it)")
@@ -1010,7 +1040,7 @@ def _prism_plan(polygon, samples, cfg, context=None, density=0.0):
             moved = None
             if refined is not None and refined.params.size == flat.size:
                 moved = refined.params.reshape(-1, 2) - flat
-            limit = _shift_limit(cfg, math.sqrt(2.0) * float(plan.std.max()))
+            limit = _shift_limit(cfg, math.sqrt(2.0) * _finite_max(plan.std))
             if moved is not None and np.hypot(*moved.T).max() <= limit:
                 plan = refined
     flat = plan.params.reshape(-1, 2)
@@ -1033,8 +1063,9 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
         raise FitError(f"{len(points)} points (fewer than {cfg.min_points})")
     plan = pp["plan"]
     z0, z0std = datum
-    vstd = plan.std.reshape(-1, 2)
-    vertex_std = float(np.sqrt(np.mean(vstd ** 2)))
+    vstd, vertex_std, undetermined = _vertex_std(plan)
+    if len(vstd) == 0:
+        raise FitError("no footprint vertex determined by the boundary samples")
     z = points[:, 2]
     tmax = math.tan(math.radians(cfg.max_slope))
     if cls is PrismPrimitive:
@@ -1048,7 +1079,8 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
             raise FitError(f"roof below the datum (height {q[0] - z0:.2f} m)")
         c = pp["polygon"].centroid
         params = {"x": c.x, "y": c.y, "z": z0, "azimuth": 0.0, "height": q[0] - z0}
-        std = {"x": float(np.sqrt(np.mean(vstd[:, 0] ** 2))), "y": float(np.sqrt(np.mean(vstd[:, 1] ** 2))),
+        std = {"x": float(np.sqrt(np.mean(vstd[:, 0] ** 2))) if len(vstd) else vertex_std,
+               "y": float(np.sqrt(np.mean(vstd[:, 1] ** 2))) if len(vstd) else vertex_std,
                "z": z0std, "height": math.hypot(qstd[0], z0std)}
     else:
         x, y, az, ln, wd = rectangle_approx(pp["polygon"])
@@ -1095,12 +1127,14 @@ def _fit_prism_kind(cls, pp, points, datum, cfg, approx=None, *, swap=False):
             std["ridge_offset"] = float(qstd[2])
     std["vertex"] = vertex_std
     params["vertices"] = float(pp["n_vertices"])
-    model = cls({k: float(v) for k, v in params.items()}, std, rings=pp["rings"])
+    model = cls({k: float(v) for k, v in params.items()}, *_determined(std), rings=pp["rings"])
     if cls is not PrismPrimitive:
         model.to_solid()  # raises FitError when the roof does not close over the polygon
     bic, broof, bplan = _bic(model.residuals(points), len(q), pp["plan_d"], pp["n_plan_params"],
                              pp["n_footprint_vertices"], cfg)
     model.info.update(_fit_info(r, plan, nfev, sel, bic, broof, bplan))
+    if undetermined:
+        model.info["n_undetermined"] = undetermined
     return model, bic
 
 

@@ -131,7 +131,8 @@ def result_attributes(model, cloud: PointCloud) -> dict:
             attrs[f"primitive_{k}_std"] = float(s[k])
     for k, v in model.derived().items():
         attrs[f"primitive_{k}"] = float(v)
-    for k in ("residual_rmse", "plan_rmse", "iterations", "n_points", "n_samples", "n_outline"):
+    for k in ("residual_rmse", "plan_rmse", "iterations", "n_points", "n_samples", "n_outline",
+              "n_undetermined", "undetermined"):
         if k in model.info:
             attrs[f"primitive_{k}"] = model.info[k]
     return attrs
