@@ -389,13 +389,13 @@ def _replace_building(doc, building_id, new_objects, new_vertices):
     verts = [np.asarray(doc.get("vertices") or [], dtype=np.int64).reshape(-1, 3),
              np.asarray(new_vertices, dtype=np.int64).reshape(-1, 3)]
     offset = len(verts[0])
+    shifted = list(range(offset, offset + len(verts[1])))  # new vertex i -> offset + i
     merged = {}
     for oid, obj in objects.items():
         if oid == building_id:
             for nid, nobj in new_objects.items():
                 nobj = dict(nobj)
                 if "geometry" in nobj:
-                    shifted = list(range(offset, offset + len(verts[1])))
                     nobj["geometry"] = [dict(g, boundaries=_remap(g["boundaries"], shifted))
                                         for g in nobj["geometry"]]
                 merged[nid] = nobj

@@ -23,12 +23,11 @@ The job, for any number of tiles and buildings, in four parts:
 from __future__ import annotations
 
 import contextlib
-
+import dataclasses
 import logging
 import os
 import time
 from collections import Counter
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
