@@ -87,6 +87,7 @@ from lidar2city.ground import (  # noqa: E402
 )
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
+from lidar2city.synthetic_terrain import HELD_OUT_KINDS, make_terrain  # noqa: E402
 
 NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
 DEPTH = 2
@@ -109,7 +110,11 @@ RAISED_REACH = 12.0
 CUE_DEPTH = 3
 #: vetoes (tolerance ratios to the fourth surface) :func:`fit_veto` chooses among.
 VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
+#: rises (m) of ``smrf_vote``'s ``above`` option :func:`fit_above` chooses among (inf: off).
+ABOVE = (1.0, 2.0, 3.0, 4.0, 6.0, np.inf)
 ANATOMY_WALL = 5.0
+#: the ``above`` (m) scored beside the defaults on the seven samples and the held-out kinds.
+ABOVE_SHOWN = 3.0
 
 
 def fit_rule(sets):
@@ -181,6 +186,45 @@ def fit_veto(sets, rule):
                  / total for v in VETO}
     veto = min(VETO, key=objective.get)
     return veto, objective[veto]
+
+
+def fit_above(sets, rule, veto):
+    """The ``above`` of :data:`ABOVE` (and its objective) that minimises the weighted point
+    error of ``rule`` with ``veto`` over ``sets`` of ``(features (N, 6), ground, weight)``
+    whose last column is the walls' rise within the rule's ``clear``."""
+    total = sum(w for _, _, w in sets)
+    objective = {a: sum(w * np.mean(vote_rule(f, **rule, veto=veto, above=a) != g)
+                        for f, g, w in sets) / total for a in ABOVE}
+    above = min(ABOVE, key=objective.get)
+    return above, objective[above]
+
+
+def with_rise(xyz, features, clear, cache, key):
+    """``features`` (N, 6) with the last column the walls' rise within ``clear`` m (the one
+    ``fit_above`` needs when a fold's ``clear`` is not the default's); cached by ``key``."""
+    if clear == VOTE_RULE["clear"]:
+        return features
+    if (key, clear) not in cache:
+        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0][:, -1]
+        cache[key, clear] = np.column_stack([features[:, :-1], rise])
+    return cache[key, clear]
+
+
+def held_out_kinds(rule_above):
+    """Print ``smrf_vote``'s errors on the scenes of
+    :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit) with its
+    defaults and with ``above``."""
+    print(f"\nscenes of kinds held out of every fit (smrf_vote type I / type II / total %: "
+          f"defaults; above={rule_above:g})")
+    for kind in HELD_OUT_KINDS:
+        for spacing in (1.0, 2.5):
+            scene = make_terrain(kind, spacing=spacing, seed=1)
+            line = f"{kind + '@' + format(spacing, 'g') + 'm':<20}"
+            for above in (None, rule_above):
+                e = ground_errors(smrf_vote(scene.xyz, above=above), scene.ground)
+                line += (f"  {100 * e['type_i']:6.2f} {100 * e['type_ii']:6.2f} "
+                         f"{100 * e['total']:6.2f}")
+            print(line)
 
 
 def candidates(xyz, features):
@@ -424,16 +468,25 @@ def main():
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
-    # the three ratios, the wall distance and the ratio to the veto's fourth surface
-    feats = {n: vote_features(xyz, fourth=VETO_SLOPE)[0] for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE)[0], s.ground) for s in scenes.values()]
+    # the three ratios, the wall distance, the ratio to the veto's fourth surface and the
+    # walls' rise within the default clear
+    clear = VOTE_RULE["clear"]
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0]
+             for n, (xyz, _) in samples.items()}
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear)[0], s.ground)
+           for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
+    xyz_of = {n: xyz for n, (xyz, _) in samples.items()} | {
+        k: s.xyz for k, s in enumerate(scenes.values())}
+    rise_cache = {}
 
     print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
           f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
-          f"synthetic terrains); the held-out errors with the veto, and the total without it")
-    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10}  rule")
-    held = {"veto": [], "no veto": []}
+          f"synthetic terrains); the held-out errors with the veto, the total without it, and "
+          f"with the veto and `above` (among {', '.join(f'{v:g}' for v in ABOVE)} m)")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10} "
+          f"{'above %':>8}  rule")
+    held = {"veto": [], "no veto": [], "veto + above": []}
     for name, (_, ref) in samples.items():
         sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
         rule, tree = fit_rule(sets)
@@ -443,22 +496,34 @@ def main():
                                                      ref)
         held["veto"].append(e["total"])
         held["no veto"].append(plain["total"])
+        above, up = None, e
+        if rule is not None:
+            keys = [n for n in samples if n != name] + list(range(len(syn)))
+            risen = [(with_rise(xyz_of[k], f, rule["clear"], rise_cache, k), g, w)
+                     for k, (f, g, w) in zip(keys, sets)]
+            above = fit_above(risen, rule, veto)[0]
+            f_held = with_rise(xyz_of[name], feats[name], rule["clear"], rise_cache, name)
+            up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
+        held["veto + above"].append(up["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f}  "
-              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto))}")
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f}  "
+              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto, above=above))}")
     for k, v in held.items():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
               f"max {100 * np.max(v):.2f} %")
     sets = [(feats[n], samples[n][1], 1.0) for n in samples] + syn_set
     rule, tree = fit_rule(sets)
     veto = None if rule is None else fit_veto(sets, rule)[0]
-    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}; "
+    above = None if rule is None or rule["clear"] != clear else fit_above(sets, rule, veto)[0]
+    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}, "
+          f"above {above}; "
           f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
           f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
-        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None)}
+        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None),
+        f"smrf_vote above {ABOVE_SHOWN:g}": lambda xyz: smrf_vote(xyz, above=ABOVE_SHOWN)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
     rows = []
@@ -475,6 +540,7 @@ def main():
         xyz, truth = small_tile()
         print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
               f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
+    held_out_kinds(ABOVE_SHOWN)
     oracle(samples, feats)
     if args.anatomy is not None:
         anatomy(samples, feats, None if args.anatomy is True else Path(args.anatomy))
