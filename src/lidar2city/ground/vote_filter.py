@@ -129,13 +129,13 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
     features = np.full((n, 3 + len(also) + (rise is not None)), np.inf)
     if n == 0 or out.all():
         return features, out
-    surfaces, spec, (walls,), zmin = _segment_surfaces(
+    surfaces, spec, (walls,), (zmin, base) = _segment_surfaces(
         xyz, out, cell=cell, slope=slopes[0], window=window, extend=extend, jump=jump,
         raised=raised, min_cells=min_cells, also=also, marks=(WALL_SLOPE,))
     r, c = cell_of(xyz[:, :2], spec)
     features[:, 3] = _distance_to(walls, int(np.ceil(WALL_REACH / cell)))[r, c] * cell
     if rise is not None:
-        tops = np.where(walls & ~np.isnan(zmin), zmin, np.inf)
+        tops = np.where(walls & ~np.isnan(zmin), zmin.astype(np.float64) + base, np.inf)
         lowest = _disk_chain(tops, int(np.floor(rise / cell)), False)
         features[:, -1] = lowest[r, c] - xyz[:, 2]
     weights = bilinear_weights(spec, xyz[:, :2])
