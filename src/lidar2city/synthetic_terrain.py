@@ -112,15 +112,19 @@ def _forest(xy, rng):
     return z, ground
 
 
-def _town_on_slope(xy, rng):
-    # dense large buildings on a 15 % slope with narrow streets between them
-    base = lambda c: 0.15 * c[:, 1]  # noqa: E731
+def _town(xy, grade, boxes):
+    """Flat-roofed ``boxes`` on a plane rising by ``grade`` along y."""
+    base = lambda c: grade * c[:, 1]  # noqa: E731
     z = base(xy)
     ground = np.ones(len(xy), dtype=bool)
-    boxes = [(5, 5, 45, 28, 12.0), (52, 5, 95, 28, 15.0), (5, 36, 45, 62, 10.0),
-             (52, 36, 95, 62, 18.0), (5, 70, 45, 95, 9.0), (52, 70, 95, 95, 14.0)]
     _boxes(xy, z, ground, boxes, base)
     return z, ground
+
+
+def _town_on_slope(xy, rng):
+    # dense large buildings on a 15 % slope with narrow streets between them
+    return _town(xy, 0.15, [(5, 5, 45, 28, 12.0), (52, 5, 95, 28, 15.0), (5, 36, 45, 62, 10.0),
+                            (52, 36, 95, 62, 18.0), (5, 70, 45, 95, 9.0), (52, 70, 95, 95, 14.0)])
 
 
 def _terraced_slope(xy, rng):
@@ -128,26 +132,21 @@ def _terraced_slope(xy, rng):
     # (sharp terrain discontinuities), each bench sloping 4 % across; a house on one bench
     widths = rng.uniform(10.0, 16.0, 12)
     edges = np.concatenate([[0.0], np.cumsum(widths)])
-    rises = rng.uniform(1.5, 4.0, 12)
+    levels = np.concatenate([[0.0], np.cumsum(rng.uniform(1.5, 4.0, 12))])
     step = np.clip(np.searchsorted(edges, xy[:, 0], side="right") - 1, 0, 11)
-    z = np.concatenate([[0.0], np.cumsum(rises)])[step] + 0.04 * xy[:, 1]
+    z = levels[step] + 0.04 * xy[:, 1]
     ground = np.ones(len(xy), dtype=bool)
     k = int(np.searchsorted(edges, 50.0, side="right") - 1)
     x0 = edges[k] + 2.0
     _boxes(xy, z, ground, [(x0, 40.0, x0 + min(widths[k] - 4.0, 10.0), 52.0, 6.0)],
-           lambda c: np.concatenate([[0.0], np.cumsum(rises)])[k] + 0.04 * c[:, 1])
+           lambda c: levels[k] + 0.04 * c[:, 1])
     return z, ground
 
 
 def _steep_town(xy, rng):
     # large buildings on a 22 % slope with ground 3-5 m wide between them
-    base = lambda c: 0.22 * c[:, 1]  # noqa: E731
-    z = base(xy)
-    ground = np.ones(len(xy), dtype=bool)
-    boxes = [(2, 3, 40, 30, 11.0), (44, 3, 97, 28, 14.0), (2, 34, 36, 62, 9.0),
-             (40, 33, 97, 64, 16.0), (2, 67, 50, 97, 12.0), (54, 68, 97, 97, 10.0)]
-    _boxes(xy, z, ground, boxes, base)
-    return z, ground
+    return _town(xy, 0.22, [(2, 3, 40, 30, 11.0), (44, 3, 97, 28, 14.0), (2, 34, 36, 62, 9.0),
+                            (40, 33, 97, 64, 16.0), (2, 67, 50, 97, 12.0), (54, 68, 97, 97, 10.0)])
 
 
 _KINDS = {
