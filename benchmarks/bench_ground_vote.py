@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues] [--anatomy [PNG_DIR]]
+        [--cues] [--anatomy [PNG_DIR]] [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -21,16 +21,22 @@ script:
    weighted equally and the synthetic terrains together as one more sample),
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
    objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
-   each ISPRS sample out in turn; it prints the held-out sample's type I /
-   type II / total error with the veto and the total without it, the rule
-   of each fold, their mean and maximum (the leave-one-out figures);
+   each ISPRS sample out in turn, and then the ``above`` of :data:`ABOVE`
+   (:func:`fit_above`); it prints the held-out sample's type I / type II /
+   total error with the veto, the total without it and with the veto and
+   ``above``, the rule of each fold, their mean and maximum (the
+   leave-one-out figures);
 3. fits it on all seven and prints the rule: its thresholds, rounded to two
    decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
    :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
    are);
-4. scores ``smrf_vote`` with its defaults and without its veto against
-   ``smrf_segments`` on the seven samples, the synthetic terrains and the
-   small tile with a building of ``bench_ground_segments.py``;
+4. scores ``smrf_vote`` with its defaults, without its veto and with
+   ``above`` 3 m against ``smrf_segments`` on the seven samples, the
+   synthetic terrains and the small tile with a building of
+   ``bench_ground_segments.py``, then on the scenes of
+   :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (kept out of every
+   fit; with ``--fit-held-out-kinds`` they join the synthetic terrains of
+   every fit instead);
 5. the bound of any per-point rule over such surfaces: the share of points
    that every one of ``smrf_segments`` at the slopes of :data:`ORACLE_SLOPES`
    and plain SMRF at 0.1 classifies wrongly, per sample;
@@ -210,12 +216,12 @@ def with_rise(xyz, features, clear, cache, key):
     return cache[key, clear]
 
 
-def held_out_kinds(rule_above):
+def held_out_kinds(rule_above, fitted=False):
     """Print ``smrf_vote``'s errors on the scenes of
-    :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit) with its
-    defaults and with ``above``."""
-    print(f"\nscenes of kinds held out of every fit (smrf_vote type I / type II / total %: "
-          f"defaults; above={rule_above:g})")
+    :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit unless
+    ``fitted``) with its defaults and with ``above``."""
+    print(f"\nscenes of kinds {'fitted on too' if fitted else 'held out of every fit'} (smrf_vote "
+          f"type I / type II / total %: defaults; above={rule_above:g})")
     for kind in HELD_OUT_KINDS:
         for spacing in (1.0, 2.5):
             scene = make_terrain(kind, spacing=spacing, seed=1)
@@ -461,6 +467,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--pairs", action="store_true")
+    ap.add_argument("--fit-held-out-kinds", action="store_true",
+                    help="fit on the scenes of HELD_OUT_KINDS too (no longer held out)")
     ap.add_argument("--cues", action="store_true",
                     help="leave-one-out of depth-3 trees with one more cue each")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
@@ -468,6 +476,9 @@ def main():
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
+    if args.fit_held_out_kinds:
+        scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
+                   for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
     # the three ratios, the wall distance, the ratio to the veto's fourth surface and the
     # walls' rise within the default clear
     clear = VOTE_RULE["clear"]
@@ -540,7 +551,7 @@ def main():
         xyz, truth = small_tile()
         print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
               f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
-    held_out_kinds(ABOVE_SHOWN)
+    held_out_kinds(ABOVE_SHOWN, fitted=args.fit_held_out_kinds)
     oracle(samples, feats)
     if args.anatomy is not None:
         anatomy(samples, feats, None if args.anatomy is True else Path(args.anatomy))
