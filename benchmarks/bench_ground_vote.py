@@ -93,7 +93,7 @@ from lidar2city.ground import (  # noqa: E402
 )
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
-from lidar2city.synthetic_terrain import HELD_OUT_KINDS, make_terrain  # noqa: E402
+from lidar2city.synthetic_terrain import HELD_OUT_KINDS, TERRAIN_KINDS, make_terrain  # noqa: E402
 
 NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
 DEPTH = 2
@@ -530,6 +530,15 @@ def main():
           f"above {above}; "
           f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
           f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
+    if rule is not None and (rule != VOTE_RULE or veto != VOTE_VETO):
+        mine = {n: ground_errors(vote_rule(feats[n], **rule, veto=veto), ref)["total"]
+                for n, (_, ref) in samples.items()}
+        worst = max(mine, key=mine.get)
+        kinds = [ground_errors(vote_rule(f, **rule, veto=veto), g)["total"]
+                 for k, (f, g) in zip(scenes, syn) if k.split("@")[0] in TERRAIN_KINDS]
+        print(f"that rule and veto: mean total {100 * np.mean(list(mine.values())):.2f} % on the "
+              f"seven ({worst} {100 * mine[worst]:.2f} %), {100 * np.mean(kinds):.2f} % on the "
+              f"{len(kinds)} synthetic terrains of TERRAIN_KINDS")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
