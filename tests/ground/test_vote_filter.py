@@ -185,3 +185,9 @@ def test_above_in_the_ground_config():
     assert GroundConfig(method="smrf_vote").method_params()["above"] is None
     with pytest.raises(ConfigError, match="ground.above"):
         GroundConfig(above=0.0)
+
+
+def test_rise_bad_input():
+    xyz, _ = _box_scene()
+    with pytest.raises(InputError, match="rise"):
+        vote_features(xyz, rise=0.0)

@@ -62,8 +62,8 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
                   outlier_depth: float = 1.5, slopes=VOTE_SLOPES, fourth: float | None = None,
                   rise: float | None = None):
     """The cues of :func:`smrf_vote`: each point's height off three provisional surfaces, and
-    its distance to the nearest wall (and off a fourth surface, and the nearest walls' rise
-    above it, when asked).
+    its distance to the nearest wall (and off a fourth surface, and the rise of the walls
+    around over it, when asked).
 
     From one progressive opening (:func:`~lidar2city.ground.smrf_surface`,
     minimum surface continued ``extend`` m across the tile edges) three
@@ -124,7 +124,8 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
     xyz, out = _checked_outliers(xyz, cell=cell, slope=slopes[0], window=window, scalar=scalar,
                                  threshold=threshold, outlier_radius=outlier_radius,
                                  outlier_depth=outlier_depth, jump=jump,
-                                 **dict(zip(("lenient", "fourth"), also)))
+                                 **dict(zip(("lenient", "fourth"), also)),
+                                 **({} if rise is None else {"rise": rise}))
     n = len(xyz)
     features = np.full((n, 3 + len(also) + (rise is not None)), np.inf)
     if n == 0 or out.all():
@@ -181,7 +182,7 @@ def vote_rule(features, *, near: float, steep: float, plain: float,
     clear_of_walls = f[:, 3] > clear
     if above is not None:
         if f.shape[1] < (6 if veto is not None else 5):
-            raise InputError("above needs the walls' rise (vote_features(..., rise=True))")
+            raise InputError("above needs the walls' rise (vote_features(..., rise=clear))")
         clear_of_walls |= f[:, -1] > above
     far = (f[:, 2] <= plain) | ((f[:, 1] <= 1.0) & clear_of_walls)
     close = f[:, 1] <= steep
