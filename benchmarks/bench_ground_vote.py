@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues] [--anatomy [PNG_DIR]]
+        [--cues] [--anatomy [PNG_DIR]] [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -21,16 +21,22 @@ script:
    weighted equally and the synthetic terrains together as one more sample),
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
    objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
-   each ISPRS sample out in turn; it prints the held-out sample's type I /
-   type II / total error with the veto and the total without it, the rule
-   of each fold, their mean and maximum (the leave-one-out figures);
+   each ISPRS sample out in turn, and then the ``above`` of :data:`ABOVE`
+   (:func:`fit_above`); it prints the held-out sample's type I / type II /
+   total error with the veto, the total without it and with the veto and
+   ``above``, the rule of each fold, their mean and maximum (the
+   leave-one-out figures);
 3. fits it on all seven and prints the rule: its thresholds, rounded to two
    decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
    :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
    are);
-4. scores ``smrf_vote`` with its defaults and without its veto against
-   ``smrf_segments`` on the seven samples, the synthetic terrains and the
-   small tile with a building of ``bench_ground_segments.py``;
+4. scores ``smrf_vote`` with its defaults, without its veto and with
+   ``above`` 3 m against ``smrf_segments`` on the seven samples, the
+   synthetic terrains and the small tile with a building of
+   ``bench_ground_segments.py``, then on the scenes of
+   :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (kept out of every
+   fit; with ``--fit-held-out-kinds`` they join the synthetic terrains of
+   every fit instead);
 5. the bound of any per-point rule over such surfaces: the share of points
    that every one of ``smrf_segments`` at the slopes of :data:`ORACLE_SLOPES`
    and plain SMRF at 0.1 classifies wrongly, per sample;
@@ -87,6 +93,7 @@ from lidar2city.ground import (  # noqa: E402
 )
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
+from lidar2city.synthetic_terrain import HELD_OUT_KINDS, TERRAIN_KINDS, make_terrain  # noqa: E402
 
 NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
 DEPTH = 2
@@ -109,7 +116,11 @@ RAISED_REACH = 12.0
 CUE_DEPTH = 3
 #: vetoes (tolerance ratios to the fourth surface) :func:`fit_veto` chooses among.
 VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
+#: rises (m) of ``smrf_vote``'s ``above`` option :func:`fit_above` chooses among (inf: off).
+ABOVE = (1.0, 2.0, 3.0, 4.0, 6.0, np.inf)
 ANATOMY_WALL = 5.0
+#: the ``above`` (m) scored beside the defaults on the seven samples and the held-out kinds.
+ABOVE_SHOWN = 3.0
 
 
 def fit_rule(sets):
@@ -181,6 +192,45 @@ def fit_veto(sets, rule):
                  / total for v in VETO}
     veto = min(VETO, key=objective.get)
     return veto, objective[veto]
+
+
+def fit_above(sets, rule, veto):
+    """The ``above`` of :data:`ABOVE` (and its objective) that minimises the weighted point
+    error of ``rule`` with ``veto`` over ``sets`` of ``(features (N, 6), ground, weight)``
+    whose last column is the walls' rise within the rule's ``clear``."""
+    total = sum(w for _, _, w in sets)
+    objective = {a: sum(w * np.mean(vote_rule(f, **rule, veto=veto, above=a) != g)
+                        for f, g, w in sets) / total for a in ABOVE}
+    above = min(ABOVE, key=objective.get)
+    return above, objective[above]
+
+
+def with_rise(xyz, features, clear, cache, key):
+    """``features`` (N, 6) with the last column the walls' rise within ``clear`` m (the one
+    ``fit_above`` needs when a fold's ``clear`` is not the default's); cached by ``key``."""
+    if clear == VOTE_RULE["clear"]:
+        return features
+    if (key, clear) not in cache:
+        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0][:, -1]
+        cache[key, clear] = np.column_stack([features[:, :-1], rise])
+    return cache[key, clear]
+
+
+def held_out_kinds(rule_above, fitted=False):
+    """Print ``smrf_vote``'s errors on the scenes of
+    :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit unless
+    ``fitted``) with its defaults and with ``above``."""
+    print(f"\nscenes of kinds {'fitted on too' if fitted else 'held out of every fit'} (smrf_vote "
+          f"type I / type II / total %: defaults; above={rule_above:g})")
+    for kind in HELD_OUT_KINDS:
+        for spacing in (1.0, 2.5):
+            scene = make_terrain(kind, spacing=spacing, seed=1)
+            line = f"{kind + '@' + format(spacing, 'g') + 'm':<20}"
+            for above in (None, rule_above):
+                e = ground_errors(smrf_vote(scene.xyz, above=above), scene.ground)
+                line += (f"  {100 * e['type_i']:6.2f} {100 * e['type_ii']:6.2f} "
+                         f"{100 * e['total']:6.2f}")
+            print(line)
 
 
 def candidates(xyz, features):
@@ -417,6 +467,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--pairs", action="store_true")
+    ap.add_argument("--fit-held-out-kinds", action="store_true",
+                    help="fit on the scenes of HELD_OUT_KINDS too (no longer held out)")
     ap.add_argument("--cues", action="store_true",
                     help="leave-one-out of depth-3 trees with one more cue each")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
@@ -424,16 +476,28 @@ def main():
     args = ap.parse_args()
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     scenes = synthetic_scenes()
-    # the three ratios, the wall distance and the ratio to the veto's fourth surface
-    feats = {n: vote_features(xyz, fourth=VETO_SLOPE)[0] for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE)[0], s.ground) for s in scenes.values()]
+    if args.fit_held_out_kinds:
+        scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
+                   for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
+    # the three ratios, the wall distance, the ratio to the veto's fourth surface and the
+    # walls' rise within the default clear
+    clear = VOTE_RULE["clear"]
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0]
+             for n, (xyz, _) in samples.items()}
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear)[0], s.ground)
+           for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
+    xyz_of = {n: xyz for n, (xyz, _) in samples.items()} | {
+        k: s.xyz for k, s in enumerate(scenes.values())}
+    rise_cache = {}
 
     print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
           f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
-          f"synthetic terrains); the held-out errors with the veto, and the total without it")
-    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10}  rule")
-    held = {"veto": [], "no veto": []}
+          f"synthetic terrains); the held-out errors with the veto, the total without it, and "
+          f"with the veto and `above` (among {', '.join(f'{v:g}' for v in ABOVE)} m)")
+    print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10} "
+          f"{'above %':>8}  rule")
+    held = {"veto": [], "no veto": [], "veto + above": []}
     for name, (_, ref) in samples.items():
         sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
         rule, tree = fit_rule(sets)
@@ -443,22 +507,43 @@ def main():
                                                      ref)
         held["veto"].append(e["total"])
         held["no veto"].append(plain["total"])
+        above, up = None, e
+        if rule is not None:
+            keys = [n for n in samples if n != name] + list(range(len(syn)))
+            risen = [(with_rise(xyz_of[k], f, rule["clear"], rise_cache, k), g, w)
+                     for k, (f, g, w) in zip(keys, sets)]
+            above = fit_above(risen, rule, veto)[0]
+            f_held = with_rise(xyz_of[name], feats[name], rule["clear"], rise_cache, name)
+            up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
+        held["veto + above"].append(up["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f}  "
-              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto))}")
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f}  "
+              f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto, above=above))}")
     for k, v in held.items():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
               f"max {100 * np.max(v):.2f} %")
     sets = [(feats[n], samples[n][1], 1.0) for n in samples] + syn_set
     rule, tree = fit_rule(sets)
     veto = None if rule is None else fit_veto(sets, rule)[0]
-    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}; "
+    above = None if rule is None or rule["clear"] != clear else fit_above(sets, rule, veto)[0]
+    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}, "
+          f"above {above}; "
           f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
           f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
+    if rule is not None and (rule != VOTE_RULE or veto != VOTE_VETO):
+        mine = {n: ground_errors(vote_rule(feats[n], **rule, veto=veto), ref)["total"]
+                for n, (_, ref) in samples.items()}
+        worst = max(mine, key=mine.get)
+        kinds = [ground_errors(vote_rule(f, **rule, veto=veto), g)["total"]
+                 for k, (f, g) in zip(scenes, syn) if k.split("@")[0] in TERRAIN_KINDS]
+        print(f"that rule and veto: mean total {100 * np.mean(list(mine.values())):.2f} % on the "
+              f"seven ({worst} {100 * mine[worst]:.2f} %), {100 * np.mean(kinds):.2f} % on the "
+              f"{len(kinds)} synthetic terrains of TERRAIN_KINDS")
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
-        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None)}
+        "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None),
+        f"smrf_vote above {ABOVE_SHOWN:g}": lambda xyz: smrf_vote(xyz, above=ABOVE_SHOWN)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
     rows = []
@@ -475,6 +560,7 @@ def main():
         xyz, truth = small_tile()
         print(f"{m}: synthetic terrains mean total {100 * s:.2f} % ({len(scenes)} scenes); "
               f"small tile with a building {100 * (fn(xyz) == truth).mean():.1f} % right")
+    held_out_kinds(ABOVE_SHOWN, fitted=args.fit_held_out_kinds)
     oracle(samples, feats)
     if args.anatomy is not None:
         anatomy(samples, feats, None if args.anatomy is True else Path(args.anatomy))

@@ -8,7 +8,7 @@ import pytest
 from lidar2city.errors import ConfigError, InputError
 from lidar2city.ground import GroundConfig, ground_mask, smrf, smrf_refined, smrf_surface
 from lidar2city.metrics.ground import ground_errors
-from lidar2city.synthetic_terrain import TERRAIN_KINDS, make_terrain
+from lidar2city.synthetic_terrain import HELD_OUT_KINDS, TERRAIN_KINDS, make_terrain
 
 
 @pytest.mark.parametrize("kind", TERRAIN_KINDS)
@@ -111,3 +111,21 @@ def test_default_keeps_the_ground_of_a_small_tile_with_a_building():
     xyz = np.column_stack([xy, z])
     truth = z == 1.0
     assert (ground_mask(xyz) == truth).mean() > 0.95
+
+
+@pytest.mark.parametrize("kind", HELD_OUT_KINDS)
+def test_held_out_kinds(kind):
+    """The kinds kept out of every fit: deterministic, 100 m x 100 m, not in TERRAIN_KINDS."""
+    a = make_terrain(kind, spacing=2.0, seed=3)
+    np.testing.assert_array_equal(a.xyz, make_terrain(kind, spacing=2.0, seed=3).xyz)
+    assert kind not in TERRAIN_KINDS
+    assert np.ptp(a.xyz[:, :2], axis=0).max() < 100.0
+    if kind == "terraced_slope":
+        # vertical risers: a point 1.5-4 m above its neighbour up to 4 m to the west
+        order = np.argsort(a.xyz[:, 0])
+        band = order[np.abs(a.xyz[order, 1] - 20.0) < 1.0]
+        dz = np.diff(a.xyz[band, 2])
+        assert ((dz > 1.4) & (np.diff(a.xyz[band, 0]) < 4.0)).sum() >= 3
+        assert 0.9 < a.ground.mean() < 1.0
+    else:
+        assert 0.1 < a.ground.mean() < 0.4

@@ -127,6 +127,10 @@ class GroundConfig:
     veto: float | None = field(0.8, "smrf_vote: a point near the strict surface is object when "
                                     "its height off smrf_segments' slope-0.4 surface exceeds "
                                     "this many tolerances (the fitted value); inf: no veto")
+    above: float | None = field(None, "smrf_vote: a point off the strict surfaces but within "
+                                      "tolerance of the lenient one is ground also near walls when "
+                                      "every wall within 15 m rises more than this (m) over it "
+                                      "(ground at the foot of buildings); default none")
     max_window: float = field(33.0, "pmf: largest window side (m)")
     initial_distance: float = field(0.5, "pmf: first height threshold dh0 (m)")
     max_distance: float = field(3.0, "pmf: largest height threshold dh_max (m)")
@@ -158,6 +162,8 @@ class GroundConfig:
             raise ConfigError(f"ground.strong_slope: must be > 0, got {self.strong_slope!r}")
         if self.veto is not None and not self.veto > 0:
             raise ConfigError(f"ground.veto: must be > 0, got {self.veto!r}")
+        if self.above is not None and not self.above > 0:
+            raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
         if self.scalar < 0:
             raise ConfigError(f"ground.scalar: must be >= 0, got {self.scalar!r}")
 

@@ -295,7 +295,8 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
     SMRF's own surface at ``slope`` (no segments given back); the grid; and, when ``marks``
-    are given, the cells judged object at each of those slopes (a list of masks)."""
+    are given, the cells judged object at each of those slopes (a list of masks) and the
+    minimum surface (float32 heights above ``base``, NaN where empty) with ``base``."""
     pts = xyz[~out]
     more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
@@ -339,7 +340,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
             surfaces.append(surface if k == 0 else _inpainted(zmin, obj, base))
     if also:
         surfaces.append(surface)
-    return (surfaces, spec, marked) if marks else (surfaces, spec)
+    return (surfaces, spec, marked, (zmin, base)) if marks else (surfaces, spec)
 
 
 def _inpainted(zmin, objects, base):

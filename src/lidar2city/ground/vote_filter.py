@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._grid import (
+    _disk_chain,
     _is_square_step,
     _unit_step,
     bilinear_weights,
@@ -58,9 +59,11 @@ VOTE_VETO = 0.8
 def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float = 1.25,
                   threshold: float = 0.5, extend: float = 10.0, jump: float = 0.6,
                   raised: float = 0.6, min_cells: int = 4, outlier_radius: float = 5.0,
-                  outlier_depth: float = 1.5, slopes=VOTE_SLOPES, fourth: float | None = None):
+                  outlier_depth: float = 1.5, slopes=VOTE_SLOPES, fourth: float | None = None,
+                  rise: float | None = None):
     """The cues of :func:`smrf_vote`: each point's height off three provisional surfaces, and
-    its distance to the nearest wall (and off a fourth surface when asked).
+    its distance to the nearest wall (and off a fourth surface, and the rise of the walls
+    around over it, when asked).
 
     From one progressive opening (:func:`~lidar2city.ground.smrf_surface`,
     minimum surface continued ``extend`` m across the tile edges) three
@@ -73,7 +76,11 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
     when the ratio is at most 1. The same opening marks the cells it cuts at
     :data:`WALL_SLOPE` (walls, crown edges); a point's wall distance is the
     distance (m, octagon metric on the grid) from its cell to the nearest such
-    cell, inf beyond :data:`WALL_REACH`.
+    cell, inf beyond :data:`WALL_REACH`. With ``rise`` (m), a point's rise
+    is the height of the lowest wall cell within ``rise`` metres (octagon
+    metric; a cell's height is its lowest point; empty cells left out) above
+    the point: large at the foot of buildings, about zero or below on a roof
+    or a terrace top.
 
     Parameters
     ----------
@@ -89,14 +96,19 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
         SMRF slope of a fourth surface built like the lenient one (the
         ``veto`` option of :func:`smrf_vote` uses :data:`VETO_SLOPE`); None
         (default): three surfaces.
+    rise : float or None
+        Reach (m) of the rise of the walls above each point, added as the
+        last column (the ``above`` option of :func:`smrf_vote` uses its
+        ``clear``); None (default): no such column.
 
     Returns
     -------
-    features : ndarray, shape (N, 4), or (N, 5) with ``fourth``
+    features : ndarray, shape (N, 4), one more column with ``fourth`` and one with ``rise``
         Tolerance ratios to the strict segment surface, the lenient segment
         surface and plain SMRF's strict surface (inf for low outliers), the
-        wall distance (m), and with ``fourth`` the ratio to the fourth
-        surface.
+        wall distance (m), with ``fourth`` the ratio to the fourth surface,
+        and with ``rise`` the rise (m) of the walls within reach (inf
+        where none is, and for low outliers).
     outliers : ndarray of bool, shape (N,)
         Low outliers (:func:`~lidar2city.ground.low_outliers`).
 
@@ -112,16 +124,21 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
     xyz, out = _checked_outliers(xyz, cell=cell, slope=slopes[0], window=window, scalar=scalar,
                                  threshold=threshold, outlier_radius=outlier_radius,
                                  outlier_depth=outlier_depth, jump=jump,
-                                 **dict(zip(("lenient", "fourth"), also)))
+                                 **dict(zip(("lenient", "fourth"), also)),
+                                 **({} if rise is None else {"rise": rise}))
     n = len(xyz)
-    features = np.full((n, 3 + len(also)), np.inf)
+    features = np.full((n, 3 + len(also) + (rise is not None)), np.inf)
     if n == 0 or out.all():
         return features, out
-    surfaces, spec, (walls,) = _segment_surfaces(
+    surfaces, spec, (walls,), (zmin, base) = _segment_surfaces(
         xyz, out, cell=cell, slope=slopes[0], window=window, extend=extend, jump=jump,
         raised=raised, min_cells=min_cells, also=also, marks=(WALL_SLOPE,))
     r, c = cell_of(xyz[:, :2], spec)
     features[:, 3] = _distance_to(walls, int(np.ceil(WALL_REACH / cell)))[r, c] * cell
+    if rise is not None:
+        tops = np.where(walls & ~np.isnan(zmin), zmin.astype(np.float64) + base, np.inf)
+        lowest = _disk_chain(tops, int(np.floor(rise / cell)), False)
+        features[:, -1] = lowest[r, c] - xyz[:, 2]
     weights = bilinear_weights(spec, xyz[:, :2])
     # surfaces: strict, lenient, [fourth,] plain; columns: strict, lenient, plain, wall, [fourth]
     for k, surface in zip((0, 1, 4, 2) if fourth is not None else (0, 1, 2), surfaces):
@@ -149,17 +166,25 @@ def _distance_to(mask, steps):
 
 
 def vote_rule(features, *, near: float, steep: float, plain: float,
-              clear: float, veto: float | None = None) -> np.ndarray:
+              clear: float, veto: float | None = None,
+              above: float | None = None) -> np.ndarray:
     """The decision of :func:`smrf_vote` on the features of :func:`vote_features` (N, 4).
 
     ``near`` the strict segment surface: ground when within ``steep`` of the
     lenient one (and, with ``veto``, within ``veto`` of the fourth surface,
     column 4 of features (N, 5)); farther: ground when within ``plain`` of
     plain strict SMRF, or within SMRF's own tolerance (ratio 1) of the
-    lenient surface more than ``clear`` metres from any wall.
+    lenient surface with no wall within ``clear`` metres, or (with
+    ``above``) none whose top is less than ``above`` metres over it (the
+    rise, the last column of the features, measured within ``clear``).
     """
     f = np.asarray(features)
-    far = (f[:, 2] <= plain) | ((f[:, 1] <= 1.0) & (f[:, 3] > clear))
+    clear_of_walls = f[:, 3] > clear
+    if above is not None:
+        if f.shape[1] < (6 if veto is not None else 5):
+            raise InputError("above needs the walls' rise (vote_features(..., rise=clear))")
+        clear_of_walls |= f[:, -1] > above
+    far = (f[:, 2] <= plain) | ((f[:, 1] <= 1.0) & clear_of_walls)
     close = f[:, 1] <= steep
     if veto is not None:
         if f.shape[1] < 5:
@@ -173,7 +198,8 @@ def smrf_vote(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float = 1
               raised: float = 0.6, min_cells: int = 4, outlier_radius: float = 5.0,
               outlier_depth: float = 1.5, near: float = VOTE_RULE["near"],
               steep: float = VOTE_RULE["steep"], plain: float = VOTE_RULE["plain"],
-              clear: float = VOTE_RULE["clear"], veto: float | None = VOTE_VETO) -> np.ndarray:
+              clear: float = VOTE_RULE["clear"], veto: float | None = VOTE_VETO,
+              above: float | None = None) -> np.ndarray:
     """Ground points by a vote of three SMRF surfaces, with a rule learnt on labelled samples.
 
     SMRF's slope decides what its opening cuts: a strict one (0.1) removes low
@@ -220,6 +246,11 @@ outlier_depth
         3.47 %; on all seven samples 3.04 % against 3.07 %, but samp11 8.01 %
         against 7.87 % (more type I) and the synthetic terrains 0.63 %
         against 0.61 %.
+    above : float or None
+        In the far branch, the lenient surface decides also near walls when
+        every wall within ``clear`` rises more than ``above`` metres over the
+        point (ground at the foot of buildings, not on a roof); None
+        (default): only ``clear`` counts.
 
     Returns
     -------
@@ -253,15 +284,19 @@ outlier_depth
     True
     """
     _check_positive(near=near, steep=steep, plain=plain, clear=clear,
-                    **({} if veto is None else {"veto": veto}))
+                    **({} if veto is None else {"veto": veto}),
+                    **({} if above is None else {"above": above}))
+    if above is not None and np.isinf(above):
+        above = None
     if veto is not None and np.isinf(veto):
         veto = None  # no point is vetoed: the fourth surface is not built
     features, out = vote_features(xyz, cell=cell, window=window, scalar=scalar,
                                 threshold=threshold, extend=extend, jump=jump, raised=raised,
                                 min_cells=min_cells, outlier_radius=outlier_radius,
                                 outlier_depth=outlier_depth,
-                                fourth=None if veto is None else VETO_SLOPE)
+                                fourth=None if veto is None else VETO_SLOPE,
+                                rise=None if above is None else clear)
     ground = vote_rule(features, near=near, steep=steep, plain=plain, clear=clear,
-                       veto=veto) & ~out
+                       veto=veto, above=above) & ~out
     logger.debug("smrf_vote: %d of %d points ground", int(ground.sum()), len(ground))
     return ground
