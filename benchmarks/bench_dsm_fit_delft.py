@@ -26,8 +26,9 @@ Protocol (the BGT footprints cover only the two central blocks of the tile):
   above-ground pieces holding no reference pixel);
 * sub-pixel edges: on outline edges against low ground, the mean distance
   to the reference edge now and with each edge moved to the DSM's own
-  half-height roof edge (minus the best single inset), and how well the
-  DSM's edge predicts the reference's (:func:`edge_study`);
+  half-height roof edge (minus the best single inset), how well the
+  DSM's edge predicts the reference's, and the mean offset on eave edges
+  (the roof rising inwards) and flat ones (:func:`edge_study`);
 * oracle: the reference footprints rasterised on the DSM grid, fitted as if
   they were the segmented regions: what the fitting alone loses;
 * segmentation alone: the same regions' pixel outlines, not fitted
@@ -180,7 +181,17 @@ def edge_study(pred, ref_union, hull, nd, transform, cell, y_split, band=1.5):
                 continue
             roof = max(float(np.median(inner)), 1e-6)
             s_dsm = -band + 2 * band * float(np.clip(z / roof, 0, 1).mean())
-            rows.append((length, s_ref, s_dsm, (a[1] + b[1]) / 2 >= y_split))
+            # the roof's rise inwards (m/m) from 0.75 to 2.75 m inside: > 0 on an eave edge
+            us = np.arange(0.5, length - 0.5, cell)
+            rise = []
+            for depth in (0.75, 2.75):
+                q = a[None, :] + us[:, None] * t[None, :] - depth * n[None, :]
+                qc = np.floor((q[:, 0] - transform.c) / cell).astype(int)
+                qr = np.floor((transform.f - q[:, 1]) / cell).astype(int)
+                ok = (qr >= 0) & (qr < h) & (qc >= 0) & (qc < w)
+                rise.append(float(np.median(nd[qr[ok], qc[ok]])) if ok.any() else np.nan)
+            rows.append((length, s_ref, s_dsm, (a[1] + b[1]) / 2 >= y_split,
+                         (rise[1] - rise[0]) / 2.0))
     if not rows:
         return "no edge"
     o = np.array(rows)
@@ -194,7 +205,12 @@ def edge_study(pred, ref_union, hull, nd, transform, cell, y_split, band=1.5):
                    f"(mean {np.average(sr, weights=L):+.3f}),"
                    f" at the DSM half-height edge minus {d0:.2f} m "
                    f"{np.average(np.abs(sr - (sd - d0)), weights=L):.3f} m, correlation "
-                   f"{np.corrcoef(sr, sd)[0, 1]:+.2f}")
+                   f"{np.corrcoef(sr, sd)[0, 1]:+.2f}; mean offset by the roof's rise inwards: "
+                   + ", ".join(
+                       f"{lab} {L[k].sum():.0f} m {np.average(sr[k], weights=L[k]):+.3f} m"
+                       for lab, k in (("eaves (> 0.3 m/m)", o[sel, 4] > 0.3),
+                                      ("flat (within 0.1 m/m)", np.abs(o[sel, 4]) < 0.1))
+                       if k.any()))
     return "; ".join(out)
 
 

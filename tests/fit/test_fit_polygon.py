@@ -368,6 +368,34 @@ def test_give_overlaps_to_the_pixel_owner_while_the_loser_stays_aligned():
     assert give_overlaps([a], lab, [1], cell=0.5) == [a]
 
 
+def test_give_overlaps_allows_a_small_notch_off_the_losers_axes():
+    from shapely import affinity
+
+    from lidar2city.fit.polygon import _aligned_share, give_overlaps
+
+    lab = np.zeros((40, 40), np.int32)
+    lab[:20, :20] = 1  # a house: x 0-10 m, y -10-0 m
+    lab[20:, 20:] = 2  # a shed to its south-east on axes 20 degrees off
+    house = shapely.box(0, -10, 10, 0)
+    # the shed's north-west corner reaches 0.7 m into the house's corner
+    shed = affinity.rotate(shapely.box(9.3, -15.0, 14.0, -9.3), 20.0, origin=(9.3, -9.3))
+    over = house.intersection(shed).area
+    assert 0.1 < over < 1.5
+    # the share rule alone refuses the notch in a small outline
+    ga, gs = give_overlaps([house, shed], lab, [1, 2], cell=0.5, min_aligned=0.99)
+    assert gs.equals(shed)
+    ga, gs = give_overlaps([house, shed], lab, [1, 2], cell=0.5, min_aligned=0.99, max_notch=3.0)
+    assert ga.equals(house) and gs.intersection(ga).area < 1e-6
+    assert gs.area == pytest.approx(shed.area - over, abs=1e-2)
+    assert _aligned_share(gs) < _aligned_share(shed)
+    # a whole wall on the other's axes is more than a notch: still refused
+    c = affinity.rotate(shapely.box(9.0, -9.0, 19.0, -1.0), 20.0)
+    lab2 = np.zeros((20, 40), np.int32)
+    lab2[:, :20], lab2[:, 20:] = 1, 2
+    _, gc = give_overlaps([house, c], lab2, [1, 2], cell=0.5, min_aligned=0.99, max_notch=3.0)
+    assert gc.equals(c)
+
+
 def test_outlines_from_labels_insets_only_the_edges_facing_the_background():
     from lidar2city.tools.dsm import outlines_from_labels
 

@@ -117,6 +117,13 @@ class PolygonFitConfig:
                                         "of its outline within 3 degrees of its own axes (the "
                                         "cut follows the owner's edges); 0: always; above 1: "
                                         "never")
+    overlap_notch: float = field(3.0, "an overlap refused by overlap_aligned still goes to the "
+                                      "owner when the cut adds at most this much outline "
+                                      "length (m) off the other outline's axes: a shed or "
+                                      "annex on other axes that reaches into a house's "
+                                      "outline loses that corner as a small notch instead "
+                                      "of claiming the house's ground (the share rule alone "
+                                      "refuses any notch in a small outline); 0: off")
     outline_inset: float = field(0.05, "after the fit, the outline's edges facing the background "
                                       "(not another region) are moved in by this distance (m), "
                                       "whatever their direction: the highest point per cell "
@@ -1141,7 +1148,8 @@ def inset_outer_edges(polygon, outer, distance):
     return g
 
 
-def give_overlaps(polygons, labels, ids, *, cell, min_area=1e-6, min_aligned=0.9) -> list:
+def give_overlaps(polygons, labels, ids, *, cell, min_area=1e-6, min_aligned=0.9,
+                  max_notch=0.0) -> list:
     """Outlines whose remaining pairwise overlaps go to the region that owns the pixels.
 
     Outlines fitted to touching regions may overlap where their axes differ
@@ -1165,6 +1173,10 @@ def give_overlaps(polygons, labels, ids, *, cell, min_area=1e-6, min_aligned=0.9
         The overlap is given only when the losing outline then keeps at least
         this share of its exterior length within 3 degrees of its own main
         axes (or no less than it had): the cut follows the winner's edges.
+    max_notch : float
+        An overlap refused by ``min_aligned`` is still given when the cut
+        adds at most this length (m) of exterior off the loser's main axes
+        (a small notch); 0: never.
 
     Returns
     -------
@@ -1216,18 +1228,30 @@ def give_overlaps(polygons, labels, ids, *, cell, min_area=1e-6, min_aligned=0.9
             continue
         # the cut follows the winner's edges: kept only while the loser's outline stays
         # mostly on its own axes
-        if _aligned_share(g) >= min(min_aligned, _aligned_share(polys[loser])):
+        if (_aligned_share(g) >= min(min_aligned, _aligned_share(polys[loser]))
+                or _off_axis_length(g) - _off_axis_length(polys[loser]) <= max_notch):
             polys[loser] = g
     return polys
 
 
-def _aligned_share(polygon, tolerance_deg=3.0) -> float:
-    """Share of the exterior length within ``tolerance_deg`` of the polygon's main axes."""
+def _edge_offsets(polygon):
+    """Exterior edge lengths and their angles (radians) off the polygon's main axes."""
     c = np.asarray(polygon.exterior.coords)
     d = np.diff(c, axis=0)
     length = np.hypot(d[:, 0], d[:, 1])
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]) - _main_axis(polygon), np.pi / 2)
+    return length, np.minimum(ang, np.pi / 2 - ang)
+
+
+def _aligned_share(polygon, tolerance_deg=3.0) -> float:
+    """Share of the exterior length within ``tolerance_deg`` of the polygon's main axes."""
+    length, off = _edge_offsets(polygon)
     if length.sum() <= 0:
         return 0.0
-    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]) - _main_axis(polygon), np.pi / 2)
-    off = np.minimum(ang, np.pi / 2 - ang)
     return float(length[off <= np.deg2rad(tolerance_deg)].sum() / length.sum())
+
+
+def _off_axis_length(polygon, tolerance_deg=3.0) -> float:
+    """Exterior length (m) more than ``tolerance_deg`` off the polygon's main axes."""
+    length, off = _edge_offsets(polygon)
+    return float(length[off > np.deg2rad(tolerance_deg)].sum())

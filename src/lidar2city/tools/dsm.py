@@ -300,7 +300,8 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
     where two such outlines share their main axis (within 3 degrees) their
     overlap is then split along it (:func:`~lidar2city.fit.polygon.split_overlaps`),
     and other overlaps go to the region owning their pixels while the other
-    outline stays on its axes (``fit_config.overlap_aligned``,
+    outline stays on its axes (``fit_config.overlap_aligned``) or gains at most
+    a small notch off them (``fit_config.overlap_notch``,
     :func:`~lidar2city.fit.polygon.give_overlaps`). Each fitted outline's edges
     facing the background move in by ``fit_config.outline_inset``
     (:func:`~lidar2city.fit.polygon.inset_outer_edges`).
@@ -372,12 +373,13 @@ def outlines_from_labels(labels, ndsm, *, cell, regularize="fit", fit_config=Non
             progress(i, total)
     if grow:
         _split_shared_walls(out, region_ids, labels, ndsm, cell=cell, lod1_config=lc,
-                            min_aligned=(fit_config or PolygonFitConfig()).overlap_aligned)
+                            min_aligned=(fit_config or PolygonFitConfig()).overlap_aligned,
+                            max_notch=(fit_config or PolygonFitConfig()).overlap_notch)
     return out
 
 
 def _split_shared_walls(results, region_ids, labels, ndsm, *, cell, lod1_config,
-                        min_aligned=0.9):
+                        min_aligned=0.9, max_notch=0.0):
     """Split the overlaps the shared-wall margin leaves between outlines: along the common
     axis of outlines on one axis, to the region owning the pixels for the others."""
     from shapely.geometry.polygon import orient
@@ -387,7 +389,7 @@ def _split_shared_walls(results, region_ids, labels, ndsm, *, cell, lod1_config,
     polys = split_overlaps([r.footprint for r in ok])
     if min_aligned <= 1.0:
         polys = give_overlaps(polys, labels, ids, cell=cell,
-                              min_aligned=min_aligned)
+                              min_aligned=min_aligned, max_notch=max_notch)
     for r, poly in zip(ok, polys, strict=True):
         if poly is r.footprint:
             continue
