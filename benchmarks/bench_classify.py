@@ -17,7 +17,8 @@ share of first-pulse points called building, and how the return fields were
 read), and the synthetic town re-written as other surveys would record it
 (:mod:`lidar2city.synthetic_surveys`: first/last-pulse pairs in file order and
 shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
-25 pts/m2) with building precision / recall / F1 against its truth.
+25 pts/m2, scan lines 8 x closer along than across at 4, 10 and 20 pts/m2) with
+building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
 ``--nebraska-png PATH`` draws where the Nebraska sample's building points are
 missed, which are as dark as the leaves, and the reference's building share per
@@ -613,9 +614,14 @@ def synthetic_surveys():
              ("canopy, no returns, 10", "no_returns", 10.0, False, True),
              ("canopy, 5 echoes, 1.5", "multi", 1.5, False, True),
              ("canopy, pairs, 1.5", "pairs", 1.5, False, True),
-             ("canopy, single, 1.5", "single", 1.5, False, True)]
-    for label, kind, density, shuffle, canopy in cases:
-        cloud = make_survey(kind, density=density, shuffle=shuffle, canopy=canopy)
+             ("canopy, single, 1.5", "single", 1.5, False, True),
+             # scan lines 8 x closer along than across (make_survey anisotropy=8)
+             ("scan lines 8:1, 4 pts/m2", "multi", 4.0, False, False, 8.0),
+             ("scan lines 8:1, 10 pts/m2", "multi", 10.0, False, False, 8.0),
+             ("scan lines 8:1, 20 pts/m2", "multi", 20.0, False, False, 8.0)]
+    for label, kind, density, shuffle, canopy, *aniso in cases:
+        cloud = make_survey(kind, density=density, shuffle=shuffle, canopy=canopy,
+                            anisotropy=aniso[0] if aniso else 1.0)
         if kind == "feet":
             from lidar2city.io.las import write_points
 
