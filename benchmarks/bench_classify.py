@@ -17,7 +17,8 @@ share of first-pulse points called building, and how the return fields were
 read), and the synthetic town re-written as other surveys would record it
 (:mod:`lidar2city.synthetic_surveys`: first/last-pulse pairs in file order and
 shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
-25 pts/m2) with building precision / recall / F1 against its truth.
+25 pts/m2, scan lines 8 x closer along than across at 4, 10 and 20 pts/m2) with
+building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
 ``--nebraska-png PATH`` draws where the Nebraska sample's building points are
 missed, which are as dark as the leaves, and the reference's building share per
@@ -27,7 +28,10 @@ breakdown by cause, with see-through and intensity tests, and the test of a
 the canopy over and beside roofs, and what labelling every point of our outline
 building would score on each, is printed after the Nebraska breakdown;
 ``--reconstruct`` also runs ``lidar2city reconstruct`` on CSite4 without
-footprints (LoD2.2) and validates the result (~10 min on 2 busy cores).
+footprints (LoD2.2) and validates the result (~10 min on 2 busy cores);
+``--scan-lines`` also reconstructs the synthetic town recorded in scan lines 8:1
+(10 pts/m2) without footprints, LoD1.2 + 1.3 + 2.2: models, truth buildings
+matched at IoU >= 0.5 by a LoD1.2 footprint, validity.
 
 Reference mappings: AHN (Delft) class 6 building, class 1 "unclassified
 (vegetation and other)" counted as vegetation, 9 water and 26 civil
@@ -613,9 +617,14 @@ def synthetic_surveys():
              ("canopy, no returns, 10", "no_returns", 10.0, False, True),
              ("canopy, 5 echoes, 1.5", "multi", 1.5, False, True),
              ("canopy, pairs, 1.5", "pairs", 1.5, False, True),
-             ("canopy, single, 1.5", "single", 1.5, False, True)]
-    for label, kind, density, shuffle, canopy in cases:
-        cloud = make_survey(kind, density=density, shuffle=shuffle, canopy=canopy)
+             ("canopy, single, 1.5", "single", 1.5, False, True),
+             # scan lines 8 x closer along than across (make_survey anisotropy=8)
+             ("scan lines 8:1, 4 pts/m2", "multi", 4.0, False, False, 8.0),
+             ("scan lines 8:1, 10 pts/m2", "multi", 10.0, False, False, 8.0),
+             ("scan lines 8:1, 20 pts/m2", "multi", 20.0, False, False, 8.0)]
+    for label, kind, density, shuffle, canopy, *aniso in cases:
+        cloud = make_survey(kind, density=density, shuffle=shuffle, canopy=canopy,
+                            anisotropy=aniso[0] if aniso else 1.0)
         if kind == "feet":
             from lidar2city.io.las import write_points
 
@@ -674,8 +683,53 @@ def reconstruct_csite4(data: Path):
         print(f"  {oid:<5} {area:8.0f} m2  {kind:<13} {why}")
 
 
+def scan_lines_reconstruct():
+    """``--scan-lines``: reconstruct without footprints on the town in scan lines 8:1."""
+    import json
+    import tempfile
+
+    import shapely
+
+    from lidar2city.datamodel import PointCloud
+    from lidar2city.io.las import write_points
+    from lidar2city.synthetic import make_town
+    from lidar2city.synthetic_surveys import scan_lines, survey_variant
+    from lidar2city.tools.reconstruct import reconstruct
+    from lidar2city.tools.validate import validate_file
+
+    town = make_town(size=(200, 150), density=120.0, seed=0)
+    c = scan_lines(survey_variant(town, "multi"), 10.0, 8.0)
+    raw = PointCloud(c.xyz, c.origin, c.crs, c.xy_unit, c.z_unit,
+                     {k: v for k, v in c.attributes.items() if k != "classification"})
+    with tempfile.TemporaryDirectory() as tmp:
+        src, out = Path(tmp) / "lines.laz", Path(tmp) / "lines.city.json"
+        write_points(src, raw)
+        s = reconstruct([src], out, lods=("1.2", "1.3", "2.2"))
+        valid = validate_file(out).valid
+        doc = json.loads(out.read_text())
+    t = doc["transform"]
+    v = np.array(doc["vertices"]) * t["scale"] + t["translate"] - np.asarray(town.cloud.origin)
+    polys = []
+    for o in doc["CityObjects"].values():
+        g = [g for g in o.get("geometry", []) if g["lod"] == "1.2"]
+        if o["type"] != "Building" or not g:
+            continue
+        solids = [g[0]["boundaries"]] if g[0]["type"] == "Solid" else g[0]["boundaries"]
+        polys.append(shapely.union_all([shapely.Polygon(v[sol[0][0][0], :2],
+                                                        [v[r, :2] for r in sol[0][0][1:]])
+                                        for sol in solids]))
+    hit = sum(any(tp.intersection(p).area / tp.union(p).area >= 0.5 for p in polys)
+              for tp in town.footprints.geometries)
+    print(f"\nscan lines 8:1, 10 pts/m2, no footprints: {s.done}/{s.total} modelled, "
+          f"{hit}/{len(town.footprints.geometries)} truth buildings matched (IoU >= 0.5); "
+          f"{'valid' if valid else 'INVALID'}")
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
+    lines = "--scan-lines" in args
+    if lines:
+        args.remove("--scan-lines")
     png = None
     neb_png = None
     rebuild = "--reconstruct" in args
@@ -700,3 +754,5 @@ if __name__ == "__main__":
     synthetic_surveys()
     if rebuild:
         reconstruct_csite4(folder)
+    if lines:
+        scan_lines_reconstruct()

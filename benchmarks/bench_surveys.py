@@ -19,7 +19,11 @@ buildings modelled / failed / with the LoD1.2 prism standing in for LoD2.2
 whether the file validates; for the crop and the thinned surveys, the RMSE of
 the models (LoD2.2, or the LoD1.2 prism standing in) to the crop's building points.
 Last, ISPRS samp11 (a sparse UTM survey) without footprints: traced buildings
-modelled and failed.
+modelled and failed. ``--sites`` prints only the footprints traced from the
+ISPRS sites CSite1 (points 4 m apart) and FSite5 (first/last-pulse pairs, our
+own ``classify``): count and area, with the spacing measured from the distinct
+positions on squares of twice the spacing, and as before session 10 (all points
+on fixed 2 m squares).
 """
 
 from __future__ import annotations
@@ -209,5 +213,37 @@ def sparse_survey_without_footprints(data):
           + f"; {'valid' if valid else 'INVALID'}")
 
 
+def sparse_sites_footprints(data):
+    """``--sites``: footprints of the raw ISPRS sites CSite1 and FSite5 (our classify),
+    on the grid of the spacing measured now and as it was measured before."""
+    from lidar2city.footprints import extract_footprints, grid_lengths, point_spacing
+    from lidar2city.io.las import read_points
+    from lidar2city.tools.classify import classify_cloud
+
+    for name in ("CSite1_red2-utm.laz", "FSite5_orig-utm.laz"):
+        src = data / "isprs" / "sites" / name
+        if not src.exists():
+            continue
+        cloud = read_points(src)
+        cls = np.asarray(classify_cloud(cloud))
+        b = cloud.xyz[cls == 6, :2]
+        now, before = point_spacing(b), point_spacing(b, cell=2.0)
+        out = []
+        for s in (now, before):
+            lengths = grid_lengths(s)
+            fps = extract_footprints(cloud.xyz, cls, cell=lengths["cell"], sigma=lengths["sigma"],
+                                     void_distance=lengths["void_distance"],
+                                     simplify=lengths["simplify"],
+                                     snake_cell=lengths["snake_cell"])
+            out.append(f"{len(fps)} footprints of {sum(f.polygon.area for f in fps):,.0f} m2 "
+                       f"(spacing {s:.2f} m)")
+        print(f"{name:22s} {len(b):,} building points: {out[0]}; before: {out[1]}")
+
+
 if __name__ == "__main__":
-    main()
+    _data = Path(__file__).resolve().parents[2] / "shared" / "data"
+    _args = [a for a in sys.argv[1:] if a != "--sites"]
+    if "--sites" in sys.argv[1:]:
+        sparse_sites_footprints(Path(_args[0]) if _args else _data)
+    else:
+        main()

@@ -38,7 +38,7 @@ from .datamodel import ASPRS, PointCloud
 from .errors import InputError
 from .synthetic import SyntheticTown, make_town
 
-__all__ = ["SURVEY_KINDS", "survey_variant", "make_survey", "add_canopy", "FEET_CRS"]
+__all__ = ["SURVEY_KINDS", "survey_variant", "make_survey", "scan_lines", "add_canopy", "FEET_CRS"]
 
 SURVEY_KINDS = ("multi", "pairs", "single", "no_returns", "feet")
 #: NAD83(2011) / Nebraska (ftUS) + NAVD88 height (ftUS): a feet CRS for x, y and z.
@@ -154,16 +154,62 @@ def survey_variant(town: SyntheticTown, kind: str, *, seed: int = 0,
 
 
 def make_survey(kind: str, *, density: float = 10.0, size=(200.0, 150.0), seed: int = 0,
-                shuffle: bool = False, canopy: bool = False, **town) -> PointCloud:
+                shuffle: bool = False, canopy: bool = False, anisotropy: float = 1.0,
+                **town) -> PointCloud:
     """:func:`make_town` at ``density`` (first echoes per m2), recorded as survey ``kind``.
 
     ``canopy=True`` adds :func:`add_canopy`'s multi-echo stands and overhanging
-    crowns first. Extra keyword arguments go to :func:`make_town`.
+    crowns first. ``anisotropy > 1`` records the town in scan lines
+    (:func:`scan_lines`): lines ``anisotropy`` times farther apart than the
+    points along them. Extra keyword arguments go to :func:`make_town`.
     """
-    t = make_town(size=size, density=density, seed=seed, **town)
+    if not anisotropy >= 1:
+        raise InputError(f"anisotropy must be >= 1, got {anisotropy!r}")
+    # scan lines are cut from a town dense enough to hold a point every along-line step
+    t = make_town(size=size, density=density * (1.5 * anisotropy if anisotropy > 1 else 1.0),
+                  seed=seed, **town)
     if canopy:
         t = add_canopy(t, seed=seed)
-    return survey_variant(t, kind, seed=seed, shuffle=shuffle)
+    cloud = survey_variant(t, kind, seed=seed, shuffle=shuffle)
+    return scan_lines(cloud, density, anisotropy) if anisotropy > 1 else cloud
+
+
+def scan_lines(cloud: PointCloud, density: float, anisotropy: float = 8.0) -> PointCloud:
+    """The points of ``cloud`` a scanner with strongly anisotropic sampling would record.
+
+    Scan lines run along x, ``sqrt(anisotropy / density)`` apart in y, with one
+    point every ``1 / anisotropy`` of that along each (the lowest-index point of
+    ``cloud`` in each step of a strip as wide as the step): ``density`` points
+    per m2, e.g. 8:1 for a fast scan mirror over a slow platform. ``cloud`` must
+    hold ``1.5 x anisotropy x density`` points per m2 or so for every step to
+    have a point. Pure; the points keep their attributes (all echoes of a
+    pulse lie at its x, y, so pulses stay whole).
+
+    Examples
+    --------
+    >>> from lidar2city.synthetic import make_town
+    >>> town = make_town(size=(60, 50), density=96, seed=1)
+    >>> lines = scan_lines(town.cloud, 8.0, 8.0)
+    >>> round(len(lines) / (60 * 50), 0)
+    8.0
+    """
+    if not (density > 0 and anisotropy >= 1):
+        raise InputError(f"density must be > 0 and anisotropy >= 1, got {density!r}, "
+                         f"{anisotropy!r}")
+    gap = np.sqrt(anisotropy / density)
+    step = gap / anisotropy
+    x, y = cloud.xyz[:, 0], cloud.xyz[:, 1]
+    on = np.flatnonzero(np.mod(y, gap) < step)
+    key = np.floor(y[on] / gap).astype(np.int64) * (1 << 32) + np.floor(x[on] / step).astype(
+        np.int64)
+    _, first = np.unique(key, return_index=True)
+    # whole pulses: every echo at the x, y of a kept point
+    _, inv = np.unique(np.concatenate([cloud.xyz[on[first], :2], cloud.xyz[on, :2]]), axis=0,
+                       return_inverse=True)
+    inv = inv.ravel()
+    keep = np.sort(on[np.isin(inv[len(first):], inv[:len(first)])])
+    return PointCloud(cloud.xyz[keep], cloud.origin, cloud.crs, cloud.xy_unit, cloud.z_unit,
+                      {k: np.asarray(v)[keep] for k, v in cloud.attributes.items()})
 
 
 def _crowns(rng, town: SyntheticTown, *, cover, overhang, roughness):

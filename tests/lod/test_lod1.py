@@ -457,3 +457,26 @@ def test_lod13_parts_whose_holes_touch_are_opened_and_checked():
     assert low.is_valid  # touching holes make a valid polygon, not a valid prism
     s = prism_solid(low, 0.0, 3.0)
     assert [i.code for i in check_solid(s)] == [303] and not prism_is_valid(s)
+
+
+@pytest.mark.parametrize("offset", [0.001, 0.002, 0.0024])
+def test_lod13_parts_never_overlap_where_a_region_corner_nears_the_outline(offset):
+    """A height region's corner (a cell corner) a few mm inside an oblique outline edge:
+    the clip left two vertices that close in both parts (ISPRS CSite2, b30: 2 mm), each
+    prism dropped one of them, not the same one, and the parts overlapped by a sliver
+    (val3dity 601 in the written file) while the building said valid."""
+    from lidar2city.validate.solid import parts_overlap
+
+    slope = 0.3  # the outline's top edge passes ``offset`` above the cell corner (24, 18)
+    fp = Polygon([(12, 6), (32, 6), (32, 18 + offset - 8 * slope),
+                  (12, 18 + offset + 12 * slope)])
+    pts = _grid_points(fp, lambda xy: np.where(
+        (xy[:, 0] < 24) & (xy[:, 1] > 18 - (24 - xy[:, 0]) * 0.4), 14.0, 8.0), 0.25)
+    r = reconstruct_building(fp, pts, _ground_ring(fp), config=Lod1Config(lods=("1.2", "1.3")))
+    assert r.ok and r.attributes["lod13_parts"] == 2 and r.attributes["valid"]
+    assert parts_overlap(r.parts["1.3"]) == []
+    # the parts still tile the footprint (snapped to the 1 mm output grid)
+    ground = r.attributes["ground_height"]
+    area = sum(solid_volume(s.vertices, s.surfaces) / (s.vertices[:, 2].max() - ground)
+               for s in r.parts["1.3"])
+    assert area == pytest.approx(fp.area, abs=20 * 0.001)

@@ -59,7 +59,7 @@ from ..datamodel import ASPRS
 from ..errors import ConfigError, InputError
 from ..ground.dtm import dtm_from_ground, height_above_ground
 from .cues import survey_cues
-from .features import local_shape, point_spacing
+from .features import local_shape, point_spacing, scan_line_gap
 from .regions import planar_regions
 
 logger = logging.getLogger(__name__)
@@ -440,8 +440,19 @@ def _classify_kept(xyz, ground, hag, multi_all, not_last_all, has_returns, rgb, 
     # neighbourhoods keep a size in metres; every point then takes the
     # features of its nearest kept point
     obj_spacing = point_spacing(p[:, :2])
-    if obj_spacing < c.feature_spacing:
-        rep = _voxel_thin(p, c.feature_spacing)
+    # points in scan lines far closer along than across (8:1) have neighbourhoods on
+    # one line, with no plane: they are thinned to a third of the gap between the
+    # lines, so that the 8 nearest reach the lines beside (an 8:1 survey of the
+    # synthetic town at 4 / 10 / 20 pts/m2: building F1 0.993 / 0.999 / 0.999; 0.000
+    # unthinned; thinned to half the gap 0.821 at 4, to a quarter 0.861 at 20)
+    gap = scan_line_gap(p[:, :2], obj_spacing) if len(p) > c.k else None
+    if gap is not None:
+        logger.info("object points in scan lines %.2f m apart (%.2f m spacing): thinned to "
+                    "%.2f m for the local features", gap, obj_spacing, gap / 3.0)
+    thin = max((gap or 0.0) / 3.0, c.feature_spacing if obj_spacing < c.feature_spacing
+               else 0.0)
+    if thin > 0:
+        rep = _voxel_thin(p, thin)
         q = p[rep]
         nn = np.asarray(cKDTree(q).query(p, k=1, workers=-1)[1], dtype=np.int64)
     else:

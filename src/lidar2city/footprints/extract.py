@@ -37,6 +37,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..classify.features import scan_line_gap
 from ..config import field as cfield
 from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
 from .grid import (Grid, building_fraction, building_regions, cell_heights, point_spacing,
@@ -222,6 +223,13 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     if len(bxy) < 3:
         raise EmptyInputError(f"no building points (class {building_class}) in the input")
     spacing = point_spacing(bxy)
+    # scan lines far closer along than across: the grid must bridge the gap between
+    # lines, or every line over a roof is a footprint of its own (8:1 at 8 pts/m2)
+    gap = scan_line_gap(bxy, spacing)
+    if gap is not None:
+        logger.info("building points in scan lines %.2f m apart: spacing %.3f m taken as %.3f m",
+                    gap, spacing, max(spacing, 0.75 * gap))
+        spacing = max(spacing, 0.75 * gap)
     L = grid_lengths(spacing, cell=cell, sigma=sigma, void_distance=void_distance,
                      simplify=simplify, snake_cell=snake_cell)
     logger.info("building point spacing %.3f m; cell %.3f m, sigma %.3f m, void %.2f m",

@@ -19,7 +19,7 @@ from ..errors import FileFormatError, Lidar2CityError
 
 __all__ = ["atomic_path", "check_input_file", "check_output_path", "make_output_dir",
            "begin_run", "end_run", "remove_run_outputs", "scratch_path", "keep_for_resume",
-           "kept_for_resume"]
+           "kept_for_resume", "new_scratch_file", "remove_stale_scratch"]
 
 #: temporary files being written by this process
 _PENDING: set = set()
@@ -96,6 +96,71 @@ def scratch_path(path):
         with contextlib.suppress(OSError):
             os.unlink(path)
         _PENDING.discard(path)
+
+
+def new_scratch_file(prefix: str, suffix: str) -> str:
+    """An empty scratch file in the temporary folder, named by this host and process.
+
+    The name is ``{prefix}{host}-{pid}-{random}{suffix}``, so that a later run
+    can tell the files of a run killed outright (``kill -9``: no clean-up ran)
+    from those of a live one, and it removes the former first
+    (:func:`remove_stale_scratch`). The caller removes the file
+    (:func:`scratch_path`).
+    """
+    import tempfile
+
+    remove_stale_scratch(prefix, suffix)
+    fd, name = tempfile.mkstemp(prefix=f"{prefix}{_host()}-{os.getpid()}-", suffix=suffix)
+    os.close(fd)
+    return name
+
+
+def remove_stale_scratch(prefix: str, suffix: str) -> list[str]:
+    """Remove the scratch files of :func:`new_scratch_file` whose process has ended.
+
+    Only files named by this host and a process id that no longer runs are
+    removed: never one of a live run (of any user), of another host sharing the
+    folder, or without a process id. Returns the paths removed.
+    """
+    import tempfile
+
+    folder = tempfile.gettempdir()
+    head = f"{prefix}{_host()}-"
+    removed = []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return removed
+    for name in sorted(names):
+        if not (name.startswith(head) and name.endswith(suffix)):
+            continue
+        pid = name[len(head):].split("-", 1)[0]
+        if not pid.isdigit() or _alive(int(pid)):
+            continue
+        path = os.path.join(folder, name)
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+            removed.append(path)
+    return removed
+
+
+def _host() -> str:
+    import socket
+
+    return socket.gethostname().replace(os.sep, "_") or "localhost"
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (on this host); another user's process counts."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: it runs, as someone else
+        return True
+    return True
 
 
 def _reason(exc) -> str:

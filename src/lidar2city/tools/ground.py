@@ -166,5 +166,11 @@ def evaluate_ground_files(pred_path, reference_path, *, check_coordinates: bool 
             if not np.allclose(a, b, rtol=0.0, atol=tol):
                 raise InputError(f"prediction and reference points differ in {axis}: "
                                  "not the same points in the same order")
-    return ground_errors(np.asarray(pred.classification) == ASPRS.GROUND,
-                         np.asarray(ref.classification) == ASPRS.GROUND)
+    ref_ground = np.asarray(ref.classification) == ASPRS.GROUND
+    if not ref_ground.any():  # e.g. a raw tile given as the reference: the scores mean nothing
+        classes = ", ".join(str(int(c)) for c in np.unique(np.asarray(ref.classification))[:8])
+        logger.warning("the reference %s labels no point ground (class 2; its classes: %s): "
+                       "type I is undefined and every point called ground counts as an error; "
+                       "a reference labels bare earth 2 (the ISPRS samples: 2 and 0)",
+                       reference_path, classes)
+    return ground_errors(np.asarray(pred.classification) == ASPRS.GROUND, ref_ground)

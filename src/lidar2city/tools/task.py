@@ -334,9 +334,7 @@ def predecode(tiles, stack) -> tuple:
     blocks, whose failure gives their buildings its reason as before.
     Returns :attr:`BlockOptions.decoded`.
     """
-    import tempfile
-
-    from ..io._atomic import scratch_path
+    from ..io._atomic import new_scratch_file, scratch_path
     from ..io.las import read_tile, save_tile
 
     out, total = [], 0
@@ -350,8 +348,8 @@ def predecode(tiles, stack) -> tuple:
         except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
             logger.debug("%s not decoded ahead: %s", t.path, exc)
             continue
-        fd, name = tempfile.mkstemp(prefix="lidar2city-tile-", suffix=".npz")
-        os.close(fd)
+        # named by host and process: a later run removes what a killed one left
+        name = new_scratch_file("lidar2city-tile-", ".npz")
         path = str(stack.enter_context(scratch_path(name)))
         save_tile(tile, path)
         del tile
