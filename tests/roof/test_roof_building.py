@@ -229,3 +229,22 @@ def test_roof_standing_on_the_floor_keeps_its_slopes(slope):
     (solid,) = res.solids
     assert solid.vertices[:, 2].min() < xyz[:, 2].min() - 0.4  # walls below the eaves
     assert res.attributes["floor_lowered"] > 0
+
+
+def test_part_floor_ignores_low_clutter_facets():
+    # a sloped facet of a few points at ground level (clutter, a ramp) under a high roof
+    # keeps the floor as given; the same roof standing on the floor lowers it
+    from lidar2city.roof.building import part_floor
+
+    roof = _roof_only_gable(40.0)
+    gx, gy = np.meshgrid(np.arange(0.2, 1.4, 0.35), np.arange(0.2, 1.4, 0.35))
+    clutter = np.column_stack([gx.ravel(), gy.ravel(), 0.1 + 0.3 * gx.ravel()])
+    xyz = np.vstack([roof, clutter])
+    labels = np.r_[np.where(roof[:, 1] < 2.0, 0, 1), np.full(len(clutter), 2)]
+    t = np.tan(np.radians(40.0))
+    planes = np.array([[0.0, t, 10.0], [0.0, -t, 10.0 + 4 * t], [0.3, 0.0, 0.1]])
+    poly = shapely.box(0, 0, 5, 4)
+    kw = dict(min_height=0.5, spacing=0.35)
+    assert part_floor(poly, xyz, labels, planes, 0.0, **kw) == 0.0
+    floor = part_floor(poly, roof, labels[:len(roof)], planes[:2], 10.0, **kw)
+    assert floor == pytest.approx(10.0 - 1.0, abs=0.05)
