@@ -1,6 +1,7 @@
 """LoD2.2 roofs on the Delft tile: fit (RMSE, coverage), validity, type IV use, speed.
 
 Usage: python benchmarks/bench_lod22.py [DATA_DIR]   (default $LIDAR2CITY_DATA or ../shared/data)
+       python benchmarks/bench_lod22.py --types [DATA_DIR]   (the City3D roof types only)
 
 Reconstructs the 132 BGT footprints of the shared AHN3 tile at LoD1.2 and LoD2.2
 (the AHN classes: 6 building, 2 ground) and measures, with the code that
@@ -9,6 +10,12 @@ inside each footprint to each model's surface (point to mesh, as roofer's
 rf_rmse); "under a roof" is the share of those points whose vertical line
 meets a roof face. Then the whole-process time of the CLI, and the synthetic
 town of the demo against its truth.
+
+With ``--types``, only the 60 City3D clouds, each roof's type and plane count
+scored against the reference labelled by eye in
+``benchmarks/data/city3d_roof_reference.csv``: per reference type, our type
+right / wrong, the median excess of our roof planes over the reference's, and
+the median RMSE.
 """
 
 from __future__ import annotations
@@ -25,9 +32,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
+REFERENCE = ROOT / "benchmarks" / "data" / "city3d_roof_reference.csv"
+
+
 def data_dir() -> Path:
-    if len(sys.argv) > 1:
-        return Path(sys.argv[1])
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    if args:
+        return Path(args[0])
     if os.environ.get("LIDAR2CITY_DATA"):
         return Path(os.environ["LIDAR2CITY_DATA"])
     return ROOT.parent / "shared" / "data"
@@ -129,7 +140,7 @@ def city3d(folder):
     from lidar2city.validate.solid import check_solid
 
     files = sorted(folder.glob("*.ply"), key=lambda p: int(p.stem))
-    rms, valid, t0 = [], 0, time.perf_counter()
+    rms, valid, t0, ours = [], 0, time.perf_counter(), {}
     for f in files:
         pc = read_ply(f)
         fps = extract_footprints(pc.xyz, np.full(len(pc), 6), regularize="snake")
@@ -138,10 +149,78 @@ def city3d(folder):
         valid += all(not check_solid(s) for s in res.solids)
         inside = shapely.contains_xy(fp, pc.xyz[:, 0], pc.xyz[:, 1])
         rms.append(model_rmse(pc.xyz[inside], res.solids))
+        ours[f.stem] = (res.attributes["roof_type"], res.attributes["roof_planes"], rms[-1])
     print(f"City3D single buildings ({len(files)}; footprints derived, floor = lowest point): "
           f"valid {valid}/{len(files)}, RMSE median {np.median(rms):.3f} m, p90 "
           f"{np.percentile(rms, 90):.3f} m, {time.perf_counter() - t0:.1f} s")
+    return ours
+
+
+def delft_planes():
+    """The Delft tile's roof plane counts and types (no reference there: the distribution)."""
+    from lidar2city.io.las import read_points
+    from lidar2city.io.vector import read_footprints
+    from lidar2city.lod.lod1 import Lod1Config
+    from lidar2city.roof.building import Lod22Config
+    from lidar2city.tools.reconstruct import reconstruct_buildings
+
+    d = data_dir() / "delft"
+    cloud = read_points(d / "ahn3_cropped_1.laz", crs="EPSG:7415")
+    fps, _ = read_footprints(d / "footprints_bgt.gpkg", origin=cloud.origin[:2], target_crs=cloud.crs)
+    res = reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2",)), lod22=Lod22Config())
+    n = np.array([r.attributes.get("roof_planes", 0) for r in res])
+    types = {}
+    for r in res:
+        types[r.attributes.get("roof_type", "-")] = types.get(r.attributes.get("roof_type", "-"), 0) + 1
+    hist = {(str(a) if b == a else f"{a}+" if b is None else f"{a}-{b}"): int(np.sum((n >= a) & (n <= (b or n.max()))))
+            for a, b in ((1, 1), (2, 2), (3, 4), (5, 8), (9, 16), (17, None))}
+    print(f"Delft tile ({len(res)} buildings, no reference): roof planes median {np.median(n):.0f}, "
+          f"buildings by plane count {hist}; types {dict(sorted(types.items()))}")
+
+
+def read_reference(path=REFERENCE):
+    """``{id: (types, planes, main types)}`` of the roofs labelled by eye ('unsure' left out)."""
+    import csv
+
+    rows = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
+    ref = {}
+    for r in csv.DictReader(rows):
+        if r["type"] != "unsure":
+            ref[r["id"]] = (tuple(r["type"].split("|")), int(r["planes"]), tuple(r["main"].split("|")))
+    return ref
+
+
+def score_types(ours, ref):
+    """Per reference type: our type right / wrong, median excess planes, median RMSE."""
+    simple = sorted({t[0] for t, *_ in ref.values()}, key=lambda t: (t == "complex", t))
+    print(f"City3D roof types against the reference by eye ({len(ref)} labelled, "
+          f"{len(ours) - len(ref)} unsure left out; {REFERENCE.name}):")
+    print(f"  {'reference':<12} {'n':>3} {'right':>6} {'wrong':>6} {'excess planes (median)':>23} "
+          f"{'RMSE median':>12}   ours when wrong")
+    for group in [simple[:-1], ["complex"]] if "complex" in simple else [simple]:
+        for t in group:
+            ids = [i for i, (ts, *_) in ref.items() if ts[0] == t]
+            right = [i for i in ids if ours[i][0] in ref[i][0]]
+            excess = [ours[i][1] - ref[i][1] for i in ids]
+            wrong = ", ".join(f"{i}:{ours[i][0]}" for i in ids if i not in right)
+            print(f"  {'|'.join(ref[ids[0]][0]):<12} {len(ids):>3} {len(right):>6} {len(ids) - len(right):>6} "
+                  f"{np.median(excess):>+23.1f} {np.median([ours[i][2] for i in ids]):>10.3f} m   {wrong}")
+    ids = [i for i, (ts, *_) in ref.items() if ts[0] == "complex"]
+    if ids:
+        main = sum(ours[i][0] in ref[i][2] for i in ids if ours[i][0] != "complex")
+        print(f"  complex roofs typed as their main part's type (dormers, annexes left to 'minor'): "
+              f"{main}/{sum(ours[i][0] != 'complex' for i in ids)}")
+    ids = [i for i, (ts, *_) in ref.items() if ts[0] != "complex"]
+    right = sum(ours[i][0] in ref[i][0] for i in ids)
+    print(f"  simple roofs (not complex): type right {right}/{len(ids)}, median excess planes "
+          f"{np.median([ours[i][1] - ref[i][1] for i in ids]):+.1f}, RMSE median "
+          f"{np.median([ours[i][2] for i in ids]):.3f} m")
 
 
 if __name__ == "__main__":
-    main()
+    if "--types" in sys.argv:
+        sys.path.insert(0, str(ROOT / "src"))
+        score_types(city3d(data_dir() / "city3d" / "building_instances"), read_reference())
+        delft_planes()
+    else:
+        main()

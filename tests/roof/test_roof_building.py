@@ -204,3 +204,47 @@ def test_select_and_raised_parts_deterministic():
         assert np.array_equal(x.vertices, y.vertices)
         assert [[list(map(list, f.rings)), f.semantic] for f in x.surfaces] == \
             [[list(map(list, f.rings)), f.semantic] for f in y.surfaces]
+
+
+def _roof_only_gable(slope_deg=45.0, spacing=0.35, seed=0):
+    """A 5 x 4 m gable's roof points only (no walls, no ground), as a small City3D cloud."""
+    rng = np.random.default_rng(seed)
+    gx, gy = np.meshgrid(np.arange(0.1, 5.0, spacing), np.arange(0.1, 4.0, spacing))
+    xy = np.column_stack([gx.ravel(), gy.ravel()]) + rng.normal(0, 0.03, (gx.size, 2))
+    z = 10.0 + np.tan(np.radians(slope_deg)) * (2.0 - np.abs(xy[:, 1] - 2.0))
+    return np.column_stack([xy, z + rng.normal(0, 0.03, len(z))])
+
+
+@pytest.mark.parametrize("slope", [30.0, 50.0])
+def test_roof_standing_on_the_floor_keeps_its_slopes(slope):
+    # a cloud of roof points only, the floor taken at its lowest point (the eaves): the
+    # sloped planes its points fit are the roof, not faces to flatten below the floor
+    from lidar2city.metrics.model import model_rmse
+
+    xyz = _roof_only_gable(slope)
+    res = reconstruct_lod22(shapely.box(0, 0, 5, 4), xyz, float(xyz[:, 2].min()))
+    assert res.attributes["roof_type"] == "gable"
+    assert abs(res.attributes["main_slope"] - slope) < 3
+    assert model_rmse(xyz, res.solids) < 0.1
+    (solid,) = res.solids
+    assert solid.vertices[:, 2].min() < xyz[:, 2].min() - 0.4  # walls below the eaves
+    assert res.attributes["floor_lowered"] > 0
+
+
+def test_part_floor_ignores_low_clutter_facets():
+    # a sloped facet of a few points at ground level (clutter, a ramp) under a high roof
+    # keeps the floor as given; the same roof standing on the floor lowers it
+    from lidar2city.roof.building import part_floor
+
+    roof = _roof_only_gable(40.0)
+    gx, gy = np.meshgrid(np.arange(0.2, 1.4, 0.35), np.arange(0.2, 1.4, 0.35))
+    clutter = np.column_stack([gx.ravel(), gy.ravel(), 0.1 + 0.3 * gx.ravel()])
+    xyz = np.vstack([roof, clutter])
+    labels = np.r_[np.where(roof[:, 1] < 2.0, 0, 1), np.full(len(clutter), 2)]
+    t = np.tan(np.radians(40.0))
+    planes = np.array([[0.0, t, 10.0], [0.0, -t, 10.0 + 4 * t], [0.3, 0.0, 0.1]])
+    poly = shapely.box(0, 0, 5, 4)
+    kw = dict(min_height=0.5, spacing=0.35)
+    assert part_floor(poly, xyz, labels, planes, 0.0, **kw) == 0.0
+    floor = part_floor(poly, roof, labels[:len(roof)], planes[:2], 10.0, **kw)
+    assert floor == pytest.approx(10.0 - 1.0, abs=0.05)

@@ -163,6 +163,42 @@ def _direction(footprint):
     return float(dominant_direction(footprint))
 
 
+def part_floor(poly, xyz, labels, planes, ground_z, *, min_height, spacing, flat_slope=3.0,
+               share=1 / 3):
+    """The floor of one footprint part: ``ground_z``, or lower when the roof stands on it.
+
+    The sloped facets whose plane, at their own points and at the outline
+    vertices within ``2 spacing`` of them (where their faces meet the outline),
+    comes down to within ``min_height`` of the floor: when they hold at least
+    ``share`` of the part's points, the roof itself stands on the floor (a cloud
+    of roof points only whose floor was taken at its lowest point, the eaves; a
+    ground estimate too high under a low roof). Those planes are roof the data
+    fits, not faces to flatten: the floor goes ``2 min_height`` below their
+    lowest height. Fewer points (a low clutter facet, sloped ground inside the
+    outline) leave the floor as given and their faces are flattened as before.
+
+    Returns the floor (m), at most ``ground_z``.
+    """
+    from scipy.spatial import cKDTree
+
+    corners = np.asarray(poly.exterior.coords)[:, :2]
+    lows, held = [], 0
+    for k, (a, b, c) in enumerate(np.asarray(planes)):
+        if np.degrees(np.arctan(np.hypot(a, b))) < flat_slope:
+            continue
+        own = xyz[labels == k]
+        if not len(own):
+            continue
+        near = cKDTree(own[:, :2]).query(corners, distance_upper_bound=2 * spacing)[0] < np.inf
+        low = float(np.min(np.vstack([own[:, :2], corners[near]]) @ (a, b) + c))
+        if low < ground_z + min_height:
+            lows.append(low)
+            held += len(own)
+    if not lows or held < share * len(xyz):
+        return ground_z
+    return min(ground_z, min(lows) - 2 * min_height)
+
+
 def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     """Faces whose plane dips below the floor get a horizontal plane at their points' median."""
     planes = list(map(np.asarray, planes))
@@ -368,7 +404,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         Building points near the footprint (those farther than ``overhang``
         outside are ignored).
     ground_z : float
-        Floor height (m).
+        Floor height (m). A part whose main sloped planes come down to it (the
+        roof standing on the floor, :func:`part_floor`) gets its floor lower, by
+        ``floor_lowered`` m (an attribute), rather than its roof flattened.
     config : Lod22Config
     direction : float, optional
         Building direction (rad); default estimated from the footprint.
@@ -410,7 +448,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes, roof_faces, directions = [], [], [], []
     parts = _parts(footprint)
-    skipped = 0
+    skipped, lowered = 0, 0.0
     for poly in parts:
         grown = poly.buffer(cfg.overhang)
         near = shapely.contains_xy(grown, xyz[:, 0], xyz[:, 1])
@@ -437,6 +475,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
             planes = np.array([[0.0, 0.0, float(np.median(pts[:, 2]))]])
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
+        floor = part_floor(poly, pts, labels, planes, ground_z, min_height=cfg.min_height,
+                           spacing=spacing, flat_slope=cfg.flat_slope)
+        lowered = max(lowered, ground_z - floor)
         # the arrangement with raised rims along the outline, without them, then the grid;
         # with the outline straightened first, then the footprint as given
         outlines = [poly]
@@ -459,11 +500,11 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
             final = k == len(tries) - 1
             try:
                 solid, faces, face_labels, planes_k, info = _part_solid(
-                    method, outline, pts, labels, planes, ground_z, cell=cell, direction=d, cfg=cfg,
+                    method, outline, pts, labels, planes, floor, cell=cell, direction=d, cfg=cfg,
                     shared=shared)
                 if cfg.raised_parts and method != "grid":
                     solid, faces, face_labels, planes_k, info = _with_raised_parts(
-                        (solid, faces, face_labels, planes_k, info), method, outline, pts, ground_z,
+                        (solid, faces, face_labels, planes_k, info), method, outline, pts, floor,
                         cell=cell, direction=d, spacing=spacing, cfg=cfg)
             except (FitError, ValueError, shapely.errors.GEOSException) as exc:
                 if final:
@@ -501,6 +542,8 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         raise FitError(f"every footprint part is smaller than one label cell ({skipped} parts)")
     if skipped:
         attrs["skipped_parts"] = skipped
+    if lowered > 0:
+        attrs["floor_lowered"] = round(lowered, 3)  # the roof stood on the floor given
     main = roof_planes[int(np.argmax(roof_areas))]
     zmax = max(float(s.vertices[:, 2].max()) for s in solids)
     attrs.update(
