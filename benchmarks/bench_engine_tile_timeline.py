@@ -165,6 +165,7 @@ def main():
         marks = tmp / "marks.txt"
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
                    BENCH_MARKS=str(marks))
+        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
         if a.log:
             env["BENCH_LOG"] = "1"
         cmd = [sys.executable, str(tmp / "child.py"), "", *(["-vv"] if a.log else []),

@@ -111,7 +111,7 @@ class DaskExecutor:
     """Run tasks on a Dask cluster: a local one of ``workers`` processes, or ``scheduler``'s."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None,
-                 preload=()):
+                 preload=(), client_computes: bool = False):
         import importlib.util
 
         # found, not imported: Dask is imported by the thread that starts the cluster
@@ -121,6 +121,10 @@ class DaskExecutor:
         self.scheduler = scheduler
         self.workers = workers
         self.preload = tuple(preload)
+        #: a local cluster of ``workers - 1`` processes, this process computing
+        #: the rest (:meth:`_map_shared`)
+        self.client_computes = bool(client_computes and scheduler is None
+                                    and int(workers or 1) > 1)
         self._cluster = None
         self._client = None
         self._starting = None
@@ -218,7 +222,8 @@ class DaskExecutor:
                               "distributed.worker.multiprocessing-method": START_METHOD,
                               "distributed.nanny.pre-spawn-environ": _worker_environ(),
                               **QUIET_CLUSTER}):
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
+            self._cluster = LocalCluster(n_workers=self.workers - self.client_computes,
+                                         threads_per_worker=1,
                                          processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)
             self._client = Client(self._cluster, set_as_default=False)
@@ -274,6 +279,9 @@ class DaskExecutor:
         items = list(items)
         if not items:
             return
+        if self.client_computes:
+            yield from self._map_shared(fn, items, args, run_hook, costs, balance)
+            return
         self.ready()
         # run-wide arguments sent once to every worker, not once per task
         shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
@@ -321,7 +329,149 @@ class DaskExecutor:
             for f in futures:
                 f.cancel()
 
+    def _map_shared(self, fn, items, args, run_hook, costs, balance):
+        """:meth:`map` with this process computing too (:attr:`client_computes`).
+
+        The runs are cut and dealt as for ``workers`` processes (:func:`runs_of`,
+        :func:`shares_of`): the cluster's ``workers - 1`` processes get the first
+        shares, this process the last, which it runs in order as :class:`InProcess`
+        does from the moment it is asked, while the cluster may still be starting.
+        A thread submits the cluster's runs once it is up and collects their
+        results. A run not yet handed out goes to whichever side is free: this
+        process, its share done, takes the last run the cluster has not got yet
+        (the cluster still starting); an idle cluster worker gets the last run of
+        this process's share. ``balance``: one queue of single items in order,
+        taken from its front by this process and, one at a time per worker, by
+        the cluster. Results and retries as :meth:`map`.
+        """
+        import queue
+        from collections import deque
+
+        from distributed import as_completed
+
+        n = len(items)
+        runs = [(i, i + 1) for i in range(n)] if balance else runs_of(n, self.workers, costs)
+        shares = shares_of(len(runs), self.workers)
+        if balance:
+            mine, theirs = deque(range(len(runs))), []
+        else:
+            mine = deque(range(*shares[-1]))
+            theirs = [deque(range(a, b)) for a, b in shares[:-1]]
+        lock, results, stop = threading.Lock(), queue.SimpleQueue(), threading.Event()
+        futures, end, finished = {}, object(), []
+
+        def items_of(rs):
+            return [x for r in rs for x in items[slice(*runs[r])]]
+
+        def take_mine():
+            with lock:
+                if mine:
+                    r = mine.popleft()
+                    return r, items_of(list(mine)[:AHEAD_RUNS])
+                # the runs the cluster has not got yet (it is starting): the last first
+                left = max(theirs, key=len, default=None)
+                return (left.pop(), []) if left else (None, [])
+
+        def feed():
+            try:
+                self.ready()
+                shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
+                names = sorted(self._client.scheduler_info().get("workers", {}))
+                with self._client.as_current():
+                    done = as_completed()
+
+                def submit(r, ahead, priority, worker=None):
+                    a, b = runs[r]
+                    fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn,
+                                              run_hook=run_hook, ahead=ahead, pure=False,
+                                              retries=RETRIES, priority=priority,
+                                              workers=None if worker is None else [worker],
+                                              allow_other_workers=worker is not None)
+                    with lock:
+                        futures[fut.key] = (fut, a, b)
+                    done.add(fut)
+
+                def give_one():  # to an idle worker: the queue's next, or my share's last
+                    with lock:
+                        if not mine:
+                            return False
+                        r = mine.popleft() if balance else mine.pop()
+                        ahead = items_of(list(mine)[:AHEAD_RUNS]) if balance else []
+                    submit(r, ahead, n - r)
+                    return True
+
+                with lock:  # what is left of the cluster's shares (this process took the ends)
+                    left = [(d[0], d[-1] + 1) if d else (0, 0) for d in theirs]
+                    for d in theirs:
+                        d.clear()
+                dealt = _dealt(left)
+                for rank, (k, r) in enumerate(dealt):
+                    nxt = min(r + AHEAD_RUNS, left[k][1] - 1)
+                    ahead = items[runs[r][1]:runs[nxt][1]] if nxt > r else []
+                    # no restriction for one worker: a dead one's runs wait for its successor
+                    submit(r, ahead, len(runs) - rank, names[k] if len(names) > 1 else None)
+                for _ in range(max(1, len(names)) - len(dealt) if balance or not dealt else 0):
+                    if not give_one():
+                        break
+                for fut in done:
+                    with lock:
+                        _, a, b = futures.pop(fut.key)
+                    try:
+                        outs = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - reported per task, the run goes on
+                        logger.warning("tasks %d to %d failed on the cluster: %s", a, b - 1, exc)
+                        outs = [(j, exc) for j in range(b - a)]
+                    fut.release()
+                    results.put((a, outs))
+                    if stop.is_set():
+                        break
+                    if done.count() < max(1, len(names)):
+                        give_one()
+            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
+                results.put(exc)
+            finally:
+                results.put(end)
+
+        def drain(block):
+            while not finished:
+                try:
+                    got = results.get(block=block)
+                except queue.Empty:
+                    return
+                if got is end:
+                    finished.append(True)
+                    return
+                if isinstance(got, BaseException):
+                    raise got
+                a, outs = got
+                for j, out in outs:
+                    yield a + j, out
+
+        feeder = threading.Thread(target=feed, name="lidar2city-dask-feed", daemon=True)
+        feeder.start()
+        try:
+            while True:
+                r, ahead = take_mine()
+                if r is None:
+                    break
+                a, b = runs[r]
+                for j, out in InProcess().map(fn, items[a:b], *args, run_hook=run_hook,
+                                              ahead=ahead):
+                    yield a + j, out
+                    yield from drain(False)
+            while not finished:
+                yield from drain(True)
+        finally:
+            stop.set()
+            with lock:
+                pending = [fut for fut, _, _ in futures.values()]
+            for fut in pending:
+                fut.cancel()
+            feeder.join(timeout=5)
+
     def describe(self) -> str:
+        if self.client_computes:
+            return f"Dask LocalCluster of {self.workers - 1} worker(s) and this process"
         if self.scheduler is not None:  # its workers are counted once it answers
             self.ready()
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
@@ -617,13 +767,16 @@ def _run_many(items, *args, fn, run_hook=None, ahead=()):
     return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
-def make_executor(workers: int = 1, scheduler: str | None = None, preload=()):
+def make_executor(workers: int = 1, scheduler: str | None = None, preload=(),
+                  client_computes: bool = False):
     """The executor for ``--workers N`` / ``--scheduler ADDRESS`` (use it as a context manager);
     ``preload``: modules a local cluster's workers import before they are forked
-    (:func:`_start_forkserver`)."""
+    (:func:`_start_forkserver`); ``client_computes``: a local cluster of N - 1
+    processes, this one computing too (:meth:`DaskExecutor._map_shared`)."""
     if scheduler is not None:
         return DaskExecutor(scheduler=scheduler)
     if int(workers) < 1:
         raise InputError(f"workers must be at least 1, got {workers}")
     return InProcess() if int(workers) == 1 else DaskExecutor(workers=int(workers),
-                                                               preload=preload)
+                                                               preload=preload,
+                                                               client_computes=client_computes)
