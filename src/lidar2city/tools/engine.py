@@ -336,13 +336,13 @@ class DaskExecutor:
         :func:`shares_of`): the cluster's ``workers - 1`` processes get the first
         shares, this process the last, which it runs in order as :class:`InProcess`
         does from the moment it is asked, while the cluster may still be starting.
-        A thread submits the cluster's runs once it is up and collects their
-        results. A run not yet handed out goes to whichever side is free: this
-        process, its share done, takes the last run the cluster has not got yet
-        (the cluster still starting); an idle cluster worker gets the last run of
-        this process's share. ``balance``: one queue of single items in order,
-        taken from its front by this process and, one at a time per worker, by
-        the cluster. Results and retries as :meth:`map`.
+        A thread hands the cluster's workers their runs once it is up, one at a
+        time each (the front of its share), and collects their results. So no
+        run waits on a busy side while the other is idle: a worker whose share
+        is done gets the last run of this process's share, and this process,
+        its share done, takes the last run of the largest share not yet handed
+        out. ``balance``: one queue of single items in order, taken from its
+        front by both sides. Results and retries as :meth:`map`.
         """
         import queue
         from collections import deque
@@ -353,7 +353,7 @@ class DaskExecutor:
         runs = [(i, i + 1) for i in range(n)] if balance else runs_of(n, self.workers, costs)
         shares = shares_of(len(runs), self.workers)
         if balance:
-            mine, theirs = deque(range(len(runs))), []
+            mine, theirs = deque(range(len(runs))), [deque() for _ in shares[:-1]]
         else:
             mine = deque(range(*shares[-1]))
             theirs = [deque(range(a, b)) for a, b in shares[:-1]]
@@ -368,9 +368,22 @@ class DaskExecutor:
                 if mine:
                     r = mine.popleft()
                     return r, items_of(list(mine)[:AHEAD_RUNS])
-                # the runs the cluster has not got yet (it is starting): the last first
                 left = max(theirs, key=len, default=None)
                 return (left.pop(), []) if left else (None, [])
+
+        def take_theirs(k):
+            """The next run of worker ``k``'s share, else the last of mine."""
+            with lock:
+                share = theirs[k] if k < len(theirs) else None
+                if share:
+                    r = share.popleft()
+                    return r, items_of(list(share)[:AHEAD_RUNS])
+                if not mine:
+                    return None, []
+                if balance:
+                    r = mine.popleft()
+                    return r, items_of(list(mine)[:AHEAD_RUNS])
+                return mine.pop(), []
 
         def feed():
             try:
@@ -380,42 +393,28 @@ class DaskExecutor:
                 with self._client.as_current():
                     done = as_completed()
 
-                def submit(r, ahead, priority, worker=None):
+                def give(k):
+                    r, ahead = take_theirs(k)
+                    if r is None:
+                        return
                     a, b = runs[r]
-                    fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn,
-                                              run_hook=run_hook, ahead=ahead, pure=False,
-                                              retries=RETRIES, priority=priority,
-                                              workers=None if worker is None else [worker],
-                                              allow_other_workers=worker is not None)
+                    # a worker of several is asked for its share's runs (its tiles kept
+                    # from run to run); one alone is asked for none: a dead one's run
+                    # waits for its successor (a restriction to it would wait for ever)
+                    fut = self._client.submit(
+                        _run_many, items[a:b], *shared, fn=fn, run_hook=run_hook, ahead=ahead,
+                        pure=False, retries=RETRIES, priority=n - a,
+                        workers=[names[k]] if len(names) > 1 else None,
+                        allow_other_workers=len(names) > 1)
                     with lock:
-                        futures[fut.key] = (fut, a, b)
+                        futures[fut.key] = (fut, a, b, k)
                     done.add(fut)
 
-                def give_one():  # to an idle worker: the queue's next, or my share's last
-                    with lock:
-                        if not mine:
-                            return False
-                        r = mine.popleft() if balance else mine.pop()
-                        ahead = items_of(list(mine)[:AHEAD_RUNS]) if balance else []
-                    submit(r, ahead, n - r)
-                    return True
-
-                with lock:  # what is left of the cluster's shares (this process took the ends)
-                    left = [(d[0], d[-1] + 1) if d else (0, 0) for d in theirs]
-                    for d in theirs:
-                        d.clear()
-                dealt = _dealt(left)
-                for rank, (k, r) in enumerate(dealt):
-                    nxt = min(r + AHEAD_RUNS, left[k][1] - 1)
-                    ahead = items[runs[r][1]:runs[nxt][1]] if nxt > r else []
-                    # no restriction for one worker: a dead one's runs wait for its successor
-                    submit(r, ahead, len(runs) - rank, names[k] if len(names) > 1 else None)
-                for _ in range(max(1, len(names)) - len(dealt) if balance or not dealt else 0):
-                    if not give_one():
-                        break
+                for k in range(max(1, len(names))):
+                    give(k)
                 for fut in done:
                     with lock:
-                        _, a, b = futures.pop(fut.key)
+                        _, a, b, k = futures.pop(fut.key)
                     try:
                         outs = fut.result()
                     except Exception as exc:  # noqa: BLE001 - reported per task, the run goes on
@@ -425,8 +424,7 @@ class DaskExecutor:
                     results.put((a, outs))
                     if stop.is_set():
                         break
-                    if done.count() < max(1, len(names)):
-                        give_one()
+                    give(k)
             except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
                 results.put(exc)
             finally:
@@ -449,6 +447,10 @@ class DaskExecutor:
 
         feeder = threading.Thread(target=feed, name="lidar2city-dask-feed", daemon=True)
         feeder.start()
+        # the threads that hand a worker its next run get the interpreter lock from
+        # this process's computing within SWITCH_INTERVAL, not Python's 5 ms
+        interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(interval, SWITCH_INTERVAL))
         try:
             while True:
                 r, ahead = take_mine()
@@ -462,9 +464,10 @@ class DaskExecutor:
             while not finished:
                 yield from drain(True)
         finally:
+            sys.setswitchinterval(interval)
             stop.set()
             with lock:
-                pending = [fut for fut, _, _ in futures.values()]
+                pending = [v[0] for v in futures.values()]
             for fut in pending:
                 fut.cancel()
             feeder.join(timeout=5)
@@ -477,6 +480,11 @@ class DaskExecutor:
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
 
+
+#: seconds a thread of a computing client (:meth:`DaskExecutor._map_shared`) holds
+#: the interpreter lock while another waits for it (Python's default: 0.005): the
+#: event loop and the thread that hands a worker its next run take it within this
+SWITCH_INTERVAL = 0.001
 
 #: runs per worker: a worker's runs are one contiguous share whose inputs pass
 #: from run to run (:func:`shares_of`), so runs cost no extra reading; several
