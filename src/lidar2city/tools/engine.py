@@ -148,6 +148,11 @@ class DaskExecutor:
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] += 1
             self._local = True
+            # the cluster's start (scheduler, nannies, each worker's registration) and,
+            # later, the handing out of runs take the interpreter lock from this
+            # process's planning or computing within SWITCH_INTERVAL, not Python's 5 ms
+            self._interval = sys.getswitchinterval()
+            sys.setswitchinterval(min(self._interval, SWITCH_INTERVAL))
             _track_semaphores()
             try:
                 _start_forkserver(self.preload)
@@ -248,6 +253,7 @@ class DaskExecutor:
             self._cluster = None
         if self._local:
             self._local = False
+            sys.setswitchinterval(self._interval)
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] -= 1
                 last = _LOCAL_CLUSTERS[0] == 0
@@ -447,10 +453,6 @@ class DaskExecutor:
 
         feeder = threading.Thread(target=feed, name="lidar2city-dask-feed", daemon=True)
         feeder.start()
-        # the threads that hand a worker its next run get the interpreter lock from
-        # this process's computing within SWITCH_INTERVAL, not Python's 5 ms
-        interval = sys.getswitchinterval()
-        sys.setswitchinterval(min(interval, SWITCH_INTERVAL))
         try:
             while True:
                 r, ahead = take_mine()
@@ -464,7 +466,6 @@ class DaskExecutor:
             while not finished:
                 yield from drain(True)
         finally:
-            sys.setswitchinterval(interval)
             stop.set()
             with lock:
                 pending = [v[0] for v in futures.values()]
@@ -481,9 +482,11 @@ class DaskExecutor:
                 else f"Dask LocalCluster of {self.workers} workers")
 
 
-#: seconds a thread of a computing client (:meth:`DaskExecutor._map_shared`) holds
-#: the interpreter lock while another waits for it (Python's default: 0.005): the
-#: event loop and the thread that hands a worker its next run take it within this
+#: seconds a thread of a local cluster's client holds the interpreter lock while
+#: another waits for it (Python's default: 0.005): the cluster's event loop (its
+#: start, a worker's registration, a result) and the thread that hands a worker
+#: its next run (:meth:`DaskExecutor._map_shared`) wait at most this long for the
+#: planning or computing thread
 SWITCH_INTERVAL = 0.001
 
 #: runs per worker: a worker's runs are one contiguous share whose inputs pass
