@@ -226,6 +226,20 @@ def test_the_client_takes_the_clusters_runs_while_it_starts(monkeypatch):
     assert got == {i: i for i in range(8)} and set(calls.values()) == {1} and len(calls) == 8
 
 
+def test_a_cluster_that_fails_to_start_leaves_every_item_to_the_computing_client(monkeypatch,
+                                                                                   caplog):
+    def broken(self):
+        raise RuntimeError("no ports left")
+
+    monkeypatch.setattr(DaskExecutor, "_start", broken)
+    with DaskExecutor(workers=2, client_computes=True) as ex:
+        got = dict(ex.map(lambda i: i * i, range(6)))
+        again = dict(ex.map(lambda i: -i, range(3), balance=True))
+        assert ex.process_cpu() == {}
+    assert got == {i: i * i for i in range(6)} and again == {0: 0, 1: -1, 2: -2}
+    assert "did not start (RuntimeError: no ports left)" in caplog.text
+
+
 def test_a_dead_worker_beside_a_computing_client_has_its_task_run_again(tmp_path):
     marker, me = tmp_path / "died", os.getpid()
 

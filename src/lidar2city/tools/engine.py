@@ -196,8 +196,10 @@ class DaskExecutor:
 
     def process_cpu(self) -> dict:
         """CPU seconds of each worker process so far (start-up and imports included),
-        by worker address."""
+        by worker address (none when the cluster did not start)."""
         self.ready()
+        if self._client is None:
+            return {}
         return dict(sorted(self._client.run(_process_cpu).items()))
 
     def _start(self):
@@ -347,7 +349,8 @@ class DaskExecutor:
         run waits on a busy side while the other is idle: a worker whose share
         is done gets the last run of this process's share, and this process,
         its share done, takes the last run of the largest share not yet handed
-        out. ``balance``: one queue of single items in order, taken from its
+        out. A cluster that fails to start leaves every run to this process (a
+        warning). ``balance``: one queue of single items in order, taken from its
         front by both sides. Results and retries as :meth:`map`.
         """
         import queue
@@ -393,7 +396,13 @@ class DaskExecutor:
 
         def feed():
             try:
-                self.ready()
+                try:
+                    self.ready()
+                except Exception as exc:  # noqa: BLE001 - this process runs every run itself
+                    logger.warning("the local cluster did not start (%s: %s): this process "
+                                   "runs every task", type(exc).__name__, exc)
+                if self._client is None:
+                    return
                 shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
                 names = sorted(self._client.scheduler_info().get("workers", {}))
                 with self._client.as_current():
