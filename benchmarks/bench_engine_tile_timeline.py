@@ -11,7 +11,8 @@ moment this script started the process, with the client's CPU seconds then:
 the imports, the start of the server the workers are forked from, the plan,
 the tile decoded by the client for the workers, the cluster ready, the
 output written, the command done; when the server's preload began and ended;
-per task (block, part or traced block) its worker, when the worker process
+per task (block, part or traced block) its worker (or the client, which
+computes a share of the tasks beside its workers), when the worker process
 was born (/proc), the task's start and end, its CPU, the tiles it decoded
 itself, the CPU the worker had spent before the task (its start-up), its
 buildings. ``--log``: also Dask's and lidar2city's log lines with their times
@@ -131,7 +132,7 @@ def main():
         mark("command done")
         import resource
         ch = resource.getrusage(resource.RUSAGE_CHILDREN)
-        print("BENCH " + json.dumps({"marks": marks, "rows": rows,
+        print("BENCH " + json.dumps({"marks": marks, "rows": rows, "client": os.getpid(),
                                      "children_cpu": ch.ru_utime + ch.ru_stime}),
               file=sys.stderr)
 
@@ -165,6 +166,7 @@ def main():
         marks = tmp / "marks.txt"
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
                    BENCH_MARKS=str(marks))
+        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
         if a.log:
             env["BENCH_LOG"] = "1"
         cmd = [sys.executable, str(tmp / "child.py"), "", *(["-vv"] if a.log else []),
@@ -189,10 +191,10 @@ def main():
         print(f"{t:6.2f} s  {text}")
     print(f"{wall:6.2f} s  process ended; CPU of the processes it started (workers, their "
           f"server) {m['children_cpu']:.2f} s")
-    pids = {}
+    pids = {m["client"]: "client  "}  # the client computes its share of the tasks too
     for start, end, pid, born, cpu, before, dec, n, kind in sorted(m["rows"]):
-        k = pids.setdefault(pid, len(pids))
-        print(f"worker {k} (born {born - t0:5.2f} s): {kind} {start - t0:5.2f}-{end - t0:5.2f} s "
+        k = pids.setdefault(pid, f"worker {len(pids) - 1}")
+        print(f"{k} (born {born - t0:5.2f} s): {kind} {start - t0:5.2f}-{end - t0:5.2f} s "
               f"({end - start:4.2f} s, {cpu:4.2f} CPU s), {n} buildings, {dec} tile(s) decoded "
               f"itself, worker CPU before {before:.2f} s")
     if a.log:

@@ -185,6 +185,77 @@ def test_a_dead_workers_task_is_run_again_on_another_worker(tmp_path):
     assert marker.exists() and got == {i: i * i for i in range(5)}
 
 
+@pytest.mark.parametrize("balance", [False, True])
+def test_the_client_computes_beside_its_worker_every_item_once(balance):
+    """``client_computes``: one worker process for ``workers=2``, this process running
+    its share of the items (and any the cluster has not got yet); every item's
+    result comes back once, from one side or the other."""
+    me = os.getpid()
+
+    def square_where(i):
+        time.sleep(0.02)
+        return i * i, os.getpid()
+
+    with DaskExecutor(workers=2, client_computes=True) as ex:
+        ex.ready()  # the cluster up: both sides get items
+        got = dict(ex.map(square_where, range(12), costs=[1.0] * 12, balance=balance))
+        assert len(ex.process_cpu()) == 1  # one worker process
+    assert sorted(got) == list(range(12))
+    assert all(v[0] == i * i for i, v in got.items())
+    assert len({pid for _, pid in got.values()}) == 2 and me in {pid for _, pid in got.values()}
+
+
+def test_the_client_takes_the_clusters_runs_while_it_starts(monkeypatch):
+    """A cluster slow to start: this process, its share done, runs the cluster's
+    runs not handed out yet (the last first); nothing runs twice."""
+    real = DaskExecutor._start
+
+    def slow(self):
+        time.sleep(1.5)
+        return real(self)
+
+    monkeypatch.setattr(DaskExecutor, "_start", slow)
+    calls = Counter()
+
+    def count(i):
+        calls[i] += 1
+        return i
+
+    with DaskExecutor(workers=2, client_computes=True) as ex:
+        got = dict(ex.map(count, range(8)))
+    assert got == {i: i for i in range(8)} and set(calls.values()) == {1} and len(calls) == 8
+
+
+def test_a_cluster_that_fails_to_start_leaves_every_item_to_the_computing_client(monkeypatch,
+                                                                                   caplog):
+    def broken(self):
+        raise RuntimeError("no ports left")
+
+    monkeypatch.setattr(DaskExecutor, "_start", broken)
+    with DaskExecutor(workers=2, client_computes=True) as ex:
+        got = dict(ex.map(lambda i: i * i, range(6)))
+        again = dict(ex.map(lambda i: -i, range(3), balance=True))
+        assert ex.process_cpu() == {}
+    assert got == {i: i * i for i in range(6)} and again == {0: 0, 1: -1, 2: -2}
+    assert "did not start (RuntimeError: no ports left)" in caplog.text
+
+
+def test_a_dead_worker_beside_a_computing_client_has_its_task_run_again(tmp_path):
+    marker, me = tmp_path / "died", os.getpid()
+
+    def square_or_die(i):
+        if os.getpid() != me and not marker.exists():
+            marker.touch()
+            os.kill(os.getpid(), signal.SIGKILL)
+        time.sleep(0.05)
+        return i * i
+
+    with DaskExecutor(workers=2, client_computes=True) as ex:
+        ex.ready()
+        got = dict(ex.map(square_or_die, range(8)))
+    assert marker.exists() and got == {i: i * i for i in range(8)}
+
+
 def test_a_scheduler_that_does_not_answer_is_an_input_error_in_time(monkeypatch):
     monkeypatch.setattr(engine, "CONNECT_TIMEOUT", 2)
     t0 = time.perf_counter()

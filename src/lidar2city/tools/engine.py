@@ -111,7 +111,7 @@ class DaskExecutor:
     """Run tasks on a Dask cluster: a local one of ``workers`` processes, or ``scheduler``'s."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None,
-                 preload=()):
+                 preload=(), client_computes: bool = False):
         import importlib.util
 
         # found, not imported: Dask is imported by the thread that starts the cluster
@@ -121,6 +121,10 @@ class DaskExecutor:
         self.scheduler = scheduler
         self.workers = workers
         self.preload = tuple(preload)
+        #: a local cluster of ``workers - 1`` processes, this process computing
+        #: the rest (:meth:`_map_shared`)
+        self.client_computes = bool(client_computes and scheduler is None
+                                    and int(workers or 1) > 1)
         self._cluster = None
         self._client = None
         self._starting = None
@@ -144,6 +148,11 @@ class DaskExecutor:
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] += 1
             self._local = True
+            # the cluster's start (scheduler, nannies, each worker's registration) and,
+            # later, the handing out of runs take the interpreter lock from this
+            # process's planning or computing within SWITCH_INTERVAL, not Python's 5 ms
+            self._interval = sys.getswitchinterval()
+            sys.setswitchinterval(min(self._interval, SWITCH_INTERVAL))
             _track_semaphores()
             try:
                 _start_forkserver(self.preload)
@@ -187,8 +196,10 @@ class DaskExecutor:
 
     def process_cpu(self) -> dict:
         """CPU seconds of each worker process so far (start-up and imports included),
-        by worker address."""
+        by worker address (none when the cluster did not start)."""
         self.ready()
+        if self._client is None:
+            return {}
         return dict(sorted(self._client.run(_process_cpu).items()))
 
     def _start(self):
@@ -218,7 +229,8 @@ class DaskExecutor:
                               "distributed.worker.multiprocessing-method": START_METHOD,
                               "distributed.nanny.pre-spawn-environ": _worker_environ(),
                               **QUIET_CLUSTER}):
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
+            self._cluster = LocalCluster(n_workers=self.workers - self.client_computes,
+                                         threads_per_worker=1,
                                          processes=True, dashboard_address="127.0.0.1:0",
                                          host="127.0.0.1", silence_logs=logging.ERROR)
             self._client = Client(self._cluster, set_as_default=False)
@@ -243,6 +255,7 @@ class DaskExecutor:
             self._cluster = None
         if self._local:
             self._local = False
+            sys.setswitchinterval(self._interval)
             with _LOCAL_LOCK:
                 _LOCAL_CLUSTERS[0] -= 1
                 last = _LOCAL_CLUSTERS[0] == 0
@@ -273,6 +286,9 @@ class DaskExecutor:
 
         items = list(items)
         if not items:
+            return
+        if self.client_computes:
+            yield from self._map_shared(fn, items, args, run_hook, costs, balance)
             return
         self.ready()
         # run-wide arguments sent once to every worker, not once per task
@@ -321,12 +337,166 @@ class DaskExecutor:
             for f in futures:
                 f.cancel()
 
+    def _map_shared(self, fn, items, args, run_hook, costs, balance):
+        """:meth:`map` with this process computing too (:attr:`client_computes`).
+
+        The runs are cut and dealt as for ``workers`` processes (:func:`runs_of`,
+        :func:`shares_of`): the cluster's ``workers - 1`` processes get the first
+        shares, this process the last, which it runs in order as :class:`InProcess`
+        does from the moment it is asked, while the cluster may still be starting.
+        A thread hands the cluster's workers their runs once it is up, one at a
+        time each (the front of its share), and collects their results. So no
+        run waits on a busy side while the other is idle: a worker whose share
+        is done gets the last run of this process's share, and this process,
+        its share done, takes the last run of the largest share not yet handed
+        out. A cluster that fails to start leaves every run to this process (a
+        warning). ``balance``: one queue of single items in order, taken from its
+        front by both sides. Results and retries as :meth:`map`.
+        """
+        import queue
+        from collections import deque
+
+        from distributed import as_completed
+
+        n = len(items)
+        runs = [(i, i + 1) for i in range(n)] if balance else runs_of(n, self.workers, costs)
+        shares = shares_of(len(runs), self.workers)
+        if balance:
+            mine, theirs = deque(range(len(runs))), [deque() for _ in shares[:-1]]
+        else:
+            mine = deque(range(*shares[-1]))
+            theirs = [deque(range(a, b)) for a, b in shares[:-1]]
+        lock, results, stop = threading.Lock(), queue.SimpleQueue(), threading.Event()
+        futures, end, finished = {}, object(), []
+
+        def items_of(rs):
+            return [x for r in rs for x in items[slice(*runs[r])]]
+
+        def take_mine():
+            with lock:
+                if mine:
+                    r = mine.popleft()
+                    return r, items_of(list(mine)[:AHEAD_RUNS])
+                left = max(theirs, key=len, default=None)
+                return (left.pop(), []) if left else (None, [])
+
+        def take_theirs(k):
+            """The next run of worker ``k``'s share, else the last of mine."""
+            with lock:
+                share = theirs[k] if k < len(theirs) else None
+                if share:
+                    r = share.popleft()
+                    return r, items_of(list(share)[:AHEAD_RUNS])
+                if not mine:
+                    return None, []
+                if balance:
+                    r = mine.popleft()
+                    return r, items_of(list(mine)[:AHEAD_RUNS])
+                return mine.pop(), []
+
+        def feed():
+            try:
+                try:
+                    self.ready()
+                except Exception as exc:  # noqa: BLE001 - this process runs every run itself
+                    logger.warning("the local cluster did not start (%s: %s): this process "
+                                   "runs every task", type(exc).__name__, exc)
+                if self._client is None:
+                    return
+                shared = [self._client.scatter(a, broadcast=True, hash=False) for a in args]
+                names = sorted(self._client.scheduler_info().get("workers", {}))
+                with self._client.as_current():
+                    done = as_completed()
+
+                def give(k):
+                    r, ahead = take_theirs(k)
+                    if r is None:
+                        return
+                    a, b = runs[r]
+                    # a worker of several is asked for its share's runs (its tiles kept
+                    # from run to run); one alone is asked for none: a dead one's run
+                    # waits for its successor (a restriction to it would wait for ever)
+                    fut = self._client.submit(
+                        _run_many, items[a:b], *shared, fn=fn, run_hook=run_hook, ahead=ahead,
+                        pure=False, retries=RETRIES, priority=n - a,
+                        workers=[names[k]] if len(names) > 1 else None,
+                        allow_other_workers=len(names) > 1)
+                    with lock:
+                        futures[fut.key] = (fut, a, b, k)
+                    done.add(fut)
+
+                for k in range(max(1, len(names))):
+                    give(k)
+                for fut in done:
+                    with lock:
+                        _, a, b, k = futures.pop(fut.key)
+                    try:
+                        outs = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - reported per task, the run goes on
+                        logger.warning("tasks %d to %d failed on the cluster: %s", a, b - 1, exc)
+                        outs = [(j, exc) for j in range(b - a)]
+                    fut.release()
+                    results.put((a, outs))
+                    if stop.is_set():
+                        break
+                    give(k)
+            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
+                results.put(exc)
+            finally:
+                results.put(end)
+
+        def drain(block):
+            while not finished:
+                try:
+                    got = results.get(block=block)
+                except queue.Empty:
+                    return
+                if got is end:
+                    finished.append(True)
+                    return
+                if isinstance(got, BaseException):
+                    raise got
+                a, outs = got
+                for j, out in outs:
+                    yield a + j, out
+
+        feeder = threading.Thread(target=feed, name="lidar2city-dask-feed", daemon=True)
+        feeder.start()
+        try:
+            while True:
+                r, ahead = take_mine()
+                if r is None:
+                    break
+                a, b = runs[r]
+                for j, out in InProcess().map(fn, items[a:b], *args, run_hook=run_hook,
+                                              ahead=ahead):
+                    yield a + j, out
+                    yield from drain(False)
+            while not finished:
+                yield from drain(True)
+        finally:
+            stop.set()
+            with lock:
+                pending = [v[0] for v in futures.values()]
+            for fut in pending:
+                fut.cancel()
+            feeder.join(timeout=5)
+
     def describe(self) -> str:
+        if self.client_computes:
+            return f"Dask LocalCluster of {self.workers - 1} worker(s) and this process"
         if self.scheduler is not None:  # its workers are counted once it answers
             self.ready()
         return (f"Dask scheduler {self.scheduler} ({self.workers} workers)" if self.scheduler
                 else f"Dask LocalCluster of {self.workers} workers")
 
+
+#: seconds a thread of a local cluster's client holds the interpreter lock while
+#: another waits for it (Python's default: 0.005): the cluster's event loop (its
+#: start, a worker's registration, a result) and the thread that hands a worker
+#: its next run (:meth:`DaskExecutor._map_shared`) wait at most this long for the
+#: planning or computing thread
+SWITCH_INTERVAL = 0.001
 
 #: runs per worker: a worker's runs are one contiguous share whose inputs pass
 #: from run to run (:func:`shares_of`), so runs cost no extra reading; several
@@ -617,13 +787,16 @@ def _run_many(items, *args, fn, run_hook=None, ahead=()):
     return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
-def make_executor(workers: int = 1, scheduler: str | None = None, preload=()):
+def make_executor(workers: int = 1, scheduler: str | None = None, preload=(),
+                  client_computes: bool = False):
     """The executor for ``--workers N`` / ``--scheduler ADDRESS`` (use it as a context manager);
     ``preload``: modules a local cluster's workers import before they are forked
-    (:func:`_start_forkserver`)."""
+    (:func:`_start_forkserver`); ``client_computes``: a local cluster of N - 1
+    processes, this one computing too (:meth:`DaskExecutor._map_shared`)."""
     if scheduler is not None:
         return DaskExecutor(scheduler=scheduler)
     if int(workers) < 1:
         raise InputError(f"workers must be at least 1, got {workers}")
     return InProcess() if int(workers) == 1 else DaskExecutor(workers=int(workers),
-                                                               preload=preload)
+                                                               preload=preload,
+                                                               client_computes=client_computes)

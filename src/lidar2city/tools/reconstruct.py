@@ -770,13 +770,20 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
             inputs, footprints=footprints, lods=lods, method=method)
     # a cluster starts (its workers import the task modules) while the area is planned;
     # the scratch files of the run (tiles decoded for the workers) go with it
-    with make_executor(workers, scheduler, preload=worker_modules(lods, method)) as executor, \
+    with make_executor(workers, scheduler, preload=worker_modules(lods, method),
+                       client_computes=CLIENT_COMPUTES) as executor, \
             contextlib.ExitStack() as scratch:
         return _reconstruct(executor, t0, inputs, output, footprints=footprints, lods=lods,
                             crs=crs, config=config, fmt=fmt, id_field=id_field, layer=layer,
                             progress=progress, method=method, primitives=primitives,
                             check_images=check_images, block_size=block_size, resume=resume,
                             block_progress=block_progress, edits=edits, scratch=scratch)
+
+
+#: with ``workers`` N > 1 on a local cluster, this process computes too, beside
+#: N - 1 worker processes (:meth:`lidar2city.tools.engine.DaskExecutor._map_shared`):
+#: after its planning it would otherwise wait, idle, for the cluster to start
+CLIENT_COMPUTES = True
 
 
 #: expected CPU seconds of one process per input point (tile headers), by what the
