@@ -872,3 +872,27 @@ def test_a_finished_run_ignores_ctrl_c_while_its_process_ends(monkeypatch):
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+# --- session 10: outputs named with an extension their writer does not write -----------------
+
+@pytest.mark.parametrize("args, kind", [
+    (["ground", "{t}", "-o", "{d}/g.txt"], ".las, .laz"),
+    (["ground", "{t}", "-o", "{d}/g.ply"], ".las, .laz"),
+    (["ground", "{t}", "-o", "{d}/g.laz", "--dtm", "{d}/d.png"], ".tif, .tiff"),
+    (["classify", "{t}", "-o", "{d}/c.csv"], ".las, .laz"),
+    (["rasterize", "{t}", "-o", "{d}/r.png"], ".tif, .tiff"),
+    (["footprints", "{t}", "-o", "{d}/f.txt"], ".gpkg"),
+])
+def test_an_output_extension_its_writer_does_not_write_is_refused(runner, block, tmp_path,
+                                                                  args, kind):
+    """``ground x.laz -o g.txt`` wrote a LAS file named .txt, ``rasterize -o r.png`` a
+    GeoTIFF named .png, ``footprints -o f.txt`` failed after the work with GDAL's
+    ``Could not set geometry`` and a raw Python warning: one line before any work now."""
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, [a.format(t=block / "t.laz", d=tmp_path) for a in args])
+    line = _error_line(res)
+    assert "extension" in line and kind in line, line
+    assert _left(tmp_path) == []
+
