@@ -896,3 +896,47 @@ def test_an_output_extension_its_writer_does_not_write_is_refused(runner, block,
     assert "extension" in line and kind in line, line
     assert _left(tmp_path) == []
 
+# --- session 10: a GeoPackage of several layers as footprints ----------------------------------
+
+def _two_layers(block, path, *, other_geometry):
+    """``f.gpkg``'s footprints as the layer ``buildings``, after a first layer ``roads``."""
+    import pyogrio
+    import shapely
+
+    meta, _, wkb, data = pyogrio.raw.read(str(block / "f.gpkg"))
+    other = shapely.to_wkb([other_geometry])
+    pyogrio.raw.write(str(path), np.array(other, dtype=object), [np.array(["r1"], dtype=object)],
+                      ["id"], layer="roads", crs=meta["crs"],
+                      geometry_type=other_geometry.geom_type)
+    pyogrio.raw.write(str(path), wkb, data, list(meta["fields"]), layer="buildings",
+                      crs=meta["crs"], geometry_type=meta["geometry_type"], append=True)
+
+
+def test_several_polygon_layers_are_an_error_naming_them(runner, block, tmp_path):
+    """A GeoPackage whose first layer is not the footprints' was read at its first layer
+    (with pyogrio's raw ``UserWarning`` and its source line on stderr), and the run ended
+    in `none of the 1 footprints meets the point cloud's extent`: now the layers are named
+    and --layer picks one."""
+    from lidar2city.cli.main import cli
+
+    _two_layers(block, tmp_path / "two.gpkg", other_geometry=box(85000, 447000, 85001, 447001))
+    args = ["reconstruct", str(block / "t.laz"), "--footprints", str(tmp_path / "two.gpkg")]
+    line = _error_line(runner.invoke(cli, [*args, "-o", str(tmp_path / "m.city.json")]))
+    assert "roads" in line and "buildings" in line and "--layer" in line, line
+    assert not (tmp_path / "m.city.json").exists()
+    res = runner.invoke(cli, [*args, "--layer", "buildings", "-o", str(tmp_path / "m.city.json")])
+    assert res.exit_code == 0 and "2 of 2 buildings" in res.output, res.output
+
+
+def test_the_only_polygon_layer_is_taken(runner, block, tmp_path):
+    """Footprints beside a layer of points or lines: the polygons are the footprints."""
+    from shapely.geometry import Point
+
+    from lidar2city.cli.main import cli
+
+    _two_layers(block, tmp_path / "two.gpkg", other_geometry=Point(85001, 447001))
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(tmp_path / "two.gpkg"), "-o", str(tmp_path / "m.city.json")])
+    assert res.exit_code == 0 and "2 of 2 buildings" in res.output, res.output
+    assert "Warning" not in res.output, res.output
+

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 from dataclasses import dataclass, field
 
@@ -14,8 +15,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "overlapping", "read_footprints", "vector_crs", "unique", "repair_polygonal",
-           "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
+__all__ = ["footprint_layer", "no_pam", "overlapping", "read_footprints", "vector_crs", "unique",
+           "repair_polygonal", "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
 
 
 def to_local(geoms, origin, xy_unit=1.0):
@@ -123,6 +124,50 @@ def no_pam():
         pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": before})
 
 
+@functools.lru_cache(maxsize=32)
+def _layers(path: str, stamp: tuple) -> tuple:
+    """``((name, geometry type or None), ...)`` of a vector source (``stamp``: its mtime and
+    size, so that a file rewritten in the same process is listed again)."""
+    import pyogrio
+
+    with no_pam():
+        return tuple((str(n), None if t is None else str(t)) for n, t in pyogrio.list_layers(path))
+
+
+def footprint_layer(path, layer=None):
+    """The layer of ``path`` that holds the footprints: ``layer`` when given, else its only
+    layer, else its only layer of polygons (beside points, lines or tables).
+
+    OGR reads the first layer of a source when none is named: a GeoPackage whose first
+    layer is roads or parcels gave models of the wrong polygons, or none, without a word.
+
+    Raises
+    ------
+    InputError
+        When several layers may hold polygons and none is named: the message lists them.
+    FileFormatError
+        If the source cannot be opened.
+    """
+    if layer is not None:
+        return layer
+    p = check_input_file(path)
+    try:
+        st = p.stat()
+        layers = _layers(str(p), (st.st_mtime_ns, st.st_size))
+    except Exception as exc:  # pyogrio.errors.DataSourceError
+        raise _unreadable(p, exc) from None
+    if len(layers) <= 1:
+        return None
+    polygonal = [n for n, t in layers if t is not None and ("Polygon" in t or t == "Unknown")]
+    if len(polygonal) == 1:
+        logger.info("%s: reading its only polygon layer %r", p.name, polygonal[0])
+        return polygonal[0]
+    listed = ", ".join(f"{n} ({t or 'no geometry'})" for n, t in layers)
+    raise InputError(f"{str(p)!r} holds {len(layers)} layers ({listed}): name the footprints' "
+                     f"layer with --layer NAME (reconstruct), or save it on its own: "
+                     f"ogr2ogr f.gpkg {p.name} NAME")
+
+
 def vector_crs(path, *, layer=None):
     """The CRS of a vector source's layer (default the first), or None when it has none.
 
@@ -135,6 +180,7 @@ def vector_crs(path, *, layer=None):
     from pyproj import CRS
 
     p = check_input_file(path)
+    layer = footprint_layer(p, layer)
     try:
         with no_pam():
             info = pyogrio.read_info(str(p), layer=layer)
@@ -286,7 +332,7 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     raw = None if bbox is not None else read_gpkg_raw(
         p, layer=layer, fids=fids, skip_features=skip_features, max_features=max_features)
     if raw is None:
-        raw = _read_ogr(p, layer=layer, bbox=bbox, fids=fids, skip_features=skip_features,
+        raw = _read_ogr(p, layer=footprint_layer(p, layer), bbox=bbox, fids=fids, skip_features=skip_features,
                         max_features=max_features)
     meta, fids, wkb, field_data = raw
     if wkb is None and not meta.get("geometry_type"):
