@@ -940,3 +940,28 @@ def test_the_only_polygon_layer_is_taken(runner, block, tmp_path):
     assert res.exit_code == 0 and "2 of 2 buildings" in res.output, res.output
     assert "Warning" not in res.output, res.output
 
+# --- session 10: --crs against the file's own CRS ------------------------------------------------
+
+@pytest.mark.parametrize("command", [["ground", "{t}", "-o", "{d}/g.laz"],
+                                     ["info", "{t}"],
+                                     ["reconstruct", "{t}", "--footprints", "{f}", "-o",
+                                      "{d}/m.city.json"]])
+def test_crs_option_replacing_the_files_own_is_said(runner, block, tmp_path, caplog, command):
+    """``--crs`` over a tile that declares another CRS relabelled its coordinates without a
+    word (Autzen, in Oregon feet, reconstructed as RD New: 2 of 2 buildings, exit 0)."""
+    import logging
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io import las
+
+    las._RELABELLED.clear()
+    args = [a.format(t=block / "t.laz", f=block / "f.gpkg", d=tmp_path) for a in command]
+    with caplog.at_level(logging.WARNING):
+        res = runner.invoke(cli, [*args, "--crs", "EPSG:32631"])
+    assert "replaces the file's own CRS Amersfoort / RD New" in caplog.text, caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):  # the same CRS (its compound form too): no word
+        runner.invoke(cli, [*args, "--crs", "EPSG:7415"])
+    assert "replaces" not in caplog.text
+    del res
+

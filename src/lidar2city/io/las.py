@@ -101,6 +101,23 @@ def _read_crs(las, path):
         return None
 
 
+_RELABELLED: set = set()
+
+
+def _forced_crs(forced, f, p):
+    """``forced`` (a ``--crs``), with a warning when the file ``f`` declares another CRS:
+    the option relabels the coordinates, it does not reproject them (said once per pair)."""
+    own = _read_crs(f, p)
+    if own is None or own.to_2d().equals(forced.to_2d(), ignore_axis_order=True):
+        return forced
+    key = (own.to_wkt(), forced.to_wkt())
+    if key not in _RELABELLED:
+        _RELABELLED.add(key)
+        logger.warning("%s: --crs %s replaces the file's own CRS %s: its coordinates are taken "
+                       "as they are, not reprojected", p.name, forced.name, own.name)
+    return forced
+
+
 def read_las(path, *, crs=None) -> LasTile:
     """Read a LAS/LAZ file.
 
@@ -122,7 +139,7 @@ def read_las(path, *, crs=None) -> LasTile:
         with laspy.open(p) as f:
             _check_point_count(f, p)
         las = laspy.read(p)
-    resolved = parse_crs(crs) if crs is not None else _read_crs(las, p)
+    resolved = _forced_crs(parse_crs(crs), las, p) if crs is not None else _read_crs(las, p)
     return LasTile(str(p), las, resolved)
 
 
@@ -212,12 +229,14 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
     # only (0.1 ms), a count lie within the last chunk left to the blocks that read it
     exact = len(paths) <= EXACT_SCAN_TILES
     out, shared = [], {}
-    for path in paths:
+    for i, path in enumerate(paths):
         p = check_input_file(path)
         with _reading(p), laspy.open(p) as f:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
-            tile_crs = forced if forced is not None else _read_crs(f, p)
+            # a forced CRS checked against the first tile's own (a CRS per tile costs ~1 ms)
+            tile_crs = (_read_crs(f, p) if forced is None
+                        else _forced_crs(forced, f, p) if i == 0 else forced)
             _check_point_count(f, p, exact=exact)
         if tile_crs is not None:
             # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
