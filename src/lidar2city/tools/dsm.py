@@ -192,12 +192,12 @@ def _read_inputs(dsm, dtm, ortho):
         raise InputError(f"{dsm}: only north-up rasters are supported (transform {tuple(t)[:6]})")
     if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
         raise InputError(f"{dsm}: pixels must be square, got {t.a} x {-t.e}")
-    check_surface(d, dsm)
+    d = check_surface(d, dsm)
     dt = o = None
     if dtm is not None:
         dt = read_raster(dtm)
         check_same_grid(d, dt, f"the DTM {str(dtm)!r}")
-        check_surface(dt, dtm)
+        dt = check_surface(dt, dtm)
     if ortho is not None:
         o = read_raster(ortho)
         arr = np.asarray(o.array)
