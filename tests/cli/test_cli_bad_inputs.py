@@ -965,3 +965,40 @@ def test_crs_option_replacing_the_files_own_is_said(runner, block, tmp_path, cap
     assert "replaces" not in caplog.text
     del res
 
+
+
+# --- session 10: coordinates stored coarser than a model needs -----------------------------------
+
+@pytest.mark.parametrize("command", [["info", "{t}"], ["ground", "{t}", "-o", "{d}/g.laz"],
+                                     ["reconstruct", "{t}", "--footprints", "{f}", "-o",
+                                      "{d}/m.city.json"]])
+def test_a_coarse_las_scale_is_said(runner, block, tmp_path, caplog, command):
+    """A tile written with a header scale of 1 m (every coordinate rounded to the metre) was
+    modelled without a word, its roofs and outlines up to 0.5 m off."""
+    import logging
+
+    import laspy
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io import las as las_io
+
+    src = laspy.read(block / "t.laz")
+    header = laspy.LasHeader(point_format=src.header.point_format, version=src.header.version)
+    header.offsets, header.scales = src.header.offsets, np.array([1.0, 1.0, 1.0])
+    for vlr in src.header.vlrs:
+        header.vlrs.append(vlr)
+    coarse = laspy.LasData(header)
+    coarse.x, coarse.y, coarse.z = src.x, src.y, src.z
+    coarse.classification = src.classification
+    coarse.write(tmp_path / "coarse.laz")
+    las_io._COARSE.clear()
+    args = [a.format(t=tmp_path / "coarse.laz", f=block / "f.gpkg", d=tmp_path) for a in command]
+    with caplog.at_level(logging.WARNING):
+        runner.invoke(cli, args)
+    assert "coarse.laz: coordinates stored to 1 m" in caplog.text, caplog.text
+    las_io._COARSE.clear()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):  # the tile's own 0.001 m: no word
+        runner.invoke(cli, [a.format(t=block / "t.laz", f=block / "f.gpkg", d=tmp_path)
+                            for a in command])
+    assert "stored to" not in caplog.text

@@ -103,6 +103,29 @@ def _read_crs(las, path):
 
 _RELABELLED: set = set()
 
+#: a header scale coarser than this (m) is said: outlines and heights are no finer
+COARSE_SCALE = 0.05
+_COARSE: set = set()
+
+
+def _check_scale(header, p, crs) -> None:
+    """Warn (once per file) when the header's scale rounds coordinates coarser than
+    :data:`COARSE_SCALE` metres: a tile written with a scale of 1 gave models up to
+    0.5 m off without a word."""
+    scales = np.asarray(header.scales, dtype=np.float64)
+    if scales.max() <= 0.01 or str(p) in _COARSE:  # the usual cm or mm: no CRS parsed
+        return
+    try:
+        xy_unit, z_unit = unit_factors(crs)
+    except CRSError:  # degrees: refused where metres are needed, described by `info`
+        return
+    steps = scales * (xy_unit, xy_unit, z_unit)
+    if steps.max() > COARSE_SCALE:
+        _COARSE.add(str(p))
+        logger.warning("%s: coordinates stored to %s m (header scale %s): outlines and heights "
+                       "are no finer than that", p.name, f"{steps.max():g}",
+                       ", ".join(f"{v:g}" for v in header.scales))
+
 
 def _forced_crs(forced, f, p):
     """``forced`` (a ``--crs``), with a warning when the file ``f`` declares another CRS:
@@ -140,6 +163,7 @@ def read_las(path, *, crs=None) -> LasTile:
             _check_point_count(f, p)
         las = laspy.read(p)
     resolved = _forced_crs(parse_crs(crs), las, p) if crs is not None else _read_crs(las, p)
+    _check_scale(las.header, p, resolved)
     return LasTile(str(p), las, resolved)
 
 
@@ -237,6 +261,7 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
             # a forced CRS checked against the first tile's own (a CRS per tile costs ~1 ms)
             tile_crs = (_read_crs(f, p) if forced is None
                         else _forced_crs(forced, f, p) if i == 0 else forced)
+            _check_scale(h, p, tile_crs)
             _check_point_count(f, p, exact=exact)
         if tile_crs is not None:
             # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
