@@ -958,11 +958,12 @@ def test_crs_option_replacing_the_files_own_is_said(runner, block, tmp_path, cap
     args = [a.format(t=block / "t.laz", f=block / "f.gpkg", d=tmp_path) for a in command]
     with caplog.at_level(logging.WARNING):
         res = runner.invoke(cli, [*args, "--crs", "EPSG:32631"])
-    assert "replaces the file's own CRS Amersfoort / RD New" in caplog.text, caplog.text
+    assert "t.laz declares the CRS Amersfoort / RD New but is read as WGS 84 / UTM zone 31N" \
+        in caplog.text, caplog.text
     caplog.clear()
     with caplog.at_level(logging.WARNING):  # the same CRS (its compound form too): no word
         runner.invoke(cli, [*args, "--crs", "EPSG:7415"])
-    assert "replaces" not in caplog.text
+    assert "declares the CRS" not in caplog.text
     del res
 
 
