@@ -274,3 +274,25 @@ def test_dsm_with_sentinel_values_under_another_nodata(runner, rasters, tmp_path
     assert "300 pixel(s) below -2000" in caplog.text, caplog.text
     a = next(iter(json.loads(out.read_text())["CityObjects"].values()))["attributes"]
     assert a["roof_z"] - a["ground_z"] == pytest.approx(9.0)
+
+
+@pytest.mark.parametrize("pixel", [(1e-5, 1e-5), (7e-6, 4.5e-6)])
+@pytest.mark.parametrize("command", ["footprints", "reconstruct"])
+def test_dsm_in_degrees_says_reproject_the_raster(runner, rasters, tmp_path, pixel, command):
+    """A DSM in EPSG:4326 was told to `reproject the points (e.g. PDAL ...)`, or, with
+    pixels of unequal sides in degrees, that `pixels must be square`."""
+    import rasterio
+
+    from lidar2city.cli.main import cli
+
+    p_dsm, _ = rasters
+    with rasterio.open(p_dsm) as src:
+        a, profile = src.read(1), src.profile
+    profile.update(crs="EPSG:4326", transform=Affine(pixel[0], 0, 4.35, 0, -pixel[1], 52.01))
+    geo = tmp_path / "geo.tif"
+    with rasterio.open(geo, "w", **profile) as dst:
+        dst.write(a, 1)
+    res = runner.invoke(cli, [command, "--dsm", str(geo), "-o", str(tmp_path / "o.gpkg")])
+    assert res.exit_code == 1, res.output
+    line = res.output.strip()
+    assert line.startswith("Error:") and "gdalwarp" in line and "\n" not in line, line

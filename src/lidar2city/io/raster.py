@@ -132,13 +132,17 @@ def check_surface(raster: Raster, name) -> Raster:
     Raises
     ------
     CRSError
-        No CRS (outputs must carry one; pass a raster with its CRS).
+        No CRS (outputs must carry one; pass a raster with its CRS), or a geographic one.
     EmptyInputError
         Every pixel is nodata.
     """
     if raster.crs is None:
         raise CRSError(f"{str(name)!r} has no CRS; write the raster with its CRS (e.g. "
                        "gdal_edit.py -a_srs EPSG:xxxx)")
+    if raster.crs.is_geographic and not raster.crs.is_compound:
+        raise CRSError(f"{str(name)!r} is in {raster.crs.name!r}, geographic (degrees): "
+                       "reproject the raster to a projected CRS in metres or feet (e.g. "
+                       "gdalwarp -t_srs EPSG:xxxx)")
     valid = raster.mask if raster.mask is not None else np.isfinite(raster.array)
     if raster.array.ndim == 2:
         with np.errstate(invalid="ignore"):
