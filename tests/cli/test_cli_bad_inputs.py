@@ -1003,3 +1003,22 @@ def test_a_coarse_las_scale_is_said(runner, block, tmp_path, caplog, command):
         runner.invoke(cli, [a.format(t=block / "t.laz", f=block / "f.gpkg", d=tmp_path)
                             for a in command])
     assert "stored to" not in caplog.text
+
+
+# --- session 10: footprints written as a Shapefile -------------------------------------------------
+
+def test_footprints_as_a_shapefile_is_whole(runner, block, tmp_path):
+    """``footprints -o f.shp`` renamed the .shp alone: its .shx, .dbf, .prj and .cpg were left
+    under hidden temporary names (a file GDAL cannot open: `Unable to open f.shx`), after
+    pyogrio's raw RuntimeWarning on the field names cut to 10 characters."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+
+    out = tmp_path / "out"
+    out.mkdir()
+    res = runner.invoke(cli, ["footprints", str(block / "t.laz"), "-o", str(out / "f.shp")])
+    assert res.exit_code == 0, res.output
+    assert "Warning" not in res.output, res.output
+    assert _left(out) == ["f.cpg", "f.dbf", "f.prj", "f.shp", "f.shx"]
+    fps, crs = read_footprints(out / "f.shp")
+    assert len(fps) == 2 and crs.to_epsg() == 28992

@@ -5,7 +5,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -481,12 +483,17 @@ def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=N
             for k, v in zip(names, values, strict=True):
                 if len(v) != len(geoms):
                     raise InputError(f"field {k!r} has {len(v)} values for {len(geoms)} features")
-            pyogrio.raw.write(
-                str(tmp), wkb, values, names, layer=lyr.name, driver=driver,
-                geometry_type=lyr.geometry_type, crs=crs.to_wkt() if crs is not None else None,
-                append=i > 0, promote_to_multi=None,
-                dataset_metadata=metadata if i == 0 and driver == "GPKG" else None,
-            )
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                pyogrio.raw.write(
+                    str(tmp), wkb, values, names, layer=lyr.name, driver=driver,
+                    geometry_type=lyr.geometry_type,
+                    crs=crs.to_wkt() if crs is not None else None,
+                    append=i > 0, promote_to_multi=None,
+                    dataset_metadata=metadata if i == 0 and driver == "GPKG" else None,
+                )
+            for w in said:  # GDAL's notes (a Shapefile's field names cut to 10 characters)
+                logger.warning("%s: %s", Path(path).name, w.message)
 
 
 def write_polygons(path, geometries, fields=None, *, origin, crs, xy_unit=1.0, layer="footprints",
