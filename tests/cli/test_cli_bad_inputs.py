@@ -1022,3 +1022,32 @@ def test_footprints_as_a_shapefile_is_whole(runner, block, tmp_path):
     assert _left(out) == ["f.cpg", "f.dbf", "f.prj", "f.shp", "f.shx"]
     fps, crs = read_footprints(out / "f.shp")
     assert len(fps) == 2 and crs.to_epsg() == 28992
+
+
+# --- session 10: a tile of no area on the per-tile commands ----------------------------------------
+
+@pytest.mark.parametrize("command", [["ground", "{t}", "-o", "{d}/g.laz", "--dtm", "{d}/d.tif"],
+                                     ["classify", "{t}", "-o", "{d}/c.laz"],
+                                     ["rasterize", "{t}", "-o", "{d}/r.tif", "--product", "dtm"]])
+@pytest.mark.parametrize("shape", ["one_xy", "line"])
+def test_points_covering_no_area_are_an_error_on_every_command(runner, block, tmp_path, command,
+                                                               shape):
+    """Every point at one XY (or on one line): `reconstruct` said `no area to reconstruct
+    buildings in`, but `ground` called 28 % of them ground and wrote a 1 x 1 DTM, `classify`
+    called 14,189 of a column of 23,922 high vegetation, `rasterize` wrote a 1 x 2 DTM."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.las import read_points, write_points
+
+    cloud = read_points(block / "t.laz")
+    xyz = cloud.xyz.copy()
+    xyz[:, 0] = 20.0
+    if shape == "one_xy":
+        xyz[:, 1] = 20.0
+    flat = type(cloud)(xyz, cloud.origin, cloud.crs, cloud.xy_unit, cloud.z_unit,
+                       dict(cloud.attributes))
+    write_points(tmp_path / "flat.laz", flat)
+    out = tmp_path / "out"
+    out.mkdir()
+    res = runner.invoke(cli, [a.format(t=tmp_path / "flat.laz", d=out) for a in command])
+    assert "no area to" in _error_line(res)
+    assert _left(out) == []
