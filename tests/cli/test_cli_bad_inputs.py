@@ -1051,3 +1051,39 @@ def test_points_covering_no_area_are_an_error_on_every_command(runner, block, tm
     res = runner.invoke(cli, [a.format(t=tmp_path / "flat.laz", d=out) for a in command])
     assert "no area to" in _error_line(res)
     assert _left(out) == []
+
+
+# --- session 10: a footprint with a vertex every centimetre ----------------------------------------
+
+def test_footprint_with_a_vertex_every_centimetre_is_thinned(runner, block, tmp_path, caplog):
+    """BGT footprints densified to a vertex every 1 cm (shapely.segmentize: a traced or
+    densified outline) gave a wall face per centimetre: the Delft crop of 11 buildings
+    took 24.6 s against 2.4 s, its CityJSON 4.8 MB against 52 kB. Their vertices within
+    1 mm of a straight line are dropped now, with a note, and the models are the same."""
+    import logging
+
+    import pyogrio
+    import shapely
+
+    from lidar2city.cli.main import cli
+
+    meta, _, wkb, data = pyogrio.raw.read(str(block / "f.gpkg"))
+    dense = shapely.segmentize(shapely.from_wkb(wkb), 0.01)
+    pyogrio.raw.write(str(tmp_path / "dense.gpkg"), np.array(shapely.to_wkb(dense), dtype=object),
+                      data, list(meta["fields"]), crs=meta["crs"],
+                      geometry_type=meta["geometry_type"])
+    docs = {}
+    for name in ("dense", "plain"):
+        src = tmp_path / "dense.gpkg" if name == "dense" else block / "f.gpkg"
+        with caplog.at_level(logging.INFO):
+            res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints", str(src),
+                                      "-o", str(tmp_path / f"{name}.city.json")])
+        assert res.exit_code == 0, res.output
+        docs[name] = (tmp_path / f"{name}.city.json").read_text()
+    assert "vertices closer than" in caplog.text, caplog.text
+    import json
+
+    a, b = (json.loads(docs[k]) for k in ("dense", "plain"))
+    assert len(a["vertices"]) == len(b["vertices"])
+    assert {k: o.get("attributes", {}).get("roof_height") for k, o in a["CityObjects"].items()} \
+        == {k: o.get("attributes", {}).get("roof_height") for k, o in b["CityObjects"].items()}

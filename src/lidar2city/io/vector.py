@@ -283,6 +283,33 @@ def _id_text(value):
     return text or None
 
 
+#: footprints whose vertices are on average closer than this (m) are densified outlines
+DENSE_SPACING = 0.05
+#: their vertices within this distance (m) of the line through their neighbours are dropped
+THIN_TOLERANCE = 0.001
+
+
+def _thinned(geoms, xy_unit, p):
+    """``geoms`` with the densified ones (a vertex every few cm, from shapely.segmentize or
+    a raster tracer) simplified within :data:`THIN_TOLERANCE`: each vertex is a wall face
+    of a model (one every cm: 10 times the time and 90 times the file of the same models)."""
+    import shapely
+
+    n = shapely.get_num_coordinates(geoms)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dense = (n > 8) & (shapely.length(geoms) * xy_unit / np.maximum(n, 1) < DENSE_SPACING)
+    if not dense.any():
+        return geoms
+    geoms = np.array(geoms, dtype=object)
+    thin = shapely.simplify(geoms[dense], THIN_TOLERANCE / xy_unit, preserve_topology=True)
+    logger.warning("%d footprint(s) of %s have vertices closer than %g m on average: those within "
+                   "%g m of a straight line are dropped (%d vertices -> %d)", int(dense.sum()),
+                   p.name, DENSE_SPACING, THIN_TOLERANCE, int(n[dense].sum()),
+                   int(shapely.get_num_coordinates(thin).sum()))
+    geoms[dense] = thin
+    return geoms
+
+
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
                     target_crs=None, bbox=None, fids=None, skip_features=0, max_features=None,
                     unique_ids=True, with_fids=False) -> tuple[Footprints, object]:
@@ -334,8 +361,8 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     raw = None if bbox is not None else read_gpkg_raw(
         p, layer=layer, fids=fids, skip_features=skip_features, max_features=max_features)
     if raw is None:
-        raw = _read_ogr(p, layer=footprint_layer(p, layer), bbox=bbox, fids=fids, skip_features=skip_features,
-                        max_features=max_features)
+        raw = _read_ogr(p, layer=footprint_layer(p, layer), bbox=bbox, fids=fids,
+                        skip_features=skip_features, max_features=max_features)
     meta, fids, wkb, field_data = raw
     if wkb is None and not meta.get("geometry_type"):
         raise FileFormatError(
@@ -357,6 +384,7 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         except Exception as exc:
             raise CRSError(f"cannot transform footprints from {src_crs.name} to {target_crs.name}: {exc}") from None
         geoms = shapely.transform(geoms, lambda c: np.column_stack(tr.transform(c[:, 0], c[:, 1])))
+    geoms = _thinned(geoms, xy_unit, p)
     names = list(meta["fields"])
     fields = {name: list(values) for name, values in zip(names, field_data, strict=True)}
     if id_field is not None and id_field not in fields:
