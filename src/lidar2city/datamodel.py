@@ -154,7 +154,7 @@ class PointCloud:
         self.require_points(what)
         size = np.ptp(self.xyz[:, :2], axis=0) * self.xy_unit
         if not (size > 0).all():
-            raise EmptyInputError(f"{what}: its {len(self)} point(s) cover {size[0]:.1f} m x "
+            raise EmptyInputError(f"{what} holds {len(self)} point(s) covering {size[0]:.1f} m x "
                                   f"{size[1]:.1f} m: no area to {purpose}")
 
     @property
