@@ -14,7 +14,7 @@ inputs" table from this session quote these lines:
 2. the Delft DSM with nodata NaN and two 50 x 50 pixel blocks: NaN and -9999
    (``reconstruct --dsm`` with the BGT footprints);
 3. the crop written with a header scale of 1 m; 4. the footprints after a first layer
-   of roads (and BGT's terrain file); 5. ``footprints -o f.shp``; 6. the crop's
+   of roads (and BGT's terrain file), and as GeometryCollections; 5. ``footprints -o f.shp``; 6. the crop's
    points moved to one XY on ``ground``, ``classify``, ``rasterize``; 7. outputs named
    ``.txt`` / ``.png``; 8. Autzen (Oregon feet) given ``--crs EPSG:28992``; 9. the DSM
    labelled EPSG:4326.
@@ -83,6 +83,9 @@ def make_inputs(data, d):
                       [np.array(["r1"], dtype=object)], ["id"], layer="roads", crs=meta["crs"],
                       geometry_type="Polygon")
     write("two.gpkg", g[keep], layer="buildings", append=True)
+    gcs = [shapely.GeometryCollection([p, p.centroid, p.boundary]) for p in g[keep]]
+    pyogrio.raw.write(str(d / "gc.gpkg"), np.array(shapely.to_wkb(gcs), dtype=object), f, names,
+                      crs=meta["crs"], geometry_type="GeometryCollection")
     # header scale 1 m
     h = laspy.LasHeader(point_format=crop.header.point_format, version=crop.header.version)
     h.offsets, h.scales = crop.header.offsets, np.array([1.0, 1.0, 1.0])
@@ -137,6 +140,13 @@ def main(data: Path):
                                     "-o", "two.city.json"], d)
         run("  BGT terrain", ["reconstruct", "crop.laz", "--footprints",
                               str(delft / "bgt_terrain.gpkg"), "-o", "t.city.json"], d)
+        run("  GeometryCollections (outline, centroid, boundary)",
+            ["reconstruct", "crop.laz", "--footprints", "gc.gpkg", "-o", "gc.city.json"], d)
+        import json
+
+        notes = {o["attributes"].get("footprint_note") for o in json.loads(
+            (d / "gc.city.json").read_text())["CityObjects"].values() if o["type"] == "Building"}
+        print(f"    footprint_note: {sorted(notes)}")
         print("5. a Shapefile output")
         (d / "shp").mkdir()
         run("  footprints -o f.shp", ["footprints", "crop.laz", "--crs", "EPSG:28992", "-o",

@@ -1087,3 +1087,38 @@ def test_footprint_with_a_vertex_every_centimetre_is_thinned(runner, block, tmp_
     assert len(a["vertices"]) == len(b["vertices"])
     assert {k: o.get("attributes", {}).get("roof_height") for k, o in a["CityObjects"].items()} \
         == {k: o.get("attributes", {}).get("roof_height") for k, o in b["CityObjects"].items()}
+
+
+# --- session 10: footprints stored as GeometryCollections ------------------------------------------
+
+def test_geometry_collection_footprints_give_their_polygons(runner, block, tmp_path):
+    """A layer of GeometryCollections (an outline with its label point or its centre
+    line, as some exports and overlays write them) failed whole: `none of its 2
+    footprint(s) is a usable polygon: not a polygon (GeometryCollection)`."""
+    import json
+
+    import pyogrio
+    import shapely
+    from shapely.geometry import GeometryCollection
+
+    from lidar2city.cli.main import cli
+
+    meta, _, wkb, data = pyogrio.raw.read(str(block / "f.gpkg"))
+    gcs = [GeometryCollection([g, g.centroid, g.boundary]) for g in shapely.from_wkb(wkb)]
+    pyogrio.raw.write(str(tmp_path / "gc.gpkg"), np.array(shapely.to_wkb(gcs), dtype=object),
+                      data, list(meta["fields"]), crs=meta["crs"],
+                      geometry_type="GeometryCollection")
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(tmp_path / "gc.gpkg"), "-o", str(tmp_path / "m.city.json")])
+    assert res.exit_code == 0 and "2 of 2 buildings" in res.output, res.output
+    notes = [o["attributes"].get("footprint_note", "") for o in
+             json.loads((tmp_path / "m.city.json").read_text())["CityObjects"].values()
+             if o["type"] == "Building"]
+    assert all("GeometryCollection" in n and "2 other part(s)" in n for n in notes), notes
+    only_points = [GeometryCollection([g.centroid]) for g in shapely.from_wkb(wkb)]
+    pyogrio.raw.write(str(tmp_path / "pts.gpkg"),
+                      np.array(shapely.to_wkb(only_points), dtype=object), data,
+                      list(meta["fields"]), crs=meta["crs"], geometry_type="GeometryCollection")
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(tmp_path / "pts.gpkg"), "-o", str(tmp_path / "p.city.json")])
+    assert "not a polygon (GeometryCollection of Point)" in _error_line(res)

@@ -59,8 +59,9 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
     ``keep_largest_share`` of the area (a small loop or spike cut off), and
     the note says so; otherwise the footprint is refused (``None``) with the
     reason, since which part is the building cannot be told. A MultiPolygon
-    keeps its parts. Non-polygonal or empty input gives ``None`` with the
-    reason.
+    keeps its parts, a GeometryCollection its polygons (its points and lines
+    left out, said in the note). Non-polygonal or empty input gives ``None``
+    with the reason.
 
     Examples
     --------
@@ -69,6 +70,26 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
     >>> g is None, note.startswith("self-intersecting outline splits into 2 parts")
     (True, True)
     """
+    from shapely.geometry import MultiPolygon
+
+    if geom is not None and geom.geom_type == "GeometryCollection" and not geom.is_empty:
+        # an outline with its label point or centre line (some exports, overlays): its polygons
+        members = list(geom.geoms)
+        polys = [p for g in members if g.geom_type in ("Polygon", "MultiPolygon")
+                 for p in getattr(g, "geoms", [g])]
+        if not polys:
+            kinds = ", ".join(sorted({g.geom_type for g in members}))
+            return None, f"not a polygon (GeometryCollection of {kinds})"
+        fixed, note = _repair(polys[0] if len(polys) == 1 else MultiPolygon(polys),
+                              keep_largest_share=keep_largest_share)
+        others = sum(g.geom_type not in ("Polygon", "MultiPolygon") for g in members)
+        said = f"the polygons of a GeometryCollection ({others} other part(s) left out)"
+        return fixed, "; ".join(n for n in (said, note) if n) if fixed is not None else note
+    return _repair(geom, keep_largest_share=keep_largest_share)
+
+
+def _repair(geom, *, keep_largest_share):
+    """:func:`repair_polygonal` of anything but a GeometryCollection."""
     import shapely
     from shapely.geometry import MultiPolygon, Polygon
 
