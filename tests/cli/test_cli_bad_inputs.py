@@ -1122,3 +1122,17 @@ def test_geometry_collection_footprints_give_their_polygons(runner, block, tmp_p
     res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
                               str(tmp_path / "pts.gpkg"), "-o", str(tmp_path / "p.city.json")])
     assert "not a polygon (GeometryCollection of Point)" in _error_line(res)
+
+
+@pytest.mark.parametrize("suffix", [".gpkg", ".shp", ".geojson", ".json", ".fgb"])
+def test_footprints_written_in_every_vector_format_named(runner, block, tmp_path, suffix):
+    """``footprints -o f.json`` ended in a traceback: pyogrio could not pick between
+    GeoJSON and JSONFG for .json. Every extension taken is written and read back."""
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import read_footprints
+
+    out = tmp_path / f"f{suffix}"
+    res = runner.invoke(cli, ["footprints", str(block / "t.laz"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    fps, crs = read_footprints(out)
+    assert len(fps) == 2 and crs.to_epsg() == 28992

@@ -508,6 +508,11 @@ def _field_array(values):
                      for v in values], dtype=object)
 
 
+#: OGR driver by output extension (pyogrio cannot tell GeoJSON from JSONFG for .json)
+DRIVERS = {".gpkg": "GPKG", ".shp": "ESRI Shapefile", ".geojson": "GeoJSON", ".json": "GeoJSON",
+           ".fgb": "FlatGeobuf"}
+
+
 def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=None,
                  metadata=None) -> None:
     """Write several layers into one vector file (GPKG default), atomically.
@@ -520,7 +525,7 @@ def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=N
 
     if not layers:
         raise InputError("nothing to write")
-    driver = driver or ("GPKG" if str(path).lower().endswith(".gpkg") else None)
+    driver = driver or DRIVERS.get(Path(path).suffix.lower())
     with atomic_path(path) as tmp:
         for i, lyr in enumerate(layers):
             geoms = np.array(lyr.geometries, dtype=object)
