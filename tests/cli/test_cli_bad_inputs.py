@@ -1136,3 +1136,23 @@ def test_footprints_written_in_every_vector_format_named(runner, block, tmp_path
     assert res.exit_code == 0, res.output
     fps, crs = read_footprints(out)
     assert len(fps) == 2 and crs.to_epsg() == 28992
+
+
+@pytest.mark.parametrize("name", ["m.dat", "m.city.json"])
+def test_reconstruct_format_gpkg_under_any_name(runner, block, tmp_path, name):
+    """``reconstruct --format gpkg -o m.dat`` ran every building, then ended in a traceback
+    (pyogrio: `Could not infer driver from path`); `-o m.city.json` in a GDAL error."""
+    import contextlib
+
+    from lidar2city.cli.main import cli
+
+    res = runner.invoke(cli, ["reconstruct", str(block / "t.laz"), "--footprints",
+                              str(block / "f.gpkg"), "--format", "gpkg", "-o", str(tmp_path / name)])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / name).read_bytes()[:16] == b"SQLite format 3\x00"
+    import sqlite3
+
+    with contextlib.closing(sqlite3.connect(tmp_path / name)) as con:
+        tables = [r[0] for r in con.execute("SELECT table_name FROM gpkg_contents")]
+    assert "footprints" in tables, tables
+    assert _left(tmp_path) == [name]
