@@ -883,6 +883,7 @@ def test_a_finished_run_ignores_ctrl_c_while_its_process_ends(monkeypatch):
     (["classify", "{t}", "-o", "{d}/c.csv"], ".las, .laz"),
     (["rasterize", "{t}", "-o", "{d}/r.png"], ".tif, .tiff"),
     (["footprints", "{t}", "-o", "{d}/f.txt"], ".gpkg"),
+    (["footprints", "--dsm", "{t}", "-o", "{d}/f.gpkg", "--figure", "{d}/f.pdf"], ".png"),
 ])
 def test_an_output_extension_its_writer_does_not_write_is_refused(runner, block, tmp_path,
                                                                   args, kind):

@@ -86,6 +86,7 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
     check_not_input((output, dtm_out, figure), inputs, dsm, dtm, ortho, weights)
     check_suffix(output, VECTOR_SUFFIXES, "footprints")
     check_suffix(dtm_out, RASTER_SUFFIXES, "rasters")
+    check_suffix(figure, (".png",), "figures")
     values = {"cell": cell, "edge_offset": edge_offset, "crs": crs, "dtm": dtm, "ortho": ortho,
               "dtm_out": dtm_out, "figure": figure, "weights": weights, "block_size": block_size}
     if dsm is None:
