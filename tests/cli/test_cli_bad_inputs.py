@@ -1157,3 +1157,24 @@ def test_reconstruct_format_gpkg_under_any_name(runner, block, tmp_path, name):
         tables = [r[0] for r in con.execute("SELECT table_name FROM gpkg_contents")]
     assert "footprints" in tables, tables
     assert _left(tmp_path) == [name]
+
+
+def test_crs_option_over_a_folder_checks_every_tile(runner, block, tmp_path, caplog):
+    """A folder of a tile without a CRS and one in another CRS, given --crs: the relabelling
+    of the second tile was not said (only the first tile was checked)."""
+    import logging
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io import las
+    from lidar2city.io.las import read_points, write_points
+
+    (tmp_path / "tiles").mkdir()
+    cloud = read_points(block / "t.laz")
+    write_points(tmp_path / "tiles" / "a.laz", type(cloud)(
+        cloud.xyz, cloud.origin, None, 1.0, 1.0, dict(cloud.attributes)))
+    shutil.copy(block / "t.laz", tmp_path / "tiles" / "b.laz")
+    las._RELABELLED.clear()
+    with caplog.at_level(logging.WARNING):
+        runner.invoke(cli, ["footprints", str(tmp_path / "tiles"), "--crs", "EPSG:32631",
+                            "-o", str(tmp_path / "f.gpkg")])
+    assert "b.laz declares the CRS Amersfoort / RD New" in caplog.text, caplog.text
