@@ -323,6 +323,11 @@ def _thinned(geoms, xy_unit, p):
         return geoms
     geoms = np.array(geoms, dtype=object)
     thin = shapely.simplify(geoms[dense], THIN_TOLERANCE / xy_unit, preserve_topology=True)
+    said = ("thinned", str(p))  # once per file, though a run reads it more than once
+    if said in _WARNED:
+        geoms[dense] = thin
+        return geoms
+    _WARNED.add(said)
     logger.warning("%d footprint(s) of %s have vertices closer than %g m on average: those within "
                    "%g m of a straight line are dropped (%d vertices -> %d)", int(dense.sum()),
                    p.name, DENSE_SPACING, THIN_TOLERANCE, int(n[dense].sum()),
