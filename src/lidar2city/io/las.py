@@ -159,22 +159,6 @@ def _check_scale(header, p, crs) -> None:
                        ", ".join(f"{v:g}" for v in header.scales))
 
 
-def _forced_crs(forced, f, p):
-    """``forced`` (a ``--crs``, or the CRS of the model being edited), with a warning when
-    the file ``f`` declares another CRS: it relabels the coordinates, it does not reproject
-    them (said once per pair)."""
-    own = _read_crs(f, p)
-    if own is None or own.to_2d().equals(forced.to_2d(), ignore_axis_order=True):
-        return forced
-    key = (own.to_wkt(), forced.to_wkt())
-    if key not in _RELABELLED:
-        _RELABELLED.add(key)
-        logger.warning("%s declares the CRS %s but is read as %s (--crs, or the model's CRS): "
-                       "its coordinates are taken as they are, not reprojected", p.name,
-                       own.name, forced.name)
-    return forced
-
-
 def read_las(path, *, crs=None) -> LasTile:
     """Read a LAS/LAZ file.
 
