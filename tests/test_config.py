@@ -18,3 +18,10 @@ def test_errors_name_stage_and_field(tmp_path):
         stage_config("ground", {"grund": {}})
     with pytest.raises(FileFormatError, match="no such config file"):
         read_config(tmp_path / "missing.toml")
+
+
+def test_a_scalar_where_a_list_is_expected_names_the_field():
+    """``building_classes = 6`` (for ``[6]``) said `lod1: 'int' object is not iterable`."""
+    with pytest.raises(ConfigError, match=r"lod1\.building_classes: expected a list, got 6"):
+        load_config({"lod1": {"building_classes": 6}})
+    assert stage_config("lod1", {"lod1": {"building_classes": [6, 26]}}).building_classes == (6, 26)

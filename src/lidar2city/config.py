@@ -92,10 +92,10 @@ def _check_type(stage, name, value, annotation):
         if value is None:
             return value
         raise ConfigError(f"{stage}.{name}: expected nothing, got {value!r}")
-    if origin in (tuple, list):
+    if origin in (tuple, list) or annotation in (tuple, list):  # tuple[int, ...] or tuple
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{stage}.{name}: expected a list, got {value!r}")
-        return tuple(value) if origin is tuple else list(value)
+        return tuple(value) if tuple in (origin, annotation) else list(value)
     if annotation is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{stage}.{name}: expected a number, got {value!r}")

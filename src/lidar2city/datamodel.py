@@ -148,6 +148,15 @@ class PointCloud:
         if len(self) == 0:
             raise EmptyInputError(f"{what} has no points")
 
+    def require_area(self, what: str = "input", purpose: str = "work") -> None:
+        """Raise :class:`EmptyInputError` when the points cover no area (none, one point,
+        every point at one XY or on one line): ``purpose`` says what needs an area."""
+        self.require_points(what)
+        size = np.ptp(self.xyz[:, :2], axis=0) * self.xy_unit
+        if not (size > 0).all():
+            raise EmptyInputError(f"{what} holds {len(self)} point(s) covering {size[0]:.1f} m x "
+                                  f"{size[1]:.1f} m: no area to {purpose}")
+
     @property
     def bounds(self) -> np.ndarray:
         """Local metric bounds ``[xmin, ymin, zmin, xmax, ymax, zmax]``."""

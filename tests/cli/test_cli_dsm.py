@@ -239,3 +239,60 @@ def test_reconstruct_dsm_with_footprints_of_another_area(runner, rasters, tmp_pa
     res = runner.invoke(cli, ["reconstruct", "--dsm", str(p_dsm), "--dtm", str(p_dtm),
                               "--footprints", str(both), "-o", str(out)])
     assert res.exit_code == 0 and "1 of 2 buildings reconstructed" in res.output, res.output
+
+
+def test_dsm_with_sentinel_values_under_another_nodata(runner, rasters, tmp_path, caplog):
+    """A float DSM whose nodata is NaN but whose gaps hold -9999 (two tools' conventions
+    mixed): the -9999 pixels were heights, and a building over them failed with
+    `height -9999.28 m is not above the terrain` (Delft's DSM so rewritten: 8 of 132).
+    Values below -2000 (lower than any land) are no data now, with a warning."""
+    import logging
+
+    import rasterio
+    import shapely
+
+    from lidar2city.cli.main import cli
+    from lidar2city.io.vector import write_polygons
+
+    p_dsm, p_dtm = rasters
+    with rasterio.open(p_dsm) as src:
+        a, profile = src.read(1), src.profile
+    a[10:20, 10:40] = -9999.0  # most of the 9 m box
+    a[0, 0] = np.nan
+    profile.update(nodata=np.nan)
+    bad = tmp_path / "mixed.tif"
+    with rasterio.open(bad, "w", **profile) as dst:
+        dst.write(a, 1)
+    fp = tmp_path / "given.gpkg"
+    write_polygons(fp, [shapely.box(500010, 4299974, 500040, 4299990)], {"id": ["A"]},
+                   origin=(0, 0), crs=CRS_UTM)
+    out = tmp_path / "o.city.json"
+    with caplog.at_level(logging.WARNING):
+        res = runner.invoke(cli, ["reconstruct", "--dsm", str(bad), "--dtm", str(p_dtm),
+                                  "--footprints", str(fp), "-o", str(out)])
+    assert res.exit_code == 0 and "1 of 1 buildings" in res.output, res.output
+    assert "300 pixel(s) below -2000" in caplog.text, caplog.text
+    a = next(iter(json.loads(out.read_text())["CityObjects"].values()))["attributes"]
+    assert a["roof_z"] - a["ground_z"] == pytest.approx(9.0)
+
+
+@pytest.mark.parametrize("pixel", [(1e-5, 1e-5), (7e-6, 4.5e-6)])
+@pytest.mark.parametrize("command", ["footprints", "reconstruct"])
+def test_dsm_in_degrees_says_reproject_the_raster(runner, rasters, tmp_path, pixel, command):
+    """A DSM in EPSG:4326 was told to `reproject the points (e.g. PDAL ...)`, or, with
+    pixels of unequal sides in degrees, that `pixels must be square`."""
+    import rasterio
+
+    from lidar2city.cli.main import cli
+
+    p_dsm, _ = rasters
+    with rasterio.open(p_dsm) as src:
+        a, profile = src.read(1), src.profile
+    profile.update(crs="EPSG:4326", transform=Affine(pixel[0], 0, 4.35, 0, -pixel[1], 52.01))
+    geo = tmp_path / "geo.tif"
+    with rasterio.open(geo, "w", **profile) as dst:
+        dst.write(a, 1)
+    res = runner.invoke(cli, [command, "--dsm", str(geo), "-o", str(tmp_path / "o.gpkg")])
+    assert res.exit_code == 1, res.output
+    line = res.output.strip()
+    assert line.startswith("Error:") and "gdalwarp" in line and "\n" not in line, line

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["check_output", "check_not_input", "crs_option", "engine_options", "EngineProgress",
+__all__ = ["check_output", "check_not_input", "check_suffix", "POINTS_SUFFIXES", "RASTER_SUFFIXES",
+           "VECTOR_SUFFIXES", "crs_option", "engine_options", "EngineProgress",
            "neighbours_options", "output_option", "progress", "progress_callback", "run_on_tiles"]
 
 crs_option = click.option(
@@ -50,6 +51,25 @@ def check_not_input(outputs, *inputs) -> None:
     for o in [outputs] if isinstance(outputs, (str, Path)) else outputs:
         if o is not None and Path(o).resolve() in given:
             raise InputError(f"output {str(o)!r} is also an input: give the output another name")
+
+
+#: output extensions the writers write, by kind of output (anything else is refused)
+POINTS_SUFFIXES = (".las", ".laz")
+RASTER_SUFFIXES = (".tif", ".tiff")
+VECTOR_SUFFIXES = (".gpkg", ".shp", ".geojson", ".json", ".fgb")
+
+
+def check_suffix(path, suffixes, what) -> None:
+    """An output file whose extension its writer does not write is an error before any
+    work: the LAS writer would put a LAS file under ``g.txt``, GDAL a GeoTIFF under
+    ``r.png``, and OGR fail at the end (``Could not set geometry``) on ``f.txt``."""
+    from pathlib import Path
+
+    from ..errors import InputError
+
+    if path is not None and Path(path).suffix.lower() not in suffixes:
+        raise InputError(f"output {str(path)!r}: {what} are written as {', '.join(suffixes)}: "
+                         "give the output one of these extensions")
 
 
 class _Workers(click.ParamType):
@@ -109,6 +129,9 @@ def run_on_tiles(job, input, output, *, neighbours, workers, scheduler, extra=No
             raise InputError("--workers and --scheduler apply to a folder or glob of tiles")
         for path in outputs:  # one file each: fails at once, in one line, before any work
             check_output_path(path)
+        check_suffix(output, POINTS_SUFFIXES, "points")
+        for path, _ in (extra or {}).values():
+            check_suffix(path, RASTER_SUFFIXES, "rasters")
         return False
     if neighbours:
         raise InputError("with a folder of tiles the neighbours are found from the tiles; "

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from ._options import check_not_input, check_output, crs_option, engine_options, output_option
+from ._options import (RASTER_SUFFIXES, VECTOR_SUFFIXES, check_not_input, check_output, check_suffix,
+                       crs_option, engine_options, output_option)
 
 #: outline regularisers of point-cloud footprints (``lidar2city.footprints.REGULARIZERS``)
 REGULARIZER_NAMES = ("none", "snake", "fit")
@@ -83,6 +84,9 @@ def command(inputs, output, dsm, dtm, ortho, dtm_out, figure, regularize, weight
     from ..errors import InputError
 
     check_not_input((output, dtm_out, figure), inputs, dsm, dtm, ortho, weights)
+    check_suffix(output, VECTOR_SUFFIXES, "footprints")
+    check_suffix(dtm_out, RASTER_SUFFIXES, "rasters")
+    check_suffix(figure, (".png",), "figures")
     values = {"cell": cell, "edge_offset": edge_offset, "crs": crs, "dtm": dtm, "ortho": ortho,
               "dtm_out": dtm_out, "figure": figure, "weights": weights, "block_size": block_size}
     if dsm is None:

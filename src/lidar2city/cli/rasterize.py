@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._options import check_not_input, crs_option, output_option
+from ._options import RASTER_SUFFIXES, check_not_input, check_suffix, crs_option, output_option
 
 PRODUCTS = ("dsm", "dtm", "ndsm", "intensity", "rgb")  # keys of tools.rasterize.PRODUCTS
 
@@ -32,6 +32,7 @@ def command(inputs, output, product, cell, ground, max_gap, crs, allow_no_crs):
     from ..tools.rasterize import rasterize_files
 
     check_not_input(output, inputs)
+    check_suffix(output, RASTER_SUFFIXES, "rasters")
     if not cell > 0:
         raise click.BadParameter("must be > 0", param_hint="--cell")
     if max_gap is not None and not max_gap >= 0:

@@ -254,6 +254,10 @@ def _temp_name(path: Path, parent: Path) -> Path:
     return parent / f".{path.stem}.tmp{os.getpid()}{''.join(path.suffixes[-1:])}"
 
 
+#: files a format writes beside the one named, by the named one's extension
+SIDECARS = {".shp": (".shx", ".dbf", ".prj", ".cpg")}
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds.
@@ -273,18 +277,27 @@ def atomic_path(path):
     check_output_path(path)
     parent = path.parent if str(path.parent) else Path(".")
     tmp = _temp_name(path, parent)
-    _PENDING.add(tmp)
+    # the files a driver writes beside the one named (a Shapefile's .shx, .dbf...): renamed
+    # with it, the named one last, and removed with it
+    sidecars = [(tmp.with_suffix(s), path.with_suffix(s))
+                for s in SIDECARS.get(path.suffix.lower(), ())]
+    pending = [tmp, *(t for t, _ in sidecars)]
+    _PENDING.update(pending)
     try:
         yield tmp
+        for t, final in sidecars:
+            if t.exists():
+                _commit(t, final)
         _commit(tmp, path)
     except BaseException as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        for t in pending:
+            with contextlib.suppress(OSError):
+                os.unlink(t)
         if _is_write_failure(exc):
             raise FileFormatError(f"cannot write {str(path)!r}: {_reason(exc)}") from exc
         raise
     finally:
-        _PENDING.discard(tmp)
+        _PENDING.difference_update(pending)
 
 
 def _commit(tmp: Path, path: Path) -> None:

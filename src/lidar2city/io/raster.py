@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -116,20 +117,43 @@ def read_raster(path, *, bands=None, crs=None) -> Raster:
     return Raster(arr, transform, resolved, mask)
 
 
+#: heights below this (in the raster's units) are no data: lower than any land (the Dead
+#: Sea's shore is at -430 m, -1411 ft), above the sentinels tools write (-9999, -32768, -3.4e38)
+LOWEST_SURFACE = -2000.0
+
+
 def check_surface(raster: Raster, name) -> Raster:
     """A DSM / DTM input must carry a CRS and hold at least one valid pixel.
+
+    Returns the raster with heights below :data:`LOWEST_SURFACE` made no data, with
+    a warning: a float raster whose nodata is NaN (or another value) holding the
+    -9999 of another tool's gaps gave buildings 10 km under the terrain.
 
     Raises
     ------
     CRSError
-        No CRS (outputs must carry one; pass a raster with its CRS).
+        No CRS (outputs must carry one; pass a raster with its CRS), or a geographic one.
     EmptyInputError
         Every pixel is nodata.
     """
     if raster.crs is None:
         raise CRSError(f"{str(name)!r} has no CRS; write the raster with its CRS (e.g. "
                        "gdal_edit.py -a_srs EPSG:xxxx)")
+    if raster.crs.is_geographic and not raster.crs.is_compound:
+        raise CRSError(f"{str(name)!r} is in {raster.crs.name!r}, geographic (degrees): "
+                       "reproject the raster to a projected CRS in metres or feet (e.g. "
+                       "gdalwarp -t_srs EPSG:xxxx)")
     valid = raster.mask if raster.mask is not None else np.isfinite(raster.array)
+    if raster.array.ndim == 2:
+        with np.errstate(invalid="ignore"):
+            low = valid & (raster.array < LOWEST_SURFACE)
+        if low.any():
+            logger.warning("%s: %d pixel(s) below %g (down to %g) taken as no data: lower than "
+                           "any land, another tool's no-data value", Path(name).name,
+                           int(low.sum()), LOWEST_SURFACE, float(raster.array[low].min()))
+            valid = valid & ~low
+            raster = Raster(np.where(valid, raster.array, np.nan), raster.transform, raster.crs,
+                            valid)
     if not np.any(valid):
         raise EmptyInputError(f"{str(name)!r} holds no valid pixel (all nodata)")
     return raster

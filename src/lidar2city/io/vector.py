@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
+import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -14,8 +17,8 @@ from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["no_pam", "overlapping", "read_footprints", "vector_crs", "unique", "repair_polygonal",
-           "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
+__all__ = ["footprint_layer", "no_pam", "overlapping", "read_footprints", "vector_crs", "unique",
+           "repair_polygonal", "VectorLayer", "write_layers", "write_polygons", "to_local", "to_world"]
 
 
 def to_local(geoms, origin, xy_unit=1.0):
@@ -56,8 +59,9 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
     ``keep_largest_share`` of the area (a small loop or spike cut off), and
     the note says so; otherwise the footprint is refused (``None``) with the
     reason, since which part is the building cannot be told. A MultiPolygon
-    keeps its parts. Non-polygonal or empty input gives ``None`` with the
-    reason.
+    keeps its parts, a GeometryCollection its polygons (its points and lines
+    left out, said in the note). Non-polygonal or empty input gives ``None``
+    with the reason.
 
     Examples
     --------
@@ -66,6 +70,26 @@ def repair_polygonal(geom, *, keep_largest_share: float = KEEP_LARGEST_SHARE):
     >>> g is None, note.startswith("self-intersecting outline splits into 2 parts")
     (True, True)
     """
+    from shapely.geometry import MultiPolygon
+
+    if geom is not None and geom.geom_type == "GeometryCollection" and not geom.is_empty:
+        # an outline with its label point or centre line (some exports, overlays): its polygons
+        members = list(geom.geoms)
+        polys = [p for g in members if g.geom_type in ("Polygon", "MultiPolygon")
+                 for p in getattr(g, "geoms", [g])]
+        if not polys:
+            kinds = ", ".join(sorted({g.geom_type for g in members}))
+            return None, f"not a polygon (GeometryCollection of {kinds})"
+        fixed, note = _repair(polys[0] if len(polys) == 1 else MultiPolygon(polys),
+                              keep_largest_share=keep_largest_share)
+        others = sum(g.geom_type not in ("Polygon", "MultiPolygon") for g in members)
+        said = f"the polygons of a GeometryCollection ({others} other part(s) left out)"
+        return fixed, "; ".join(n for n in (said, note) if n) if fixed is not None else note
+    return _repair(geom, keep_largest_share=keep_largest_share)
+
+
+def _repair(geom, *, keep_largest_share):
+    """:func:`repair_polygonal` of anything but a GeometryCollection."""
     import shapely
     from shapely.geometry import MultiPolygon, Polygon
 
@@ -123,6 +147,50 @@ def no_pam():
         pyogrio.set_gdal_config_options({"GDAL_PAM_ENABLED": before})
 
 
+@functools.lru_cache(maxsize=32)
+def _layers(path: str, stamp: tuple) -> tuple:
+    """``((name, geometry type or None), ...)`` of a vector source (``stamp``: its mtime and
+    size, so that a file rewritten in the same process is listed again)."""
+    import pyogrio
+
+    with no_pam():
+        return tuple((str(n), None if t is None else str(t)) for n, t in pyogrio.list_layers(path))
+
+
+def footprint_layer(path, layer=None):
+    """The layer of ``path`` that holds the footprints: ``layer`` when given, else its only
+    layer, else its only layer of polygons (beside points, lines or tables).
+
+    OGR reads the first layer of a source when none is named: a GeoPackage whose first
+    layer is roads or parcels gave models of the wrong polygons, or none, without a word.
+
+    Raises
+    ------
+    InputError
+        When several layers may hold polygons and none is named: the message lists them.
+    FileFormatError
+        If the source cannot be opened.
+    """
+    if layer is not None:
+        return layer
+    p = check_input_file(path)
+    try:
+        st = p.stat()
+        layers = _layers(str(p), (st.st_mtime_ns, st.st_size))
+    except Exception as exc:  # pyogrio.errors.DataSourceError
+        raise _unreadable(p, exc) from None
+    if len(layers) <= 1:
+        return None
+    polygonal = [n for n, t in layers if t is not None and ("Polygon" in t or t == "Unknown")]
+    if len(polygonal) == 1:
+        logger.info("%s: reading its only polygon layer %r", p.name, polygonal[0])
+        return polygonal[0]
+    listed = ", ".join(f"{n} ({t or 'no geometry'})" for n, t in layers)
+    raise InputError(f"{str(p)!r} holds {len(layers)} layers ({listed}): name the footprints' "
+                     f"layer with --layer NAME (reconstruct), or save it on its own: "
+                     f"ogr2ogr f.gpkg {p.name} NAME")
+
+
 def vector_crs(path, *, layer=None):
     """The CRS of a vector source's layer (default the first), or None when it has none.
 
@@ -135,6 +203,7 @@ def vector_crs(path, *, layer=None):
     from pyproj import CRS
 
     p = check_input_file(path)
+    layer = footprint_layer(p, layer)
     try:
         with no_pam():
             info = pyogrio.read_info(str(p), layer=layer)
@@ -235,6 +304,38 @@ def _id_text(value):
     return text or None
 
 
+#: footprints whose vertices are on average closer than this (m) are densified outlines
+DENSE_SPACING = 0.05
+#: their vertices within this distance (m) of the line through their neighbours are dropped
+THIN_TOLERANCE = 0.001
+
+
+def _thinned(geoms, xy_unit, p):
+    """``geoms`` with the densified ones (a vertex every few cm, from shapely.segmentize or
+    a raster tracer) simplified within :data:`THIN_TOLERANCE`: each vertex is a wall face
+    of a model (one every cm: 10 times the time and 90 times the file of the same models)."""
+    import shapely
+
+    n = shapely.get_num_coordinates(geoms)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dense = (n > 8) & (shapely.length(geoms) * xy_unit / np.maximum(n, 1) < DENSE_SPACING)
+    if not dense.any():
+        return geoms
+    geoms = np.array(geoms, dtype=object)
+    thin = shapely.simplify(geoms[dense], THIN_TOLERANCE / xy_unit, preserve_topology=True)
+    said = ("thinned", str(p))  # once per file, though a run reads it more than once
+    if said in _WARNED:
+        geoms[dense] = thin
+        return geoms
+    _WARNED.add(said)
+    logger.warning("%d footprint(s) of %s have vertices closer than %g m on average: those within "
+                   "%g m of a straight line are dropped (%d vertices -> %d)", int(dense.sum()),
+                   p.name, DENSE_SPACING, THIN_TOLERANCE, int(n[dense].sum()),
+                   int(shapely.get_num_coordinates(thin).sum()))
+    geoms[dense] = thin
+    return geoms
+
+
 def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_unit=1.0,
                     target_crs=None, bbox=None, fids=None, skip_features=0, max_features=None,
                     unique_ids=True, with_fids=False) -> tuple[Footprints, object]:
@@ -286,8 +387,8 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
     raw = None if bbox is not None else read_gpkg_raw(
         p, layer=layer, fids=fids, skip_features=skip_features, max_features=max_features)
     if raw is None:
-        raw = _read_ogr(p, layer=layer, bbox=bbox, fids=fids, skip_features=skip_features,
-                        max_features=max_features)
+        raw = _read_ogr(p, layer=footprint_layer(p, layer), bbox=bbox, fids=fids,
+                        skip_features=skip_features, max_features=max_features)
     meta, fids, wkb, field_data = raw
     if wkb is None and not meta.get("geometry_type"):
         raise FileFormatError(
@@ -309,6 +410,7 @@ def read_footprints(path, *, layer=None, id_field=None, origin=(0.0, 0.0), xy_un
         except Exception as exc:
             raise CRSError(f"cannot transform footprints from {src_crs.name} to {target_crs.name}: {exc}") from None
         geoms = shapely.transform(geoms, lambda c: np.column_stack(tr.transform(c[:, 0], c[:, 1])))
+    geoms = _thinned(geoms, xy_unit, p)
     names = list(meta["fields"])
     fields = {name: list(values) for name, values in zip(names, field_data, strict=True)}
     if id_field is not None and id_field not in fields:
@@ -411,6 +513,11 @@ def _field_array(values):
                      for v in values], dtype=object)
 
 
+#: OGR driver by output extension (pyogrio cannot tell GeoJSON from JSONFG for .json)
+DRIVERS = {".gpkg": "GPKG", ".shp": "ESRI Shapefile", ".geojson": "GeoJSON", ".json": "GeoJSON",
+           ".fgb": "FlatGeobuf"}
+
+
 def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=None,
                  metadata=None) -> None:
     """Write several layers into one vector file (GPKG default), atomically.
@@ -423,7 +530,7 @@ def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=N
 
     if not layers:
         raise InputError("nothing to write")
-    driver = driver or ("GPKG" if str(path).lower().endswith(".gpkg") else None)
+    driver = driver or DRIVERS.get(Path(path).suffix.lower())
     with atomic_path(path) as tmp:
         for i, lyr in enumerate(layers):
             geoms = np.array(lyr.geometries, dtype=object)
@@ -435,12 +542,17 @@ def write_layers(path, layers, *, origin, crs, xy_unit=1.0, z_unit=1.0, driver=N
             for k, v in zip(names, values, strict=True):
                 if len(v) != len(geoms):
                     raise InputError(f"field {k!r} has {len(v)} values for {len(geoms)} features")
-            pyogrio.raw.write(
-                str(tmp), wkb, values, names, layer=lyr.name, driver=driver,
-                geometry_type=lyr.geometry_type, crs=crs.to_wkt() if crs is not None else None,
-                append=i > 0, promote_to_multi=None,
-                dataset_metadata=metadata if i == 0 and driver == "GPKG" else None,
-            )
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                pyogrio.raw.write(
+                    str(tmp), wkb, values, names, layer=lyr.name, driver=driver,
+                    geometry_type=lyr.geometry_type,
+                    crs=crs.to_wkt() if crs is not None else None,
+                    append=i > 0, promote_to_multi=None,
+                    dataset_metadata=metadata if i == 0 and driver == "GPKG" else None,
+                )
+            for w in said:  # GDAL's notes (a Shapefile's field names cut to 10 characters)
+                logger.warning("%s: %s", Path(path).name, w.message)
 
 
 def write_polygons(path, geometries, fields=None, *, origin, crs, xy_unit=1.0, layer="footprints",

@@ -34,7 +34,7 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     d = read_raster(dsm)
     if d.array.ndim != 2:
         raise InputError(f"{str(dsm)!r}: the DSM must have one band")
-    check_surface(d, dsm)
+    d = check_surface(d, dsm)
     from ..crs import unit_factors
 
     z_unit = unit_factors(d.crs)[1]
@@ -50,7 +50,7 @@ def load_scene_inputs(dsm, *, dtm=None, ortho=None) -> dict:
     else:
         t = read_raster(dtm)
         check_same_grid(d, t, f"DTM {str(dtm)!r}")
-        check_surface(t, dtm)
+        t = check_surface(t, dtm)
         ground = t.array * z_unit
     ndsm = zs - ground
     o = None

@@ -113,7 +113,7 @@ def classify_file(src, dst, *, crs=None, ground_from_file: bool = False,
     t0 = time.perf_counter()
     tile = read_las(src, crs=crs)
     cloud = tile.point_cloud()
-    cloud.require_points(str(src))
+    cloud.require_area(repr(str(src)), "classify")
     wide = with_neighbours(cloud, neighbours, buffer=buffer, crs=crs)
     classes = classify_cloud(wide, ground_from_file=ground_from_file,
                              ground_method=ground_method, config=cfg)[:len(cloud)]

@@ -186,18 +186,17 @@ def _z_unit(raster) -> float:
 
 def _read_inputs(dsm, dtm, ortho):
     """The DSM, DTM (heights in metres) and orthoimage rasters, checked."""
-    d = read_raster(dsm)
+    d = check_surface(read_raster(dsm), dsm)
     t = d.transform
     if abs(t.b) > 1e-12 or abs(t.d) > 1e-12 or t.a <= 0 or t.e >= 0:
         raise InputError(f"{dsm}: only north-up rasters are supported (transform {tuple(t)[:6]})")
     if abs(abs(t.a) - abs(t.e)) > 1e-6 * abs(t.a):
         raise InputError(f"{dsm}: pixels must be square, got {t.a} x {-t.e}")
-    check_surface(d, dsm)
     dt = o = None
     if dtm is not None:
         dt = read_raster(dtm)
         check_same_grid(d, dt, f"the DTM {str(dtm)!r}")
-        check_surface(dt, dtm)
+        dt = check_surface(dt, dtm)
     if ortho is not None:
         o = read_raster(ortho)
         arr = np.asarray(o.array)

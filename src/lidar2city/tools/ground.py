@@ -91,7 +91,7 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     t0 = time.perf_counter()
     tile = read_las(input_path, crs=crs)
     cloud = tile.point_cloud()
-    cloud.require_points(repr(tile.path))
+    cloud.require_area(repr(tile.path), "filter the ground in")
     wide = with_neighbours(cloud, neighbours, buffer=buffer, crs=crs)
     far = far_points(wide.xyz[:, :2])
     if far.any():  # stray returns far away: not ground, and the survey filtered without them

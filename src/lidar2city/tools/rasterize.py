@@ -200,6 +200,7 @@ def rasterize_files(paths, output, *, product="dsm", cell=0.5, crs=None, ground=
         logger.warning("%d point(s) far from the rest of the survey left out of the raster",
                        int(far.sum()))
         cloud = cloud.subset(~far)
+    cloud.require_area("the input", "rasterize")
     res = rasterize_points(cloud, product=product, cell=cell, ground=ground, max_gap=max_gap)
     arr = res["array"]
     if product == "rgb":

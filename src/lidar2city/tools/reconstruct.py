@@ -655,7 +655,7 @@ def _write_gpkg(path, results, cloud, *, attributes=None, configuration=None, lo
     meta = {"lidar2city_configuration": json.dumps(configuration or {})}
     with fixed_gpkg_date():
         write_layers(path, layers, origin=cloud.origin, crs=cloud.crs, xy_unit=cloud.xy_unit,
-                     z_unit=cloud.z_unit, metadata=meta)
+                     z_unit=cloud.z_unit, metadata=meta, driver="GPKG")  # whatever its name
 
 
 #: the time stamp written in GeoPackage outputs (``gpkg_contents.last_change``)
