@@ -88,3 +88,24 @@ def test_the_lod13_raster_of_a_huge_covered_footprint_is_capped(monkeypatch):
     reconstruct_building(box(0, 0, 30, 20), _points(0, 0, 30, 20, 9.0, 5.0),
                          _ground(0, 0, 30, 20), config=Lod1Config(lods=("1.2", "1.3")))
     assert cells == [pytest.approx(30 * 20 / 0.25)]
+
+
+def test_a_part_far_from_every_point_is_named_and_gets_no_invented_parts():
+    # a two-part footprint, the second part 5 km off (a misplaced copy): it used to get a
+    # prism at the building's height with no word of it
+    near, far = box(0, 0, 12, 8), box(5000, 0, 5012, 8)
+    fp = shapely.MultiPolygon([near, far])
+    res = reconstruct_building(fp, _points(0, 0, 12, 8, 6, 10.0), _ground(0, 0, 12, 8),
+                               config=Lod1Config(lods=("1.2", "1.3")), id="mp")
+    assert res.ok
+    assert "part 2 of its 2 (96 m2) has no building point within" in res.attributes["low_coverage"]
+    assert "part 1" not in res.attributes["low_coverage"]
+    assert res.attributes["lod13_parts"] == 2  # the LoD1.2 prisms stand in
+
+
+def test_two_covered_parts_have_no_coverage_attribute():
+    fp = shapely.MultiPolygon([box(0, 0, 12, 8), box(20, 0, 32, 8)])
+    pts = np.vstack([_points(0, 0, 12, 8, 6, 10.0), _points(20, 0, 32, 8, 6, 10.0, seed=3)])
+    res = reconstruct_building(fp, pts, _ground(0, 0, 32, 8),
+                               config=Lod1Config(lods=("1.2", "1.3")), id="mp2")
+    assert res.ok and "low_coverage" not in res.attributes

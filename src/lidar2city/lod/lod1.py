@@ -264,6 +264,16 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
                             f"{100 * MIN_COVERAGE:.0f} %)")
             result.attributes["point_coverage"] = round(share, 4)
             result.attributes["low_coverage"] = low_coverage
+        elif len(polys) > 1:
+            # a multi-part footprint may hold a part far from every point (a
+            # mis-digitised or misplaced part): no height to give it, so it is
+            # treated as a footprint its points do not cover
+            empty = _empty_parts(polys, inside[:, :2], reach_m)
+            if empty:
+                low_coverage = "; ".join(
+                    f"part {k + 1} of its {len(polys)} ({polys[k].area:.0f} m2) has no building "
+                    f"point within {reach_m:.1f} m" for k in empty)
+                result.attributes["low_coverage"] = low_coverage
         z = inside[:, 2]
         roof = roof_height(z, cfg.roof_statistic)
         ground, source = ground_height(
@@ -349,6 +359,20 @@ def _same_solids(a, b) -> bool:
                     np.array_equal(r, q) for r, q in zip(f.rings, g.rings, strict=True)):
                 return False
     return True
+
+
+def _empty_parts(polys, xy, reach: float) -> list[int]:
+    """Indices of the polygons with no point of ``xy`` inside or within ``reach`` (m)."""
+    import shapely
+
+    empty = []
+    for k, p in enumerate(polys):
+        x0, y0, x1, y1 = p.bounds
+        near = ((xy[:, 0] >= x0 - reach) & (xy[:, 0] <= x1 + reach)
+                & (xy[:, 1] >= y0 - reach) & (xy[:, 1] <= y1 + reach))
+        if not near.any() or not shapely.dwithin(p, shapely.points(xy[near]), reach).any():
+            empty.append(k)
+    return empty
 
 
 def _rmse(points, solids) -> float:
