@@ -42,6 +42,11 @@ def _ground(cloud, *, ground_from_file: bool, method: str):
     return ground
 
 
+#: ASPRS classes a vendor marks noise (low point 7; high noise 18, LAS 1.4): never
+#: reclassified
+NOISE_CLASSES = (7, 18)
+
+
 def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str = "smrf",
                    config=None) -> np.ndarray:
     """ASPRS classes of every point of a :class:`PointCloud`: ground filter, then classification.
@@ -53,6 +58,17 @@ def classify_cloud(cloud, *, ground_from_file: bool = False, ground_method: str 
     from ..classify.outliers import far_points
 
     cfg = config if config is not None else classify_config(None)
+    given = cloud.get("classification")
+    noise = np.isin(given, NOISE_CLASSES) if given is not None else None
+    if noise is not None and noise.any():  # the vendor's noise labels are kept
+        if noise.all():
+            raise EmptyInputError("every point is classified noise (7 or 18): nothing to classify")
+        logger.info("%d point(s) classified noise (7 or 18) in the input: kept as noise",
+                    int(noise.sum()))
+        out = np.array(given, dtype=np.uint8, copy=True)
+        out[~noise] = classify_cloud(cloud.subset(~noise), ground_from_file=ground_from_file,
+                                     ground_method=ground_method, config=cfg)
+        return out
     far = far_points(cloud.xyz[:, :2])
     if far.any():  # stray returns far away: noise, and the survey classified without them
         logger.warning("%d point(s) far from the rest of the survey: classified noise (7)",
