@@ -299,7 +299,10 @@ def traced_blocks(tiles, frame: Frame, world_bounds, block_size: float, buffer: 
     pad = buffer / frame.xy_unit
     cells = _sparse_cells(tiles, frame, step)
     if cells is None:
-        cells = ((row, col) for row in range(k0[1], k1[1] + 1) for col in range(k0[0], k1[0] + 1))
+        cells = _tile_cells(tiles, step)
+    # only the cells the tiles' boxes meet (tiles far apart, e.g. two areas in one
+    # folder, do not make every cell between them a block), within the extent
+    cells = [(r, c) for r, c in cells if k0[1] <= r <= k1[1] and k0[0] <= c <= k1[0]]
     specs = []
     for row, col in cells:
         world = (col * step - pad, row * step - pad, (col + 1) * step + pad,
@@ -307,6 +310,19 @@ def traced_blocks(tiles, frame: Frame, world_bounds, block_size: float, buffer: 
         specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
                                _tiles_meeting(tiles, world), frame))
     return specs
+
+
+def _tile_cells(tiles, step) -> list:
+    """``(row, col)`` of the cells the header boxes of the tiles with points meet, in
+    row order."""
+    cells = set()
+    for t in tiles:
+        if not t.count:
+            continue
+        lo = np.floor(np.asarray(t.mins[:2]) / step).astype(np.int64)
+        hi = np.floor(np.asarray(t.maxs[:2]) / step).astype(np.int64)
+        cells.update((int(r), int(c)) for r in range(lo[1], hi[1] + 1) for c in range(lo[0], hi[0] + 1))
+    return sorted(cells)
 
 
 def _sparse_cells(tiles, frame, step):
