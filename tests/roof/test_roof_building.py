@@ -204,3 +204,48 @@ def test_select_and_raised_parts_deterministic():
         assert np.array_equal(x.vertices, y.vertices)
         assert [[list(map(list, f.rings)), f.semantic] for f in x.surfaces] == \
             [[list(map(list, f.rings)), f.semantic] for f in y.surfaces]
+
+
+def _flat_points(x1, y1, z, step=0.5):
+    g = np.mgrid[step / 2:x1:step, step / 2:y1:step].reshape(2, -1).T
+    return np.column_stack([g, np.full(len(g), z)])
+
+
+def test_face_on_a_plane_far_above_its_points_is_replaned():
+    """A small face given a steep plane fitted elsewhere (extrapolated 10 m above the
+    points under it) must not make a spike: no roof vertex rises more than the
+    tolerance above the building's points, and ridge_height is the model's top."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import Lod22Config, _finish_solid
+
+    poly = box(0, 0, 10, 10)
+    pts = _flat_points(10, 10, 10.0)
+    faces = [box(0, 0, 8, 10), box(8, 0, 10, 10)]
+    planes = np.array([[0.0, 0.0, 10.0], [5.0, 0.0, -30.0]])  # z = 10 at x = 8, 20 at x = 10
+    solid, faces2, labels2, planes2, _ = _finish_solid(
+        "grid", poly, pts, faces, np.array([0, 1]), planes, 0.0, cell=0.5, cfg=Lod22Config(), info={})
+    assert solid.vertices[:, 2].max() <= 10.0 + 2 * Lod22Config().elevation_error
+    assert not _closed_shell_errors(solid)
+
+
+def test_true_gable_faces_keep_their_planes():
+    """The spike check leaves a roof whose planes the points support alone, ridge included."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import _fix_high_faces
+
+    rng = np.random.default_rng(0)
+    g = rng.uniform(0, 10, (400, 2))
+    z = 10.0 + 0.8 * (5 - np.abs(g[:, 0] - 5)) + rng.normal(0, 0.03, len(g))  # ridge at x = 5, 14 m
+    pts = np.column_stack([g, z])
+    faces = [box(0, 0, 5, 10), box(5, 0, 10, 10)]
+    planes = np.array([[0.8, 0.0, 10.0], [-0.8, 0.0, 18.0]])
+    labels, planes2 = _fix_high_faces(faces, np.array([0, 1]), planes, pts, spacing=0.5, t_step=0.3)
+    assert labels.tolist() == [0, 1] and np.array_equal(planes2, planes)
+
+
+def _closed_shell_errors(solid):
+    from tests.roof.test_roof_solid import shell_errors
+
+    return shell_errors(solid)[0]

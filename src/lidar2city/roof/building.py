@@ -181,6 +181,59 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     return face_labels, np.asarray(planes)
 
 
+def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
+    """Faces whose plane rises above every point near them get a horizontal plane.
+
+    A plane fitted to one part of the roof and given to a small face elsewhere (a
+    steep facet extrapolated over a patch its points never reached) can put the
+    face's corners metres above every point of the building: a spike. A face is
+    supported when its highest corner stays within ``t_step + tan(slope) * spacing``
+    of the highest point within two point spacings of it (a ridge corner between
+    points one spacing apart); else it takes a horizontal plane at the median of its
+    points (of the points near it when it holds none), as :func:`_fix_low_faces` does
+    for faces below the floor.
+
+    Returns ``(face_labels, planes)``: the labels of the faces re-planed point to
+    planes appended to ``planes``; unchanged inputs when every face is supported.
+    """
+    import shapely
+
+    reach = 2.0 * spacing
+    out_labels, out_planes = None, None
+    x, y = xyz[:, 0], xyz[:, 1]
+    zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
+    for fi, f in enumerate(faces):
+        pl = planes[face_labels[fi]]
+        c = np.asarray(f.exterior.coords)
+        top = float(np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]))
+        tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
+        if not len(xyz) or top <= zmin + tol:
+            continue  # no lower than the lowest point: supported whatever lies near
+        x0, y0, x1, y1 = f.bounds
+        cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
+        near = cand[shapely.contains_xy(f.buffer(reach), x[cand], y[cand])]
+        if len(near) and top <= float(xyz[near, 2].max()) + tol:
+            continue
+        inside = near[shapely.contains_xy(f, x[near], y[near])]
+        sup = inside if len(inside) else near
+        if not len(sup):
+            continue  # nothing near to say how high it is: the whole-roof check decides
+        if out_labels is None:
+            out_labels, out_planes = np.array(face_labels, copy=True), list(map(np.asarray, planes))
+        logger.debug("face %d of %.2f m2: plane %.2f m above its %d nearest points; levelled",
+                     fi, f.area, top - float(xyz[near, 2].max()), len(near))
+        out_planes.append(np.array([0.0, 0.0, float(np.median(xyz[sup, 2]))]))
+        out_labels[fi] = len(out_planes) - 1
+    if out_labels is None:
+        return face_labels, planes
+    return out_labels, np.asarray(out_planes)
+
+
+#: the steepest slope (tangent, ~72 deg) whose rise over one point spacing a supported
+#: roof corner may have above its nearest points
+_SPIKE_MAX_TAN = 3.0
+
+
 def _clean_faces(faces, labels, precision=5e-3):
     """Repair faces whose rings touch themselves (a hole pinched into the shell)."""
     import shapely
@@ -733,6 +786,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
+    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     variants = [(faces, face_labels)]
     if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
@@ -744,6 +798,8 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+        face_labels, planes_f = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
+                                                t_step=2 * cfg.elevation_error)
         solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
                                             repair=k == len(variants) - 1)
         if not relabelled:
