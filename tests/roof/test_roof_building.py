@@ -241,8 +241,25 @@ def test_true_gable_faces_keep_their_planes():
     pts = np.column_stack([g, z])
     faces = [box(0, 0, 5, 10), box(5, 0, 10, 10)]
     planes = np.array([[0.8, 0.0, 10.0], [-0.8, 0.0, 18.0]])
-    labels, planes2 = _fix_high_faces(faces, np.array([0, 1]), planes, pts, spacing=0.5, t_step=0.3)
-    assert labels.tolist() == [0, 1] and np.array_equal(planes2, planes)
+    faces2, labels, planes2 = _fix_high_faces(faces, np.array([0, 1]), planes, pts, spacing=0.5, t_step=0.3)
+    assert faces2 is faces and labels.tolist() == [0, 1] and np.array_equal(planes2, planes)
+
+
+def test_face_whose_plane_fits_its_points_is_capped_at_the_highest_point():
+    """A shed face whose points stop 2 m before its high end keeps its plane up to a
+    step above the highest point and gets a level cap beyond (the roof follows its points)."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import _fix_high_faces
+
+    g = np.mgrid[0.25:8:0.5, 0.25:10:0.5].reshape(2, -1).T  # no points over 8 < x < 10
+    pts = np.column_stack([g, 10.0 + 1.5 * g[:, 0]])  # highest point 10 + 1.5 * 7.75
+    faces, labels, planes = _fix_high_faces([box(0, 0, 10, 10)], np.array([0]),
+                                            np.array([[1.5, 0.0, 10.0]]), pts, spacing=0.5, t_step=0.3)
+    top = pts[:, 2].max() + 0.3
+    assert len(faces) == 2 and sum(f.area for f in faces) == pytest.approx(100.0)
+    assert planes[labels[1]].tolist() == [0.0, 0.0, top] and labels[0] == 0
+    assert faces[0].bounds[2] == pytest.approx((top - 10.0) / 1.5)
 
 
 def _closed_shell_errors(solid):

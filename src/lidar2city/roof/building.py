@@ -182,51 +182,102 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
 
 
 def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
-    """Faces whose plane rises above every point near them get a horizontal plane.
+    """Faces whose plane rises above every point near them are capped or levelled.
 
-    A plane fitted to one part of the roof and given to a small face elsewhere (a
-    steep facet extrapolated over a patch its points never reached) can put the
-    face's corners metres above every point of the building: a spike. A face is
-    supported when its highest corner stays within ``t_step + tan(slope) * spacing``
-    of the highest point within two point spacings of it (a ridge corner between
-    points one spacing apart); else it takes a horizontal plane at the median of its
-    points (of the points near it when it holds none), as :func:`_fix_low_faces` does
-    for faces below the floor.
+    A plane fitted to one part of the roof and given to a face reaching where its
+    points never did (a steep facet extrapolated over a patch without points) can
+    put the face's corners metres above every point of the building: a spike. A
+    face is supported when its highest corner stays within ``t_step + tan(slope) *
+    spacing`` of the highest point within two point spacings of it (a ridge corner
+    between points one spacing apart). An unsupported face whose plane fits its own
+    points (median residual within ``t_step``) keeps it up to ``t_step`` above that
+    highest point and gets a horizontal cap at that height beyond (the face cut along
+    the plane's contour line); any other unsupported face takes a
+    horizontal plane at the median of its points (of the points near it when it
+    holds none), as :func:`_fix_low_faces` does for faces below the floor.
 
-    Returns ``(face_labels, planes)``: the labels of the faces re-planed point to
-    planes appended to ``planes``; unchanged inputs when every face is supported.
+    Returns ``(faces, face_labels, planes)``: the inputs themselves when every face is
+    supported; else new lists, the caps and levels as planes appended to ``planes``.
     """
-    import shapely
-
-    reach = 2.0 * spacing
-    out_labels, out_planes = None, None
+    out, changed = [[], [], list(map(np.asarray, planes))], False
     x, y = xyz[:, 0], xyz[:, 1]
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
     for fi, f in enumerate(faces):
-        pl = planes[face_labels[fi]]
-        c = np.asarray(f.exterior.coords)
-        top = float(np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]))
-        tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
-        if not len(xyz) or top <= zmin + tol:
-            continue  # no lower than the lowest point: supported whatever lies near
-        x0, y0, x1, y1 = f.bounds
-        cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
-        near = cand[shapely.contains_xy(f.buffer(reach), x[cand], y[cand])]
-        if len(near) and top <= float(xyz[near, 2].max()) + tol:
+        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, x, y, zmin, spacing=spacing, t_step=t_step)
+        if fixed is None:
+            out[0].append(f)
+            out[1].append(face_labels[fi])
             continue
-        inside = near[shapely.contains_xy(f, x[near], y[near])]
-        sup = inside if len(inside) else near
-        if not len(sup):
-            continue  # nothing near to say how high it is: the whole-roof check decides
-        if out_labels is None:
-            out_labels, out_planes = np.array(face_labels, copy=True), list(map(np.asarray, planes))
-        logger.debug("face %d of %.2f m2: plane %.2f m above its %d nearest points; levelled",
-                     fi, f.area, top - float(xyz[near, 2].max()), len(near))
-        out_planes.append(np.array([0.0, 0.0, float(np.median(xyz[sup, 2]))]))
-        out_labels[fi] = len(out_planes) - 1
-    if out_labels is None:
-        return face_labels, planes
-    return out_labels, np.asarray(out_planes)
+        changed = True
+        parts, z = fixed
+        out[2].append(np.array([0.0, 0.0, z]))
+        for k, g in enumerate(parts):
+            out[0] += g
+            out[1] += [face_labels[fi] if k == 0 else len(out[2]) - 1] * len(g)
+    if not changed:
+        return faces, face_labels, planes
+    return out[0], np.asarray(out[1], dtype=np.int64), np.asarray(out[2])
+
+
+def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step):
+    """None when face ``f`` on plane ``pl`` is supported (:func:`_fix_high_faces`); else
+    ``(parts, z)``: ``[[below...], [above...]]`` the polygons keeping ``pl`` and those
+    taking the horizontal plane at ``z``."""
+    import shapely
+
+    reach = 2.0 * spacing
+    c = np.asarray(f.exterior.coords)
+    top = float(np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]))
+    tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
+    if not len(xyz) or top <= zmin + tol:
+        return None  # no higher than the lowest point: supported whatever lies near
+    x0, y0, x1, y1 = f.bounds
+    cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
+    near = cand[shapely.contains_xy(f.buffer(reach), x[cand], y[cand])]
+    if not len(near):
+        return None  # nothing near to say how high it is: add_lod22's whole-roof check decides
+    high = float(xyz[near, 2].max())
+    if top <= high + tol:
+        return None
+    inside = near[shapely.contains_xy(f, x[near], y[near])]
+    logger.debug("a face of %.2f m2 rises %.2f m above its %d nearest points", f.area, top - high, len(near))
+    if len(inside) >= 3 and np.median(np.abs(xyz[inside, 2] - pl[0] * x[inside]
+                                              - pl[1] * y[inside] - pl[2])) <= t_step:
+        # the cap a step above the highest point: a ridge the points reach keeps its plane
+        parts = _below_contour(f, pl, high + t_step)
+        if parts:
+            return parts, high + t_step
+    return [[], [f]], float(np.median(xyz[inside if len(inside) else near, 2]))
+
+
+def _below_contour(face, plane, z, min_area=1e-4):
+    """``[below, above]``: the polygons of ``face`` where ``plane`` lies below and above the
+    height ``z``, or None when the cut leaves a part smaller than ``min_area`` (m2) or
+    loses area (more than the face's precision grid can explain)."""
+    import shapely
+
+    from shapely.geometry.polygon import orient
+
+    g = float(np.hypot(plane[0], plane[1]))
+    if g < 1e-9:
+        return None
+    n = np.array([plane[0], plane[1]]) / g  # uphill
+    t = np.array([-n[1], n[0]])
+    cx, cy = face.centroid.x, face.centroid.y
+    p = np.array([cx, cy]) - n * ((plane[0] * cx + plane[1] * cy + plane[2] - z) / g)
+    x0, y0, x1, y1 = face.bounds
+    r = 2.0 * (x1 - x0 + y1 - y0) + np.hypot(*(p - [cx, cy])) + 1.0
+    half = shapely.Polygon([p + t * r, p - t * r, p - t * r - n * r, p + t * r - n * r])
+    # cut in full precision: a face's precision grid would move the cut's ends off its edges
+    exact = shapely.set_precision(face, 0.0)
+    cut = [shapely.get_parts(exact.intersection(half)), shapely.get_parts(exact.difference(half))]
+    # counter-clockwise exteriors, as the partition's faces (overlays return them clockwise)
+    parts = [[orient(q, 1.0) for q in c if isinstance(q, shapely.Polygon)] for c in cut]
+    slack = min_area
+    if not all(parts) or any(q.area < min_area for c in parts for q in c) \
+            or abs(sum(q.area for c in parts for q in c) - face.area) > slack:
+        return None
+    return parts
 
 
 #: the steepest slope (tangent, ~72 deg) whose rise over one point spacing a supported
@@ -798,10 +849,17 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-        face_labels, planes_f = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
-                                                t_step=2 * cfg.elevation_error)
-        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
+        fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
+                                t_step=2 * cfg.elevation_error)
+        solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
                                             repair=k == len(variants) - 1)
+        if fixed[0] is not faces and (not _closed_shell(solid) or check_solid(solid)):
+            # the capped faces make no valid shell: the roof as partitioned (a spike left
+            # is refused with the whole roof by the caller's check)
+            solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
+                                                repair=k == len(variants) - 1)
+        else:
+            faces, face_labels, planes_f = fixed
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info
