@@ -199,7 +199,7 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
     Returns ``(faces, face_labels, planes)``: the inputs themselves when every face is
     supported; else new lists, the caps and levels as planes appended to ``planes``.
     """
-    out, changed = [[], [], list(map(np.asarray, planes))], False
+    out, changed, caps = [[], [], list(map(np.asarray, planes))], False, []
     x, y = xyz[:, 0], xyz[:, 1]
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
     for fi, f in enumerate(faces):
@@ -212,11 +212,43 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
         parts, z = fixed
         out[2].append(np.array([0.0, 0.0, z]))
         for k, g in enumerate(parts):
+            if parts[0]:
+                caps += range(len(out[0]), len(out[0]) + len(g)) if k else []
             out[0] += g
             out[1] += [face_labels[fi] if k == 0 else len(out[2]) - 1] * len(g)
     if not changed:
         return faces, face_labels, planes
-    return out[0], np.asarray(out[1], dtype=np.int64), np.asarray(out[2])
+    faces, labels, planes = out[0], np.asarray(out[1], dtype=np.int64), np.asarray(out[2])
+    return _merge_thin_caps(faces, labels, planes, caps, spacing=spacing)
+
+
+def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
+    """Caps narrower than a point spacing on average (the tip of a face no point reached)
+    join the neighbour they share most boundary with when its plane stays at or below the
+    cap over them: the roof gets no new corners for a part no point can place."""
+    import shapely
+
+    drop = set()
+    for i in caps:
+        f = faces[i]
+        if f.area >= spacing * f.length / 2:
+            continue
+        shared = [(f.boundary.intersection(g.boundary).length, j) for j, g in enumerate(faces)
+                  if j != i and j not in drop]
+        length, j = max(shared, default=(0.0, -1))
+        if length <= 0:
+            continue
+        c = np.asarray(f.exterior.coords)
+        pl = planes[labels[j]]
+        if np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]) > planes[labels[i]][2] + 1e-9:
+            continue
+        merged = shapely.union(shapely.set_precision(faces[j], 0.0), shapely.set_precision(f, 0.0))
+        if merged.geom_type != "Polygon":
+            continue
+        faces[j] = shapely.geometry.polygon.orient(merged, 1.0)
+        drop.add(i)
+    keep = [k for k in range(len(faces)) if k not in drop]
+    return [faces[k] for k in keep], labels[keep], planes
 
 
 def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step):
