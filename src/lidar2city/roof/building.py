@@ -181,7 +181,7 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     return face_labels, np.asarray(planes)
 
 
-def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
+def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=True):
     """Faces whose plane rises above every point near them are capped or levelled.
 
     A plane fitted to one part of the roof and given to a face reaching where its
@@ -194,7 +194,8 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
     highest point and gets a horizontal cap at that height beyond (the face cut along
     the plane's contour line); any other unsupported face takes a
     horizontal plane at the median of its points (of the points near it when it
-    holds none), as :func:`_fix_low_faces` does for faces below the floor.
+    holds none), as :func:`_fix_low_faces` does for faces below the floor; so does
+    every unsupported face when ``cap`` is False.
 
     Returns ``(faces, face_labels, planes)``: the inputs themselves when every face is
     supported; else new lists, the caps and levels as planes appended to ``planes``.
@@ -203,7 +204,8 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step):
     x, y = xyz[:, 0], xyz[:, 1]
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
     for fi, f in enumerate(faces):
-        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, x, y, zmin, spacing=spacing, t_step=t_step)
+        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, x, y, zmin, spacing=spacing, t_step=t_step,
+                            cap=cap)
         if fixed is None:
             out[0].append(f)
             out[1].append(face_labels[fi])
@@ -251,7 +253,7 @@ def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
     return [faces[k] for k in keep], labels[keep], planes
 
 
-def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step):
+def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step, cap=True):
     """None when face ``f`` on plane ``pl`` is supported (:func:`_fix_high_faces`); else
     ``(parts, z)``: ``[[below...], [above...]]`` the polygons keeping ``pl`` and those
     taking the horizontal plane at ``z``."""
@@ -273,7 +275,7 @@ def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step):
         return None
     inside = near[shapely.contains_xy(f, x[near], y[near])]
     logger.debug("a face of %.2f m2 rises %.2f m above its %d nearest points", f.area, top - high, len(near))
-    if len(inside) >= 3 and np.median(np.abs(xyz[inside, 2] - pl[0] * x[inside]
+    if cap and len(inside) >= 3 and np.median(np.abs(xyz[inside, 2] - pl[0] * x[inside]
                                               - pl[1] * y[inside] - pl[2])) <= t_step:
         # the cap a step above the highest point: a ridge the points reach keeps its plane
         parts = _below_contour(f, pl, high + t_step)
@@ -881,17 +883,19 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-        fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
-                                t_step=2 * cfg.elevation_error)
-        solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
-                                            repair=k == len(variants) - 1)
-        if fixed[0] is not faces and (not _closed_shell(solid) or check_solid(solid)):
-            # the capped faces make no valid shell: the roof as partitioned (a spike left
-            # is refused with the whole roof by the caller's check)
+        # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
+        # with the whole roof by add_lod22's check)
+        for cap in (True, False):
+            fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
+                                    t_step=2 * cfg.elevation_error, cap=cap)
+            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
+                                                repair=k == len(variants) - 1)
+            if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid)):
+                faces, face_labels, planes_f = fixed
+                break
+        else:
             solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
                                                 repair=k == len(variants) - 1)
-        else:
-            faces, face_labels, planes_f = fixed
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info
