@@ -92,3 +92,16 @@ def test_nebraska_narrow_building_keeps_its_roof(data, tmp_path):
     objs = json.loads(out.read_text())["CityObjects"]
     assert len(objs) == 2
     assert not any("lod22_fallback" in o["attributes"] for o in objs.values())
+
+
+def test_a_roof_corner_far_above_every_point_is_refused():
+    """The median of worse_than_prism never sees one small spike; the top check does."""
+    from lidar2city.lod.roofcheck import rises_above_points
+
+    spiked = [_shed(0, 0, 10, 6, 3.0, 8.0), _shed(10, 0, 12, 6, 3.0, 40.0)]  # a 2 m wide spike
+    pts = np.array([[x, y, 3.0 + 0.5 * x] for x in np.arange(0.25, 12, 0.5) for y in (1.0, 5.0)])
+    reason = rises_above_points(spiked, pts, tolerance=1.0)
+    assert reason.startswith("the LoD2.2 roof rises 31.1")
+    assert worse_than_prism(spiked, prism_solid(box(0, 0, 12, 6), 0.0, 8.0), pts, margin=0.3) == ""
+    assert rises_above_points(spiked[:1], pts, tolerance=1.0) == ""
+    assert rises_above_points(spiked, np.zeros((0, 3)), tolerance=1.0) == ""

@@ -248,3 +248,65 @@ def test_part_floor_ignores_low_clutter_facets():
     assert part_floor(poly, xyz, labels, planes, 0.0, **kw) == 0.0
     floor = part_floor(poly, roof, labels[:len(roof)], planes[:2], 10.0, **kw)
     assert floor == pytest.approx(10.0 - 1.0, abs=0.05)
+
+
+def _flat_points(x1, y1, z, step=0.5):
+    g = np.mgrid[step / 2:x1:step, step / 2:y1:step].reshape(2, -1).T
+    return np.column_stack([g, np.full(len(g), z)])
+
+
+def test_face_on_a_plane_far_above_its_points_is_replaned():
+    """A small face given a steep plane fitted elsewhere (extrapolated 10 m above the
+    points under it) must not make a spike: no roof vertex rises more than the
+    tolerance above the building's points, and ridge_height is the model's top."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import Lod22Config, _finish_solid
+
+    poly = box(0, 0, 10, 10)
+    pts = _flat_points(10, 10, 10.0)
+    faces = [box(0, 0, 8, 10), box(8, 0, 10, 10)]
+    planes = np.array([[0.0, 0.0, 10.0], [5.0, 0.0, -30.0]])  # z = 10 at x = 8, 20 at x = 10
+    solid, faces2, labels2, planes2, _ = _finish_solid(
+        "grid", poly, pts, faces, np.array([0, 1]), planes, 0.0, cell=0.5, cfg=Lod22Config(), info={})
+    assert solid.vertices[:, 2].max() <= 10.0 + 2 * Lod22Config().elevation_error
+    assert not _closed_shell_errors(solid)
+
+
+def test_true_gable_faces_keep_their_planes():
+    """The spike check leaves a roof whose planes the points support alone, ridge included."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import _fix_high_faces
+
+    rng = np.random.default_rng(0)
+    g = rng.uniform(0, 10, (400, 2))
+    z = 10.0 + 0.8 * (5 - np.abs(g[:, 0] - 5)) + rng.normal(0, 0.03, len(g))  # ridge at x = 5, 14 m
+    pts = np.column_stack([g, z])
+    faces = [box(0, 0, 5, 10), box(5, 0, 10, 10)]
+    planes = np.array([[0.8, 0.0, 10.0], [-0.8, 0.0, 18.0]])
+    faces2, labels, planes2 = _fix_high_faces(faces, np.array([0, 1]), planes, pts, spacing=0.5, t_step=0.3)
+    assert faces2 is faces and labels.tolist() == [0, 1] and np.array_equal(planes2, planes)
+
+
+def test_face_whose_plane_fits_its_points_is_capped_at_the_highest_point():
+    """A shed face whose points stop 2 m before its high end keeps its plane up to a
+    step above the highest point and gets a level cap beyond (the roof follows its points)."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import _fix_high_faces
+
+    g = np.mgrid[0.25:8:0.5, 0.25:10:0.5].reshape(2, -1).T  # no points over 8 < x < 10
+    pts = np.column_stack([g, 10.0 + 1.5 * g[:, 0]])  # highest point 10 + 1.5 * 7.75
+    faces, labels, planes = _fix_high_faces([box(0, 0, 10, 10)], np.array([0]),
+                                            np.array([[1.5, 0.0, 10.0]]), pts, spacing=0.5, t_step=0.3)
+    top = pts[:, 2].max() + 0.3
+    assert len(faces) == 2 and sum(f.area for f in faces) == pytest.approx(100.0)
+    assert planes[labels[1]].tolist() == [0.0, 0.0, top] and labels[0] == 0
+    assert faces[0].bounds[2] == pytest.approx((top - 10.0) / 1.5)
+
+
+def _closed_shell_errors(solid):
+    from tests.roof.test_roof_solid import shell_errors
+
+    return shell_errors(solid)[0]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["roof_residuals", "worse_than_prism"]
+__all__ = ["rises_above_points", "roof_residuals", "worse_than_prism"]
 
 
 def roof_residuals(solids, xyz) -> np.ndarray:
@@ -99,3 +99,29 @@ def worse_than_prism(lod22, lod12, xyz, *, margin: float, sample: int = 400) -> 
         return ""
     return (f"the LoD2.2 roof fits its points worse (median vertical distance {m22:.2f} m "
             f"against the prism's {m12:.2f} m)")
+
+
+def rises_above_points(lod22, xyz, *, tolerance: float) -> str:
+    """Why the LoD2.2 ``lod22`` rises above every one of its points ``xyz``, or ``""``.
+
+    A roof corner more than ``tolerance`` (m) above the highest point is a spike
+    no point supports (the median of :func:`worse_than_prism` never sees one
+    small face); the roof's faces are levelled where their points say so
+    (:func:`lidar2city.roof.building.reconstruct_lod22`), so this is the last guard.
+
+    Examples
+    --------
+    >>> from shapely.geometry import box
+    >>> from lidar2city.lod.prism import prism_solid
+    >>> s = prism_solid(box(0, 0, 10, 10), 0.0, 9.0)
+    >>> rises_above_points(s, np.array([[5.0, 5.0, 5.0]]), tolerance=1.0)
+    'the LoD2.2 roof rises 4.00 m above its highest point'
+    """
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    if not len(xyz):
+        return ""
+    top = max(float(s.vertices[:, 2].max()) for s in (lod22 if isinstance(lod22, (list, tuple)) else [lod22]))
+    rise = top - float(xyz[:, 2].max())
+    if rise <= tolerance:
+        return ""
+    return f"the LoD2.2 roof rises {rise:.2f} m above its highest point"

@@ -217,6 +217,144 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     return face_labels, np.asarray(planes)
 
 
+def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=True):
+    """Faces whose plane rises above every point near them are capped or levelled.
+
+    A plane fitted to one part of the roof and given to a face reaching where its
+    points never did (a steep facet extrapolated over a patch without points) can
+    put the face's corners metres above every point of the building: a spike. A
+    face is supported when its highest corner stays within ``t_step + tan(slope) *
+    spacing`` of the highest point within two point spacings of it (a ridge corner
+    between points one spacing apart). An unsupported face whose plane fits its own
+    points (median residual within ``t_step``) keeps it up to ``t_step`` above that
+    highest point and gets a horizontal cap at that height beyond (the face cut along
+    the plane's contour line); any other unsupported face takes a
+    horizontal plane at the median of its points (of the points near it when it
+    holds none), as :func:`_fix_low_faces` does for faces below the floor; so does
+    every unsupported face when ``cap`` is False.
+
+    Returns ``(faces, face_labels, planes)``: the inputs themselves when every face is
+    supported; else new lists, the caps and levels as planes appended to ``planes``.
+    """
+    out, changed, caps = [[], [], list(map(np.asarray, planes))], False, []
+    x, y = xyz[:, 0], xyz[:, 1]
+    zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
+    for fi, f in enumerate(faces):
+        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, x, y, zmin, spacing=spacing, t_step=t_step,
+                            cap=cap)
+        if fixed is None:
+            out[0].append(f)
+            out[1].append(face_labels[fi])
+            continue
+        changed = True
+        parts, z = fixed
+        out[2].append(np.array([0.0, 0.0, z]))
+        for k, g in enumerate(parts):
+            if parts[0]:
+                caps += range(len(out[0]), len(out[0]) + len(g)) if k else []
+            out[0] += g
+            out[1] += [face_labels[fi] if k == 0 else len(out[2]) - 1] * len(g)
+    if not changed:
+        return faces, face_labels, planes
+    faces, labels, planes = out[0], np.asarray(out[1], dtype=np.int64), np.asarray(out[2])
+    return _merge_thin_caps(faces, labels, planes, caps, spacing=spacing)
+
+
+def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
+    """Caps narrower than a point spacing on average (the tip of a face no point reached)
+    join the neighbour they share most boundary with when its plane stays at or below the
+    cap over them: the roof gets no new corners for a part no point can place."""
+    import shapely
+
+    drop = set()
+    for i in caps:
+        f = faces[i]
+        if f.area >= spacing * f.length / 2:
+            continue
+        shared = [(f.boundary.intersection(g.boundary).length, j) for j, g in enumerate(faces)
+                  if j != i and j not in drop]
+        length, j = max(shared, default=(0.0, -1))
+        if length <= 0:
+            continue
+        c = np.asarray(f.exterior.coords)
+        pl = planes[labels[j]]
+        if np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]) > planes[labels[i]][2] + 1e-9:
+            continue
+        merged = shapely.union(shapely.set_precision(faces[j], 0.0), shapely.set_precision(f, 0.0))
+        if merged.geom_type != "Polygon":
+            continue
+        faces[j] = shapely.geometry.polygon.orient(merged, 1.0)
+        drop.add(i)
+    keep = [k for k in range(len(faces)) if k not in drop]
+    return [faces[k] for k in keep], labels[keep], planes
+
+
+def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step, cap=True):
+    """None when face ``f`` on plane ``pl`` is supported (:func:`_fix_high_faces`); else
+    ``(parts, z)``: ``[[below...], [above...]]`` the polygons keeping ``pl`` and those
+    taking the horizontal plane at ``z``."""
+    import shapely
+
+    reach = 2.0 * spacing
+    c = np.asarray(f.exterior.coords)
+    top = float(np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]))
+    tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
+    if not len(xyz) or top <= zmin + tol:
+        return None  # no higher than the lowest point: supported whatever lies near
+    x0, y0, x1, y1 = f.bounds
+    cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
+    near = cand[shapely.contains_xy(f.buffer(reach), x[cand], y[cand])]
+    if not len(near):
+        return None  # nothing near to say how high it is: add_lod22's whole-roof check decides
+    high = float(xyz[near, 2].max())
+    if top <= high + tol:
+        return None
+    inside = near[shapely.contains_xy(f, x[near], y[near])]
+    logger.debug("a face of %.2f m2 rises %.2f m above its %d nearest points", f.area, top - high, len(near))
+    if cap and len(inside) >= 3 and np.median(np.abs(xyz[inside, 2] - pl[0] * x[inside]
+                                              - pl[1] * y[inside] - pl[2])) <= t_step:
+        # the cap a step above the highest point: a ridge the points reach keeps its plane
+        parts = _below_contour(f, pl, high + t_step)
+        if parts:
+            return parts, high + t_step
+    return [[], [f]], float(np.median(xyz[inside if len(inside) else near, 2]))
+
+
+def _below_contour(face, plane, z, min_area=1e-4):
+    """``[below, above]``: the polygons of ``face`` where ``plane`` lies below and above the
+    height ``z``, or None when the cut leaves a part smaller than ``min_area`` (m2) or
+    loses area (more than the face's precision grid can explain)."""
+    import shapely
+
+    from shapely.geometry.polygon import orient
+
+    g = float(np.hypot(plane[0], plane[1]))
+    if g < 1e-9:
+        return None
+    n = np.array([plane[0], plane[1]]) / g  # uphill
+    t = np.array([-n[1], n[0]])
+    cx, cy = face.centroid.x, face.centroid.y
+    p = np.array([cx, cy]) - n * ((plane[0] * cx + plane[1] * cy + plane[2] - z) / g)
+    x0, y0, x1, y1 = face.bounds
+    r = 2.0 * (x1 - x0 + y1 - y0) + np.hypot(*(p - [cx, cy])) + 1.0
+    half = shapely.Polygon([p + t * r, p - t * r, p - t * r - n * r, p + t * r - n * r])
+    # cut in full precision: a face's precision grid would move the cut's ends off its edges
+    exact = shapely.set_precision(face, 0.0)
+    cut = [shapely.get_parts(exact.intersection(half)), shapely.get_parts(exact.difference(half))]
+    # counter-clockwise exteriors, as the partition's faces (overlays return them clockwise)
+    parts = [[orient(q, 1.0) for q in c if isinstance(q, shapely.Polygon)] for c in cut]
+    slack = min_area
+    if not all(parts) or any(q.area < min_area for c in parts for q in c) \
+            or abs(sum(q.area for c in parts for q in c) - face.area) > slack:
+        return None
+    return parts
+
+
+#: the steepest slope (tangent, ~72 deg) whose rise over one point spacing a supported
+#: roof corner may have above its nearest points
+_SPIKE_MAX_TAN = 3.0
+
+
 def _clean_faces(faces, labels, precision=5e-3):
     """Repair faces whose rings touch themselves (a hole pinched into the shell)."""
     import shapely
@@ -776,6 +914,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
+    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     variants = [(faces, face_labels)]
     if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
@@ -787,8 +926,19 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         # (so only the last variant's saddles are repaired)
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
-        solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
-                                            repair=k == len(variants) - 1)
+        # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
+        # with the whole roof by add_lod22's check)
+        for cap in (True, False):
+            fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
+                                    t_step=2 * cfg.elevation_error, cap=cap)
+            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
+                                                repair=k == len(variants) - 1)
+            if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid)):
+                faces, face_labels, planes_f = fixed
+                break
+        else:
+            solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
+                                                repair=k == len(variants) - 1)
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info

@@ -470,6 +470,11 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
     return results
 
 
+#: how many point spacings a LoD2.2 roof corner may rise above its highest point (a ridge
+#: between points, the steepest facet rising 3 m per metre) before the prism stands in
+SPIKE_SPACINGS = 3.0
+
+
 def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> None:
     """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
 
@@ -477,10 +482,13 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
     roof fits its points worse than the LoD1.2 prism's by more than a step
     (``2 * elevation_error``, :func:`lidar2city.lod.roofcheck.worse_than_prism`),
     the LoD1.2 prism stands in for LoD2.2 and ``lod22_fallback`` says why: every
-    footprint keeps a valid solid, the better founded of the two.
+    footprint keeps a valid solid, the better founded of the two. So it does when a
+    roof corner rises more than ``2 * elevation_error`` plus :data:`SPIKE_SPACINGS`
+    point spacings above the highest of the roof's points
+    (:func:`lidar2city.lod.roofcheck.rises_above_points`).
     """
     from ..errors import AlgorithmError
-    from ..lod.roofcheck import worse_than_prism
+    from ..lod.roofcheck import rises_above_points, worse_than_prism
     from ..roof.building import reconstruct_lod22
 
     if result.attributes.get("low_coverage"):  # no roof planes drawn from a corner of points
@@ -496,6 +504,14 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
     lod12 = result.solids.get("1.2")
     worse = "" if lod12 is None else worse_than_prism(
         out.solids, lod12, building_xyz, margin=2.0 * config.elevation_error)
+    if not worse:  # a corner farther above the roof's points than a steep facet over 3 spacings
+        import shapely
+
+        grown = footprint.buffer(config.overhang)
+        own = building_xyz[shapely.contains_xy(grown, building_xyz[:, 0], building_xyz[:, 1])]
+        spacing = float(np.sqrt(grown.area / max(len(own), 1)))
+        worse = rises_above_points(out.solids, own, tolerance=2.0 * config.elevation_error
+                                   + SPIKE_SPACINGS * spacing)
     if worse:
         set_lod22(result, None, {}, worse)
         return
