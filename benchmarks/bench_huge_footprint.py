@@ -71,7 +71,7 @@ def write_hall(tmp: Path):
 PHASES = (("height_parts", "lidar2city.lod.lod1", "height_parts"),
           ("prism RMSE", "lidar2city.lod.lod1", "prism_distance"),
           ("solid checks", "lidar2city.lod.lod1", "_codes"),
-          ("LoD2.2 roof", "lidar2city.tools.reconstruct", "reconstruct_lod22"))
+          ("LoD2.2 roof", "lidar2city.roof.building", "reconstruct_lod22"))
 
 
 def _timed(spent, name, fn):
