@@ -136,20 +136,15 @@ def huge_covered_footprint():
 
     import lidar2city.lod.lod1 as lod1
 
-    w, d = 300.0, 0.3
-    rng = np.random.default_rng(0)
-    n = int(w * w * d)
-    xy = rng.uniform(0, w, (n, 2))
-    blocks = (xy[:, 0] // 6).astype(int) * 1000 + (xy[:, 1] // 6).astype(int)
-    z = 8 + rng.uniform(0, 6, 10**6)[blocks]
-    g = rng.uniform(-5, w + 5, (4000, 2))
-    g[:, 1] = np.where(rng.random(4000) < 0.5, -2.0, w + 2)
-    ground = np.column_stack([g, np.zeros(len(g))])
+    from bench_huge_footprint import hall_points
+
+    w = 300.0
+    roof, ground = hall_points(w, 0.3, seed=0)
     cap = lod1.LOD13_MAX_CELLS
     for name, cells in (("capped", cap), ("no cap", 10**12)):
         lod1.LOD13_MAX_CELLS = cells
         t0 = _cpu()
-        r = lod1.reconstruct_building(box(0, 0, w, w), np.column_stack([xy, z]), ground,
+        r = lod1.reconstruct_building(box(0, 0, w, w), roof, ground,
                                       config=lod1.Lod1Config(lods=("1.2", "1.3")))
         print(f"300 m x 300 m covered footprint, LoD1.3 {name}: {_cpu() - t0:.1f} CPU s, "
               f"{r.attributes.get('lod13_parts')} parts, cell "

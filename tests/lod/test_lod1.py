@@ -480,3 +480,28 @@ def test_lod13_parts_never_overlap_where_a_region_corner_nears_the_outline(offse
     area = sum(solid_volume(s.vertices, s.surfaces) / (s.vertices[:, 2].max() - ground)
                for s in r.parts["1.3"])
     assert area == pytest.approx(fp.area, abs=20 * 0.001)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_prism_distance_of_a_halls_many_parts_equals_every_point_against_every_edge(seed):
+    """A hall of 6 m blocks of random roof heights (LoD1.3: tens of touching parts, one
+    winding through the others, holes): the distances found against the parts near each
+    point and their near edges only are those of every point against every edge, bit for
+    bit, for points on the roofs and anywhere around, above and below."""
+    from lidar2city.lod.prism import prism_distance
+
+    w = 60.0
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, w, (int(w * w * 2), 2))
+    blocks = (xy[:, 0] // 6).astype(int) * 100 + (xy[:, 1] // 6).astype(int)
+    roof = np.column_stack([xy, 8 + rng.uniform(0, 6, 10**4)[blocks]])
+    g = rng.uniform(-5, w + 5, (400, 2))
+    g[:, 1] = np.where(rng.random(400) < 0.5, -2.0, w + 2)
+    res = reconstruct_building(box(0, 0, w, w), roof, np.column_stack([g, np.zeros(len(g))]),
+                               config=Lod1Config(lods=("1.3",), precision=0.001))
+    parts = res.parts["1.3"]
+    assert len(parts) > 10
+    pts = np.vstack([roof, rng.uniform([-10, -10, -5], [w + 10, w + 10, 25], (3000, 3))])
+    d = prism_distance(pts, parts)
+    np.testing.assert_array_equal(d, _plain_prism_distance(pts, parts))
+    assert res.attributes["rmse_lod13"] == round(float(np.sqrt(np.mean(d[:len(roof)] ** 2))), 4)

@@ -159,3 +159,24 @@ def test_prisms_of_random_polygons_are_valid(points, z0, h):
             continue
         s = prism_solid(part, z0, z0 + h, grid=0.001)
         assert check_solid(s) == [], part.wkt
+
+
+@pytest.mark.parametrize("long_boxes", [False, True])
+def test_candidate_pairs_are_every_pair_of_meeting_boxes_once(long_boxes):
+    """The sweep and the R-tree (boxes overlapping along x by the hundred, as a hall's cap
+    triangles) both give exactly the pairs of boxes meeting within tol, each once."""
+    from lidar2city.validate.solid import _candidate_pairs
+
+    rng = np.random.default_rng(3)
+    n = 600
+    lo = rng.uniform(0, 100, (n, 3)).round(1)
+    size = rng.uniform(0, 3, (n, 3)).round(1)
+    if long_boxes:  # spanning the whole x range: the sweep would meet every pair
+        size[:, 0] = 100.0
+    hi = lo + size
+    tol = 0.1
+    i, j = _candidate_pairs(lo, hi, tol)
+    got = sorted(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist(), strict=True))
+    meet = np.all((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol), axis=2)
+    want = [(a, b) for a, b in zip(*np.nonzero(np.triu(meet, 1)), strict=True)]
+    assert got == [(int(a), int(b)) for a, b in want] and len(got) > 0

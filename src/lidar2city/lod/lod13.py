@@ -163,7 +163,7 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         ia, ib = np.searchsorted(regions, (a, b))
         sa, ea = first[ia], first[ia] + sizes[ia]
         sb, eb = first[ib], first[ib] + sizes[ib]
-        run = np.sort(np.concatenate([z[sa:ea], z[sb:eb]]))
+        run = np.sort(np.concatenate([z[sa:ea], z[sb:eb]]), kind="stable")  # two sorted runs: merged
         z = np.concatenate([z[:sa], run, z[ea:sb], z[eb:]])
         sizes[ia] += sizes[ib]
         sizes = np.delete(sizes, ib)

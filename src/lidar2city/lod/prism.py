@@ -254,24 +254,91 @@ def prism_distance(points, solids, *, chunk_pairs: int = 1 << 16):
         None when a solid is not such a prism (measure it on its mesh then).
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    a_list, b_list, owner, g, r = [], [], [], [], []
-    for j, s in enumerate(solids):
+    rings = []  # per prism: edges from a to b, ground, roof, its rings' vertices
+    for s in solids:
         layout = _prism_layout(s)
         if layout is None:
             return None
         v, k, starts, lens, _ = layout
-        for s0, m in zip(starts, lens, strict=True):
-            ids = np.arange(s0, s0 + m)
-            a_list.append(v[ids, :2])
-            b_list.append(v[np.roll(ids, -1), :2])
-            owner.append(np.full(m, j))
-        g.append(v[0, 2])
-        r.append(v[k, 2])
+        ids = np.concatenate([np.arange(s0, s0 + m) for s0, m in zip(starts, lens, strict=True)])
+        nxt = np.concatenate([np.roll(np.arange(s0, s0 + m), -1)
+                              for s0, m in zip(starts, lens, strict=True)])
+        rings.append((v[ids, :2], v[nxt, :2], v[0, 2], v[k, 2],
+                      [v[s0:s0 + m, :2] for s0, m in zip(starts, lens, strict=True)]))
     if not solids or len(pts) == 0:
         return np.full(len(pts), np.inf) if not solids else np.zeros(0)
-    a, b, owner = np.concatenate(a_list), np.concatenate(b_list), np.concatenate(owner)
-    g, r = np.array(g), np.array(r)
-    first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])  # edges grouped by prism
+    if len(rings) == 1:
+        return np.sqrt(_prism_d2(pts, rings, chunk_pairs))
+    # many prisms (the parts of a hall, one of them winding through all of it): each
+    # point against the prisms that can be its nearest only, and against the edges of
+    # those that can decide its distance only (every point against every edge grows with
+    # the square of a hall's area). A point inside a prism is at most the height to its
+    # nearer cap from it: a bound b (points inside none, valid, are measured against all
+    # edges).
+    # Tile of points by tile, prisms whose box is farther than b cannot be nearest; of
+    # the others, the edges whose box is farther than b cannot give the minimum, and those
+    # not crossing the points' rows to their right do not change the ray casting: they are
+    # left out. Each value kept is the one computed against all edges (the minimum over
+    # edges holding its smallest one, the same parity), the others can only be larger, so
+    # the distances are identical. A tolerance of 1 um covers GEOS's and the kernel's
+    # rounding (~1e-13 m).
+    import shapely
+
+    tol = 1e-6
+    g = np.array([q[2] for q in rings])
+    r = np.array([q[3] for q in rings])
+    emin = [np.minimum(q[0], q[1]) for q in rings]
+    emax = [np.maximum(q[0], q[1]) for q in rings]
+    blo = np.array([m.min(axis=0) for m in emin])
+    bhi = np.array([m.max(axis=0) for m in emax])
+    x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
+    bound = np.full(len(pts), np.inf)
+    for j, q in enumerate(rings):
+        sel = np.flatnonzero((x >= blo[j, 0]) & (x <= bhi[j, 0]) & (y >= blo[j, 1])
+                             & (y <= bhi[j, 1]))
+        poly = shapely.Polygon(q[4][0], q[4][1:])
+        if not poly.is_valid:  # its inside per GEOS may not be the ray casting's
+            continue
+        shapely.prepare(poly)
+        sel = sel[shapely.contains_xy(poly, x[sel], y[sel])]
+        bound[sel] = np.minimum(bound[sel], np.minimum(np.abs(z[sel] - r[j]),
+                                                       np.abs(z[sel] - g[j])) + tol)
+    best = np.full(len(pts), np.inf)
+    rest = np.flatnonzero(~np.isfinite(bound))
+    if len(rest):
+        best[rest] = _prism_d2(pts[rest], rings, chunk_pairs)
+    held = np.flatnonzero(np.isfinite(bound))
+    # tiles of ~256 points
+    lo, hi = pts[:, :2].min(axis=0), pts[:, :2].max(axis=0)
+    side = max(float(np.sqrt((hi - lo).prod() * 256.0 / len(pts))), 1e-3)
+    cells = np.floor((pts[held, :2] - lo) / side).astype(np.int64)
+    tile = cells[:, 0] * (int(cells[:, 1].max(initial=0)) + 1) + cells[:, 1]
+    held = held[np.argsort(tile, kind="stable")]
+    tile = np.sort(tile, kind="stable")
+    cut = np.flatnonzero(np.r_[True, tile[1:] != tile[:-1], True])
+    for s0, s1 in zip(cut[:-1], cut[1:], strict=True):
+        sel = held[s0:s1]
+        p = pts[sel]
+        plo, phi, reach = p[:, :2].min(axis=0), p[:, :2].max(axis=0), bound[sel].max()
+        for j in np.flatnonzero(np.all((blo <= phi + reach) & (bhi >= plo - reach), axis=1)):
+            keep = np.all((emin[j] <= phi + reach) & (emax[j] >= plo - reach), axis=1)  # near
+            keep |= ((emax[j][:, 1] > plo[1]) & (emin[j][:, 1] <= phi[1])
+                     & (emax[j][:, 0] + tol >= plo[0]))                       # ray casting
+            if keep.any():  # else the points are outside it and farther than their bound
+                a, b = rings[j][0][keep], rings[j][1][keep]
+                best[sel] = np.minimum(best[sel], _prism_d2(p, [(a, b, g[j], r[j])],
+                                                            chunk_pairs))
+    return np.sqrt(best)
+
+
+def _prism_d2(pts, rings, chunk_pairs):
+    """Squared 3-D distance of each point to the nearest of the prisms ``rings`` (as
+    :func:`prism_distance` lays them out: ring edges ``a -> b``, ground, roof)."""
+    a = np.concatenate([q[0] for q in rings])
+    b = np.concatenate([q[1] for q in rings])
+    g = np.array([q[2] for q in rings])
+    r = np.array([q[3] for q in rings])
+    first = np.cumsum([0] + [len(q[0]) for q in rings])[:-1]  # edges grouped by prism
     ab = b - a
     ll = np.einsum("ij,ij->i", ab, ab)
     ll_safe = np.where(ll > 0, ll, 1.0)
@@ -321,7 +388,7 @@ def prism_distance(points, solids, *, chunk_pairs: int = 1 << 16):
         d_in = np.where(between, np.minimum(cap2, plan2), cap2)
         dz = np.maximum(np.maximum(g - z, z - r), 0.0)
         d_out = plan2 + dz * dz
-        out[s0:s0 + m] = np.sqrt(np.where(inside, d_in, d_out).min(axis=1))
+        out[s0:s0 + m] = np.where(inside, d_in, d_out).min(axis=1)
     return out
 
 

@@ -328,12 +328,25 @@ def _segments_cross_triangles(p, q, a, b, c, eps, normals=None):
 
 
 def _candidate_pairs(lo, hi, tol):
-    """Index pairs (i < j) of boxes overlapping on all axes (sweep along x)."""
+    """Index pairs of boxes overlapping on all axes (within ``tol``), each pair once.
+
+    A sweep along x; when the boxes' x ranges overlap a lot (the long cap triangles of a
+    hall's prism: every one against hundreds), an R-tree on their plan boxes instead. The
+    same pairs either way (their order differs; the callers do not depend on it).
+    """
     order = np.argsort(lo[:, 0], kind="stable")
     xs = lo[order, 0]
     stop = np.searchsorted(xs, hi[order, 0] + tol, side="right")
     start = np.arange(len(order)) + 1
     cnt = np.maximum(stop - start, 0)
+    if cnt.sum() > 64 * len(lo) + 4096:
+        import shapely
+
+        grown = shapely.box(lo[:, 0] - tol, lo[:, 1] - tol, hi[:, 0] + tol, hi[:, 1] + tol)
+        i, j = shapely.STRtree(grown).query(grown)  # plan boxes meeting (a superset)
+        i, j = i[i < j], j[i < j]
+        keep = np.all((lo[i] <= hi[j] + tol) & (lo[j] <= hi[i] + tol), axis=1)
+        return i[keep], j[keep]
     i = np.repeat(np.arange(len(order)), cnt)
     j = np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
     i, j = order[i], order[j]
