@@ -16,8 +16,8 @@ sites (first and last pulse as separate points, no reference classes: the
 share of first-pulse points called building, and how the return fields were
 read), and the synthetic town re-written as other surveys would record it
 (:mod:`lidar2city.synthetic_surveys`: first/last-pulse pairs in file order and
-shuffled, single returns, no return fields, feet through a LAS file, 1.5 and
-25 pts/m2, scan lines 8 x closer along than across at 4, 10 and 20 pts/m2) with
+shuffled, single returns, no return fields, feet through a LAS file, 1.5, 25,
+35 and 50 pts/m2, scan lines 8 x closer along than across at 4, 10 and 20 pts/m2) with
 building precision / recall / F1 against its truth.
 ``--png PATH`` also draws CSite4's classes (docs/classify_csite4.png);
 ``--nebraska-png PATH`` draws where the Nebraska sample's building points are
@@ -608,9 +608,15 @@ def synthetic_surveys():
              ("1.5 pts/m2 pairs", "pairs", 1.5, False, False),
              ("1.5 pts/m2 single returns", "single", 1.5, False, False),
              ("25 pts/m2", "multi", 25.0, False, False),
+             # dense surveys (LiDAR HD, AHN4/5, drone): the region roughness limit
+             # follows the terrain's noise (5 cm here)
+             ("35 pts/m2", "multi", 35.0, False, False),
+             ("50 pts/m2", "multi", 50.0, False, False),
              # with add_canopy: stands of crowns, up to 5 echoes, crowns over roofs
              ("canopy, 5 echoes, 10 pts/m2", "multi", 10.0, False, True),
              ("canopy, 5 echoes, 25 pts/m2", "multi", 25.0, False, True),
+             ("canopy, 5 echoes, 50 pts/m2", "multi", 50.0, False, True),
+             ("canopy, single, 50 pts/m2", "single", 50.0, False, True),
              ("canopy, pairs, 10 pts/m2", "pairs", 10.0, False, True),
              ("canopy, single, 10 pts/m2", "single", 10.0, False, True),
              ("canopy, single, 25 pts/m2", "single", 25.0, False, True),

@@ -111,3 +111,19 @@ def test_hag_of_points_above_a_plane(a, b, c, h):
     # a plane sampled at random (4 points per 1 m cell) is recovered within half the height
     # change across a cell (cells whose points do not span them take their mean)
     assert np.allclose(hag[len(g):], h, atol=0.02 + 0.5 * max(abs(a), abs(b)))
+
+
+def test_surface_noise_follows_the_height_noise_and_not_the_order():
+    from lidar2city.classify.features import surface_noise
+
+    rng = np.random.default_rng(4)
+    xy = rng.uniform(0, 100, (40_000, 2))
+    levels = [surface_noise(np.column_stack([xy, rng.normal(0, s, len(xy))]), 8,
+                            max_points=10_000) for s in (0.01, 0.03, 0.09)]
+    assert levels[0] < levels[1] < levels[2]
+    assert levels[2] / levels[1] == pytest.approx(3.0, rel=0.1)
+    # the blocks are chosen by position: a shuffled copy gives the same level
+    pts = np.column_stack([xy, rng.normal(0, 0.03, len(xy))])
+    assert surface_noise(pts[rng.permutation(len(pts))], 8, max_points=10_000) == pytest.approx(
+        surface_noise(pts, 8, max_points=10_000), rel=1e-9)
+    assert surface_noise(pts[:5], 8) == 0.0
