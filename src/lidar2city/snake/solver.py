@@ -192,6 +192,12 @@ class _Structure:
         self.active: set[int] = set(range(n))
         self.heap: list[tuple[int, int]] = []
         self.conditioned: set[int] = set()
+        # min_weight's keys, kept up to date instead of recomputed for every active
+        # vertex at each call: a lazy heap of (key, v), ``keys`` the current key of
+        # each vertex, and the vertices whose key may have changed since
+        self.keys: dict[int, tuple] = {}
+        self.key_heap: list[tuple[tuple, int]] = []
+        self.dirty: set[int] = set(range(n))
 
     def copy(self) -> _Structure:
         new = _Structure.__new__(_Structure)
@@ -201,7 +207,19 @@ class _Structure:
         new.active = set(self.active)
         new.heap = list(self.heap)
         new.conditioned = set(self.conditioned)
+        new.keys = dict(self.keys)
+        new.key_heap = list(self.key_heap)
+        new.dirty = set(self.dirty)
         return new
+
+    def _touch(self, vertices) -> None:
+        """``vertices`` changed their tables or neighbours: their min-weight keys and
+        their neighbours' (whose fill counts their adjacency) are out of date."""
+        for x in vertices:
+            self.dirty.add(x)
+            a = self.adj.get(x)
+            if a:
+                self.dirty.update(a)
 
     def add(self, scope: frozenset) -> None:
         """Register a table over ``scope``."""
@@ -212,6 +230,7 @@ class _Structure:
             for b in act[i + 1:]:
                 self.adj[a].add(b)
                 self.adj[b].add(a)
+        self._touch(scope)
 
     def union(self, v: int) -> frozenset:
         return frozenset().union(*self.scopes[v]) if self.scopes[v] else frozenset((v,))
@@ -255,6 +274,7 @@ class _Structure:
             for x in s:
                 if x != v:
                     self.scopes[x].discard(s)
+        self._touch(union - {v})
         nb = self._deactivate(v)
         new = union - {v}
         if new:
@@ -272,16 +292,32 @@ class _Structure:
         nb = self.adj.pop(v, set())
         for x in nb:
             self.adj[x].discard(v)
+        self._touch(nb)
         return nb
 
     def min_weight(self) -> int:
-        """Active vertex whose elimination makes the smallest table (then least fill)."""
-        def key(v):
-            nb = list(self.adj[v])
-            fill = sum(1 for i, a in enumerate(nb) for b in nb[i + 1:] if b not in self.adj[a])
-            return (self.weight(v), fill, v)
+        """Active vertex whose elimination makes the smallest table (then least fill).
 
-        return min(self.active, key=key)
+        The least key ``(table size, fill, v)`` over the active vertices: keys are
+        recomputed only for the vertices whose tables or neighbourhood changed
+        since the last call, so a large graph is not rescanned at each step.
+        """
+        adj, keys, heap = self.adj, self.keys, self.key_heap
+        for v in self.dirty:
+            if v in self.active:
+                nb = list(adj[v])
+                fill = sum(1 for i, a in enumerate(nb) for b in nb[i + 1:] if b not in adj[a])
+                k = (self.weight(v), fill, v)
+                if keys.get(v) != k:
+                    keys[v] = k
+                    heapq.heappush(heap, (k, v))
+        self.dirty.clear()
+        while heap:
+            k, v = heap[0]
+            if v in self.active and keys.get(v) == k:
+                return v
+            heapq.heappop(heap)
+        raise ValueError("no active vertex")  # pragma: no cover - callers check
 
     def ball(self, v: int, radius: int | None = None) -> set[int]:
         """Active vertices within ``radius`` edges of ``v`` (its component if None)."""
