@@ -303,6 +303,12 @@ def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step, cap=True):
         return None  # no higher than the lowest point: supported whatever lies near
     x0, y0, x1, y1 = f.bounds
     cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
+    # most faces are held by their own points: those inside it already reach its top
+    # (they are among the points near it), so the buffer is not needed to say so
+    own = cand[(x[cand] >= x0) & (x[cand] <= x1) & (y[cand] >= y0) & (y[cand] <= y1)]
+    own = own[shapely.contains_xy(f, x[own], y[own])]
+    if len(own) and top <= float(xyz[own, 2].max()) + tol:
+        return None
     near = cand[shapely.contains_xy(f.buffer(reach), x[cand], y[cand])]
     if not len(near):
         return None  # nothing near to say how high it is: add_lod22's whole-roof check decides
