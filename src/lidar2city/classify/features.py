@@ -85,7 +85,10 @@ def scan_line_gap(xy, spacing: float, *, k: int = 6, sample: int = 20_000,
     """
     from scipy.spatial import cKDTree
 
-    xy = np.unique(np.asarray(xy, dtype=np.float64)[:, :2], axis=0)  # pulse pairs: one position
+    # pulse pairs: one position (the rows as complex numbers: the same rows in the same
+    # order as np.unique(axis=0), in half the time)
+    c = np.unique(np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2]).view(np.complex128))
+    xy = np.column_stack([c.real, c.imag])
     if len(xy) <= k:
         return None
     s = xy[::max(1, len(xy) // sample)]

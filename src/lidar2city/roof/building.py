@@ -239,9 +239,11 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=Tru
     out, changed, caps = [[], [], list(map(np.asarray, planes))], False, []
     x, y = xyz[:, 0], xyz[:, 1]
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
+    by_x = np.argsort(x, kind="stable")  # each face's box of points by two binary searches
+    xs = x[by_x]
     for fi, f in enumerate(faces):
-        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, x, y, zmin, spacing=spacing, t_step=t_step,
-                            cap=cap)
+        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, (by_x, xs), zmin, spacing=spacing,
+                            t_step=t_step, cap=cap)
         if fixed is None:
             out[0].append(f)
             out[1].append(face_labels[fi])
@@ -289,7 +291,7 @@ def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
     return [faces[k] for k in keep], labels[keep], planes
 
 
-def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step, cap=True):
+def _fixed_face(f, pl, xyz, sorted_x, zmin, *, spacing, t_step, cap=True):
     """None when face ``f`` on plane ``pl`` is supported (:func:`_fix_high_faces`); else
     ``(parts, z)``: ``[[below...], [above...]]`` the polygons keeping ``pl`` and those
     taking the horizontal plane at ``z``."""
@@ -301,8 +303,12 @@ def _fixed_face(f, pl, xyz, x, y, zmin, *, spacing, t_step, cap=True):
     tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
     if not len(xyz) or top <= zmin + tol:
         return None  # no higher than the lowest point: supported whatever lies near
+    x, y = xyz[:, 0], xyz[:, 1]
     x0, y0, x1, y1 = f.bounds
-    cand = np.flatnonzero((x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach))
+    by_x, xs = sorted_x  # the points' order by x and their sorted x
+    lo, hi = np.searchsorted(xs, x0 - reach, "left"), np.searchsorted(xs, x1 + reach, "right")
+    cand = np.sort(by_x[lo:hi])
+    cand = cand[(y[cand] >= y0 - reach) & (y[cand] <= y1 + reach)]
     # most faces are held by their own points: those inside it already reach its top
     # (they are among the points near it), so the buffer is not needed to say so
     own = cand[(x[cand] >= x0) & (x[cand] <= x1) & (y[cand] >= y0) & (y[cand] <= y1)]
