@@ -1015,3 +1015,37 @@ def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, mo
     monkeypatch.setattr(las, "check_input_file", counted)
     assert las.count_points([laz] * 5, at_least=n + 1) == 2 * n and len(opened) == 2
     assert R.usable_cores() >= 1
+
+
+def test_semaphores_made_after_an_interrupt_closed_them_are_never_left_to_the_tracker():
+    """An interrupted run closes the registrations before it kills its workers: a
+    nanny then making new queues for the worker it starts in place of one killed (six
+    semaphores) must not leave them to the resource tracker, which would warn of
+    "leaked semaphore objects" after the run's last line. In a process of its own:
+    the closing is not undone."""
+    import multiprocessing
+    import subprocess
+    import sys
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        pytest.skip("named semaphores are a forkserver / spawn platform's")
+    code = """
+import multiprocessing, os, sys
+from lidar2city.tools import engine
+engine._track_semaphores()
+ctx = multiprocessing.get_context("forkserver")
+kept = ctx.Lock()
+engine.close_semaphores()
+queue = ctx.Queue()   # as a nanny makes them for a worker it restarts
+made = [queue._rlock._semlock.name, queue._wlock._semlock.name, queue._sem._semlock.name]
+assert kept._semlock.name in engine._SEMAPHORES
+assert not set(made) & engine._SEMAPHORES, made
+assert not [n for n in made if os.path.exists("/dev/shm/sem." + n.lstrip("/"))], made
+engine.release_semaphores()
+sys.stdout.flush()
+os._exit(0)
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "leaked" not in done.stderr, done.stderr

@@ -116,7 +116,12 @@ def _stop_workers():  # pragma: no cover - exercised in a subprocess
     if mp is None:
         return
     engine = sys.modules.get("lidar2city.tools.engine")
-    if engine is not None:  # first the server workers are forked from: no worker restarted
+    if engine is not None:
+        # no semaphore made from now on (the queues of a worker a nanny starts in place
+        # of one killed below) is left to the resource tracker to warn of
+        with contextlib.suppress(Exception):
+            engine.close_semaphores()
+        # first the server workers are forked from: no worker restarted
         with contextlib.suppress(Exception):
             engine.kill_forkserver()
     with contextlib.suppress(Exception):

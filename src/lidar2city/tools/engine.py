@@ -645,6 +645,11 @@ def _stop_forkserver() -> None:
 #: names of the semaphores this process registered with multiprocessing's resource
 #: tracker and has not released (:func:`_track_semaphores`)
 _SEMAPHORES: set = set()
+#: held while a semaphore is registered or the registrations are closed
+_SEMAPHORE_LOCK = threading.RLock()
+#: set by :func:`close_semaphores` when an interrupted run stops: no semaphore made
+#: after it is left to the resource tracker
+_SEMAPHORES_CLOSED = [False]
 
 
 def _track_semaphores() -> None:
@@ -661,9 +666,16 @@ def _track_semaphores() -> None:
     register, unregister = resource_tracker.register, resource_tracker.unregister
 
     def tracked_register(name, rtype):
-        if rtype == "semaphore":
+        if rtype != "semaphore":
+            return register(name, rtype)
+        with _SEMAPHORE_LOCK:
+            if _SEMAPHORES_CLOSED[0]:
+                # made while the interrupted run stops (a nanny replacing the worker just
+                # killed): its name goes at once, the tracker never hears of it
+                _unlink_semaphore(name)
+                return None
             _SEMAPHORES.add(name)
-        return register(name, rtype)
+            return register(name, rtype)
 
     def tracked_unregister(name, rtype):
         if rtype == "semaphore":
@@ -672,6 +684,28 @@ def _track_semaphores() -> None:
 
     tracked_register._lidar2city = True
     resource_tracker.register, resource_tracker.unregister = tracked_register, tracked_unregister
+
+
+def _unlink_semaphore(name) -> None:
+    sync = sys.modules.get("multiprocessing.synchronize")
+    if sync is not None:
+        with contextlib.suppress(Exception):
+            sync.sem_unlink(name)
+
+
+def close_semaphores() -> None:
+    """Stop leaving semaphores to the resource tracker: for an interrupted run, before
+    it kills its workers, whose nannies would make new queues (six semaphores each)
+    for the workers they start in their place; those would be registered after
+    :func:`release_semaphores` and warned of as leaked after the run's last line.
+    Not undone: the process ends. Safe in a signal handler (the lock is re-entrant and
+    waited for at most a second)."""
+    got = _SEMAPHORE_LOCK.acquire(timeout=1.0)
+    try:
+        _SEMAPHORES_CLOSED[0] = True
+    finally:
+        if got:
+            _SEMAPHORE_LOCK.release()
 
 
 def release_semaphores() -> None:
@@ -698,8 +732,7 @@ def release_semaphores() -> None:
     from multiprocessing import resource_tracker
 
     for name in list(_SEMAPHORES):
-        with contextlib.suppress(Exception):
-            sync.sem_unlink(name)
+        _unlink_semaphore(name)
         with contextlib.suppress(Exception):
             resource_tracker.unregister(name, "semaphore")
 
