@@ -101,7 +101,10 @@ def _on_interrupt(signum, frame):  # pragma: no cover - exercised in a subproces
     removed = remove_run_outputs()
     _stop_workers()
     note = f"; {len(removed)} partial output(s) removed" if removed else ""
-    kept = [p for p in kept_for_resume() if os.path.isdir(p)]
+    # a journal is named as kept before it is made (io.journal imported by then): kept
+    # when complete, removed when the interrupt came while it was being made
+    journal = sys.modules.get("lidar2city.io.journal")
+    kept = [p for p in kept_for_resume() if journal is not None and journal.settle_interrupted(p)]
     if kept:  # the blocks finished are in the journal: say how to go on from them
         note += f"; the journal {kept[0]} is kept: run the same command with --resume to go on"
     with contextlib.suppress(Exception):

@@ -25,7 +25,7 @@ from ._atomic import keep_for_resume, scratch_path
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Journal", "journal_path", "run_key", "file_stamp"]
+__all__ = ["Journal", "journal_path", "run_key", "file_stamp", "settle_interrupted"]
 
 _RUN = "run.json"
 
@@ -47,6 +47,20 @@ def run_key(description: dict) -> str:
     """A hash of a JSON-able description of a run's inputs and options."""
     text = json.dumps(description, sort_keys=True, default=str, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def settle_interrupted(folder) -> bool:
+    """Whether ``folder``, a journal an interrupted run keeps (:func:`keep_for_resume`),
+    is one ``--resume`` can go on from; a folder interrupted before its run file was
+    written is removed (it could only be refused as another run's). Safe in a signal
+    handler."""
+    folder = str(folder)
+    if not os.path.isdir(folder):
+        return False
+    if os.path.isfile(os.path.join(folder, _RUN)):
+        return True
+    shutil.rmtree(folder, ignore_errors=True)
+    return False
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
@@ -111,6 +125,9 @@ class Journal:
             journal.remove()
         if not folder.parent.is_dir():
             raise FileFormatError(f"output folder {str(folder.parent)!r} does not exist")
+        # named as kept before it is made: an interrupt while it is being made finds it
+        # (:func:`settle_interrupted`) and either names it or removes it
+        keep_for_resume(folder)
         try:
             folder.mkdir(exist_ok=True)
             if not (folder / _RUN).exists():
@@ -120,7 +137,6 @@ class Journal:
                 folder.rmdir()
             raise FileFormatError(f"cannot write the journal {str(folder)!r}: "
                                   f"{exc.strerror or exc}") from None
-        keep_for_resume(folder)
         return journal
 
     def _block(self, index: int) -> Path:
