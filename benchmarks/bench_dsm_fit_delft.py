@@ -316,8 +316,8 @@ def per_building(pred, kinds, ref, hull, tree, y_split, top=25):
             touch[j].append((i, a / g.area))
     fn = np.array([r.difference(pu).area for r in ref])
     order = np.argsort(-(fp + fn), kind="stable")
-    lines = [f"per reference building (top {top} of {len(ref)} by FP + FN; total north/south "
-             f"FP + FN in the table's rows below):"]
+    lines = [f"per reference building (the {top} largest FP + FN of {len(ref)}; the totals "
+             f"over all references on the last line):"]
     tot = {"north": 0.0, "south": 0.0}
     for j in range(len(ref)):
         tot["north" if ref[j].centroid.y >= y_split else "south"] += fp[j] + fn[j]
