@@ -1,8 +1,10 @@
 """Polygon fitting on the Delft 0.5 m DSM against the 132 BGT footprints (issue 16).
 
 Usage: ``PYTHONPATH=src python benchmarks/bench_dsm_fit_delft.py [DATA_DIR] [--dsm-from-laz]
-[--set stage.field=value ...]`` (``--set`` overrides a DSM stage option, e.g.
-``--set dsm_roofs.min_area=5``, to compare settings).
+[--set stage.field=value ...] [--per-building] [--quick]`` (``--set`` overrides a DSM stage
+option, e.g. ``--set dsm_roofs.min_area=5``, to compare settings; ``--per-building`` prints
+each reference's false positive / negative area and the outlines it got, largest losses
+first; ``--quick`` stops after the scores and halves, skipping the oracle and the studies).
 
 Inputs: ``delft/dsm_50cm.tif`` and ``dtm_50cm.tif`` (or, with
 ``--dsm-from-laz``, the DSM and DTM made by ``lidar2city rasterize`` from
@@ -282,6 +284,56 @@ def cause_budget(pred, ref, hull, dsm, dtm, transform, cell, split_row, *, roofs
     return "; ".join(out)
 
 
+def per_building(pred, kinds, ref, hull, tree, y_split, top=25):
+    """Each reference's false positive / negative area and the outlines it got, by loss.
+
+    A reference's false negatives are its area outside every scored outline
+    (touching a reference, clipped to the hull); an outline's false positives
+    (its clipped area on no reference) are shared among the references it
+    covers in proportion to the area it covers of each. Prints the ``top``
+    largest losses: half, FP and FN (m2), then the outlines touching the
+    reference (index, shape type, vertex count, main axis in degrees modulo
+    90, the share of its area on this reference).
+    """
+    import shapely
+
+    from lidar2city.fit.polygon import _main_axis
+
+    ru = shapely.union_all(ref)
+    hits = np.unique(tree.query(pred, predicate="intersects")[0]) if pred else []
+    clip = {int(i): pred[i].intersection(hull) for i in hits}
+    pu = shapely.union_all(list(clip.values()))
+    fp = np.zeros(len(ref))
+    touch = [[] for _ in ref]
+    for i, g in clip.items():
+        cover = {int(j): g.intersection(ref[j]).area for j in tree.query(g, predicate="intersects")}
+        tot = sum(cover.values())
+        extra = g.difference(ru).area
+        for j, a in cover.items():
+            if a <= 0:
+                continue
+            fp[j] += extra * a / tot
+            touch[j].append((i, a / g.area))
+    fn = np.array([r.difference(pu).area for r in ref])
+    order = np.argsort(-(fp + fn), kind="stable")
+    lines = [f"per reference building (the {top} largest FP + FN of {len(ref)}; the totals "
+             f"over all references on the last line):"]
+    tot = {"north": 0.0, "south": 0.0}
+    for j in range(len(ref)):
+        tot["north" if ref[j].centroid.y >= y_split else "south"] += fp[j] + fn[j]
+    for j in order[:top]:
+        half = "north" if ref[j].centroid.y >= y_split else "south"
+        desc = ", ".join(
+            f"#{i} {kinds[i]} {len(pred[i].exterior.coords) - 1}v "
+            f"{np.degrees(_main_axis(pred[i])):.1f}deg {100 * s:.0f}%"
+            for i, s in sorted(touch[j], key=lambda t: -t[1]))
+        lines.append(f"    ref {j:3d} {half} area {ref[j].area:6.1f} m2 FP {fp[j]:5.1f} "
+                     f"FN {fn[j]:5.1f} | {desc or 'no outline'}")
+    lines.append(f"    all references: FP + FN north {tot['north']:.0f} m2, "
+                 f"south {tot['south']:.0f} m2")
+    return "\n".join(lines)
+
+
 def main(argv):
     import pyogrio
     import shapely
@@ -333,13 +385,14 @@ def main(argv):
         dom = scoring_domain(refm, nd > 3.0, "reference", cell=d.cell_size)
 
         # the fitting alone, on the rasterised references
-        lab = features.rasterize([(g, i + 1) for i, g in enumerate(ref)], out_shape=d.shape,
-                                 transform=d.transform, fill=0, dtype="int32")
-        oracle = outlines_from_labels(lab, nd, cell=d.cell_size)
-        ox, oy = d.transform.c, d.transform.f
-        opred = [shapely.affinity.translate(r.footprint, ox, oy) for r in oracle if r.ok]
-        print(f"oracle (references rasterised at {d.cell_size:g} m, then fitted): "
-              f"{score(opred, ref, hull, tree)}")
+        if "--quick" not in argv:
+            lab = features.rasterize([(g, i + 1) for i, g in enumerate(ref)], out_shape=d.shape,
+                                     transform=d.transform, fill=0, dtype="int32")
+            oracle = outlines_from_labels(lab, nd, cell=d.cell_size)
+            ox, oy = d.transform.c, d.transform.f
+            opred = [shapely.affinity.translate(r.footprint, ox, oy) for r in oracle if r.ok]
+            print(f"oracle (references rasterised at {d.cell_size:g} m, then fitted): "
+                  f"{score(opred, ref, hull, tree)}")
 
         out = Path(tmp) / "fp.gpkg"
         t0 = time.perf_counter()
@@ -349,12 +402,17 @@ def main(argv):
         geoms = shapely.from_wkb(w2)
         good = ~shapely.is_empty(geoms) & ~shapely.is_missing(geoms)
         pred = [max(shapely.get_parts(g), key=lambda p: p.area) for g in geoms[good]]
+        kinds = [str(k) for k in np.asarray(f2[1])[good]]
         print(f"footprints --dsm: {summary['buildings']} outlines in {el:.1f} s "
               f"({summary['failed']} failed), shape types {summary['shape_types']}")
         print(f"  restricted: {score(pred, ref, hull, tree)}")
         rows = np.nonzero(refm.any(axis=1))[0]
         y_split = d.transform.f - int((rows.min() + rows.max() + 1) // 2) * d.cell_size
         print(f"  halves: {halves(pred, ref, hull, tree, y_split)}")
+        if "--per-building" in argv:
+            print(per_building(pred, kinds, ref, hull, tree, y_split))
+        if "--quick" in argv:
+            return
         near = [pred[i] for i in np.unique(tree.query(pred, predicate="intersects")[0])]
         ref_all = shapely.union_all(ref)
         graze = [g for g in near if g.intersection(ref_all).area < 1.0]
