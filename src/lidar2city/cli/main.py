@@ -183,5 +183,9 @@ def main():  # pragma: no cover - the console script, exercised in subprocesses
     return cli()
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()
+if __name__ == "__main__":  # pragma: no cover - ``python -m lidar2city.cli.main``
+    # the package's module, not this copy run as __main__: one copy of the run's state
+    # (_STANDALONE), which the subcommands import from it
+    from lidar2city.cli.main import main as _main
+
+    _main()
