@@ -101,6 +101,8 @@ def main():
         def run(spec, options):
             import time as t_
             import resource as r_
+            import gc as g_
+            gcs0 = sum(st["collections"] for st in g_.get_stats())
             start, cpu0, dec0 = t_.time(), t_.process_time(), task._cache.decoded
 
             def sched():  # this thread's time on a core, waiting for one (s)
@@ -110,7 +112,8 @@ def main():
             out = fn(spec, options)
             u1, s1 = r_.getrusage(r_.RUSAGE_THREAD), sched()
             th = (u1.ru_utime - u0.ru_utime, u1.ru_stime - u0.ru_stime,
-                  u1.ru_minflt - u0.ru_minflt, u1.ru_nivcsw - u0.ru_nivcsw, s1[1] - s0[1])
+                  u1.ru_minflt - u0.ru_minflt,
+                  sum(st["collections"] for st in g_.get_stats()) - gcs0, s1[1] - s0[1])
             with open("/proc/self/stat") as f:
                 fields = f.read().rsplit(")", 1)[1].split()
             age = (t_.clock_gettime(t_.CLOCK_BOOTTIME)
@@ -227,7 +230,7 @@ def tasks(m, t0=0.0) -> list:
         wall = end - start
         out.append({"who": who, "index": index, "kind": kind, "start": start - t0,
                     "end": end - t0, "born": born - t0, "cpu": cpu, "user": th[0],
-                    "sys": th[1], "faults": th[2], "preempted": th[3], "wait": th[4],
+                    "sys": th[1], "faults": th[2], "collections": th[3], "wait": th[4],
                     "blocked": wall - th[0] - th[1] - th[4], "buildings": n, "decoded": dec,
                     "before": before})
     return out
@@ -268,7 +271,7 @@ def main():
         print(f"{t['who']:8s} (born {t['born']:5.2f} s): {t['kind']} {t['index']} "
               f"{t['start']:5.2f}-{t['end']:5.2f} s ({t['end'] - t['start']:4.2f} s, "
               f"{t['cpu']:4.2f} CPU s; its thread {t['user']:4.2f} user {t['sys']:4.2f} sys, "
-              f"{t['faults']} page faults, waited for a core {t['wait']:4.2f} s, blocked "
+              f"{t['faults']} page faults, {t['collections']} collections, waited for a core {t['wait']:4.2f} s, blocked "
               f"{t['blocked']:4.2f} s), {t['buildings']} buildings, {t['decoded']} tile(s) "
               f"decoded itself, worker CPU before {t['before']:.2f} s")
     for who, s in sums.items():

@@ -65,7 +65,8 @@ class _RootGroup(LazyGroup):
             _atomic.end_run()
 
 
-#: allocations between two collections of the youngest generation during a run
+#: allocations between two collections of the youngest generation during a run (a
+#: local cluster's workers run with the same: ``lidar2city.tools.engine.GC_THRESHOLD``)
 _GC_THRESHOLD = 50_000
 
 _frozen_at_exit = []

@@ -297,7 +297,7 @@ class DaskExecutor:
         if balance:
             for i in range(len(items)):
                 fut = self._client.submit(_run_many, items[i:i + 1], *shared, fn=fn,
-                                          run_hook=run_hook,
+                                          run_hook=run_hook, own=self.scheduler is None,
                                           ahead=items[i + 1:i + 1 + AHEAD_RUNS], pure=False,
                                           retries=RETRIES, priority=len(items) - i)
                 futures.append(fut)
@@ -313,7 +313,8 @@ class DaskExecutor:
             ahead = items[b:runs[nxt][1]] if nxt > r else []
             # earlier submitted, higher priority: each worker's runs start in order
             fut = self._client.submit(_run_many, items[a:b], *shared, fn=fn, run_hook=run_hook,
-                                      ahead=ahead, pure=False, retries=RETRIES,
+                                      ahead=ahead, own=self.scheduler is None, pure=False,
+                                      retries=RETRIES,
                                       priority=len(runs) - rank,
                                       workers=[names[k]] if names else None,
                                       allow_other_workers=True)
@@ -418,7 +419,7 @@ class DaskExecutor:
                     # waits for its successor (a restriction to it would wait for ever)
                     fut = self._client.submit(
                         _run_many, items[a:b], *shared, fn=fn, run_hook=run_hook, ahead=ahead,
-                        pure=False, retries=RETRIES, priority=n - a,
+                        own=True, pure=False, retries=RETRIES, priority=n - a,
                         workers=[names[k]] if len(names) > 1 else None,
                         allow_other_workers=len(names) > 1)
                     with lock:
@@ -818,9 +819,38 @@ def _dealt(shares) -> list:
         depth += 1
 
 
-def _run_many(items, *args, fn, run_hook=None, ahead=()):
+#: allocations between two collections of the youngest generation in a cluster
+#: worker, as in a run of one process (``lidar2city.cli.main._GC_THRESHOLD``)
+GC_THRESHOLD = 50_000
+_WORKER_SET_UP: list = []
+
+
+def _set_up_worker() -> None:
+    """Once per cluster worker process, before its first task: the cycle collector
+    as a run in one process has it, every :data:`GC_THRESHOLD` allocations
+    instead of Python's 700 (a worker of the Delft tile's parts ran 40
+    collections over its 4 parts, the client computing beside it none), and
+    what the process holds by then (the modules its server imported, Dask's
+    own state) moved out of the collector's reach (:func:`gc.freeze`): a
+    collection neither walks those objects again nor writes to, and so
+    copies, the pages a forked worker shares with its server."""
+    if _WORKER_SET_UP:
+        return
+    import gc
+
+    _WORKER_SET_UP.append(True)
+    thresholds = gc.get_threshold()
+    gc.set_threshold(max(thresholds[0], GC_THRESHOLD), *thresholds[1:])
+    gc.freeze()
+
+
+def _run_many(items, *args, fn, run_hook=None, ahead=(), own=False):
     """One cluster task: ``fn`` over a run of items in turn, each tried as in
-    :class:`InProcess`; ``[(offset in the run, result or exception)]``."""
+    :class:`InProcess`; ``[(offset in the run, result or exception)]``. ``own``:
+    on a worker of our own local cluster (:func:`_set_up_worker`; an external
+    cluster's workers are left as they are)."""
+    if own:
+        _set_up_worker()
     return list(InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead))
 
 
