@@ -43,7 +43,7 @@ def main():
     t0, marks = float(sys.argv[1]), []
 
     def mark(name):
-        marks.append((name, time.time() - t0, time.process_time()))
+        marks.append((name, time.time() - t0, time.process_time(), time.thread_time()))
 
     mark("python started")
     import logging
@@ -67,12 +67,26 @@ def main():
             return out
         setattr(owner, name, wrapped)
 
+    if os.environ.get("BENCH_ONE"):  # the plan of N workers, every part in this process
+        def no_cluster(self):
+            raise RuntimeError("no cluster (--one-process)")
+        engine.DaskExecutor._start = no_cluster
+        engine._start_forkserver = lambda preload=(): None
     engine_start = engine._start_forkserver
     engine._start_forkserver = lambda preload=(): (
         mark("server start asked"), engine_start(tuple(preload) + ("bench_mark_last",)),
         mark("server started (its preload goes on)"))
     wrap(R, "plan_reconstruct", "plan begun", lambda p: f"plan done ({len(p.specs)} tasks)")
     wrap(task, "predecode", None, lambda d: f"client decoded {len(d)} tile(s) for the workers")
+    real_start = engine.DaskExecutor._start
+
+    def start(self):  # in the thread that starts the cluster: its CPU so far
+        try:
+            return real_start(self)
+        finally:
+            mark(f"cluster started by the client's start thread ({time.thread_time():.2f} "
+                 "CPU s of that thread)")
+    engine.DaskExecutor._start = start
     real_ready = engine.DaskExecutor.ready
 
     def ready(self):
@@ -86,14 +100,26 @@ def main():
     def timed(fn):
         def run(spec, options):
             import time as t_
+            import resource as r_
+            import gc as g_
+            gcs0 = sum(st["collections"] for st in g_.get_stats())
             start, cpu0, dec0 = t_.time(), t_.process_time(), task._cache.decoded
+
+            def sched():  # this thread's time on a core, waiting for one (s)
+                with open("/proc/thread-self/schedstat") as f:
+                    return [int(v) / 1e9 for v in f.read().split()[:2]]
+            u0, s0 = r_.getrusage(r_.RUSAGE_THREAD), sched()
             out = fn(spec, options)
+            u1, s1 = r_.getrusage(r_.RUSAGE_THREAD), sched()
+            th = (u1.ru_utime - u0.ru_utime, u1.ru_stime - u0.ru_stime,
+                  u1.ru_minflt - u0.ru_minflt,
+                  sum(st["collections"] for st in g_.get_stats()) - gcs0, s1[1] - s0[1])
             with open("/proc/self/stat") as f:
                 fields = f.read().rsplit(")", 1)[1].split()
             age = (t_.clock_gettime(t_.CLOCK_BOOTTIME)
                    - int(fields[19]) / os.sysconf("SC_CLK_TCK"))
             out.bench = (start, t_.time(), os.getpid(), t_.time() - age,
-                         t_.process_time() - cpu0, cpu0, task._cache.decoded - dec0)
+                         t_.process_time() - cpu0, cpu0, task._cache.decoded - dec0, th, spec.index)
             return out
         return run
 
@@ -124,7 +150,10 @@ def main():
                 rows.append(list(out.bench) + [len(out.footprints or ()), "trace"])
             yield i, out
     engine.DaskExecutor.map = traced_map
-    wrap(R, "_sink", None, None)
+    wrap(R._Collect, "close", "output being written", "output written")
+    wrap(R._Stream, "close", "output being written", "output written")
+    wrap(engine.DaskExecutor, "process_cpu", None, "workers' CPU asked")
+    wrap(engine.DaskExecutor, "_close", "cluster closing", "cluster closed")
     try:
         climain._STANDALONE.append(True)
         climain.cli.main(sys.argv[2:], standalone_mode=False)
@@ -147,56 +176,109 @@ with open(os.environ["BENCH_MARKS"], "a") as f:
 """
 
 
+
+class Child:
+    """One instrumented run of the command, started now (:data:`CHILD`); ``result()``
+    waits for it: ``(wall seconds, the child's report, the server's marks)``."""
+
+    def __init__(self, d, *, workers="2", traced=False, log=False, one_process=False):
+        self.dir = tempfile.TemporaryDirectory()
+        tmp = Path(self.dir.name)
+        (tmp / "child.py").write_text(CHILD)
+        for name in ("first", "last"):
+            (tmp / f"bench_mark_{name}.py").write_text(
+                MARK.replace("{NAME}", f"server preload {'begun' if name == 'first' else 'done'}"))
+        self.marks = tmp / "marks.txt"
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
+                   BENCH_MARKS=str(self.marks))
+        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
+        if log:
+            env["BENCH_LOG"] = "1"
+        if one_process:
+            env["BENCH_ONE"] = "1"
+        self.t0 = time.time()
+        cmd = [sys.executable, str(tmp / "child.py"), repr(self.t0), *(["-vv"] if log else []),
+               "reconstruct", str(d / "ahn3_cropped_1.laz"),
+               *([] if traced else ["--footprints", str(d / "footprints_bgt.gpkg")]),
+               "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(tmp / "out.city.json"),
+               "-q", "--workers", str(workers)]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env=env)
+
+    def result(self):
+        _, err = self.proc.communicate()
+        wall = time.time() - self.t0
+        server = ([(float(line.split(" ", 1)[0]) - self.t0, line.split(" ", 1)[1].strip())
+                   for line in self.marks.read_text().splitlines()] if self.marks.exists() else [])
+        self.dir.cleanup()
+        lines = err.splitlines()
+        bench = [line for line in lines if line.startswith("BENCH ")]
+        if self.proc.returncode or not bench:
+            raise SystemExit(err)
+        return wall, json.loads(bench[-1][6:]), server, lines
+
+
+def tasks(m, t0=0.0) -> list:
+    """Per task of a child's report: a dict of its process (``client`` or
+    ``worker K``), part index, start / end (s from the start), CPU seconds of its
+    process and of its thread (user, system), page faults, the seconds its thread
+    waited for a core (runnable, not running: /proc's schedstat) and was blocked
+    (neither: the interpreter lock, I/O)."""
+    pids, out = {m["client"]: "client"}, []
+    for start, end, pid, born, cpu, before, dec, th, index, n, kind in sorted(m["rows"]):
+        who = pids.setdefault(pid, f"worker {len(pids) - 1}")
+        wall = end - start
+        out.append({"who": who, "index": index, "kind": kind, "start": start - t0,
+                    "end": end - t0, "born": born - t0, "cpu": cpu, "user": th[0],
+                    "sys": th[1], "faults": th[2], "collections": th[3], "wait": th[4],
+                    "blocked": wall - th[0] - th[1] - th[4], "buildings": n, "decoded": dec,
+                    "before": before})
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", nargs="?")
     ap.add_argument("--workers", default="2")
     ap.add_argument("--traced", action="store_true", help="no footprint file")
     ap.add_argument("--log", action="store_true", help="Dask's and lidar2city's log lines too")
+    ap.add_argument("--one-process", action="store_true",
+                    help="the plan of --workers N (its parts), no cluster: every part in the "
+                         "client, one after the other (each part's CPU without a second process)")
     a = ap.parse_args()
     d = data_dir(a.data) / "delft"
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
           f"({os.cpu_count()} cores)")
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        (tmp / "child.py").write_text(CHILD)
-        for name in ("first", "last"):
-            (tmp / f"bench_mark_{name}.py").write_text(
-                MARK.replace("{NAME}", f"server preload {'begun' if name == 'first' else 'done'}"))
-        marks = tmp / "marks.txt"
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
-                   BENCH_MARKS=str(marks))
-        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
-        if a.log:
-            env["BENCH_LOG"] = "1"
-        cmd = [sys.executable, str(tmp / "child.py"), "", *(["-vv"] if a.log else []),
-               "reconstruct", str(d / "ahn3_cropped_1.laz"),
-               *([] if a.traced else ["--footprints", str(d / "footprints_bgt.gpkg")]),
-               "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", str(tmp / "out.city.json"),
-               "-q", "--workers", a.workers]
-        t0 = time.time()
-        cmd[2] = repr(t0)
-        r = subprocess.run(cmd, capture_output=True, text=True, env=env)
-        wall = time.time() - t0
-        server = ([(float(line.split(" ", 1)[0]) - t0, line.split(" ", 1)[1].strip())
-                   for line in marks.read_text().splitlines()] if marks.exists() else [])
-    lines = r.stderr.splitlines()
-    bench = [line for line in lines if line.startswith("BENCH ")]
-    if r.returncode or not bench:
-        raise SystemExit(r.stderr)
-    m = json.loads(bench[-1][6:])
-    events = [(t, f"client: {n} (client CPU {c:.2f} s)") for n, t, c in m["marks"]]
+    child = Child(d, workers=a.workers, traced=a.traced, log=a.log, one_process=a.one_process)
+    t0 = child.t0
+    wall, m, server, lines = child.result()
+    events = [(t, f"client: {n} (client CPU {c:.2f} s, its thread {th:.2f})")
+              for n, t, c, th in m["marks"]]
     events += [(t, f"server: {n}") for t, n in server]
     for t, text in sorted(events):
         print(f"{t:6.2f} s  {text}")
     print(f"{wall:6.2f} s  process ended; CPU of the processes it started (workers, their "
           f"server) {m['children_cpu']:.2f} s")
-    pids = {m["client"]: "client  "}  # the client computes its share of the tasks too
-    for start, end, pid, born, cpu, before, dec, n, kind in sorted(m["rows"]):
-        k = pids.setdefault(pid, f"worker {len(pids) - 1}")
-        print(f"{k} (born {born - t0:5.2f} s): {kind} {start - t0:5.2f}-{end - t0:5.2f} s "
-              f"({end - start:4.2f} s, {cpu:4.2f} CPU s), {n} buildings, {dec} tile(s) decoded "
-              f"itself, worker CPU before {before:.2f} s")
+    sums = {}
+    for t in tasks(m, t0):
+        s = sums.setdefault(t["who"], dict.fromkeys(
+            ("n", "wall", "cpu", "thread", "sys", "faults", "wait", "blocked"), 0))
+        s["n"] += 1
+        s["wall"] += t["end"] - t["start"]
+        s["thread"] += t["user"] + t["sys"]
+        for key in ("cpu", "sys", "faults", "wait", "blocked"):
+            s[key] += t[key]
+        print(f"{t['who']:8s} (born {t['born']:5.2f} s): {t['kind']} {t['index']} "
+              f"{t['start']:5.2f}-{t['end']:5.2f} s ({t['end'] - t['start']:4.2f} s, "
+              f"{t['cpu']:4.2f} CPU s; its thread {t['user']:4.2f} user {t['sys']:4.2f} sys, "
+              f"{t['faults']} page faults, {t['collections']} collections, waited for a core {t['wait']:4.2f} s, blocked "
+              f"{t['blocked']:4.2f} s), {t['buildings']} buildings, {t['decoded']} tile(s) "
+              f"decoded itself, worker CPU before {t['before']:.2f} s")
+    for who, s in sums.items():
+        print(f"{who}: {s['n']} task(s), {s['wall']:.2f} s, {s['cpu']:.2f} CPU s of the process, "
+              f"{s['thread']:.2f} CPU s of the task's thread ({s['sys']:.2f} in the kernel, "
+              f"{s['faults']} page faults), waited for a core {s['wait']:.2f} s, blocked (not "
+              f"runnable: the interpreter lock, I/O) {s['blocked']:.2f} s")
     if a.log:
         for line in lines:
             if line[:8].strip().split(" ")[0].isdigit():

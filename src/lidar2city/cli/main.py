@@ -65,7 +65,8 @@ class _RootGroup(LazyGroup):
             _atomic.end_run()
 
 
-#: allocations between two collections of the youngest generation during a run
+#: allocations between two collections of the youngest generation during a run (a
+#: local cluster's workers run with the same: ``lidar2city.tools.engine.GC_THRESHOLD``)
 _GC_THRESHOLD = 50_000
 
 _frozen_at_exit = []
@@ -191,5 +192,9 @@ def main():  # pragma: no cover - the console script, exercised in subprocesses
     return cli()
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()
+if __name__ == "__main__":  # pragma: no cover - ``python -m lidar2city.cli.main``
+    # the package's module, not this copy run as __main__: one copy of the run's state
+    # (_STANDALONE), which the subcommands import from it
+    from lidar2city.cli.main import main as _main
+
+    _main()

@@ -102,6 +102,16 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
              quiet=quiet, layer=layer, id_field=id_field)
         return
 
+    from .main import _STANDALONE
+
+    if _STANDALONE and (lods or config is None):  # the LoDs, hence the worker's imports, known
+        # a command of its own: the server its local cluster's workers are forked from
+        # starts now, its imports beside this process's (in a test runner's process the
+        # cluster starts it, and ends it with itself)
+        from ..tools.engine import start_worker_server, worker_modules
+
+        start_worker_server(workers, scheduler, worker_modules(lods, method))
+
     from ..tools.reconstruct import reconstruct
 
     if workers not in (1, "auto") and scheduler is not None:

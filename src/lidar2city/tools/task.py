@@ -30,6 +30,9 @@ import numpy as np
 
 from ..errors import EmptyInputError
 from ..io.las import DecodedTile, SpilledTile, TileReader
+# what a block imports: named in the engine, which the command line asks to start its
+# worker server before this module (and NumPy) is imported
+from .engine import LOD22_MODULES, WORKER_MODULES, worker_modules  # noqa: F401
 
 logger = logging.getLogger(__name__)
 
@@ -296,23 +299,6 @@ class _TileCache:
 #: of tiles a row of blocks leaves to the next row on areas tens of blocks wide
 KEEP_BLOCKS = 8
 _cache = _TileCache()
-
-
-#: what a block imports (besides this module), for a local cluster's workers to
-#: have it imported before they are forked (:func:`worker_modules`)
-WORKER_MODULES = ("laspy", "lazrs", "shapely", "pyproj", "lidar2city.io.las",
-                  "lidar2city.io.vector", "lidar2city.lod.lod1", "lidar2city.metrics.model",
-                  "lidar2city.validate.solid")
-#: what LoD2.2 from the roof topology imports besides (scipy's ~0.25 CPU-second)
-LOD22_MODULES = ("scipy.ndimage", "scipy.spatial", "scipy.sparse", "lidar2city.roof.building",
-                 "lidar2city.regularize.snake", "lidar2city.lod.roofcheck")
-
-
-def worker_modules(lods=(), method="roof") -> tuple:
-    """The modules the blocks of a run building ``lods`` import
-    (:func:`lidar2city.tools.engine.make_executor` ``preload``)."""
-    return WORKER_MODULES + (LOD22_MODULES if "2.2" in (lods or ()) and method == "roof"
-                             else ())
 
 
 #: the most points the run's client decodes for its workers (:func:`predecode`):
