@@ -208,6 +208,9 @@ def test_a_wrong_header_point_count_is_found_when_the_tiles_are_scanned(tmp_path
         assert scan_tiles([less])[0].count == 2000
         assert len(read_las(less).data.points) == 2000
     assert "holds 3,000 point records, its header counts 2,000" in caplog.text
+    # a second scan of tiles already checked (reconstruct taking the footprints' CRS for
+    # tiles without one) decodes nothing: the lie is not looked for again
+    assert scan_tiles([bad], check_count=False)[0].count == 4000
 
 
 def test_a_large_scan_reads_chunk_tables_only(tmp_path):

@@ -252,10 +252,12 @@ class TileInfo:
     crs: object
 
 
-def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
+def scan_tiles(paths, *, crs=None, allow_empty=False, check_count=True) -> list:
     """Headers of LAS/LAZ tiles (no points read): bounds, counts, one shared CRS.
 
     ``allow_empty``: tiles without points are accepted (neighbour lists).
+    ``check_count`` false: the point counts are not checked against the points
+    (for tiles scanned again with another CRS; a check decodes a chunk a tile).
 
     Raises
     ------
@@ -278,7 +280,8 @@ def scan_tiles(paths, *, crs=None, allow_empty=False) -> list:
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = _read_crs(f, p) if forced is None else _forced_crs(forced, f, p)
             _check_scale(h, p, tile_crs)
-            _check_point_count(f, p, exact=exact)
+            if check_count:
+                _check_point_count(f, p, exact=exact)
         if tile_crs is not None:
             # one CRS object for all the tiles of one CRS (each holds ~30 kB of PROJ
             # state: 300 MB for 10,000 tiles otherwise)

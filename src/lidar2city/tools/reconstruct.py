@@ -1215,7 +1215,8 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         if fp_crs is not None:
             logger.warning("the input has no CRS: taking the footprints' (%s; pass --crs "
                            "EPSG:xxxx to choose one)", fp_crs.name)
-            tiles = scan_tiles(inputs, crs=fp_crs)
+            # the counts were checked by the first scan: not decoded again
+            tiles = scan_tiles(inputs, crs=fp_crs, check_count=False)
     reader = TileReader(tiles)
     _check_area(reader)
     # classified input (some building points anywhere) or raw: decided once for
