@@ -164,7 +164,7 @@ def _direction(footprint):
 
 
 def part_floor(poly, xyz, labels, planes, ground_z, *, min_height, spacing, flat_slope=3.0,
-               share=1 / 3):
+               share=1 / 3, building_points=None):
     """The floor of one footprint part: ``ground_z``, or lower when the roof stands on it.
 
     The sloped facets whose plane, at their own points and at the outline
@@ -177,26 +177,41 @@ def part_floor(poly, xyz, labels, planes, ground_z, *, min_height, spacing, flat
     lowest height. Fewer points (a low clutter facet, sloped ground inside the
     outline) leave the floor as given and their faces are flattened as before.
 
+    Flat facets on the floor count too when, with the sloped ones, they hold at
+    least ``share`` of the part's points and of the building's
+    (``building_points``, default the part's): a flat roof of roof points only,
+    its floor taken at its lowest point, on the roof. Lifting it to ``2
+    min_height`` over the floor would put the roof a metre above every point; a
+    part of a larger building that is mostly ground (a traced patch behind the
+    house) holds too few of the building's points to move its floor.
+
     Returns the floor (m), at most ``ground_z``.
     """
     from scipy.spatial import cKDTree
 
     corners = np.asarray(poly.exterior.coords)[:, :2]
-    lows, held = [], 0
+    lows, held, flat_lows, flat_held = [], 0, [], 0
     for k, (a, b, c) in enumerate(np.asarray(planes)):
-        if np.degrees(np.arctan(np.hypot(a, b))) < flat_slope:
-            continue
+        flat = np.degrees(np.arctan(np.hypot(a, b))) < flat_slope
         own = xyz[labels == k]
         if not len(own):
             continue
         near = cKDTree(own[:, :2]).query(corners, distance_upper_bound=2 * spacing)[0] < np.inf
         low = float(np.min(np.vstack([own[:, :2], corners[near]]) @ (a, b) + c))
-        if low < ground_z + min_height:
+        if low >= ground_z + min_height:
+            continue
+        if flat:
+            flat_lows.append(low)
+            flat_held += len(own)
+        else:
             lows.append(low)
             held += len(own)
-    if not lows or held < share * len(xyz):
-        return ground_z
-    return min(ground_z, min(lows) - 2 * min_height)
+    if lows and held >= share * len(xyz):
+        return min(ground_z, min(lows) - 2 * min_height)
+    total = len(xyz) if building_points is None else max(int(building_points), len(xyz))
+    if flat_lows and held + flat_held >= share * total:
+        return min(ground_z, min(lows + flat_lows) - 2 * min_height)
+    return ground_z
 
 
 def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
@@ -223,9 +238,14 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=Tru
     A plane fitted to one part of the roof and given to a face reaching where its
     points never did (a steep facet extrapolated over a patch without points) can
     put the face's corners metres above every point of the building: a spike. A
-    face is supported when its highest corner stays within ``t_step + tan(slope) *
-    spacing`` of the highest point within two point spacings of it (a ridge corner
-    between points one spacing apart). An unsupported face whose plane fits its own
+    face is supported when its highest corner stays within ``t_step + min(tan(slope) *
+    spacing, max(spacing / 2, 2 t_step))`` of the highest point within two point
+    spacings of it: the plane's rise over one spacing (a ridge corner between points
+    one spacing apart), but no more than half a spacing (a 45 deg ridge half a spacing
+    from its nearest points; on a sparse survey a steep plane rises metres over one
+    spacing: ISPRS CSite1's 50-60 deg faces at 2.8 m put corners 2-4 m above every
+    point) nor less than a step (a dense survey's steep face a spacing beyond its
+    points, 0.5-0.6 m on Delft's mansards). An unsupported face whose plane fits its own
     points (median residual within ``t_step``) keeps it up to ``t_step`` above that
     highest point and gets a horizontal cap at that height beyond (the face cut along
     the plane's contour line); any other unsupported face takes a
@@ -300,7 +320,8 @@ def _fixed_face(f, pl, xyz, sorted_x, zmin, *, spacing, t_step, cap=True):
     reach = 2.0 * spacing
     c = np.asarray(f.exterior.coords)
     top = float(np.max(pl[0] * c[:, 0] + pl[1] * c[:, 1] + pl[2]))
-    tol = t_step + min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing
+    tol = t_step + min(min(float(np.hypot(pl[0], pl[1])), _SPIKE_MAX_TAN) * spacing,
+                       max(spacing / 2, 2 * t_step))
     if not len(xyz) or top <= zmin + tol:
         return None  # no higher than the lowest point: supported whatever lies near
     x, y = xyz[:, 0], xyz[:, 1]
@@ -598,6 +619,9 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
     n_planes, type4, n_int, n_step, moved, snake_fallbacks = 0, 0, 0, 0, 0, 0
     roof_areas, roof_planes, roof_faces, directions = [], [], [], []
     parts = _parts(footprint)
+    # the building's points, for a part's floor (part_floor): one part holds them all
+    n_building = None if len(parts) == 1 else int(np.count_nonzero(shapely.contains_xy(
+        footprint.buffer(cfg.overhang), xyz[:, 0], xyz[:, 1])))
     skipped, lowered = 0, 0.0
     for poly in parts:
         grown = poly.buffer(cfg.overhang)
@@ -626,7 +650,7 @@ def reconstruct_lod22(footprint, building_xyz, ground_z, *, config: Lod22Config 
         planes = regularize_planes(planes, labels, pts, d, snap_angle=cfg.snap_angle,
                                    flat_slope=cfg.flat_slope)
         floor = part_floor(poly, pts, labels, planes, ground_z, min_height=cfg.min_height,
-                           spacing=spacing, flat_slope=cfg.flat_slope)
+                           spacing=spacing, flat_slope=cfg.flat_slope, building_points=n_building)
         lowered = max(lowered, ground_z - floor)
         # the arrangement with raised rims along the outline, without them, then the grid;
         # with the outline straightened first, then the footprint as given
