@@ -9,9 +9,11 @@ does; every building's highest LoD2.2 vertex is compared with the highest of
 the building points its roof was fitted to (those within the ``[lod22]
 overhang`` of its footprint). Printed per input: the buildings whose roof
 rises more than ``--over`` metres (default 1 m), more than 2 m, and more than
-the spacing-scaled tolerance ``2 elevation_error + spacing / 2`` (a ridge between
-points one spacing apart is at most half a spacing from the nearest; the
-building's point spacing ``sqrt(area / points)`` over its grown footprint) above
+the spacing-scaled tolerance ``t_step + max(spacing / 2, 2 t_step)``, ``t_step = 2
+elevation_error`` (a ridge between points one spacing apart is at most half a
+spacing from the nearest; a step at least; the building's point spacing
+``sqrt(area / points)`` over its grown footprint; the most the roof's spike check,
+``roof.building._fix_high_faces``, lets a face rise over its highest near point) above
 their highest point, out of the buildings with a LoD2.2 roof (LoD1.2 fallbacks
 included: their prism's roof never rises above its points), the largest rise,
 the median LoD2.2 RMSE of those points (point to mesh, as ``evaluate model``:
@@ -86,11 +88,11 @@ def report(name, rows, over, seconds):
 
     t_step = 2 * Lod22Config().elevation_error
     rise = np.array([r[1] for r in rows]) if rows else np.zeros(0)
-    scaled = np.array([t_step + r[5] / 2 for r in rows]) if rows else np.zeros(0)
+    scaled = np.array([t_step + max(r[5] / 2, 2 * t_step) for r in rows]) if rows else np.zeros(0)
     worst = sorted(rows, key=lambda r: -r[1])[:5]
     print(f"{name}: {np.count_nonzero(rise > over)} of {len(rows)} LoD2.2 roofs rise > {over:g} m "
           f"above their highest point, {np.count_nonzero(rise > 2.0)} > 2 m, "
-          f"{np.count_nonzero(rise > scaled)} > {t_step:g} m + spacing / 2; largest rise "
+          f"{np.count_nonzero(rise > scaled)} > {t_step:g} m + max(spacing / 2, {2 * t_step:g} m); largest rise "
           f"{rise.max() if len(rise) else 0:+.2f} m; LoD2.2 RMSE median "
           f"{np.nanmedian([r[6] for r in rows]) if rows else np.nan:.3f} m ({seconds:.0f} s)")
     for fid, r, top, high, why, spacing, _ in worst:

@@ -371,3 +371,22 @@ def test_steep_face_of_a_sparse_survey_is_capped_half_a_spacing_up():
     faces2, labels2, _ = _fix_high_faces([box(0, 0, 8.3, 12)], np.array([0]),
                                          np.array([[t, 0.0, 300.0]]), pts, spacing=0.35, t_step=0.3)
     assert len(faces2) == 1 and labels2.tolist() == [0]
+
+
+def test_saddle_repair_takes_a_plane_that_does_not_rise_over_the_face():
+    """At a saddle the face takes a neighbour's plane: the longest-shared one unless that
+    plane, carried over the face, rises above both faces (a slope extended over a large
+    flat part: CSite1's b250 stood 1.97 m over its points); then the next neighbour's."""
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import _plane_donor
+
+    faces = [box(0, 0, 10, 10), box(10, 0, 11, 10), box(0, 10, 5, 11)]
+    planes = np.array([[0.0, 0.0, 5.0], [-0.5, 0.0, 10.5], [0.0, 0.0, 4.9]])  # 10.5 m at x = 0
+    labels = np.array([0, 1, 2])
+    assert _plane_donor(faces, labels, planes, 0, [(10.0, 1), (5.0, 2)], 0.25) == 2
+    planes[1] = [0.0, 0.0, 5.2]  # a level neighbour: the longest-shared, as before
+    assert _plane_donor(faces, labels, planes, 0, [(10.0, 1), (5.0, 2)], 0.25) == 1
+    planes[2] = [0.5, 0.0, 4.9]  # both rise (2.5 and 5 m): the one rising least
+    planes[1] = [-0.5, 0.0, 10.5]
+    assert _plane_donor(faces, labels, planes, 0, [(10.0, 1), (5.0, 2)], 0.25) == 2

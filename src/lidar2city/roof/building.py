@@ -522,7 +522,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         neigh = [(float(L), int(j)) for L, j in zip(shared, others, strict=True) if L > 0]
         if not neigh:
             return solid, r
-        face_labels[victim] = face_labels[max(neigh)[1]]
+        face_labels[victim] = face_labels[_plane_donor(faces, face_labels, planes, victim, neigh,
+                                                       min_height)]
     if len(_nonmanifold_points(solid)):
         # taking planes did not converge (one face's new plane makes the next saddle): keep
         # every plane and cut the saddle vertices out of the partition instead
@@ -531,6 +532,29 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         if cut is not None:
             return cut, 0
     return solid, max_rounds
+
+
+def _plane_donor(faces, face_labels, planes, victim, neigh, tolerance):
+    """The neighbour whose plane face ``victim`` takes at a saddle: the longest-shared of
+    ``neigh`` (``[(shared length, face)]``) whose plane, over the victim, stays within
+    ``tolerance`` of the higher of the victim's own top and that neighbour's; the one
+    rising least when none does. A plane carried over a large face (a flat part beside a
+    small sloped one) would else put the victim's far corner metres above every point:
+    CSite1's b250, +1.97 m, CSite2's b19, +4.3 m over the partition's highest corner."""
+    def top(face, plane):
+        c = np.asarray(face.exterior.coords)
+        return float(np.max(c[:, 0] * plane[0] + c[:, 1] * plane[1] + plane[2]))
+
+    v = faces[victim]
+    own = top(v, planes[face_labels[victim]])
+    rises = []
+    for _, j in sorted(neigh, reverse=True):
+        pl = planes[face_labels[j]]
+        rise = top(v, pl) - max(own, top(faces[j], pl))
+        if rise <= tolerance:
+            return j
+        rises.append((rise, j))
+    return min(rises)[1]
 
 
 def _saddle_cut(faces, own, ground_z, min_height, solid=None):
@@ -956,10 +980,12 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
+    kept = None  # the first variant's solid with its spike left, when the fix pinched a saddle
     for k, (faces, face_labels) in enumerate(variants):
         # collapsing short edges can pinch faces at different heights into a saddle; the
         # uncollapsed partition is used then rather than a face taking a neighbour's plane
         # (so only the last variant's saddles are repaired)
+        last = k == len(variants) - 1
         faces, face_labels = _clean_faces(faces, face_labels)
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
         # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
@@ -967,14 +993,21 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         for cap in (True, False):
             fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
                                     t_step=2 * cfg.elevation_error, cap=cap)
-            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
-                                                repair=k == len(variants) - 1)
+            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2, repair=last)
             if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid)):
                 faces, face_labels, planes_f = fixed
                 break
         else:
             solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
-                                                repair=k == len(variants) - 1)
+                                                repair=last)
+            if kept is not None:  # no variant takes the fix: the first one's solid, as before
+                solid, faces, face_labels, planes_f = kept
+                break
+            if not relabelled and not last:
+                # the fixed faces pinch a saddle only the last variant repairs (FSite5 b9:
+                # a levelled face beside a collapsed edge, its roof left 1.2 m over its points)
+                kept = solid, faces, face_labels, planes_f
+                continue
         if not relabelled:
             break
     return solid, faces, face_labels, planes_f, info
