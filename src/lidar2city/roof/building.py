@@ -232,6 +232,12 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     return face_labels, np.asarray(planes)
 
 
+def _top(faces, face_labels, planes):
+    """The highest corner of a roof partition, each face on its plane."""
+    return max(float(np.max(np.asarray(f.exterior.coords)[:, :2] @ planes[k][:2] + planes[k][2]))
+               for f, k in zip(faces, face_labels, strict=True))
+
+
 def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=True):
     """Faces whose plane rises above every point near them are capped or levelled.
 
@@ -997,7 +1003,10 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
             fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
                                     t_step=2 * cfg.elevation_error, cap=cap)
             solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2, repair=last)
-            if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid)):
+            # a fix is kept when its solid is valid and its saddle repair did not raise a new
+            # spike (faces taking their neighbours' planes: ISPRS samp11 b54, +3.4 m)
+            if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid) and float(
+                    solid.vertices[:, 2].max()) <= _top(*fixed) + 2 * cfg.elevation_error):
                 faces, face_labels, planes_f = fixed
                 break
         else:
