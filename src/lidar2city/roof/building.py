@@ -232,10 +232,15 @@ def _fix_low_faces(faces, face_labels, planes, ground_z, min_height, xyz):
     return face_labels, np.asarray(planes)
 
 
+def _face_top(face, plane):
+    """The height of ``face``'s highest corner on ``plane`` ``(a, b, c)``."""
+    c = np.asarray(face.exterior.coords)
+    return float(np.max(c[:, 0] * plane[0] + c[:, 1] * plane[1] + plane[2]))
+
+
 def _top(faces, face_labels, planes):
     """The highest corner of a roof partition, each face on its plane."""
-    return max(float(np.max(np.asarray(f.exterior.coords)[:, :2] @ planes[k][:2] + planes[k][2]))
-               for f, k in zip(faces, face_labels, strict=True))
+    return max(_face_top(f, planes[k]) for f, k in zip(faces, face_labels, strict=True))
 
 
 def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=True):
@@ -550,16 +555,12 @@ def _plane_donor(faces, face_labels, planes, victim, neigh, tolerance):
     rising least when none does. A plane carried over a large face (a flat part beside a
     small sloped one) would else put the victim's far corner metres above every point:
     CSite1's b250, +1.97 m, CSite2's b19, +4.3 m over the partition's highest corner."""
-    def top(face, plane):
-        c = np.asarray(face.exterior.coords)
-        return float(np.max(c[:, 0] * plane[0] + c[:, 1] * plane[1] + plane[2]))
-
     v = faces[victim]
-    own = top(v, planes[face_labels[victim]])
+    own = _face_top(v, planes[face_labels[victim]])
     rises = []
     for _, j in sorted(neigh, reverse=True):
         pl = planes[face_labels[j]]
-        rise = top(v, pl) - max(own, top(faces[j], pl))
+        rise = _face_top(v, pl) - max(own, _face_top(faces[j], pl))
         if rise <= tolerance:
             return j
         rises.append((rise, j))
