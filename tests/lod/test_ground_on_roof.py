@@ -1,6 +1,7 @@
 """A footprint without ground around it whose lowest building point is on its roof."""
 
 import numpy as np
+import pytest
 from shapely.geometry import box
 
 from lidar2city.lod import reconstruct_building
@@ -34,3 +35,14 @@ def test_a_roof_only_building_with_walls_keeps_its_lowest_point():
     pts[:5, 2] = 0.5  # wall foot points
     res = reconstruct_building(box(0, 0, 10, 10), pts, np.zeros((0, 3)), id="w")
     assert res.ok and res.attributes["ground_source"] == "lowest building point"
+
+
+def test_a_flat_roof_only_cloud_gets_its_floor_under_the_roof():
+    # every point on a flat roof, no ground anywhere: the lowest point is 0.1 m under the
+    # roof, so a floor there would leave no wall; the floor goes 2 min_height under the roof
+    # (the building was refused as less than min_height high)
+    pts = _points(0, 0, 6, 5, 10.0, 10.0)
+    res = reconstruct_building(box(0, 0, 6, 5), pts, np.zeros((0, 3)), id="flat")
+    assert res.ok and res.attributes["ground_source"] == "below the roof"
+    assert res.attributes["ground_height"] == pytest.approx(res.attributes["roof_height"] - 1.0)
+    assert "1 m under its roof" in res.attributes["ground_note"]

@@ -290,10 +290,17 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
             if fz is not None and np.isfinite(fz) and roof - fz >= cfg.min_height:
                 ground, source = float(fz), "fallback"
             else:
+                where = "the floor is at that point, on the roof"
+                if below < cfg.min_height:
+                    # every point on the roof (a flat roof-only cloud): no wall to measure, so
+                    # the floor goes 2 min_height under the roof, as LoD2.2 lowers the floor
+                    # of a roof standing on it, rather than the building refused as too low
+                    ground, source = roof - 2 * cfg.min_height, "below the roof"
+                    where = f"the floor is {2 * cfg.min_height:g} m under its roof"
                 result.attributes["ground_note"] = (
                     f"no ground point within {cfg.ground_wide_ring:g} m, and its lowest point "
                     f"is {below:.2f} m under its roof (less than a wall's {MIN_WALL_HEIGHT:g} m):"
-                    f" the floor is at that point, on the roof")
+                    f" {where}")
         result.attributes.update(
             roof_height=round(roof, 3), roof_height_min=round(float(z.min()), 3),
             roof_height_max=round(float(z.max()), 3),
