@@ -7,13 +7,17 @@ import pytest
 
 from lidar2city.errors import ConfigError, InputError
 from lidar2city.ground import GroundConfig, ground_mask, ptd
+from lidar2city.ground.tin_filter import _locate, seeded_tin
 from lidar2city.metrics.ground import ground_errors
 from lidar2city.synthetic_terrain import make_terrain
 
 
 def _block_on_slope(gradient=0.5, height=8.0):
-    g = np.stack(np.meshgrid(np.arange(80.0), np.arange(80.0)), -1).reshape(-1, 2)
-    roof = (abs(g[:, 0] - 40) < 8) & (abs(g[:, 1] - 40) < 8)
+    # a grid shaken by up to 0.2 m (fixed seed): exact grids are co-circular everywhere,
+    # which makes every Delaunay build slow
+    g = np.stack(np.meshgrid(np.arange(50.0), np.arange(50.0)), -1).reshape(-1, 2)
+    g += np.random.default_rng(0).uniform(-0.2, 0.2, g.shape)
+    roof = (abs(g[:, 0] - 25) < 6) & (abs(g[:, 1] - 25) < 6)
     z = gradient * g[:, 0] + np.where(roof, height, 0.0)
     return np.column_stack([g, z]), ~roof
 
@@ -59,3 +63,26 @@ def test_registered_in_config_and_ground_mask():
         GroundConfig(method="ptd", iteration_angle=90.0)
     with pytest.raises(ConfigError):
         GroundConfig(method="ptd", max_iterations=-2)
+
+
+def test_locate_matches_delaunay_find_simplex_off_edges():
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(2)
+    tri = Delaunay(rng.uniform(0, 100, (300, 2)))
+    q = rng.uniform(-10, 110, (800, 2))
+    np.testing.assert_array_equal(_locate(tri.points, tri.simplices, q), tri.find_simplex(q))
+
+
+def test_seeded_tin_grows_along_connected_terrain_not_onto_a_roof():
+    # seeds on the lower third of a slope only; a roof on it
+    xyz, truth = _block_on_slope(gradient=0.2, height=6.0)
+    seeds = truth & (xyz[:, 0] < 15)
+    surface, grad = seeded_tin(xyz, seeds)
+    off = np.abs(xyz[:, 2] - surface) / (0.5 + 1.25 * grad)
+    assert (off[truth] <= 1).mean() > 0.99       # the TIN reached the ground it was not seeded on
+    assert (off[~truth] > 1).all()               # but not the roof
+    nan = seeded_tin(xyz, np.zeros(len(xyz), dtype=bool))
+    assert np.isnan(nan[0]).all()
+    with pytest.raises(InputError):
+        seeded_tin(xyz, seeds[:-1])

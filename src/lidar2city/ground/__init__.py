@@ -140,7 +140,7 @@ class GroundConfig:
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
-    iteration_angle: float = field(10.0, "ptd: iteration angle (degrees) to the facet's "
+    iteration_angle: float = field(20.0, "ptd: iteration angle (degrees) to the facet's "
                                          "vertices")
     iteration_distance: float = field(1.5, "ptd: iteration distance (m) to the facet plane")
     max_iterations: int = field(60, "ptd: densification iterations at most")
