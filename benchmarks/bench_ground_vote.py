@@ -89,6 +89,7 @@ from lidar2city.ground import (  # noqa: E402
     VOTE_RULE,
     VOTE_VETO,
     GroundConfig,
+    ptd,
     smrf_segments,
     smrf_vote,
     vote_features,
@@ -224,13 +225,16 @@ def held_out_kinds(rule_above, fitted=False):
     :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit unless
     ``fitted``) with its defaults and with ``above``."""
     print(f"\nscenes of kinds {'fitted on too' if fitted else 'held out of every fit'} (smrf_vote "
-          f"type I / type II / total %: defaults; above={rule_above:g})")
+          f"type I / type II / total %: defaults; above={rule_above:g}; then ptd with its "
+          f"defaults, likewise)")
+    ptd_params = GroundConfig(method="ptd").method_params()
     for kind in HELD_OUT_KINDS:
         for spacing in (1.0, 2.5):
             scene = make_terrain(kind, spacing=spacing, seed=1)
             line = f"{kind + '@' + format(spacing, 'g') + 'm':<20}"
-            for above in (None, rule_above):
-                e = ground_errors(smrf_vote(scene.xyz, above=above), scene.ground)
+            for pred in (smrf_vote(scene.xyz), smrf_vote(scene.xyz, above=rule_above),
+                         ptd(scene.xyz, **ptd_params)):
+                e = ground_errors(pred, scene.ground)
                 line += (f"  {100 * e['type_i']:6.2f} {100 * e['type_ii']:6.2f} "
                          f"{100 * e['total']:6.2f}")
             print(line)
