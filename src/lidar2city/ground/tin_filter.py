@@ -5,7 +5,6 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from scipy.spatial import Delaunay
 
 from ..errors import InputError
 from ._grid import cell_of, grid_spec
@@ -144,6 +143,8 @@ def _densify(pts, cand, in_tin, corners, *, iteration_angle, iteration_distance,
     """Grow the TIN of ``pts[in_tin]`` + ``corners`` by the candidates ``cand`` (indices into
     ``pts``) as in :func:`ptd`, step 4; ``in_tin`` (N,) is updated in place. Returns the
     final triangulation and its vertices (V, 3)."""
+    from scipy.spatial import Delaunay  # here: other methods never import scipy
+
     sin_max = np.sin(np.radians(iteration_angle))
     for it in range(max_iterations):
         # rebuilt every round: qhull's incremental mode (add_points) was 5x slower here
@@ -192,6 +193,8 @@ def _drop_raised_seeds(pts, seeds, tolerance, rounds=3):
     The plane (least squares through the neighbours, evaluated at the seed)
     keeps seeds on a uniform slope, hull seeds included.
     """
+    from scipy.spatial import Delaunay
+
     for _ in range(rounds):
         if len(seeds) < 4:
             break
