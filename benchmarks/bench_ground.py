@@ -15,8 +15,9 @@ of ``--repeat`` runs each) and prints the ratio, for each method and for
 ``smrf_vote`` with its ``veto`` off and with ``above`` 3 m (:data:`SPEED_VARIANTS`).
 
 ``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
-smrf_segments (the same grid for the three; ``--loo-methods smrf_segments``
-runs only the named ones): for each ISPRS sample, the parameter set of a coarse grid (:data:`LOO_GRID`) that
+smrf_segments (the same grid for the three) and of ptd (its iteration angle
+and seed cell; ``--loo-methods ptd`` runs only the named ones): for each
+ISPRS sample, the parameter set of a coarse grid (:data:`LOO_GRID`) that
 minimises the mean total error over the six other samples plus the
 synthetic terrains (their mean counted as one more sample) is scored on the
 held-out sample; it prints the held-out errors, their mean and maximum, and
@@ -55,6 +56,8 @@ LOO_GRID = {
                      "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
     "smrf_segments": {"slope": (0.1, 0.15, 0.2), "window": (16.0, 24.0, 32.0),
                       "scalar": (0.75, 1.25, 2.0), "threshold": (0.3, 0.5, 0.7)},
+    # progressive TIN densification: its iteration angle and seed cell (issue 18, session 11)
+    "ptd": {"iteration_angle": (10.0, 20.0, 30.0), "seed_cell": (20.0, 40.0)},
 }
 
 

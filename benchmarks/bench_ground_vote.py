@@ -57,7 +57,9 @@ script:
    point of the 3x3 cells around, how far the point is raised above the
    ground on both sides in its second most raised direction
    (:func:`raised_all_sides`), the cloth simulation filter's call when its
-   package is installed), the worst sample's error with such trees fitted
+   package is installed, the tolerance ratio to a TIN densified from the
+   points all four surfaces call ground (:func:`seeded_tin_ratio`)), the
+   worst sample's error with such trees fitted
    on that sample itself over every cue (the ceiling of the rule family
    there); the cues tried for issue 18 (the first became the veto; see the
    README); a few minutes with the cloth filter;
@@ -87,10 +89,12 @@ from lidar2city.ground import (  # noqa: E402
     VOTE_RULE,
     VOTE_VETO,
     GroundConfig,
+    ptd,
     smrf_segments,
     smrf_vote,
     vote_features,
 )
+from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
 from lidar2city.synthetic_terrain import HELD_OUT_KINDS, TERRAIN_KINDS, make_terrain  # noqa: E402
@@ -110,7 +114,7 @@ ANATOMY_WORST = 2
 #: the further cues of the ``--cues`` check (the first: the ratio to the fourth surface of
 #: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
 CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3",
-        "raised on all sides", "cloth (CSF) ground")
+        "raised on all sides", "cloth (CSF) ground", "seeded TIN ratio")
 #: reach (m) of the ``raised on all sides`` cue.
 RAISED_REACH = 12.0
 CUE_DEPTH = 3
@@ -221,13 +225,16 @@ def held_out_kinds(rule_above, fitted=False):
     :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` (left out of every fit unless
     ``fitted``) with its defaults and with ``above``."""
     print(f"\nscenes of kinds {'fitted on too' if fitted else 'held out of every fit'} (smrf_vote "
-          f"type I / type II / total %: defaults; above={rule_above:g})")
+          f"type I / type II / total %: defaults; above={rule_above:g}; then ptd with its "
+          f"defaults, likewise)")
+    ptd_params = GroundConfig(method="ptd").method_params()
     for kind in HELD_OUT_KINDS:
         for spacing in (1.0, 2.5):
             scene = make_terrain(kind, spacing=spacing, seed=1)
             line = f"{kind + '@' + format(spacing, 'g') + 'm':<20}"
-            for above in (None, rule_above):
-                e = ground_errors(smrf_vote(scene.xyz, above=above), scene.ground)
+            for pred in (smrf_vote(scene.xyz), smrf_vote(scene.xyz, above=rule_above),
+                         ptd(scene.xyz, **ptd_params)):
+                e = ground_errors(pred, scene.ground)
                 line += (f"  {100 * e['type_i']:6.2f} {100 * e['type_ii']:6.2f} "
                          f"{100 * e['total']:6.2f}")
             print(line)
@@ -346,6 +353,23 @@ def cloth_ground(xyz):
         return np.full(len(xyz), np.nan)
 
 
+def seeded_tin_ratio(xyz, features):
+    """Each point's tolerance ratio (as in :func:`~lidar2city.ground.vote_features`) to a TIN
+    densified (:func:`~lidar2city.ground.tin_filter.seeded_tin`, ptd's default angle and
+    distance) from the points within tolerance of all four surfaces of ``features`` (N, 5):
+    the TIN grows from that agreed ground along connected terrain (terrace benches, ground
+    between buildings on a slope), not onto roofs raised on all sides. Inf for low outliers."""
+    out = ~np.isfinite(features[:, 0])
+    seeds = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
+    p = GroundConfig(method="ptd").method_params()
+    surface, grad = seeded_tin(xyz, seeds, exclude=out, cell=p["cell"],
+                               iteration_angle=p["iteration_angle"],
+                               iteration_distance=p["iteration_distance"],
+                               max_iterations=p["max_iterations"])
+    ratio = np.abs(xyz[:, 2] - surface) / (p["threshold"] + p["scalar"] * grad)
+    return np.where(out | np.isnan(ratio), np.inf, ratio)
+
+
 def cues(samples, scenes, feats, syn):
     """Print the leave-one-out of a depth-:data:`CUE_DEPTH` tree over the three ratios plus
     each further cue of :data:`CUES` (see ``--cues``), and the worst sample's error with the
@@ -355,7 +379,8 @@ def cues(samples, scenes, feats, syn):
         return {"segments 0.4 ratio": f[:, 4],
                 "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz),
                 "raised on all sides": raised_all_sides(xyz),
-                "cloth (CSF) ground": cloth_ground(xyz)}
+                "cloth (CSF) ground": cloth_ground(xyz),
+                "seeded TIN ratio": np.minimum(seeded_tin_ratio(xyz, f), 1e6)}
 
     real = {n: cue_columns(xyz, feats[n]) for n, (xyz, _) in samples.items()}
     fake = [cue_columns(s.xyz, f) for s, (f, _) in zip(scenes.values(), syn)]

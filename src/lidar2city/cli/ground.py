@@ -6,7 +6,7 @@ import click
 
 from ._options import check_not_input, crs_option, engine_options, neighbours_options, run_on_tiles
 
-METHODS = ("pmf", "smrf", "smrf_refined", "smrf_segments", "smrf_vote")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
+METHODS = ("pmf", "ptd", "smrf", "smrf_refined", "smrf_segments", "smrf_vote")  # keys of lidar2city.ground.GROUND_METHODS (kept literal for start-up speed)
 
 
 @click.command("ground")
