@@ -512,6 +512,18 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
     return solid, max_rounds
 
 
+def _same_partition(a, b) -> bool:
+    """Two ``(faces, face_labels, planes)`` equal to the bit (the same solid is built of them)."""
+    import shapely
+
+    if a[0] is b[0] and a[1] is b[1] and a[2] is b[2]:
+        return True
+    if len(a[0]) != len(b[0]) or not np.array_equal(a[1], b[1]) or not np.array_equal(a[2], b[2]):
+        return False
+    wkb = [shapely.to_wkb(np.asarray(f, dtype=object)) for f in (a[0], b[0])]
+    return bool(np.array_equal(wkb[0], wkb[1]))
+
+
 def _saddle_cut(faces, own, ground_z, min_height, solid=None):
     """The solid of the partition with every face on its own plane (``own``, per face;
     ``solid`` when already built) and its saddle vertices cut out
@@ -522,7 +534,10 @@ def _saddle_cut(faces, own, ground_z, min_height, solid=None):
         bad = _nonmanifold_points(cut)
         if not len(bad):
             break
-        faces = split_saddles(faces, bad)
+        split = split_saddles(faces, bad)
+        if all(a is b for a, b in zip(split, faces, strict=True)):
+            break  # no saddle could be cut: every further round would rebuild this solid
+        faces = split
         cut = partition_solid(faces, own, ground_z, min_height=min_height)
     if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
         return cut
@@ -940,11 +955,16 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
         # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
         # with the whole roof by add_lod22's check)
+        tried = None  # the capped roof's partition
         for cap in (True, False):
             fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
                                     t_step=2 * cfg.elevation_error, cap=cap)
+            if tried is not None and fixed[0] is not faces and _same_partition(tried, fixed):
+                # levelling gave the very partition capping gave: the same solid, refused again
+                continue
             solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2,
                                                 repair=k == len(variants) - 1)
+            tried = fixed
             if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid)):
                 faces, face_labels, planes_f = fixed
                 break

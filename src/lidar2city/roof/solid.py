@@ -281,9 +281,14 @@ def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
     import shapely
 
     faces = list(faces)
+    # each face's box, kept beside it: the exact distance is only taken for the faces
+    # whose box grown by 2e-6 holds the vertex (the rest are farther than 1e-6)
+    boxes = shapely.bounds(np.asarray(faces, dtype=object)).reshape(-1, 4)
     for p in np.asarray(points, dtype=np.float64).reshape(-1, 2):
         pt = shapely.Point(p)
-        at = [i for i, f in enumerate(faces) if f.distance(pt) < 1e-6]
+        near = np.flatnonzero((boxes[:, 0] - 2e-6 <= p[0]) & (p[0] <= boxes[:, 2] + 2e-6)
+                              & (boxes[:, 1] - 2e-6 <= p[1]) & (p[1] <= boxes[:, 3] + 2e-6))
+        at = [i for i in near.tolist() if faces[i].distance(pt) < 1e-6]
         if len(at) < 2:
             continue
         xy = shapely.get_coordinates([faces[i] for i in at])
@@ -303,6 +308,7 @@ def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
         if all(g.geom_type == "Polygon" and not g.is_empty for g in new.values()):
             for i, g in new.items():
                 faces[i] = g
+                boxes[i] = g.bounds
     return faces
 
 
