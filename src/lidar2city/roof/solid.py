@@ -110,6 +110,24 @@ def _rings(poly):
     return out
 
 
+def _face_rings(faces) -> list:
+    """:func:`_rings` of every face, the orientation and coordinates of all faces taken at
+    once (the same GEOS orientation as ``orient``: the same arrays)."""
+    import shapely
+
+    if not len(faces):
+        return []
+    oriented = shapely.orient_polygons(np.asarray(faces, dtype=object))
+    rings, ring_face = shapely.get_rings(oriented, return_index=True)
+    xy, ring_of = shapely.get_coordinates(rings, return_index=True)
+    ends = np.cumsum(np.bincount(ring_of, minlength=len(rings)))
+    per_ring = np.split(xy, ends[:-1])
+    out = [[] for _ in range(len(faces))]
+    for f, r in zip(ring_face.tolist(), per_ring, strict=True):
+        out[f].append(r[:-1])
+    return out
+
+
 def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
@@ -168,17 +186,26 @@ def _insert_at(rings_per_face, inserts: dict):
     numbered through all rings of all faces in order)."""
     if not inserts:
         return [list(rs) for rs in rings_per_face]
+    at = np.array(sorted(inserts), dtype=np.int64)
     out = []
     i = 0
     for rs in rings_per_face:
         new_rs = []
         for r in rs:
-            seq = []
-            for k in range(len(r)):
-                seq.append(r[k])
-                seq.extend(inserts.get(i + k, ()))
-            i += len(r)
-            new_rs.append(np.asarray(seq))
+            n = len(r)
+            lo, hi = np.searchsorted(at, (i, i + n))
+            if lo == hi:  # nothing inserted in this ring
+                new_rs.append(np.asarray(r))
+            else:
+                seq, k0 = [], 0
+                for e in at[lo:hi].tolist():
+                    k = e - i
+                    seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
+                    seq.append(np.asarray(inserts[e]).reshape(-1, 2))
+                    k0 = k + 1
+                seq.append(np.asarray(r[k0:]).reshape(-1, 2))
+                new_rs.append(np.concatenate(seq))
+            i += n
         out.append(new_rs)
     return out
 
@@ -206,7 +233,7 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
     list of list of ndarray
         Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
     """
-    rings = conform([_rings(f) for f in faces])
+    rings = conform(_face_rings(faces))
     flat = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat], dtype=np.int64)
     fv = np.repeat(np.repeat(np.arange(len(rings)), [len(rs) for rs in rings]), sizes)
