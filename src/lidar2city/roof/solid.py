@@ -187,18 +187,23 @@ def _insert_at(rings_per_face, inserts: dict):
     if not inserts:
         return [list(rs) for rs in rings_per_face]
     at = np.array(sorted(inserts), dtype=np.int64)
+    sizes = np.fromiter((len(r) for rs in rings_per_face for r in rs), dtype=np.int64)
+    ends = np.cumsum(sizes)
+    # the insertions of each ring that gets any: at[lo[ring]:hi[ring]]
+    ring_of = np.searchsorted(ends, at, side="right")
+    hit, lo = np.unique(ring_of, return_index=True)
+    span = dict(zip(hit.tolist(), zip(lo.tolist(), [*lo[1:].tolist(), len(at)], strict=True)))
     out = []
-    i = 0
+    i = ring = 0
     for rs in rings_per_face:
         new_rs = []
         for r in rs:
             n = len(r)
-            lo, hi = np.searchsorted(at, (i, i + n))
-            if lo == hi:  # nothing inserted in this ring
+            if ring not in span:  # nothing inserted in this ring
                 new_rs.append(np.asarray(r))
             else:
                 seq, k0 = [], 0
-                for e in at[lo:hi].tolist():
+                for e in at[slice(*span[ring])].tolist():
                     k = e - i
                     seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
                     seq.append(np.asarray(inserts[e]).reshape(-1, 2))
@@ -206,6 +211,7 @@ def _insert_at(rings_per_face, inserts: dict):
                 seq.append(np.asarray(r[k0:]).reshape(-1, 2))
                 new_rs.append(np.concatenate(seq))
             i += n
+            ring += 1
         out.append(new_rs)
     return out
 
@@ -374,11 +380,19 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     """
     planes = np.asarray(planes, dtype=np.float64)
     rings = split_crossings(faces, planes, tol=level_tol)
-    keys = [[_ring_keys(r) for r in rs] for rs in rings]
     flat_rings = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat_rings], dtype=np.int64)
     ring_face = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
     xy = np.concatenate(flat_rings)[:, :2]
+    # every vertex's key (:func:`_ring_keys` of all rings at once), as rows and as tuples
+    key_rows = np.rint(xy * _KEY).astype(np.int64)
+    flat_keys = list(map(tuple, key_rows.tolist()))
+    ends = np.cumsum(sizes).tolist()
+    starts = [0, *ends[:-1]]
+    keys, ri = [], 0
+    for rs in rings:
+        keys.append([flat_keys[starts[ri + j]:ends[ri + j]] for j in range(len(rs))])
+        ri += len(rs)
     vface = np.repeat(ring_face, sizes)
     # heights of every face at its vertices
     z = planes[vface, 0] * xy[:, 0] + planes[vface, 1] * xy[:, 1] + planes[vface, 2]
@@ -391,10 +405,19 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         raise FitError(f"roof plane {fi} goes below the floor "
                        f"({z[s0:s0 + sizes[ri]].min():.2f} < {ground_z:.2f} + {min_height})")
     # vertex keys -> ids 0.. in order of first appearance; coordinates of the last one
-    kid_of: dict = {}
-    flat_keys = [k for ks_face in keys for ks in ks_face for k in ks]
-    kid = np.fromiter((kid_of.setdefault(k, len(kid_of)) for k in flat_keys), dtype=np.int64,
-                      count=len(flat_keys))
+    # (np.unique of the rows, sorted by x then y; each key's first index and group)
+    srt = np.lexsort((key_rows[:, 1], key_rows[:, 0]))
+    ks = key_rows[srt]
+    new = np.ones(len(ks), dtype=bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    inverse = np.empty(len(srt), dtype=np.int64)
+    inverse[srt] = np.cumsum(new) - 1
+    first = np.minimum.reduceat(srt, np.flatnonzero(new))
+    by_first = np.argsort(first)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[by_first] = np.arange(len(first))
+    kid = rank[inverse]
+    kid_of = dict(zip([flat_keys[i] for i in first[by_first].tolist()], range(len(first))))
     nk = len(kid_of)
     last = np.full(nk, -1, dtype=np.int64)
     np.maximum.at(last, kid, np.arange(len(kid)))
@@ -452,17 +475,30 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     # the wall belongs to the higher side (crossings were split away)
     wall = ~((zf_p < zo_p) | (zf_q < zo_q) | ((zf_p == zo_p) & (zf_q == zo_q)))
     width = table.shape[1]
-    wall_rings = []
-    for kp, kq, fp_, fq_, op_, oq_ in zip(*(a[wall].tolist() for a in (e_kp, e_kq, zf_p, zf_q,
-                                                                         zo_p, zo_q)), strict=True):
-        # seen from the lower side: up along q (bottom..top), down along p (top..bottom),
-        # counter-clockwise seen from outside (the face is on the left of p -> q)
-        ring = ([kq * width + j for j in range(oq_, fq_ + 1)]
-                + [kp * width + j for j in range(fp_, op_ - 1, -1)])
-        requests.append(np.asarray(ring, dtype=np.int64))  # its vertices exist even if it is dropped
-        ring = _dedupe(ring)
-        if len(ring) >= 3:
-            wall_rings.append(np.asarray(ring, dtype=np.int64))
+    # every wall's ring at once: seen from the lower side, up along q (levels oq..fq), down
+    # along p (fp..op), counter-clockwise seen from outside (the face is on the left of p -> q)
+    kp_w, kq_w, fp_w, op_w = e_kp[wall], e_kq[wall], zf_p[wall], zo_p[wall]
+    oq_w = zo_q[wall]
+    up = np.maximum(zf_q[wall] - oq_w + 1, 0)
+    n_w = up + np.maximum(fp_w - op_w + 1, 0)
+    w_of = np.repeat(np.arange(len(n_w)), n_w)
+    pos = np.arange(len(w_of)) - np.repeat(np.cumsum(n_w) - n_w, n_w)
+    wall_codes = np.where(pos < up[w_of], kq_w[w_of] * width + oq_w[w_of] + pos,
+                          kp_w[w_of] * width + fp_w[w_of] - (pos - up[w_of]))
+    requests.append(wall_codes)  # their vertices exist even if a wall is dropped
+    # repeated vertices dropped (a run keeps its first; the last when it closes the ring)
+    keep = np.ones(len(w_of), dtype=bool)
+    keep[1:] = (wall_codes[1:] != wall_codes[:-1]) | (w_of[1:] != w_of[:-1])
+    kept = np.flatnonzero(keep)
+    n_kept = np.bincount(w_of[kept], minlength=len(n_w))
+    has = np.flatnonzero(n_kept > 1)
+    last = kept[np.cumsum(n_kept)[has] - 1]
+    first = kept[(np.cumsum(n_kept) - n_kept)[has]]
+    closes = wall_codes[last] == wall_codes[first]
+    keep[last[closes]] = False
+    n_kept[has[closes]] -= 1
+    keep &= (n_kept >= 3)[w_of]
+    wall_codes, wall_len = wall_codes[keep], n_kept[n_kept >= 3]
     # floor: the polygons the outer edges enclose (pinched outlines give several), facing down
     import shapely
     from shapely.geometry.polygon import orient
@@ -501,19 +537,9 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         surfaces.append(Surface([roof_ids[bounds[ring_i + j]:bounds[ring_i + j + 1]]
                                  for j in range(len(rs))], "RoofSurface"))
         ring_i += len(rs)
-    if wall_rings:
-        cut = np.cumsum([len(r) for r in wall_rings])[:-1]
-        surfaces += [Surface([r], "WallSurface")
-                     for r in np.split(ids(np.concatenate(wall_rings)), cut)]
+    if len(wall_len):
+        wall_ids, ends = ids(wall_codes), np.cumsum(wall_len).tolist()
+        surfaces += [Surface([wall_ids[i:j]], "WallSurface")
+                     for i, j in zip([0, *ends[:-1]], ends, strict=True)]
     surfaces[:0] = [Surface([ids(r) for r in rs], "GroundSurface") for rs in floor_rings]
     return Solid(verts.reshape(-1, 3), surfaces)
-
-
-def _dedupe(ring):
-    out = []
-    for i in ring:
-        if not out or out[-1] != i:
-            out.append(i)
-    if len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return out
