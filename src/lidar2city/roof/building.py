@@ -17,7 +17,7 @@ from .arrangement import (arrangement_partition, collapse_short_edges, raised_pa
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import nudge_on_grid, on_grid, partition_solid, split_saddles
+from .solid import nudge_on_grid, on_grid, partition_edges, partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -480,7 +480,10 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
             i = seen[key]
             solid = solids[i + (max_rounds - i) % (r - i)]
             break
-        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+        if r == 0:
+            edges = partition_edges(faces)  # the faces stay: each round only relabels
+        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height,
+                                edges=edges)
         if r == max_rounds:
             break
         seen[key] = r

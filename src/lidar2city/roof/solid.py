@@ -16,7 +16,8 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["nudge_on_grid", "on_grid", "partition_solid", "split_crossings", "split_saddles"]
+__all__ = ["nudge_on_grid", "on_grid", "partition_edges", "partition_solid", "split_crossings",
+           "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
 
@@ -216,29 +217,11 @@ def _insert_at(rings_per_face, inserts: dict):
     return out
 
 
-def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
-    """Insert a vertex where two adjacent faces' planes cross along their shared edge.
-
-    A wall between two faces is only a simple polygon when one face stays above
-    the other along the whole edge.
-
-    Parameters
-    ----------
-    faces : list of shapely Polygon
-    planes : ndarray, shape (len(faces), 3)
-        The plane of each face.
-    tol : float
-        Height differences below this (m) count as equal (the solid's level tolerance).
-    min_gap : float
-        No vertex is inserted closer than this (m) to an edge's end.
-    grid : float
-        Inserted vertices are snapped to this grid (m), the output's precision.
-
-    Returns
-    -------
-    list of list of ndarray
-        Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
-    """
+def partition_edges(faces) -> tuple:
+    """The faces' rings made conforming (:func:`conform`) and their directed edges: per ring
+    vertex its face, position, next vertex, edge code p -> q, the twin's code and the face
+    on the other side (-1: the outside). What :func:`split_crossings` needs of the faces
+    (not of their planes)."""
     rings = conform(_face_rings(faces))
     flat = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat], dtype=np.int64)
@@ -259,6 +242,36 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
     np.maximum.at(last, inv.ravel(), np.arange(m))
     pos = np.minimum(np.searchsorted(uc, twin), len(uc) - 1)
     g = np.where(uc[pos] == twin, fv[last[pos]], -1)
+    return rings, fv, xy, nxt, code, twin, g
+
+
+def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3, edges=None):
+    """Insert a vertex where two adjacent faces' planes cross along their shared edge.
+
+    A wall between two faces is only a simple polygon when one face stays above
+    the other along the whole edge.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+    planes : ndarray, shape (len(faces), 3)
+        The plane of each face.
+    tol : float
+        Height differences below this (m) count as equal (the solid's level tolerance).
+    min_gap : float
+        No vertex is inserted closer than this (m) to an edge's end.
+    grid : float
+        Inserted vertices are snapped to this grid (m), the output's precision.
+    edges : tuple, optional
+        :func:`partition_edges` of ``faces`` when already taken (it does not depend on
+        the planes: a partition rebuilt with other planes reuses it).
+
+    Returns
+    -------
+    list of list of ndarray
+        Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
+    """
+    rings, fv, xy, nxt, code, twin, g = edges if edges is not None else partition_edges(faces)
     zf = planes[fv, 0] * xy[:, 0] + planes[fv, 1] * xy[:, 1] + planes[fv, 2]
     gg = np.maximum(g, 0)
     p, q = xy, xy[nxt]
@@ -345,7 +358,8 @@ def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
     return faces
 
 
-def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
+def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
+                    edges=None) -> Solid:
     """Build the closed solid of a roof partition.
 
     Parameters
@@ -360,6 +374,8 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         A roof lower than ``ground_z + min_height`` anywhere is an error.
     level_tol : float
         Heights at one vertex closer than this are the same level.
+    edges : tuple, optional
+        :func:`partition_edges` of ``faces``, when already taken for other planes.
 
     Returns
     -------
@@ -379,7 +395,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     surfaces first use them (roofs, then walls in edge order, then the floor).
     """
     planes = np.asarray(planes, dtype=np.float64)
-    rings = split_crossings(faces, planes, tol=level_tol)
+    rings = split_crossings(faces, planes, tol=level_tol, edges=edges)
     flat_rings = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat_rings], dtype=np.int64)
     ring_face = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
