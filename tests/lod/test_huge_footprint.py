@@ -35,3 +35,35 @@ def test_the_halls_lod13_model_is_pinned():
     for s in res.parts["1.3"]:
         h.update(np.round(s.vertices * 1000).astype(np.int64).tobytes())
     assert h.hexdigest() == "938ed0d5623c512aa022cb987129d542755ab200f4c4cf02140df01c873bbc9d"
+
+
+@pytest.mark.slow
+def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeypatch):
+    # the hall's LoD2.2 roof (256 planes, thousands of faces): the same solid as before its
+    # retries were cut (a saddle cut that cuts nothing, a levelled roof equal to the capped
+    # one, repair rounds reusing the faces' edges), and no retry rebuilds a solid it built
+    import lidar2city.roof.building as building
+
+    built = []
+    partition_solid = building.partition_solid
+
+    def counted(faces, planes, ground_z, **kw):
+        key = hashlib.sha256(b"".join(f.wkb for f in faces) + np.asarray(planes).tobytes())
+        built.append(key.hexdigest())
+        return partition_solid(faces, planes, ground_z, **kw)
+
+    monkeypatch.setattr(building, "partition_solid", counted)
+    roof, _ = _hall()
+    res = building.reconstruct_lod22(box(0, 0, 300, 300), roof, 0.0)
+    a = res.attributes
+    assert (a["roof_planes"], a["intersection_edges"], a["step_edges"]) == (256, 63, 4917)
+    assert len(res.solids) == 1 and len(res.solids[0].surfaces) == 9280
+    h = hashlib.sha256()
+    for s in res.solids:
+        h.update(np.round(s.vertices * 1000).astype(np.int64).tobytes())
+        for sf in s.surfaces:
+            h.update(sf.semantic.encode())
+            for r in sf.rings:
+                h.update(np.asarray(r, dtype=np.int64).tobytes())
+    assert h.hexdigest() == "148ec58abccf07429a6682817f38525f65f33782916edbf890cf8e94569c17b7"
+    assert len(built) == len(set(built)), "a partition's solid was built twice"

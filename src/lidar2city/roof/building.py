@@ -17,7 +17,7 @@ from .arrangement import (arrangement_partition, collapse_short_edges, raised_pa
 from .facets import segment_planes
 from .refine import refine_partition
 from .rooftype import classify_roof
-from .solid import nudge_on_grid, on_grid, partition_solid, split_saddles
+from .solid import nudge_on_grid, on_grid, partition_edges, partition_solid, split_saddles
 from .topology import roof_partition
 
 logger = logging.getLogger(__name__)
@@ -515,7 +515,10 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
             i = seen[key]
             solid = solids[i + (max_rounds - i) % (r - i)]
             break
-        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height)
+        if r == 0:
+            edges = partition_edges(faces)  # the faces stay: each round only relabels
+        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height,
+                                edges=edges)
         if r == max_rounds:
             break
         seen[key] = r
@@ -567,6 +570,18 @@ def _plane_donor(faces, face_labels, planes, victim, neigh, tolerance):
     return min(rises)[1]
 
 
+def _same_partition(a, b) -> bool:
+    """Two ``(faces, face_labels, planes)`` equal to the bit (the same solid is built of them)."""
+    import shapely
+
+    if a[0] is b[0] and a[1] is b[1] and a[2] is b[2]:
+        return True
+    if len(a[0]) != len(b[0]) or not np.array_equal(a[1], b[1]) or not np.array_equal(a[2], b[2]):
+        return False
+    wkb = [shapely.to_wkb(np.asarray(f, dtype=object)) for f in (a[0], b[0])]
+    return bool(np.array_equal(wkb[0], wkb[1]))
+
+
 def _saddle_cut(faces, own, ground_z, min_height, solid=None):
     """The solid of the partition with every face on its own plane (``own``, per face;
     ``solid`` when already built) and its saddle vertices cut out
@@ -577,7 +592,10 @@ def _saddle_cut(faces, own, ground_z, min_height, solid=None):
         bad = _nonmanifold_points(cut)
         if not len(bad):
             break
-        faces = split_saddles(faces, bad)
+        split = split_saddles(faces, bad)
+        if all(a is b for a, b in zip(split, faces, strict=True)):
+            break  # no saddle could be cut: every further round would rebuild this solid
+        faces = split
         cut = partition_solid(faces, own, ground_z, min_height=min_height)
     if not len(_nonmanifold_points(cut)) and _valid_cut(cut):
         return cut
@@ -1000,10 +1018,15 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
         # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
         # with the whole roof by add_lod22's check)
+        tried = None  # the capped roof's partition
         for cap in (True, False):
             fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
                                     t_step=2 * cfg.elevation_error, cap=cap)
+            if tried is not None and fixed[0] is not faces and _same_partition(tried, fixed):
+                # levelling gave the very partition capping gave: the same solid, refused again
+                continue
             solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2, repair=last)
+            tried = fixed
             # a fix is kept when its solid is valid and its saddle repair did not raise a new
             # spike (faces taking their neighbours' planes: ISPRS samp11 b54, +3.4 m)
             if fixed[0] is faces or (_closed_shell(solid) and not check_solid(solid) and float(

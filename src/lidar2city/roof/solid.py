@@ -16,7 +16,8 @@ import numpy as np
 from ..datamodel import Solid, Surface
 from ..errors import FitError
 
-__all__ = ["nudge_on_grid", "on_grid", "partition_solid", "split_crossings", "split_saddles"]
+__all__ = ["nudge_on_grid", "on_grid", "partition_edges", "partition_solid", "split_crossings",
+           "split_saddles"]
 
 _KEY = 1e6  # vertex keys: coordinates rounded to a micrometre
 
@@ -110,6 +111,24 @@ def _rings(poly):
     return out
 
 
+def _face_rings(faces) -> list:
+    """:func:`_rings` of every face, the orientation and coordinates of all faces taken at
+    once (the same GEOS orientation as ``orient``: the same arrays)."""
+    import shapely
+
+    if not len(faces):
+        return []
+    oriented = shapely.orient_polygons(np.asarray(faces, dtype=object))
+    rings, ring_face = shapely.get_rings(oriented, return_index=True)
+    xy, ring_of = shapely.get_coordinates(rings, return_index=True)
+    ends = np.cumsum(np.bincount(ring_of, minlength=len(rings)))
+    per_ring = np.split(xy, ends[:-1])
+    out = [[] for _ in range(len(faces))]
+    for f, r in zip(ring_face.tolist(), per_ring, strict=True):
+        out[f].append(r[:-1])
+    return out
+
+
 def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
@@ -168,45 +187,42 @@ def _insert_at(rings_per_face, inserts: dict):
     numbered through all rings of all faces in order)."""
     if not inserts:
         return [list(rs) for rs in rings_per_face]
+    at = np.array(sorted(inserts), dtype=np.int64)
+    sizes = np.fromiter((len(r) for rs in rings_per_face for r in rs), dtype=np.int64)
+    ends = np.cumsum(sizes)
+    # the insertions of each ring that gets any: at[lo[ring]:hi[ring]]
+    ring_of = np.searchsorted(ends, at, side="right")
+    hit, lo = np.unique(ring_of, return_index=True)
+    span = dict(zip(hit.tolist(), zip(lo.tolist(), [*lo[1:].tolist(), len(at)], strict=True)))
     out = []
-    i = 0
+    i = ring = 0
     for rs in rings_per_face:
         new_rs = []
         for r in rs:
-            seq = []
-            for k in range(len(r)):
-                seq.append(r[k])
-                seq.extend(inserts.get(i + k, ()))
-            i += len(r)
-            new_rs.append(np.asarray(seq))
+            n = len(r)
+            if ring not in span:  # nothing inserted in this ring
+                new_rs.append(np.asarray(r))
+            else:
+                seq, k0 = [], 0
+                for e in at[slice(*span[ring])].tolist():
+                    k = e - i
+                    seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
+                    seq.append(np.asarray(inserts[e]).reshape(-1, 2))
+                    k0 = k + 1
+                seq.append(np.asarray(r[k0:]).reshape(-1, 2))
+                new_rs.append(np.concatenate(seq))
+            i += n
+            ring += 1
         out.append(new_rs)
     return out
 
 
-def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
-    """Insert a vertex where two adjacent faces' planes cross along their shared edge.
-
-    A wall between two faces is only a simple polygon when one face stays above
-    the other along the whole edge.
-
-    Parameters
-    ----------
-    faces : list of shapely Polygon
-    planes : ndarray, shape (len(faces), 3)
-        The plane of each face.
-    tol : float
-        Height differences below this (m) count as equal (the solid's level tolerance).
-    min_gap : float
-        No vertex is inserted closer than this (m) to an edge's end.
-    grid : float
-        Inserted vertices are snapped to this grid (m), the output's precision.
-
-    Returns
-    -------
-    list of list of ndarray
-        Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
-    """
-    rings = conform([_rings(f) for f in faces])
+def partition_edges(faces) -> tuple:
+    """The faces' rings made conforming (:func:`conform`) and their directed edges: per ring
+    vertex its face, position, next vertex, edge code p -> q, the twin's code and the face
+    on the other side (-1: the outside). What :func:`split_crossings` needs of the faces
+    (not of their planes)."""
+    rings = conform(_face_rings(faces))
     flat = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat], dtype=np.int64)
     fv = np.repeat(np.repeat(np.arange(len(rings)), [len(rs) for rs in rings]), sizes)
@@ -226,6 +242,36 @@ def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3):
     np.maximum.at(last, inv.ravel(), np.arange(m))
     pos = np.minimum(np.searchsorted(uc, twin), len(uc) - 1)
     g = np.where(uc[pos] == twin, fv[last[pos]], -1)
+    return rings, fv, xy, nxt, code, twin, g
+
+
+def split_crossings(faces, planes, *, tol=5e-3, min_gap=2e-3, grid=1e-3, edges=None):
+    """Insert a vertex where two adjacent faces' planes cross along their shared edge.
+
+    A wall between two faces is only a simple polygon when one face stays above
+    the other along the whole edge.
+
+    Parameters
+    ----------
+    faces : list of shapely Polygon
+    planes : ndarray, shape (len(faces), 3)
+        The plane of each face.
+    tol : float
+        Height differences below this (m) count as equal (the solid's level tolerance).
+    min_gap : float
+        No vertex is inserted closer than this (m) to an edge's end.
+    grid : float
+        Inserted vertices are snapped to this grid (m), the output's precision.
+    edges : tuple, optional
+        :func:`partition_edges` of ``faces`` when already taken (it does not depend on
+        the planes: a partition rebuilt with other planes reuses it).
+
+    Returns
+    -------
+    list of list of ndarray
+        Rings per face (exterior counter-clockwise first) with crossing vertices inserted.
+    """
+    rings, fv, xy, nxt, code, twin, g = edges if edges is not None else partition_edges(faces)
     zf = planes[fv, 0] * xy[:, 0] + planes[fv, 1] * xy[:, 1] + planes[fv, 2]
     gg = np.maximum(g, 0)
     p, q = xy, xy[nxt]
@@ -281,9 +327,14 @@ def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
     import shapely
 
     faces = list(faces)
+    # each face's box, kept beside it: the exact distance is only taken for the faces
+    # whose box grown by 2e-6 holds the vertex (the rest are farther than 1e-6)
+    boxes = shapely.bounds(np.asarray(faces, dtype=object)).reshape(-1, 4)
     for p in np.asarray(points, dtype=np.float64).reshape(-1, 2):
         pt = shapely.Point(p)
-        at = [i for i, f in enumerate(faces) if f.distance(pt) < 1e-6]
+        near = np.flatnonzero((boxes[:, 0] - 2e-6 <= p[0]) & (p[0] <= boxes[:, 2] + 2e-6)
+                              & (boxes[:, 1] - 2e-6 <= p[1]) & (p[1] <= boxes[:, 3] + 2e-6))
+        at = [i for i in near.tolist() if faces[i].distance(pt) < 1e-6]
         if len(at) < 2:
             continue
         xy = shapely.get_coordinates([faces[i] for i in at])
@@ -303,10 +354,12 @@ def split_saddles(faces, points, *, radius=0.05, grid=5e-3):
         if all(g.geom_type == "Polygon" and not g.is_empty for g in new.values()):
             for i, g in new.items():
                 faces[i] = g
+                boxes[i] = g.bounds
     return faces
 
 
-def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) -> Solid:
+def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
+                    edges=None) -> Solid:
     """Build the closed solid of a roof partition.
 
     Parameters
@@ -321,6 +374,8 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         A roof lower than ``ground_z + min_height`` anywhere is an error.
     level_tol : float
         Heights at one vertex closer than this are the same level.
+    edges : tuple, optional
+        :func:`partition_edges` of ``faces``, when already taken for other planes.
 
     Returns
     -------
@@ -340,12 +395,20 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     surfaces first use them (roofs, then walls in edge order, then the floor).
     """
     planes = np.asarray(planes, dtype=np.float64)
-    rings = split_crossings(faces, planes, tol=level_tol)
-    keys = [[_ring_keys(r) for r in rs] for rs in rings]
+    rings = split_crossings(faces, planes, tol=level_tol, edges=edges)
     flat_rings = [r for rs in rings for r in rs]
     sizes = np.array([len(r) for r in flat_rings], dtype=np.int64)
     ring_face = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
     xy = np.concatenate(flat_rings)[:, :2]
+    # every vertex's key (:func:`_ring_keys` of all rings at once), as rows and as tuples
+    key_rows = np.rint(xy * _KEY).astype(np.int64)
+    flat_keys = list(map(tuple, key_rows.tolist()))
+    ends = np.cumsum(sizes).tolist()
+    starts = [0, *ends[:-1]]
+    keys, ri = [], 0
+    for rs in rings:
+        keys.append([flat_keys[starts[ri + j]:ends[ri + j]] for j in range(len(rs))])
+        ri += len(rs)
     vface = np.repeat(ring_face, sizes)
     # heights of every face at its vertices
     z = planes[vface, 0] * xy[:, 0] + planes[vface, 1] * xy[:, 1] + planes[vface, 2]
@@ -358,10 +421,19 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         raise FitError(f"roof plane {fi} goes below the floor "
                        f"({z[s0:s0 + sizes[ri]].min():.2f} < {ground_z:.2f} + {min_height})")
     # vertex keys -> ids 0.. in order of first appearance; coordinates of the last one
-    kid_of: dict = {}
-    flat_keys = [k for ks_face in keys for ks in ks_face for k in ks]
-    kid = np.fromiter((kid_of.setdefault(k, len(kid_of)) for k in flat_keys), dtype=np.int64,
-                      count=len(flat_keys))
+    # (np.unique of the rows, sorted by x then y; each key's first index and group)
+    srt = np.lexsort((key_rows[:, 1], key_rows[:, 0]))
+    ks = key_rows[srt]
+    new = np.ones(len(ks), dtype=bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    inverse = np.empty(len(srt), dtype=np.int64)
+    inverse[srt] = np.cumsum(new) - 1
+    first = np.minimum.reduceat(srt, np.flatnonzero(new))
+    by_first = np.argsort(first)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[by_first] = np.arange(len(first))
+    kid = rank[inverse]
+    kid_of = dict(zip([flat_keys[i] for i in first[by_first].tolist()], range(len(first))))
     nk = len(kid_of)
     last = np.full(nk, -1, dtype=np.int64)
     np.maximum.at(last, kid, np.arange(len(kid)))
@@ -419,17 +491,30 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
     # the wall belongs to the higher side (crossings were split away)
     wall = ~((zf_p < zo_p) | (zf_q < zo_q) | ((zf_p == zo_p) & (zf_q == zo_q)))
     width = table.shape[1]
-    wall_rings = []
-    for kp, kq, fp_, fq_, op_, oq_ in zip(*(a[wall].tolist() for a in (e_kp, e_kq, zf_p, zf_q,
-                                                                         zo_p, zo_q)), strict=True):
-        # seen from the lower side: up along q (bottom..top), down along p (top..bottom),
-        # counter-clockwise seen from outside (the face is on the left of p -> q)
-        ring = ([kq * width + j for j in range(oq_, fq_ + 1)]
-                + [kp * width + j for j in range(fp_, op_ - 1, -1)])
-        requests.append(np.asarray(ring, dtype=np.int64))  # its vertices exist even if it is dropped
-        ring = _dedupe(ring)
-        if len(ring) >= 3:
-            wall_rings.append(np.asarray(ring, dtype=np.int64))
+    # every wall's ring at once: seen from the lower side, up along q (levels oq..fq), down
+    # along p (fp..op), counter-clockwise seen from outside (the face is on the left of p -> q)
+    kp_w, kq_w, fp_w, op_w = e_kp[wall], e_kq[wall], zf_p[wall], zo_p[wall]
+    oq_w = zo_q[wall]
+    up = np.maximum(zf_q[wall] - oq_w + 1, 0)
+    n_w = up + np.maximum(fp_w - op_w + 1, 0)
+    w_of = np.repeat(np.arange(len(n_w)), n_w)
+    pos = np.arange(len(w_of)) - np.repeat(np.cumsum(n_w) - n_w, n_w)
+    wall_codes = np.where(pos < up[w_of], kq_w[w_of] * width + oq_w[w_of] + pos,
+                          kp_w[w_of] * width + fp_w[w_of] - (pos - up[w_of]))
+    requests.append(wall_codes)  # their vertices exist even if a wall is dropped
+    # repeated vertices dropped (a run keeps its first; the last when it closes the ring)
+    keep = np.ones(len(w_of), dtype=bool)
+    keep[1:] = (wall_codes[1:] != wall_codes[:-1]) | (w_of[1:] != w_of[:-1])
+    kept = np.flatnonzero(keep)
+    n_kept = np.bincount(w_of[kept], minlength=len(n_w))
+    has = np.flatnonzero(n_kept > 1)
+    last = kept[np.cumsum(n_kept)[has] - 1]
+    first = kept[(np.cumsum(n_kept) - n_kept)[has]]
+    closes = wall_codes[last] == wall_codes[first]
+    keep[last[closes]] = False
+    n_kept[has[closes]] -= 1
+    keep &= (n_kept >= 3)[w_of]
+    wall_codes, wall_len = wall_codes[keep], n_kept[n_kept >= 3]
     # floor: the polygons the outer edges enclose (pinched outlines give several), facing down
     import shapely
     from shapely.geometry.polygon import orient
@@ -468,19 +553,9 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3) 
         surfaces.append(Surface([roof_ids[bounds[ring_i + j]:bounds[ring_i + j + 1]]
                                  for j in range(len(rs))], "RoofSurface"))
         ring_i += len(rs)
-    if wall_rings:
-        cut = np.cumsum([len(r) for r in wall_rings])[:-1]
-        surfaces += [Surface([r], "WallSurface")
-                     for r in np.split(ids(np.concatenate(wall_rings)), cut)]
+    if len(wall_len):
+        wall_ids, ends = ids(wall_codes), np.cumsum(wall_len).tolist()
+        surfaces += [Surface([wall_ids[i:j]], "WallSurface")
+                     for i, j in zip([0, *ends[:-1]], ends, strict=True)]
     surfaces[:0] = [Surface([ids(r) for r in rs], "GroundSurface") for rs in floor_rings]
     return Solid(verts.reshape(-1, 3), surfaces)
-
-
-def _dedupe(ring):
-    out = []
-    for i in ring:
-        if not out or out[-1] != i:
-            out.append(i)
-    if len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return out

@@ -347,8 +347,7 @@ def _merge_faces(polys, labels, min_area):
 
     polys = list(polys)
     labels = list(labels)
-    # areas and boxes kept beside the faces (a face's changes only when it absorbs another):
-    # the pair scan below reads them O(n^2) times per merge
+    # areas and boxes kept beside the faces (a face's change only when it absorbs another)
     areas = [p.area for p in polys]
     boxes = [p.bounds for p in polys]
 
@@ -358,37 +357,40 @@ def _merge_faces(polys, labels, min_area):
     changed = True
     while changed and len(polys) > 1:
         changed = False
-        for i in range(len(polys)):
-            for j in range(i + 1, len(polys)):
-                same = labels[i] == labels[j]
-                small = min(areas[i], areas[j]) < min_area
-                if not (same or small) or apart(boxes[i], boxes[j]):
+        # the pairs (i < j, in that order) that are not apart and of one label or with a
+        # small face, found at once (boxes that touch or overlap: an STRtree of the faces)
+        arr = np.asarray(polys, dtype=object)
+        ii, jj = shapely.STRtree(arr).query(arr)
+        lab, area = np.asarray(labels), np.asarray(areas)
+        ok = (ii < jj) & ((lab[ii] == lab[jj]) | (np.minimum(area[ii], area[jj]) < min_area))
+        ii, jj = ii[ok], jj[ok]
+        order = np.lexsort((jj, ii))
+        for i, j in zip(ii[order].tolist(), jj[order].tolist(), strict=True):
+            same = labels[i] == labels[j]
+            small = min(areas[i], areas[j]) < min_area
+            shared = polys[i].boundary.intersection(polys[j].boundary).length
+            if shared <= 1e-9:
+                continue
+            if small and not same:
+                # the small face joins the neighbour it shares most boundary with
+                k = i if areas[i] < areas[j] else j
+                best = max((m for m in range(len(polys)) if m != k),
+                           key=lambda m: 0.0 if apart(boxes[k], boxes[m]) else
+                           polys[k].boundary.intersection(polys[m].boundary).length)
+                if best not in (i, j):
                     continue
-                shared = polys[i].boundary.intersection(polys[j].boundary).length
-                if shared <= 1e-9:
-                    continue
-                if small and not same:
-                    # the small face joins the neighbour it shares most boundary with
-                    k = i if areas[i] < areas[j] else j
-                    best = max((m for m in range(len(polys)) if m != k),
-                               key=lambda m: 0.0 if apart(boxes[k], boxes[m]) else
-                               polys[k].boundary.intersection(polys[m].boundary).length)
-                    if best not in (i, j):
-                        continue
-                    keep_label = labels[j] if k == i else labels[i]
-                else:
-                    keep_label = labels[i]
-                merged = shapely.union(polys[i], polys[j])
-                if merged.geom_type != "Polygon":
-                    continue
-                polys[i] = shapely.normalize(merged)
-                areas[i], boxes[i] = polys[i].area, polys[i].bounds
-                labels[i] = keep_label
-                del polys[j], labels[j], areas[j], boxes[j]
-                changed = True
-                break
-            if changed:
-                break
+                keep_label = labels[j] if k == i else labels[i]
+            else:
+                keep_label = labels[i]
+            merged = shapely.union(polys[i], polys[j])
+            if merged.geom_type != "Polygon":
+                continue
+            polys[i] = shapely.normalize(merged)
+            areas[i], boxes[i] = polys[i].area, polys[i].bounds
+            labels[i] = keep_label
+            del polys[j], labels[j], areas[j], boxes[j]
+            changed = True
+            break
     return polys, np.array(labels, dtype=np.int64)
 
 
