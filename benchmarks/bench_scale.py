@@ -37,10 +37,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -231,6 +233,8 @@ def main():
                 if n not in sizes and w != workers[0]:
                     continue
                 out = tmp / f"out{n}_{w}{ext[fmt]}"
+                out.unlink(missing_ok=True)  # and an interrupted earlier run's journal
+                shutil.rmtree(out.with_name(out.name + ".journal"), ignore_errors=True)
                 cmd = [py, "-m", "lidar2city.cli.main", "reconstruct", *tiles, "--crs",
                        "EPSG:7415", "--footprints", str(fps), "--lod", "1.2", "--lod", "1.3",
                        "--lod", "2.2", "--workers", str(w), "-q", "-o", str(out)]
@@ -252,10 +256,12 @@ def main():
                 same, total, diffs = compare(ref[fmt], got, n, bag_ids)
                 print(f"    {same}/{total} buildings the tile's model moved by their copy's "
                       f"shift ({nb} footprints)" + (":" if diffs else ""), flush=True)
-                for cp, bid, what in diffs[:12]:
+                if diffs:
+                    per = Counter(str(cp) for cp, _, _ in diffs)
+                    geo = sum("geometry" in w for _, _, w in diffs)
+                    print(f"      by copy {dict(sorted(per.items()))}; {geo} in their geometry")
+                for cp, bid, what in diffs[:3]:
                     print(f"      copy {cp} {bid}: {what}")
-                if len(diffs) > 12:
-                    print(f"      ... {len(diffs) - 12} more")
 
 
 if __name__ == "__main__":
