@@ -461,7 +461,8 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
             res = reconstruct_building(g, bxyz[bi], gxyz[gi], config=cfg, id=fid,
                                        fallback_ground_z=fallback, point_density=density)
             if lod22 is not None and res.ok:
-                add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision)
+                add_lod22(res, g, bxyz[near], lod22, precision=cfg.precision,
+                          anchor=building_anchor(cloud, x0, y0))
         if notes[i]:
             res.attributes["footprint_note"] = notes[i]
         results[i] = res
@@ -475,7 +476,24 @@ def reconstruct_buildings(cloud, footprints, *, config=None, building=None, grou
 SPIKE_SPACINGS = 3.0
 
 
-def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> None:
+def building_anchor(cloud, x, y) -> np.ndarray:
+    """The local ``(x, y)`` of the whole CRS unit at or below the world position of the
+    local point ``(x, y)``: where a building's LoD2.2 is computed from, whatever the
+    run's origin (the lower corner of all its tiles).
+
+    A roof's arithmetic (plane offsets, the vertex grids it snaps to) in coordinates
+    measured from the run's origin would make a building's model depend on which other
+    tiles are in the run. Measured from this anchor, its points and footprint are the
+    same numbers in every run (both origins whole units: the differences are exact),
+    so is its model.
+    """
+    o = np.asarray(cloud.origin[:2], dtype=np.float64)
+    unit = float(cloud.xy_unit)
+    return (np.floor(o + np.array([x, y]) / unit) - o) * unit
+
+
+def add_lod22(result, footprint, building_xyz, config, *, precision=0.001,
+              anchor=None) -> None:
     """Add the LoD2.2 solid(s) and roof attributes to a LoD1 result (in place).
 
     The LoD1.2 ground height is the floor. When no roof can be fitted, or the
@@ -486,6 +504,9 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
     roof corner rises more than ``2 * elevation_error`` plus :data:`SPIKE_SPACINGS`
     point spacings above the highest of the roof's points
     (:func:`lidar2city.lod.roofcheck.rises_above_points`).
+
+    ``anchor``: the local ``(x, y)`` the roof is computed from (:func:`building_anchor`);
+    the solids stored are in the footprint's frame.
     """
     from ..errors import AlgorithmError
     from ..lod.roofcheck import rises_above_points, worse_than_prism
@@ -495,6 +516,12 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
         set_lod22(result, None, {}, result.attributes["low_coverage"])
         return
     ground_z = result.attributes.get("ground_height")
+    a = np.zeros(2) if anchor is None else np.asarray(anchor, dtype=np.float64)
+    if a.any():
+        import shapely
+
+        footprint = shapely.transform(footprint, lambda c: c - a)
+        building_xyz = building_xyz - np.append(a, 0.0)
     try:
         out = reconstruct_lod22(footprint, building_xyz, float(ground_z), config=config,
                                 precision=precision)
@@ -503,7 +530,7 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
         return
     lod12 = result.solids.get("1.2")
     worse = "" if lod12 is None else worse_than_prism(
-        out.solids, lod12, building_xyz, margin=2.0 * config.elevation_error)
+        out.solids, _moved(lod12, -a), building_xyz, margin=2.0 * config.elevation_error)
     if not worse:  # a corner farther above the roof's points than a steep facet over 3 spacings
         import shapely
 
@@ -515,7 +542,18 @@ def add_lod22(result, footprint, building_xyz, config, *, precision=0.001) -> No
     if worse:
         set_lod22(result, None, {}, worse)
         return
-    set_lod22(result, out.solids, out.attributes, precision=precision, checked=out.issues)
+    set_lod22(result, [_moved(s, a) for s in out.solids], out.attributes, precision=precision,
+              checked=out.issues)
+
+
+def _moved(solids, d):
+    """A solid, or a list of solids (a multi-part footprint's), moved by ``d`` = (dx, dy)
+    (themselves when ``d`` is zero)."""
+    if not np.any(d):
+        return solids
+    if isinstance(solids, (list, tuple)):
+        return [_moved(s, d) for s in solids]
+    return type(solids)(solids.vertices + np.append(d, 0.0), solids.surfaces)
 
 
 def set_lod22(result, solids, attributes, reason="", *, precision=0.001, checked=None) -> None:
