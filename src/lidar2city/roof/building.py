@@ -1008,7 +1008,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
-    kept = None  # the first variant's solid with its spike left, when the fix pinched a saddle
+    pinched = None  # the first variant's solid with its spike left, when the fix pinched a saddle
     for k, (faces, face_labels) in enumerate(variants):
         # collapsing short edges can pinch faces at different heights into a saddle; the
         # uncollapsed partition is used then rather than a face taking a neighbour's plane
@@ -1036,13 +1036,13 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         else:
             solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
                                                 repair=last)
-            if kept is not None:  # no variant takes the fix: the first one's solid, as before
-                solid, faces, face_labels, planes_f = kept
+            if pinched is not None:  # no variant takes the fix: the first one's solid, as before
+                solid, faces, face_labels, planes_f = pinched
                 break
             if not relabelled and not last:
                 # the fixed faces pinch a saddle only the last variant repairs (FSite5 b9:
                 # a levelled face beside a collapsed edge, its roof left 1.2 m over its points)
-                kept = solid, faces, face_labels, planes_f
+                pinched = solid, faces, face_labels, planes_f
                 continue
         if not relabelled:
             break

@@ -101,19 +101,9 @@ def _ring_keys(r) -> list:
     return list(map(tuple, np.rint(np.asarray(r)[:, :2] * _KEY).astype(np.int64).tolist()))
 
 
-def _rings(poly):
-    """Exterior counter-clockwise then holes clockwise, as (m, 2) arrays without closing vertex."""
-    from shapely.geometry.polygon import orient
-
-    poly = orient(poly, 1.0)
-    out = [np.asarray(poly.exterior.coords)[:-1, :2]]
-    out += [np.asarray(r.coords)[:-1, :2] for r in poly.interiors]
-    return out
-
-
 def _face_rings(faces) -> list:
-    """:func:`_rings` of every face, the orientation and coordinates of all faces taken at
-    once (the same GEOS orientation as ``orient``: the same arrays)."""
+    """Every face's rings, exterior counter-clockwise then holes clockwise, as (m, 2) arrays
+    without the closing vertex; the orientation and coordinates of all faces taken at once."""
     import shapely
 
     if not len(faces):
