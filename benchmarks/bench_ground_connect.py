@@ -76,6 +76,9 @@ PATCHES = ((0.3, 0.0), (0.6, 0.0), (0.3, 0.5))
 OFF = None
 GRID = tuple(itertools.product((0.9, OFF), (0.6, 0.8, 0.95, OFF), (0.9, OFF), (0, 4)))
 ROUNDS = 3
+#: single rules scored on the seven samples beside the fitted setting: spreading along
+#: patches, roofs taken back, a lenient ``lower``.
+SHOWN = ((0.9, OFF, OFF, 0), (OFF, OFF, 0.9, 0), (OFF, 0.8, OFF, 0))
 
 
 def settings():
@@ -208,6 +211,13 @@ def main():
           + ", ".join(f"{n} {100 * a:.2f} / {100 * b:.2f}" for n, (a, b) in zip(samples, rows))
           + f"; mean {100 * np.mean([a for a, _ in rows]):.2f} / "
             f"{100 * np.mean([b for _, b in rows]):.2f}")
+    for rule in SHOWN:
+        one = (PATCHES[0], rule)
+        totals = [ground_errors(revise(c[0], m, c[2], c[3], one), ref)["total"]
+                  for (c, ref, _), m in zip(cases[:len(samples)], default)]
+        print(f"  {show(one)} alone: " + ", ".join(f"{n} {100 * v:.2f}" for n, v in
+                                                   zip(samples, totals))
+              + f"; mean {100 * np.mean(totals):.2f}")
     syn = [(ground_errors(m, ref)["total"],
             ground_errors(revise(c[0], m, c[2], c[3], setting), ref)["total"])
            for (c, ref, _), m in zip(cases[len(samples):], default[len(samples):])]
