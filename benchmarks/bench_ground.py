@@ -12,7 +12,8 @@ error of each method on the synthetic terrains of
 ``lidar2city ground`` on ``DIR/isprs/sites/CSite4_orig-utm.laz`` as a fresh
 process against plainly reading and writing the same file with laspy (best
 of ``--repeat`` runs each) and prints the ratio, for each method and for
-``smrf_vote`` with its ``veto`` off and with ``above`` 3 m (:data:`SPEED_VARIANTS`).
+``smrf_vote`` with its ``veto`` off, with ``above`` 3 m and with ``connect`` 3
+(:data:`SPEED_VARIANTS`).
 
 ``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
 smrf_segments (the same grid for the three) and of ptd (its iteration angle
@@ -190,7 +191,8 @@ def best_times(cmd, env, repeat):
 #: ``lidar2city ground`` runs of the speed check besides the methods' defaults: label ->
 #: (method, the ``[ground]`` table of a run TOML given with ``--config``).
 SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf"),
-                  "smrf_vote, above 3": ("smrf_vote", "above = 3.0")}
+                  "smrf_vote, above 3": ("smrf_vote", "above = 3.0"),
+                  "smrf_vote, connect 3": ("smrf_vote", "connect = 3")}
 
 
 def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),

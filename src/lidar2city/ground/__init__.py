@@ -30,6 +30,7 @@ import numpy as np
 
 from ..config import field
 from ..errors import ConfigError, InputError
+from .connect_filter import connect_ground, surface_patches
 from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
@@ -51,6 +52,8 @@ __all__ = [
     "anchored_objects",
     "smrf_vote",
     "vote_features",
+    "connect_ground",
+    "surface_patches",
     "VOTE_RULE",
     "VOTE_VETO",
     "VETO_SLOPE",
@@ -138,6 +141,10 @@ class GroundConfig:
                                       "tolerance of the lenient one is ground also near walls when "
                                       "every wall within 15 m rises more than this (m) over it "
                                       "(ground at the foot of buildings); default none")
+    connect: int | None = field(None, "smrf_vote: rounds of segment connectivity on its mask "
+                                      "(smooth patches running on from its ground given to it, "
+                                      "patches raised all round and pits taken away); default "
+                                      "none")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -179,6 +186,8 @@ class GroundConfig:
             raise ConfigError(f"ground.veto: must be > 0, got {self.veto!r}")
         if self.above is not None and not self.above > 0:
             raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
+        if self.connect is not None and not (isinstance(self.connect, int) and self.connect >= 0):
+            raise ConfigError(f"ground.connect: must be an integer >= 0, got {self.connect!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
             raise ConfigError("ground.max_iterations: must be an integer >= 0, got "
                               f"{self.max_iterations!r}")

@@ -7,6 +7,7 @@ import logging
 import numpy as np
 
 from ..errors import InputError
+from .connect_filter import connect_ground
 from ._grid import (
     _disk_chain,
     _is_square_step,
@@ -199,7 +200,7 @@ def smrf_vote(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float = 1
               outlier_depth: float = 1.5, near: float = VOTE_RULE["near"],
               steep: float = VOTE_RULE["steep"], plain: float = VOTE_RULE["plain"],
               clear: float = VOTE_RULE["clear"], veto: float | None = VOTE_VETO,
-              above: float | None = None) -> np.ndarray:
+              above: float | None = None, connect: int | None = None) -> np.ndarray:
     """Ground points by a vote of three SMRF surfaces, with a rule learnt on labelled samples.
 
     SMRF's slope decides what its opening cuts: a strict one (0.1) removes low
@@ -251,6 +252,12 @@ outlier_depth
         every wall within ``clear`` rises more than ``above`` metres over the
         point (ground at the foot of buildings, not on a roof); None
         (default): only ``clear`` counts.
+    connect : int or None
+        Rounds of :func:`~lidar2city.ground.connect_ground` on the vote's
+        mask (segment connectivity: smooth surface patches that run on from
+        the vote's ground given to it, patches raised all round and pits taken
+        from it; its defaults); None (default): none.
+        ``bench_ground_connect.py``: not lower on leave-one-sample-out.
 
     Returns
     -------
@@ -283,6 +290,8 @@ outlier_depth
     >>> bool((smrf_vote(scene.xyz) == scene.ground).all())
     True
     """
+    if connect is not None and not (isinstance(connect, (int, np.integer)) and connect >= 0):
+        raise InputError(f"connect must be an integer >= 0 or None, got {connect!r}")
     _check_positive(near=near, steep=steep, plain=plain, clear=clear,
                     **({} if veto is None else {"veto": veto}),
                     **({} if above is None else {"above": above}))
@@ -298,5 +307,7 @@ outlier_depth
                                 rise=None if above is None else clear)
     ground = vote_rule(features, near=near, steep=steep, plain=plain, clear=clear,
                        veto=veto, above=above) & ~out
+    if connect:
+        ground = connect_ground(xyz, ground, exclude=out, rounds=connect)
     logger.debug("smrf_vote: %d of %d points ground", int(ground.sum()), len(ground))
     return ground
