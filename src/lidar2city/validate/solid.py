@@ -195,36 +195,62 @@ def _polygon_checks(verts, rings, i, issues, planarity_tolerance):
 
 
 def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance):
-    """Batched checks of single-ring faces with the same vertex count."""
+    """The polygon checks of the single-ring faces ``faces``, all in one pass.
+
+    Their issues in the order a pass per vertex count gives them (fewest vertices
+    first; within a count planarity, then zero area, then self-intersection). A ring
+    whose vertices all lie within ``planarity_tolerance / (2 sqrt(k))`` of the plane
+    through their centroid normal to their Newell vector is planar without its
+    least-squares plane: that plane's largest distance is at most ``sqrt(k)`` times
+    its RMS, which is at most that plane's. Only the other rings are fitted (SVD).
+    """
     import shapely
 
-    R = np.stack([rings_per_face[i][0] for i in faces])
-    P = verts[R]                                       # (F, k, 3)
-    k = R.shape[1]
-    bad = np.zeros(len(faces), dtype=bool)
-    if k > 3:
-        c = P.mean(axis=1, keepdims=True)
-        _, _, vt = np.linalg.svd(P - c, full_matrices=False)
-        dist = np.abs(dot3(P - c, vt[:, None, -1, :])).max(axis=1)
-        for f in np.flatnonzero(dist > planarity_tolerance):
-            issues.append(Issue(203, int(faces[f]), f"vertex {dist[f]:.4f} m from the plane"))
-            bad[f] = True
-    Q = np.concatenate([P[:, 1:], P[:, :1]], axis=1)  # np.roll(P, -1, axis=1) without its overhead
-    nw = np.stack([np.sum((P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), axis=1),
-                   np.sum((P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]), axis=1),
-                   np.sum((P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]), axis=1)], axis=1)
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return
+    ext = [rings_per_face[f][0] for f in faces]
+    idx, nxt, starts, lens = _ring_layout(ext)
+    P = verts[idx]
+    Q = P[nxt]
+    d, s = P - Q, P + Q
+    nw = np.add.reduceat(np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]]),
+                         starts, axis=0)
     area2 = np.sqrt(dot3(nw, nw))
+    ring = np.repeat(np.arange(len(faces)), lens)
+    centre = np.add.reduceat(P, starts, axis=0) / lens[:, None]
+    unit = nw / np.where(area2 > 0, area2, 1.0)[:, None]
+    off = np.abs(dot3(P - centre[ring], unit[ring]))
+    planar = (lens <= 3) | ((area2 > 0) & (np.maximum.reduceat(off, starts) * np.sqrt(lens)
+                                           <= 0.5 * planarity_tolerance))
+    found = []  # (vertex count, stage, face, issue)
+    bad = np.zeros(len(faces), dtype=bool)
+    for k in np.unique(lens[~planar]):
+        sel = np.flatnonzero(~planar & (lens == k))
+        R = np.stack([ext[f] for f in sel])
+        Pk = verts[R]
+        c = Pk.mean(axis=1, keepdims=True)
+        vt = np.linalg.svd(Pk - c, full_matrices=False)[2]
+        dist = np.abs(dot3(Pk - c, vt[:, None, -1, :])).max(axis=1)
+        for f in np.flatnonzero(dist > planarity_tolerance):
+            found.append((k, 0, int(faces[sel[f]]),
+                          Issue(203, int(faces[sel[f]]), f"vertex {dist[f]:.4f} m from the plane")))
+            bad[sel[f]] = True
     for f in np.flatnonzero(~bad & (area2 < 1e-10)):
-        issues.append(Issue(104, int(faces[f]), "ring collapses to a line (zero area)"))
+        found.append((lens[f], 1, int(faces[f]),
+                      Issue(104, int(faces[f]), "ring collapses to a line (zero area)")))
         bad[f] = True
-    if k > 3:
-        ok = ~bad
-        if ok.any():
-            u, v = plane_bases(nw[ok])
-            P2 = np.stack([dot3(P[ok], u[:, None, :]), dot3(P[ok], v[:, None, :])], axis=-1)
-            simple = shapely.is_simple(shapely.linearrings(P2))
-            for f in np.flatnonzero(ok)[~simple]:
-                issues.append(Issue(104, int(faces[f]), "ring self-intersects"))
+    test = np.flatnonzero(~bad & (lens > 3))
+    if len(test):
+        u, v = plane_bases(nw[test])
+        take = np.isin(ring, test)
+        at = np.searchsorted(test, ring[take])
+        Pt = P[take]
+        P2 = np.column_stack([dot3(Pt, u[at]), dot3(Pt, v[at])])
+        simple = shapely.is_simple(shapely.linearrings(P2, indices=at))
+        for f in test[~simple]:
+            found.append((lens[f], 2, int(faces[f]), Issue(104, int(faces[f]), "ring self-intersects")))
+    issues.extend(item[3] for item in sorted(found, key=lambda item: item[:3]))
 
 
 def solid_volume(vertices, surfaces) -> float:
@@ -350,8 +376,13 @@ def _candidate_pairs(lo, hi, tol):
     i = np.repeat(np.arange(len(order)), cnt)
     j = np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
     i, j = order[i], order[j]
-    keep = np.all((lo[i] <= hi[j] + tol) & (lo[j] <= hi[i] + tol), axis=1)
-    return i[keep], j[keep]
+    # the sweep already has them overlapping along x (j starts after i, before i's end):
+    # the other axes one at a time, each on the pairs still in
+    for axis in range(1, lo.shape[1]):
+        lo_a, hi_a = lo[:, axis], hi[:, axis]
+        keep = (lo_a[i] <= hi_a[j] + tol) & (lo_a[j] <= hi_a[i] + tol)
+        i, j = i[keep], j[keep]
+    return i, j
 
 
 def _self_intersections(verts, rings_per_face, tol, mesh):
@@ -366,9 +397,13 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     i, j = _candidate_pairs(lo, hi, tol)
     keep = face[i] != face[j]
-    shared = (tris[i][:, :, None] == tris[j][:, None, :]).any(axis=(1, 2))
-    keep &= ~shared
     i, j = i[keep], j[keep]
+    ti, tj = tris[i], tris[j]
+    shared = np.zeros(len(i), dtype=bool)
+    for a in range(3):
+        for b in range(3):
+            shared |= ti[:, a] == tj[:, b]
+    i, j = i[~shared], j[~shared]
     hits = np.zeros(len(i), dtype=bool)
     eps = 1e-9 * max(1.0, float(np.abs(verts).max()))
     chunk = 32_768  # triangle pairs at a time: a few MB of temporaries
@@ -483,14 +518,13 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
         rings_per_face = [_ring_checks(rings, i, issues) for i, rings in enumerate(faces)]
     if issues:
         return issues
-    simple: dict[int, list] = {}
+    simple = []
     for i, rings in enumerate(rings_per_face):
         if len(rings) == 1:
-            simple.setdefault(len(rings[0]), []).append(i)
+            simple.append(i)
         else:
             _polygon_checks(verts, rings, i, issues, planarity_tolerance)
-    for _, faces in sorted(simple.items()):
-        _simple_faces_checks(verts, rings_per_face, np.array(faces), issues, planarity_tolerance)
+    _simple_faces_checks(verts, rings_per_face, simple, issues, planarity_tolerance)
     if issues or not shell:
         return issues
     if len(rings_per_face) < 4:
