@@ -203,7 +203,8 @@ def _vertex_ids(p2, ids, q, p_owner=None, q_owner=None):
     back[order] = np.arange(len(order))
     hit = last[back[n:]]
     safe = order[np.maximum(hit, 0)]
-    found = (hit >= 0) & (p_owner[safe] == q_owner) & (p2[safe, 0] == q[:, 0]) & (p2[safe, 1] == q[:, 1])
+    found = ((hit >= 0) & (p_owner[safe] == q_owner) & (p2[safe, 0] == q[:, 0])
+             & (p2[safe, 1] == q[:, 1]))
     out = ids[safe]
     for m in np.flatnonzero(~found):
         mine = np.flatnonzero(p_owner == q_owner[m])
@@ -284,7 +285,9 @@ def _single_rings(vertices, exts):
         area2 = np.sqrt(dot3(n, n))
         ok = np.isfinite(area2) & (area2 >= 1e-12)
         u, v = plane_bases(np.where(ok[:, None], n, 1.0))
-        p2 = np.stack([np.matmul(p, u[:, :, None])[..., 0], np.matmul(p, v[:, :, None])[..., 0]], axis=-1)
+        # stacked products: per ring the floating-point result of ``p[j] @ u[j]``
+        p2 = np.stack([np.matmul(p, u[:, :, None])[..., 0], np.matmul(p, v[:, :, None])[..., 0]],
+                      axis=-1)
         d1 = np.concatenate([p2[:, 1:], p2[:, :1]], axis=1) - p2
         d2 = np.concatenate([d1[:, 1:], d1[:, :1]], axis=1)
         fan = np.all(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0, axis=1)

@@ -249,7 +249,8 @@ def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_toleran
         P2 = np.column_stack([dot3(Pt, u[at]), dot3(Pt, v[at])])
         simple = shapely.is_simple(shapely.linearrings(P2, indices=at))
         for f in test[~simple]:
-            found.append((lens[f], 2, int(faces[f]), Issue(104, int(faces[f]), "ring self-intersects")))
+            found.append((lens[f], 2, int(faces[f]),
+                          Issue(104, int(faces[f]), "ring self-intersects")))
     issues.extend(item[3] for item in sorted(found, key=lambda item: item[:3]))
 
 
@@ -444,19 +445,39 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     fi, fj = fi[pair_order], fj[pair_order]
     dot = np.einsum("ij,ij->i", normals[fi], normals[fj])
     cop = (np.abs(dot) > 1 - 1e-9) & (np.abs(offsets[fi] - np.sign(dot) * offsets[fj]) < tol)
-    for a, b in zip(fi[cop], fj[cop], strict=True):
-        u, v = plane_basis(normals[a])
-        polys = []
-        for f in (a, b):
-            rr = [np.column_stack([verts[r] @ u, verts[r] @ v]) for r in rings_per_face[f]]
-            polys.append(shapely.Polygon(rr[0], rr[1:]))
+    fi, fj = fi[cop], fj[cop]
+    if len(fi):
+        # both faces of each pair in the plane basis of its first: all pairs in one pass
+        u, v = plane_bases(normals[fi])
         try:
-            inter = shapely.intersection(polys[0], polys[1]).area
-        except Exception:  # invalid polygons were reported at the polygon level
-            inter = 0.0
-        if inter > tol * tol:
-            found.add((int(a), int(b)))
+            inter = shapely.area(shapely.intersection(
+                *[_planar_polygons(verts, rings_per_face, f, u, v) for f in (fi, fj)]))
+        except Exception:  # invalid polygons were reported at the polygon level: one by one
+            inter = np.zeros(len(fi))
+            for k in range(len(fi)):
+                one = slice(k, k + 1)
+                try:
+                    inter[k] = shapely.area(shapely.intersection(*[_planar_polygons(
+                        verts, rings_per_face, f[one], u[one], v[one]) for f in (fi, fj)]))[0]
+                except Exception:
+                    pass
+        found.update((int(a), int(b)) for a, b in zip(fi[inter > tol * tol], fj[inter > tol * tol],
+                                                     strict=True))
     return sorted(found)
+
+
+def _planar_polygons(verts, rings_per_face, faces, u, v):
+    """Shapely polygons of ``faces`` (F,) in the plane bases ``u, v`` (F, 3), one each."""
+    import shapely
+
+    rings = [r for f in faces for r in rings_per_face[f]]
+    n_rings = np.array([len(rings_per_face[f]) for f in faces])
+    idx, _, _, lens = _ring_layout(rings)
+    owner = np.repeat(np.repeat(np.arange(len(faces)), n_rings), lens)
+    p = verts[idx]
+    xy = np.column_stack([dot3(p, u[owner]), dot3(p, v[owner])])
+    ring_polys = shapely.linearrings(xy, indices=np.repeat(np.arange(len(rings)), lens))
+    return shapely.polygons(ring_polys, indices=np.repeat(np.arange(len(faces)), n_rings))
 
 
 def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: float = 0.001,
