@@ -84,9 +84,10 @@ def _merge_vertices(vertices, tol):
     return np.asarray(vertices, dtype=np.float64)[first], inverse.ravel()
 
 
-def _all_rings_clean(rings) -> bool:
-    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones."""
-    idx, nxt, starts, lens = _ring_layout(rings)
+def _all_rings_clean(rings, layout=None) -> bool:
+    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones.
+    ``layout``: :func:`_ring_layout` of ``rings`` when already taken."""
+    idx, nxt, starts, lens = layout or _ring_layout(rings)
     if len(lens) == 0 or lens.min() < 3 or np.any(idx == idx[nxt]):
         return False
     if lens.max() == 3:
@@ -112,9 +113,9 @@ def _ring_layout(rings):
     return idx, nxt, starts, lens
 
 
-def _ring_normals(verts, rings):
+def _ring_normals(verts, rings, layout=None):
     """Newell vector (twice the vector area) of every ring, shape (R, 3); rings of >= 1 vertex."""
-    idx, nxt, starts, _ = _ring_layout(rings)
+    idx, nxt, starts, _ = layout or _ring_layout(rings)
     p, q = verts[idx], verts[idx[nxt]]
     d, s = p - q, p + q
     terms = np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]])
@@ -273,10 +274,19 @@ def solid_volume(vertices, surfaces) -> float:
     return float(np.sum(dot3(first, area))) / 3.0
 
 
-def _edge_checks(rings_per_face, issues):
-    """Closedness, manifoldness, orientation consistency, connectivity. True if all pass."""
-    flat = [r for rings in rings_per_face for r in rings]
-    a, nxt, _, lens = _ring_layout(flat)
+def _volume(verts, rings_per_face, layout):
+    """:func:`solid_volume` of clean rings (each of >= 3 vertices) whose
+    :func:`_ring_layout` is ``layout``: the same sums."""
+    nr = np.array([len(rings) for rings in rings_per_face])
+    area = np.add.reduceat(_ring_normals(verts, None, layout), np.cumsum(nr) - nr, axis=0) / 2.0
+    first = verts[layout[0][layout[2][np.cumsum(nr) - nr]]]
+    return float(np.sum(dot3(first, area))) / 3.0
+
+
+def _edge_checks(rings_per_face, issues, layout=None):
+    """Closedness, manifoldness, orientation consistency, connectivity. True if all pass.
+    ``layout``: :func:`_ring_layout` of all rings of all faces when already taken."""
+    a, nxt, _, lens = layout or _ring_layout([r for rings in rings_per_face for r in rings])
     b = a[nxt]
     fc = np.repeat(np.repeat(np.arange(len(rings_per_face)),
                              [len(rings) for rings in rings_per_face]), lens)
@@ -386,8 +396,9 @@ def _candidate_pairs(lo, hi, tol):
     return i, j
 
 
-def _self_intersections(verts, rings_per_face, tol, mesh):
-    """Face pairs whose triangles cross, or coplanar faces that overlap."""
+def _self_intersections(verts, rings_per_face, tol, mesh, outer_layout=None):
+    """Face pairs whose triangles cross, or coplanar faces that overlap.
+    ``outer_layout``: :func:`_ring_layout` of the faces' outer rings when already taken."""
     import shapely
 
     tris, face = mesh
@@ -431,10 +442,11 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
              for a, b in zip(i[hits], j[hits], strict=True)}
     # coplanar faces overlapping (crossing tests miss them)
     outer = [rings[0] for rings in rings_per_face]
-    nw = _ring_normals(verts, outer)
+    layout = outer_layout or _ring_layout(outer)
+    nw = _ring_normals(verts, outer, layout)
     nn = np.sqrt(dot3(nw, nw))
     normals = nw / np.where(nn > 0, nn, 1.0)[:, None]
-    idx, _, starts, lens = _ring_layout(outer)
+    idx, _, starts, lens = layout
     centre = np.add.reduceat(verts[idx], starts, axis=0) / lens[:, None]
     offsets = dot3(centre, normals)
     # only faces whose boxes meet can overlap (every pair of faces would be quadratic)
@@ -532,10 +544,15 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
                 issues.append(Issue(901, i, "vertex index out of range"))
     if issues:
         return issues
-    faces = [[remap[r] for r in rings] for rings in raw]
-    if _all_rings_clean([r for rings in faces for r in rings]):
+    n_rings = [len(rings) for rings in raw]
+    flat_rings = np.split(remap[flat], np.cumsum([len(r) for rings in raw for r in rings])[:-1])
+    ends = np.cumsum(n_rings).tolist()
+    faces = [flat_rings[i:j] for i, j in zip([0, *ends[:-1]], ends, strict=True)]
+    layout = _ring_layout(flat_rings)
+    if _all_rings_clean(flat_rings, layout):
         rings_per_face = faces
     else:
+        layout = None
         rings_per_face = [_ring_checks(rings, i, issues) for i, rings in enumerate(faces)]
     if issues:
         return issues
@@ -550,15 +567,19 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
         return issues
     if len(rings_per_face) < 4:
         return [Issue(301, None, f"{len(rings_per_face)} polygons")]
-    if not _edge_checks(rings_per_face, issues):
+    if not _edge_checks(rings_per_face, issues, layout):
         return issues
     tris, face = solid_mesh(solid)
-    inter = _self_intersections(verts, rings_per_face, overlap_tolerance, (remap[tris], face))
+    # one ring per face (the common case): the outer rings are all the rings
+    single = layout is not None and len(flat_rings) == len(rings_per_face)
+    inter = _self_intersections(verts, rings_per_face, overlap_tolerance, (remap[tris], face),
+                                layout if single else None)
     if inter:
         pairs = ", ".join(f"{a}-{b}" for a, b in inter[:5])
         issues.append(Issue(306, inter[0][0], f"{len(inter)} intersecting face pair(s): {pairs}"))
         return issues
-    vol = solid_volume(verts, rings_per_face)
+    vol = _volume(verts, rings_per_face, layout) if layout is not None \
+        else solid_volume(verts, rings_per_face)
     if vol <= 0:
         issues.append(Issue(307, None, f"all faces point inward (volume {vol:.3f} m3)"))
     return issues
