@@ -221,8 +221,14 @@ def partition_edges(faces) -> tuple:
     start = np.repeat(np.cumsum(sizes) - sizes, sizes)
     nxt = np.arange(1, m + 1)
     nxt[np.cumsum(sizes) - 1] = start[np.cumsum(sizes) - 1]  # each ring's last vertex -> its first
-    _, kid = np.unique(np.rint(xy * _KEY).astype(np.int64), axis=0, return_inverse=True)
-    kid = kid.ravel()
+    # vertex ids by their keys' rank in (x, y) order (np.unique of the rows' inverse)
+    key = np.rint(xy * _KEY).astype(np.int64)
+    srt = np.lexsort((key[:, 1], key[:, 0]))
+    ks = key[srt]
+    new = np.ones(len(ks), dtype=bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    kid = np.empty(len(ks), dtype=np.int64)
+    kid[srt] = np.cumsum(new) - 1
     nk = int(kid.max()) + 1
     code = kid * nk + kid[nxt]  # directed edge p -> q
     twin = kid[nxt] * nk + kid

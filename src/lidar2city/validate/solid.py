@@ -79,9 +79,18 @@ class Issue:
 
 
 def _merge_vertices(vertices, tol):
-    key = np.round(np.asarray(vertices, dtype=np.float64) / tol).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return np.asarray(vertices, dtype=np.float64)[first], inverse.ravel()
+    """Vertices on one ``tol`` grid cell merged: ``(merged, remap)``, the merged ones in
+    the order of their cells (x, then y, then z), each the first of its cell; as
+    ``np.unique(..., axis=0)`` gives them, without its structured-row sort."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    key = np.round(vertices / tol).astype(np.int64)
+    order = np.lexsort(key.T[::-1])  # stable: the first of equal keys first
+    k = key[order]
+    new = np.ones(len(k), dtype=bool)
+    new[1:] = np.any(k[1:] != k[:-1], axis=1)
+    inverse = np.empty(len(k), dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return vertices[order[new]], inverse
 
 
 def _all_rings_clean(rings, layout=None) -> bool:
