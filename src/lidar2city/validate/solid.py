@@ -432,6 +432,7 @@ def _self_intersections(verts, rings_per_face, tol, mesh, outer_layout=None):
         ii, jj = i[s:s + chunk], j[s:s + chunk]
         ti, tj = corners[ii], corners[jj]
         h = np.zeros(len(ii), dtype=bool)
+        tests = []  # (pair, segment start, segment end, triangle, its normal and length)
         for (A, B, kb) in ((ti, tj, jj), (tj, ti, ii)):
             nb, nlb = tri_n[kb], tri_nl[kb]
             # an edge of A crosses B only when A has corners on both sides of B's plane
@@ -440,12 +441,12 @@ def _self_intersections(verts, rings_per_face, tol, mesh, outer_layout=None):
             hi_d = np.maximum(np.maximum(d[0], d[1]), d[2])
             lo_d = np.minimum(np.minimum(d[0], d[1]), d[2])
             sel = np.flatnonzero((hi_d > eps) & (lo_d < -eps) & (nlb > 0))
-            if len(sel) == 0:
-                continue
-            As, Bs, ns = A[sel], B[sel], (nb[sel], nlb[sel])
-            for e in range(3):
-                h[sel] |= _segments_cross_triangles(As[:, e], As[:, (e + 1) % 3], Bs[:, 0],
-                                                    Bs[:, 1], Bs[:, 2], eps, ns)
+            for e in range(3) if len(sel) else ():
+                tests.append((sel, A[sel, e], A[sel, (e + 1) % 3], B[sel], nb[sel], nlb[sel]))
+        if tests:
+            # every edge of both triangles of every pair left in one row-wise test
+            sel, p, q, b, nb, nlb = (np.concatenate(c) for c in zip(*tests, strict=True))
+            h[sel[_segments_cross_triangles(p, q, b[:, 0], b[:, 1], b[:, 2], eps, (nb, nlb))]] = True
         hits[s:s + chunk] = h
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}
