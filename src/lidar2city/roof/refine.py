@@ -236,10 +236,17 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     # footprint outline segments are walls too
     union = shapely.union_all(faces)
     face_count: dict = {}
+    # every face's rings as given (coordinates without the closing vertex) and their keys
+    ring_data = []
     for f in faces:
+        rings_f = []
         for ring in [f.exterior, *f.interiors]:
-            for k in _ring_keys(np.asarray(ring.coords)[:-1]):
+            coords = np.asarray(ring.coords)[:-1]
+            keys = _ring_keys(coords)
+            rings_f.append((coords, keys))
+            for k in keys:
                 face_count[k] = face_count.get(k, 0) + 1
+        ring_data.append(rings_f)
     redundant = set()  # straight-outline vertices inside one face carry nothing and block moves
     for ring in shapely.get_rings(union):
         c = np.asarray(ring.coords)[:-1]
@@ -303,18 +310,21 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
 
     def rebuild(drop_interior):
         out = []
-        for f in faces:
+        for rings_f in ring_data:
             rings = []
-            for ring in [f.exterior, *f.interiors]:
-                pts = []
-                coords = np.asarray(ring.coords)[:-1]
-                for p, k in zip(coords, _ring_keys(coords), strict=True):
-                    if (drop_interior and k in interior_of_intersection) or k in redundant:
-                        continue
-                    q = moves.get(k, p)
-                    if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
-                        continue
-                    pts.append(q)
+            for coords, keys in rings_f:
+                sub = [moves.get(k, p) for p, k in zip(coords, keys, strict=True)
+                       if not ((drop_interior and k in interior_of_intersection) or k in redundant)]
+                pts = sub
+                if len(sub) > 1:
+                    step = np.diff(np.array(sub, dtype=float), axis=0)
+                    if (np.hypot(step[:, 0], step[:, 1]) < 1e-6).any():
+                        # a vertex on (or moved onto) the one before: dropped, in order
+                        pts = []
+                        for q in sub:
+                            if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
+                                continue
+                            pts.append(q)
                 if len(pts) > 1 and np.hypot(*(np.asarray(pts[0]) - pts[-1])) < 1e-6:
                     pts.pop()
                 rings.append(_remove_spikes(pts))
