@@ -133,39 +133,57 @@ def _fan_or_projection(vertices, rings):
 
 
 def _delaunay_many(items):
+    """:func:`_delaunay_batch` of ``items``, ``(p2, allidx, lens)`` of
+    :func:`_fan_or_projection`: a list of triangle arrays, one per item."""
+    if not items:
+        return []
+    tris, owner = _delaunay_batch(np.concatenate([it[0] for it in items]),
+                                  np.concatenate([it[1] for it in items]),
+                                  np.concatenate([it[2] for it in items]),
+                                  np.array([len(it[2]) for it in items]))
+    return np.split(tris, np.cumsum(np.bincount(owner, minlength=len(items)))[:-1])
+
+
+def _delaunay_batch(p2, ids, ring_lens, n_rings):
     """GEOS's constrained Delaunay triangles of several projected polygons at once.
 
-    ``items``: ``(p2, allidx, lens)`` of :func:`_fan_or_projection`. One vectorised
-    shapely pass over all of them (polygons built, made valid where not, triangulated,
-    triangle corners mapped back to vertex indices): the triangles each polygon gets
-    alone, without the per-polygon calls. A polygon GEOS fails on gets none, as alone.
+    ``p2`` (n, 2) the polygons' ring vertices one after the other, projected on their
+    planes, ``ids`` (n,) their vertex indices, ``ring_lens`` each ring's length,
+    ``n_rings`` each polygon's ring count (exterior first). One vectorised shapely pass
+    over all of them (polygons built, made valid where not, triangulated, triangle
+    corners mapped back to vertex indices): the triangles each polygon gets alone,
+    without the per-polygon calls. A polygon GEOS fails on gets none, as alone.
+
+    Returns ``(triangles (T, 3), polygon index of each (T,))``, each polygon's in order.
     """
     import shapely
 
-    if not items:
-        return []
-    p2 = np.concatenate([it[0] for it in items])
-    ids = np.concatenate([it[1] for it in items])
-    ring_lens = np.concatenate([it[2] for it in items])
-    n_rings = np.array([len(it[2]) for it in items])
-    pts_per_poly = np.array([len(it[0]) for it in items])
+    n_poly = len(n_rings)
+    if not n_poly:
+        return _NO_TRIANGLES, np.zeros(0, dtype=np.int64)
+    ring_of_poly = np.repeat(np.arange(n_poly), n_rings)
+    pts_per_poly = np.bincount(ring_of_poly, weights=ring_lens, minlength=n_poly).astype(np.int64)
     try:
         rings = shapely.linearrings(p2, indices=np.repeat(np.arange(len(ring_lens)), ring_lens))
-        polys = shapely.polygons(rings, indices=np.repeat(np.arange(len(items)), n_rings))
+        polys = shapely.polygons(rings, indices=ring_of_poly)
         bad = ~shapely.is_valid(polys)
         if bad.any():
             polys[bad] = shapely.make_valid(polys[bad])
         cdt = shapely.constrained_delaunay_triangles(polys)
     except Exception:  # GEOS failures on degenerate input: each polygon alone
-        if len(items) == 1:
-            return [_NO_TRIANGLES]
-        return [_delaunay_many([it])[0] for it in items]
+        if n_poly == 1:
+            return _NO_TRIANGLES, np.zeros(0, dtype=np.int64)
+        pe, re = np.cumsum(pts_per_poly), np.cumsum(n_rings)
+        out = [_delaunay_batch(p2[e - n:e], ids[e - n:e], ring_lens[r - m:r], n_rings[k:k + 1])[0]
+               for k, (e, n, r, m) in enumerate(zip(pe, pts_per_poly, re, n_rings, strict=True))]
+        return (np.concatenate(out),
+                np.repeat(np.arange(n_poly), [len(t) for t in out]).astype(np.int64))
     tris, owner = shapely.get_parts(cdt, return_index=True)
     is_tri = shapely.get_type_id(tris) == 3
     tris, owner = tris[is_tri], owner[is_tri]
     coords = shapely.get_coordinates(tris).reshape(len(tris), -1, 2)[:, :3]
     # corners back to vertex indices, each among its own polygon's points
-    point_owner = np.repeat(np.arange(len(items)), pts_per_poly)
+    point_owner = np.repeat(np.arange(n_poly), pts_per_poly)
     out = _vertex_ids(p2, ids, coords.reshape(-1, 2), point_owner,
                       np.repeat(owner, 3)).reshape(len(tris), 3)
     keep = (out[:, 0] != out[:, 1]) & (out[:, 1] != out[:, 2]) & (out[:, 0] != out[:, 2])
@@ -174,7 +192,7 @@ def _delaunay_many(items):
               - (c[:, 2, 0] - c[:, 0, 0]) * (c[:, 1, 1] - c[:, 0, 1]))
     flip = signed < 0
     out[flip] = out[flip][:, ::-1]
-    return np.split(out, np.cumsum(np.bincount(owner, minlength=len(items)))[:-1])
+    return out, owner.astype(np.int64)
 
 
 def _vertex_ids(p2, ids, q, p_owner=None, q_owner=None):
@@ -249,33 +267,47 @@ def triangulate_surfaces(vertices: np.ndarray, surfaces) -> tuple[np.ndarray, np
             chunks.append(np.column_stack([idx[first], idx[j], idx[j + 1]]))
             owners.append(np.repeat(np.asarray(single)[fan], k))
             fanned[np.asarray(single)[fan]] = True
-    rest = _single_rings(vertices, {i: ext[j] for j, i in enumerate(single) if not fanned[i]})
-    rest += [(i, _fan_or_projection(vertices, all_rings[i])) for i in np.flatnonzero(~fanned)
-             if len(all_rings[i]) != 1 or len(all_rings[i][0]) < 3]
-    pending = [(i, t) for i, t in rest if not isinstance(t, np.ndarray)]
-    done = [(i, t) for i, t in rest if isinstance(t, np.ndarray)]
-    done += zip([i for i, _ in pending], _delaunay_many([t for _, t in pending]), strict=True)
-    for i, t in done:
+    # the other single-ring faces, by ring length; then the faces with holes (or fewer
+    # than 3 vertices) one by one; every Delaunay triangulation in one batch
+    batch: list = [[], [], [], [], []]  # p2, ids, ring lengths, ring counts, face
+    _single_rings(vertices, {i: ext[j] for j, i in enumerate(single) if not fanned[i]},
+                  chunks, owners, batch)
+    for i in np.flatnonzero(~fanned):
+        if len(all_rings[i]) == 1 and len(all_rings[i][0]) >= 3:
+            continue
+        t = _fan_or_projection(vertices, all_rings[i])
+        if isinstance(t, np.ndarray):
+            chunks.append(t)
+            owners.append(np.full(len(t), i, dtype=np.int64))
+        else:
+            for part, x in zip(batch, (t[0], t[1], t[2], [len(t[2])], [i]), strict=True):
+                part.append(np.asarray(x))
+    if batch[0]:
+        t, poly = _delaunay_batch(*(np.concatenate(x) for x in batch[:4]))
         chunks.append(t)
-        owners.append(np.full(len(t), i, dtype=np.int64))
+        owners.append(np.concatenate(batch[4])[poly])
     tris = np.concatenate(chunks) if chunks else np.zeros((0, 3), dtype=np.int64)
     face = np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64)
     order = np.argsort(face, kind="stable")  # by face, each face's triangles in their order
     return tris[order], face[order]
 
 
-def _single_rings(vertices, exts):
+def _single_rings(vertices, exts, chunks, owners, batch):
     """:func:`_fan_or_projection` of single-ring faces ``{face: ring}``, vectorised over
     the rings of each length with the same arithmetic (the same floating-point results
-    as one call per ring): ``[(face, triangles or projection), ...]``."""
+    as one call per ring). Fans are appended to ``chunks`` (triangles) and ``owners``
+    (their faces), projections to ``batch`` (p2, ids, ring lengths, ring counts, faces)."""
     by_len: dict[int, list] = {}
     for i, r in exts.items():
         by_len.setdefault(len(r), []).append(i)
-    out = []
     for k, faces in by_len.items():
-        if k == 3:
-            out += [(i, _fan_or_projection(vertices, [exts[i]])) for i in faces]
+        if k == 3:  # near-degenerate triangles (the clear ones are fanned already)
+            for i in faces:
+                t = _fan_or_projection(vertices, [exts[i]])
+                chunks.append(t)
+                owners.append(np.full(len(t), i, dtype=np.int64))
             continue
+        faces = np.asarray(faces)
         ext = np.stack([exts[i] for i in faces])
         p = vertices[ext]                                  # (F, k, 3)
         q = np.concatenate([p[:, 1:], p[:, :1]], axis=1)
@@ -290,16 +322,18 @@ def _single_rings(vertices, exts):
                       axis=-1)
         d1 = np.concatenate([p2[:, 1:], p2[:, :1]], axis=1) - p2
         d2 = np.concatenate([d1[:, 1:], d1[:, :1]], axis=1)
-        fan = np.all(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0, axis=1)
-        for j, i in enumerate(faces):
-            e = ext[j]
-            if not ok[j]:
-                out.append((i, _NO_TRIANGLES))
-            elif fan[j]:
-                out.append((i, np.column_stack([np.full(k - 2, e[0]), e[1:-1], e[2:]])))
-            else:
-                out.append((i, (p2[j], e, [k])))
-    return out
+        fan = ok & np.all(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0, axis=1)
+        if fan.any():
+            e = ext[fan]
+            chunks.append(np.stack([np.repeat(e[:, :1], k - 2, axis=1), e[:, 1:-1], e[:, 2:]],
+                                   axis=-1).reshape(-1, 3))
+            owners.append(np.repeat(faces[fan], k - 2))
+        cdt = ok & ~fan
+        if cdt.any():
+            m = int(cdt.sum())
+            for part, x in zip(batch, (p2[cdt].reshape(-1, 2), ext[cdt].ravel(), np.full(m, k),
+                                       np.ones(m, dtype=np.int64), faces[cdt]), strict=True):
+                part.append(x)
 
 
 def _clear_fans(vertices, idx, lens):
