@@ -204,7 +204,7 @@ def _polygon_checks(verts, rings, i, issues, planarity_tolerance):
             issues.append(Issue(code, i, reason))
 
 
-def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance):
+def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance, layout=None):
     """The polygon checks of the single-ring faces ``faces``, all in one pass.
 
     Their issues in the order a pass per vertex count gives them (fewest vertices
@@ -213,6 +213,7 @@ def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_toleran
     through their centroid normal to their Newell vector is planar without its
     least-squares plane: that plane's largest distance is at most ``sqrt(k)`` times
     its RMS, which is at most that plane's. Only the other rings are fitted (SVD).
+    ``layout``: :func:`_ring_layout` of the faces' rings when already taken.
     """
     import shapely
 
@@ -220,7 +221,7 @@ def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_toleran
     if not len(faces):
         return
     ext = [rings_per_face[f][0] for f in faces]
-    idx, nxt, starts, lens = _ring_layout(ext)
+    idx, nxt, starts, lens = layout or _ring_layout(ext)
     P = verts[idx]
     Q = P[nxt]
     d, s = P - Q, P + Q
@@ -572,7 +573,9 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
             simple.append(i)
         else:
             _polygon_checks(verts, rings, i, issues, planarity_tolerance)
-    _simple_faces_checks(verts, rings_per_face, simple, issues, planarity_tolerance)
+    # every face one ring (the common case): their layout is the solid's
+    _simple_faces_checks(verts, rings_per_face, simple, issues, planarity_tolerance,
+                         layout if len(simple) == len(flat_rings) else None)
     if issues or not shell:
         return issues
     if len(rings_per_face) < 4:
