@@ -11,8 +11,8 @@ import weakref
 
 import numpy as np
 
-__all__ = ["dot3", "cross3", "plane_bases", "newell_normal", "plane_basis", "triangulate_polygon", "triangulate_surfaces",
-           "solid_mesh", "solid_triangles"]
+__all__ = ["dot3", "cross3", "plane_bases", "newell_normal", "ragged_newell", "plane_basis",
+           "triangulate_polygon", "triangulate_surfaces", "solid_mesh", "solid_triangles"]
 
 
 def dot3(a, b):
@@ -58,6 +58,16 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
     d, s = p - q, p + q
     return np.array([np.sum(d[:, 1] * s[:, 2]), np.sum(d[:, 2] * s[:, 0]),
                      np.sum(d[:, 0] * s[:, 1])])
+
+
+def ragged_newell(p, nxt, starts):
+    """Newell vectors (twice the vector areas) of rings stored one after the other: ``p``
+    (n, 3) their vertices, ``nxt`` (n,) each vertex's next in its ring, ``starts`` (R,)
+    each ring's first position. Shape (R, 3); summed in ring order (``np.add.reduceat``)."""
+    q = p[nxt]
+    d, s = p - q, p + q
+    return np.add.reduceat(np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0],
+                                            d[:, 0] * s[:, 1]]), starts, axis=0)
 
 
 def plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -350,10 +360,7 @@ def _clear_fans(vertices, idx, lens):
     nxt = np.arange(len(idx)) + 1
     nxt[starts + lens - 1] = starts
     p = vertices[idx]
-    q = p[nxt]
-    d, s = p - q, p + q
-    n = np.add.reduceat(np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]]),
-                        starts, axis=0)
+    n = ragged_newell(p, nxt, starts)
     area2 = np.sqrt(dot3(n, n))
     ok = np.isfinite(area2) & (area2 > 1e-9)
     u, v = plane_bases(np.where(ok[:, None], n, 1.0))

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lod.mesh import cross3, dot3, newell_normal, plane_bases, plane_basis, solid_mesh
+from ..lod.mesh import (cross3, dot3, newell_normal, plane_bases, plane_basis, ragged_newell,
+                        solid_mesh)
 
 __all__ = ["CODES", "Issue", "check_solid", "solid_error_codes", "parts_overlap", "solid_volume"]
 
@@ -125,10 +126,7 @@ def _ring_layout(rings):
 def _ring_normals(verts, rings, layout=None):
     """Newell vector (twice the vector area) of every ring, shape (R, 3); rings of >= 1 vertex."""
     idx, nxt, starts, _ = layout or _ring_layout(rings)
-    p, q = verts[idx], verts[idx[nxt]]
-    d, s = p - q, p + q
-    terms = np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]])
-    return np.add.reduceat(terms, starts, axis=0)
+    return ragged_newell(verts[idx], nxt, starts)
 
 
 def _ring_checks(rings, i, issues):
@@ -223,10 +221,7 @@ def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_toleran
     ext = [rings_per_face[f][0] for f in faces]
     idx, nxt, starts, lens = layout or _ring_layout(ext)
     P = verts[idx]
-    Q = P[nxt]
-    d, s = P - Q, P + Q
-    nw = np.add.reduceat(np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]]),
-                         starts, axis=0)
+    nw = ragged_newell(P, nxt, starts)
     area2 = np.sqrt(dot3(nw, nw))
     ring = np.repeat(np.arange(len(faces)), lens)
     centre = np.add.reduceat(P, starts, axis=0) / lens[:, None]
