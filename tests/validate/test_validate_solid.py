@@ -180,3 +180,74 @@ def test_candidate_pairs_are_every_pair_of_meeting_boxes_once(long_boxes):
     meet = np.all((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol), axis=2)
     want = [(a, b) for a, b in zip(*np.nonzero(np.triu(meet, 1)), strict=True)]
     assert got == [(int(a), int(b)) for a, b in want] and len(got) > 0
+
+
+def _faces_checks_by_count(verts, rings_per_face, faces, planarity_tolerance):
+    """The single-ring face checks as they were, one pass per vertex count (a reference)."""
+    import shapely
+
+    from lidar2city.lod.mesh import dot3, plane_bases
+    from lidar2city.validate.solid import Issue
+
+    issues = []
+    by_len = {}
+    for f in faces:
+        by_len.setdefault(len(rings_per_face[f][0]), []).append(f)
+    for k, group in sorted(by_len.items()):
+        group = np.array(group)
+        P = verts[np.stack([rings_per_face[f][0] for f in group])]
+        bad = np.zeros(len(group), dtype=bool)
+        if k > 3:
+            c = P.mean(axis=1, keepdims=True)
+            vt = np.linalg.svd(P - c, full_matrices=False)[2]
+            dist = np.abs(dot3(P - c, vt[:, None, -1, :])).max(axis=1)
+            for f in np.flatnonzero(dist > planarity_tolerance):
+                issues.append(Issue(203, int(group[f]), f"vertex {dist[f]:.4f} m from the plane"))
+                bad[f] = True
+        Q = np.concatenate([P[:, 1:], P[:, :1]], axis=1)
+        nw = np.stack([np.sum((P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), axis=1),
+                       np.sum((P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]), axis=1),
+                       np.sum((P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]), axis=1)], axis=1)
+        for f in np.flatnonzero(~bad & (np.sqrt(dot3(nw, nw)) < 1e-10)):
+            issues.append(Issue(104, int(group[f]), "ring collapses to a line (zero area)"))
+            bad[f] = True
+        if k > 3 and (~bad).any():
+            u, v = plane_bases(nw[~bad])
+            P2 = np.stack([dot3(P[~bad], u[:, None, :]), dot3(P[~bad], v[:, None, :])], axis=-1)
+            for f in np.flatnonzero(~bad)[~shapely.is_simple(shapely.linearrings(P2))]:
+                issues.append(Issue(104, int(group[f]), "ring self-intersects"))
+    return issues
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_one_pass_face_checks_give_the_per_count_issues(seed):
+    """Faces of 3 to 9 vertices, some bent out of their plane by up to 5 cm, some folded
+    onto a line, some with two vertices swapped (a bow tie): the one-pass checks (with
+    their planarity shortcut) find the issues, in the order, of a pass per vertex count."""
+    from lidar2city.validate.solid import _simple_faces_checks
+
+    rng = np.random.default_rng(seed)
+    verts, rings = [], []
+    for _ in range(rng.integers(1, 25)):
+        k = int(rng.integers(3, 10))
+        ang = np.sort(rng.uniform(0, 2 * np.pi, k))
+        p = np.column_stack([np.cos(ang), np.sin(ang), np.zeros(k)]) * rng.uniform(0.5, 20)
+        kind = rng.integers(0, 4)
+        if kind == 1:
+            p[:, 2] += rng.uniform(-0.05, 0.05, k)   # bent: planar or not near the tolerance
+        elif kind == 2:
+            p[:, 1] = 0.0                            # folded onto a line
+        elif kind == 3 and k > 3:
+            p[[0, 2]] = p[[2, 0]]                    # a bow tie
+        axis = rng.normal(size=(3, 3))
+        rot = np.linalg.qr(axis)[0]
+        p = p @ rot.T + rng.uniform(-100, 100, 3)
+        rings.append([np.arange(len(verts) * 0 + sum(len(r[0]) for r in rings),
+                                sum(len(r[0]) for r in rings) + k)])
+        verts.append(p)
+    verts = np.vstack(verts)
+    faces = list(range(len(rings)))
+    got = []
+    _simple_faces_checks(verts, rings, faces, got, 0.01)
+    assert [str(i) for i in got] == [str(i) for i in _faces_checks_by_count(verts, rings, faces, 0.01)]

@@ -504,7 +504,7 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
     labels0 = face_labels
     face_labels = np.array(face_labels, copy=True)
     face_array = np.asarray(faces, dtype=object)
-    boundaries = shapely.boundary(face_array)
+    boundaries = None  # taken at the first saddle (most partitions have none)
     # the relabelling is a function of the labels: once a labelling comes back, the
     # rounds left repeat that cycle, and the labelling after max_rounds is known
     seen: dict = {}  # labels -> round
@@ -535,6 +535,8 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
         victim = min(mid or at, key=lambda i: faces[i].area)
         others = np.flatnonzero((np.arange(len(faces)) != victim)
                                 & (face_labels != face_labels[victim]))
+        if boundaries is None:
+            boundaries = shapely.boundary(face_array)
         shared = shapely.length(shapely.intersection(boundaries[victim], boundaries[others]))
         neigh = [(float(L), int(j)) for L, j in zip(shared, others, strict=True) if L > 0]
         if not neigh:

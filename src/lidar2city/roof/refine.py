@@ -57,13 +57,24 @@ def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
     ii, jj = ii[keep], jj[keep]
     bounds = shapely.boundary(arr)
     shared = shapely.intersection(bounds[ii], bounds[jj])
-    ok = ~shapely.is_empty(shared) & (shapely.length(shared) > 1e-9)
-    for i, j, inter in zip(ii[ok].tolist(), jj[ok].tolist(), shared[ok], strict=True):
+    length = shapely.length(shared)
+    ok = ~shapely.is_empty(shared) & (length > 1e-9)
+    ii, jj, shared, length = ii[ok], jj[ok], shared[ok], length[ok]
+    # DH: mean |h1 - h2| over points sampled along each shared edge, the samples of all
+    # edges in one call (each edge's mean over its own, as alone)
+    m = samples * np.maximum(length.astype(np.int64), 1)
+    t = (np.arange(m.sum()) - np.repeat(np.cumsum(m) - m, m) + 0.5) / np.repeat(m, m)
+    pts = shapely.get_coordinates(shapely.line_interpolate_point(np.repeat(shared, m), t,
+                                                                 normalized=True))
+    pa_all, pb_all = np.asarray(planes)[lab[ii]], np.asarray(planes)[lab[jj]]
+    ca, cb = np.repeat(pa_all, m, axis=0), np.repeat(pb_all, m, axis=0)
+    gap = np.abs((ca[:, 0] - cb[:, 0]) * pts[:, 0] + (ca[:, 1] - cb[:, 1]) * pts[:, 1]
+                 + ca[:, 2] - cb[:, 2])
+    ends = np.cumsum(m)
+    parts = _merged_parts(shared)
+    for e, (i, j, inter) in enumerate(zip(ii.tolist(), jj.tolist(), shared, strict=True)):
         pa, pb = planes[labels[i]], planes[labels[j]]
-        # DH: mean |h1 - h2| over points sampled along the shared edge
-        t = (np.arange(samples * max(int(inter.length), 1)) + 0.5) / (samples * max(int(inter.length), 1))
-        pts = shapely.get_coordinates(shapely.line_interpolate_point(inter, t, normalized=True))
-        dh = float(np.mean(np.abs((pa[0] - pb[0]) * pts[:, 0] + (pa[1] - pb[1]) * pts[:, 1] + pa[2] - pb[2])))
+        dh = float(np.mean(gap[ends[e] - m[e]:ends[e]]))
         line = _plane_line(pa, pb)
         kind = "step"
         if dh < t_step:
@@ -75,19 +86,33 @@ def edge_types(faces, labels, planes, *, t_step=0.3, max_shift=1.0, samples=10):
                 kind = "intersection"
         if kind == "intersection" and line is None:
             kind = "step"  # coplanar-parallel planes only meet as steps
-        out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter, "planes": (pa, pb)}
+        out[(i, j)] = {"type": kind, "dh": dh, "line": line, "shared": inter, "planes": (pa, pb),
+                       "parts": parts[e]}
     return out
 
 
-def _line_parts(geom):
-    """The maximal polylines of a (multi)line or collection (points dropped)."""
+def _merged_parts(shared):
+    """The maximal polylines (line-merged; points dropped) of each geometry of ``shared``
+    as coordinate arrays (k, 2), in vectorised calls over all of them."""
     import shapely
-    from shapely.geometry import MultiLineString
 
-    lines = [g for g in shapely.get_parts(geom) if g.geom_type in ("LineString", "LinearRing")]
-    if not lines:
-        return []
-    return list(shapely.get_parts(shapely.line_merge(MultiLineString([np.asarray(g.coords) for g in lines]))))
+    out = [[] for _ in range(len(shared))]
+    parts, owner = shapely.get_parts(shared, return_index=True)
+    tid = shapely.get_type_id(parts)
+    keep = (tid == 1) | (tid == 2)  # LineString, LinearRing
+    if not keep.any():
+        return out
+    parts, owner = parts[keep], owner[keep]
+    xy, which = shapely.get_coordinates(parts, return_index=True)
+    lines = shapely.linestrings(xy, indices=which)
+    has, compact = np.unique(owner, return_inverse=True)
+    merged = shapely.line_merge(shapely.multilinestrings(lines, indices=compact))
+    mparts, mowner = shapely.get_parts(merged, return_index=True)
+    xy, which = shapely.get_coordinates(mparts, return_index=True)
+    ends = np.cumsum(np.bincount(which, minlength=len(mparts)))[:-1]
+    for g, c in zip(has[mowner].tolist(), np.split(xy, ends), strict=True):
+        out[g].append(c)
+    return out
 
 
 def _remove_spikes(pts, tol=1e-6):
@@ -195,7 +220,7 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     wall_lines: dict = {}
     interior_of_intersection = set()
     for v in types.values():
-        coords_parts = [(v["type"], np.asarray(g.coords)) for g in _line_parts(v["shared"])]
+        coords_parts = [(v["type"], c) for c in v["parts"]]
         if v["type"] == "intersection":
             coords_parts = [q for _, c in coords_parts for q in _split_mixed(c, v, t_step)]
         for kind, coords in coords_parts:
@@ -207,36 +232,39 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                     interior_of_intersection.add(_key(p))
             else:
                 for a, b in ((coords[0], coords[1]), (coords[-1], coords[-2])):
-                    ln = _segment_line(a, b)
-                    if ln is not None:
-                        wall_lines.setdefault(_key(a), []).append(ln)
+                    wall_lines.setdefault(_key(a), []).append((a, b))
     # footprint outline segments are walls too
     union = shapely.union_all(faces)
     face_count: dict = {}
+    # every face's rings as given (coordinates without the closing vertex) and their keys
+    ring_data = []
     for f in faces:
+        rings_f = []
         for ring in [f.exterior, *f.interiors]:
-            for k in _ring_keys(np.asarray(ring.coords)[:-1]):
+            coords = np.asarray(ring.coords)[:-1]
+            keys = _ring_keys(coords)
+            rings_f.append((coords, keys))
+            for k in keys:
                 face_count[k] = face_count.get(k, 0) + 1
+        ring_data.append(rings_f)
     redundant = set()  # straight-outline vertices inside one face carry nothing and block moves
     for ring in shapely.get_rings(union):
         c = np.asarray(ring.coords)[:-1]
         keys = _ring_keys(c)
+        nxt = np.roll(np.arange(len(c)), -1)
+        u = c[nxt] - c
+        w = c - c[np.roll(np.arange(len(c)), 1)]
+        # a footprint corner (not collinear with its neighbours) stays fixed
+        corner = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]) > \
+            1e-6 * np.hypot(u[:, 0], u[:, 1]) * np.hypot(w[:, 0], w[:, 1])
         for k in range(len(c)):
-            for a, b in ((c[k], c[(k + 1) % len(c)]), (c[k], c[k - 1])):
-                ln = _segment_line(a, b)
-                if ln is not None:
-                    wall_lines.setdefault(keys[k], []).append(ln)
-            # a footprint corner (not collinear with its neighbours) stays fixed
-            u = c[(k + 1) % len(c)] - c[k]
-            w = c[k] - c[k - 1]
-            if abs(u[0] * w[1] - u[1] * w[0]) > 1e-6 * np.hypot(*u) * np.hypot(*w):
+            wall_lines.setdefault(keys[k], []).extend(((c[k], c[nxt[k]]), (c[k], c[k - 1])))
+            if corner[k]:
                 fixed_keys.add(keys[k])
             elif face_count.get(keys[k], 0) == 1:
                 redundant.add(keys[k])
-    from shapely.geometry import Point
-
     outline = union.boundary
-    moves = {}
+    moves, wanted = {}, []
     fixed_pts = np.array(sorted(fixed_keys), dtype=float) / _KEY if fixed_keys else None
     for k, lines in inter_lines.items():
         if k in fixed_keys:
@@ -253,7 +281,8 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                 target = _lines_point(uniq)
         if target is None:
             line = uniq[0]
-            walls = wall_lines.get(k, [])
+            walls = [ln for ln in (_segment_line(a, b) for a, b in wall_lines.get(k, []))
+                     if ln is not None]
             best, best_sin = None, 0.17
             for wl in walls:
                 s = abs(line[0][0] * wl[0][1] - line[0][1] * wl[0][0])
@@ -268,26 +297,34 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
             d = np.hypot(*(fixed_pts - target).T)
             if d.min() <= snap:
                 target = fixed_pts[d.argmin()]  # onto the footprint corner itself
-        if outline.distance(Point(p)) < 1e-6 and outline.distance(Point(target)) > 1e-6:
-            continue  # a vertex on the footprint outline slides along it, never off it
-        if np.hypot(*(target - p)) <= max_shift:
-            moves[k] = target
+        wanted.append((k, p, target))
+    if wanted:
+        # a vertex on the footprint outline slides along it, never off it (the distances
+        # to the outline of every vertex and target in two calls)
+        on_p = shapely.distance(outline, shapely.points([p for _, p, _ in wanted])) < 1e-6
+        off_t = shapely.distance(outline, shapely.points([t for _, _, t in wanted])) > 1e-6
+        for (k, p, target), a, b in zip(wanted, on_p, off_t, strict=True):
+            if not (a and b) and np.hypot(*(target - p)) <= max_shift:
+                moves[k] = target
     info["moved"] = len(moves)
 
     def rebuild(drop_interior):
         out = []
-        for f in faces:
+        for rings_f in ring_data:
             rings = []
-            for ring in [f.exterior, *f.interiors]:
-                pts = []
-                coords = np.asarray(ring.coords)[:-1]
-                for p, k in zip(coords, _ring_keys(coords), strict=True):
-                    if (drop_interior and k in interior_of_intersection) or k in redundant:
-                        continue
-                    q = moves.get(k, p)
-                    if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
-                        continue
-                    pts.append(q)
+            for coords, keys in rings_f:
+                sub = [moves.get(k, p) for p, k in zip(coords, keys, strict=True)
+                       if not ((drop_interior and k in interior_of_intersection) or k in redundant)]
+                pts = sub
+                if len(sub) > 1:
+                    step = np.diff(np.array(sub, dtype=float), axis=0)
+                    if (np.hypot(step[:, 0], step[:, 1]) < 1e-6).any():
+                        # a vertex on (or moved onto) the one before: dropped, in order
+                        pts = []
+                        for q in sub:
+                            if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
+                                continue
+                            pts.append(q)
                 if len(pts) > 1 and np.hypot(*(np.asarray(pts[0]) - pts[-1])) < 1e-6:
                     pts.pop()
                 rings.append(_remove_spikes(pts))

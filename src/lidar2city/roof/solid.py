@@ -207,6 +207,19 @@ def _insert_at(rings_per_face, inserts: dict):
     return out
 
 
+def _key_groups(key):
+    """``(order, new, group)`` of integer key rows (n, 2): their stable order by x then y,
+    whether each row in that order starts a new key, and each row's key rank (the
+    inverse of ``np.unique(key, axis=0)``)."""
+    srt = np.lexsort((key[:, 1], key[:, 0]))
+    ks = key[srt]
+    new = np.ones(len(ks), dtype=bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    group = np.empty(len(srt), dtype=np.int64)
+    group[srt] = np.cumsum(new) - 1
+    return srt, new, group
+
+
 def partition_edges(faces) -> tuple:
     """The faces' rings made conforming (:func:`conform`) and their directed edges: per ring
     vertex its face, position, next vertex, edge code p -> q, the twin's code and the face
@@ -221,8 +234,8 @@ def partition_edges(faces) -> tuple:
     start = np.repeat(np.cumsum(sizes) - sizes, sizes)
     nxt = np.arange(1, m + 1)
     nxt[np.cumsum(sizes) - 1] = start[np.cumsum(sizes) - 1]  # each ring's last vertex -> its first
-    _, kid = np.unique(np.rint(xy * _KEY).astype(np.int64), axis=0, return_inverse=True)
-    kid = kid.ravel()
+    # vertex ids by their keys' rank in (x, y) order (np.unique of the rows' inverse)
+    kid = _key_groups(np.rint(xy * _KEY).astype(np.int64))[2]
     nk = int(kid.max()) + 1
     code = kid * nk + kid[nxt]  # directed edge p -> q
     twin = kid[nxt] * nk + kid
@@ -412,12 +425,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
                        f"({z[s0:s0 + sizes[ri]].min():.2f} < {ground_z:.2f} + {min_height})")
     # vertex keys -> ids 0.. in order of first appearance; coordinates of the last one
     # (np.unique of the rows, sorted by x then y; each key's first index and group)
-    srt = np.lexsort((key_rows[:, 1], key_rows[:, 0]))
-    ks = key_rows[srt]
-    new = np.ones(len(ks), dtype=bool)
-    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
-    inverse = np.empty(len(srt), dtype=np.int64)
-    inverse[srt] = np.cumsum(new) - 1
+    srt, new, inverse = _key_groups(key_rows)
     first = np.minimum.reduceat(srt, np.flatnonzero(new))
     by_first = np.argsort(first)
     rank = np.empty(len(first), dtype=np.int64)

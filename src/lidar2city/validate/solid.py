@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lod.mesh import cross3, dot3, newell_normal, plane_bases, plane_basis, solid_mesh
+from ..lod.mesh import (cross3, dot3, newell_normal, plane_bases, plane_basis, ragged_newell,
+                        solid_mesh)
 
 __all__ = ["CODES", "Issue", "check_solid", "solid_error_codes", "parts_overlap", "solid_volume"]
 
@@ -79,14 +80,24 @@ class Issue:
 
 
 def _merge_vertices(vertices, tol):
-    key = np.round(np.asarray(vertices, dtype=np.float64) / tol).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return np.asarray(vertices, dtype=np.float64)[first], inverse.ravel()
+    """Vertices on one ``tol`` grid cell merged: ``(merged, remap)``, the merged ones in
+    the order of their cells (x, then y, then z), each the first of its cell; as
+    ``np.unique(..., axis=0)`` gives them, without its structured-row sort."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    key = np.round(vertices / tol).astype(np.int64)
+    order = np.lexsort(key.T[::-1])  # stable: the first of equal keys first
+    k = key[order]
+    new = np.ones(len(k), dtype=bool)
+    new[1:] = np.any(k[1:] != k[:-1], axis=1)
+    inverse = np.empty(len(k), dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return vertices[order[new]], inverse
 
 
-def _all_rings_clean(rings) -> bool:
-    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones."""
-    idx, nxt, starts, lens = _ring_layout(rings)
+def _all_rings_clean(rings, layout=None) -> bool:
+    """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones.
+    ``layout``: :func:`_ring_layout` of ``rings`` when already taken."""
+    idx, nxt, starts, lens = layout or _ring_layout(rings)
     if len(lens) == 0 or lens.min() < 3 or np.any(idx == idx[nxt]):
         return False
     if lens.max() == 3:
@@ -112,13 +123,10 @@ def _ring_layout(rings):
     return idx, nxt, starts, lens
 
 
-def _ring_normals(verts, rings):
+def _ring_normals(verts, rings, layout=None):
     """Newell vector (twice the vector area) of every ring, shape (R, 3); rings of >= 1 vertex."""
-    idx, nxt, starts, _ = _ring_layout(rings)
-    p, q = verts[idx], verts[idx[nxt]]
-    d, s = p - q, p + q
-    terms = np.column_stack([d[:, 1] * s[:, 2], d[:, 2] * s[:, 0], d[:, 0] * s[:, 1]])
-    return np.add.reduceat(terms, starts, axis=0)
+    idx, nxt, starts, _ = layout or _ring_layout(rings)
+    return ragged_newell(verts[idx], nxt, starts)
 
 
 def _ring_checks(rings, i, issues):
@@ -194,37 +202,62 @@ def _polygon_checks(verts, rings, i, issues, planarity_tolerance):
             issues.append(Issue(code, i, reason))
 
 
-def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance):
-    """Batched checks of single-ring faces with the same vertex count."""
+def _simple_faces_checks(verts, rings_per_face, faces, issues, planarity_tolerance, layout=None):
+    """The polygon checks of the single-ring faces ``faces``, all in one pass.
+
+    Their issues in the order a pass per vertex count gives them (fewest vertices
+    first; within a count planarity, then zero area, then self-intersection). A ring
+    whose vertices all lie within ``planarity_tolerance / (2 sqrt(k))`` of the plane
+    through their centroid normal to their Newell vector is planar without its
+    least-squares plane: that plane's largest distance is at most ``sqrt(k)`` times
+    its RMS, which is at most that plane's. Only the other rings are fitted (SVD).
+    ``layout``: :func:`_ring_layout` of the faces' rings when already taken.
+    """
     import shapely
 
-    R = np.stack([rings_per_face[i][0] for i in faces])
-    P = verts[R]                                       # (F, k, 3)
-    k = R.shape[1]
-    bad = np.zeros(len(faces), dtype=bool)
-    if k > 3:
-        c = P.mean(axis=1, keepdims=True)
-        _, _, vt = np.linalg.svd(P - c, full_matrices=False)
-        dist = np.abs(dot3(P - c, vt[:, None, -1, :])).max(axis=1)
-        for f in np.flatnonzero(dist > planarity_tolerance):
-            issues.append(Issue(203, int(faces[f]), f"vertex {dist[f]:.4f} m from the plane"))
-            bad[f] = True
-    Q = np.concatenate([P[:, 1:], P[:, :1]], axis=1)  # np.roll(P, -1, axis=1) without its overhead
-    nw = np.stack([np.sum((P[..., 1] - Q[..., 1]) * (P[..., 2] + Q[..., 2]), axis=1),
-                   np.sum((P[..., 2] - Q[..., 2]) * (P[..., 0] + Q[..., 0]), axis=1),
-                   np.sum((P[..., 0] - Q[..., 0]) * (P[..., 1] + Q[..., 1]), axis=1)], axis=1)
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return
+    ext = [rings_per_face[f][0] for f in faces]
+    idx, nxt, starts, lens = layout or _ring_layout(ext)
+    P = verts[idx]
+    nw = ragged_newell(P, nxt, starts)
     area2 = np.sqrt(dot3(nw, nw))
+    ring = np.repeat(np.arange(len(faces)), lens)
+    centre = np.add.reduceat(P, starts, axis=0) / lens[:, None]
+    unit = nw / np.where(area2 > 0, area2, 1.0)[:, None]
+    off = np.abs(dot3(P - centre[ring], unit[ring]))
+    planar = (lens <= 3) | ((area2 > 0) & (np.maximum.reduceat(off, starts) * np.sqrt(lens)
+                                           <= 0.5 * planarity_tolerance))
+    found = []  # (vertex count, stage, face, issue)
+    bad = np.zeros(len(faces), dtype=bool)
+    for k in np.unique(lens[~planar]):
+        sel = np.flatnonzero(~planar & (lens == k))
+        R = np.stack([ext[f] for f in sel])
+        Pk = verts[R]
+        c = Pk.mean(axis=1, keepdims=True)
+        vt = np.linalg.svd(Pk - c, full_matrices=False)[2]
+        dist = np.abs(dot3(Pk - c, vt[:, None, -1, :])).max(axis=1)
+        for f in np.flatnonzero(dist > planarity_tolerance):
+            found.append((k, 0, int(faces[sel[f]]),
+                          Issue(203, int(faces[sel[f]]), f"vertex {dist[f]:.4f} m from the plane")))
+            bad[sel[f]] = True
     for f in np.flatnonzero(~bad & (area2 < 1e-10)):
-        issues.append(Issue(104, int(faces[f]), "ring collapses to a line (zero area)"))
+        found.append((lens[f], 1, int(faces[f]),
+                      Issue(104, int(faces[f]), "ring collapses to a line (zero area)")))
         bad[f] = True
-    if k > 3:
-        ok = ~bad
-        if ok.any():
-            u, v = plane_bases(nw[ok])
-            P2 = np.stack([dot3(P[ok], u[:, None, :]), dot3(P[ok], v[:, None, :])], axis=-1)
-            simple = shapely.is_simple(shapely.linearrings(P2))
-            for f in np.flatnonzero(ok)[~simple]:
-                issues.append(Issue(104, int(faces[f]), "ring self-intersects"))
+    test = np.flatnonzero(~bad & (lens > 3))
+    if len(test):
+        u, v = plane_bases(nw[test])
+        take = np.isin(ring, test)
+        at = np.searchsorted(test, ring[take])
+        Pt = P[take]
+        P2 = np.column_stack([dot3(Pt, u[at]), dot3(Pt, v[at])])
+        simple = shapely.is_simple(shapely.linearrings(P2, indices=at))
+        for f in test[~simple]:
+            found.append((lens[f], 2, int(faces[f]),
+                          Issue(104, int(faces[f]), "ring self-intersects")))
+    issues.extend(item[3] for item in sorted(found, key=lambda item: item[:3]))
 
 
 def solid_volume(vertices, surfaces) -> float:
@@ -246,10 +279,19 @@ def solid_volume(vertices, surfaces) -> float:
     return float(np.sum(dot3(first, area))) / 3.0
 
 
-def _edge_checks(rings_per_face, issues):
-    """Closedness, manifoldness, orientation consistency, connectivity. True if all pass."""
-    flat = [r for rings in rings_per_face for r in rings]
-    a, nxt, _, lens = _ring_layout(flat)
+def _volume(verts, rings_per_face, layout):
+    """:func:`solid_volume` of clean rings (each of >= 3 vertices) whose
+    :func:`_ring_layout` is ``layout``: the same sums."""
+    nr = np.array([len(rings) for rings in rings_per_face])
+    area = np.add.reduceat(_ring_normals(verts, None, layout), np.cumsum(nr) - nr, axis=0) / 2.0
+    first = verts[layout[0][layout[2][np.cumsum(nr) - nr]]]
+    return float(np.sum(dot3(first, area))) / 3.0
+
+
+def _edge_checks(rings_per_face, issues, layout=None):
+    """Closedness, manifoldness, orientation consistency, connectivity. True if all pass.
+    ``layout``: :func:`_ring_layout` of all rings of all faces when already taken."""
+    a, nxt, _, lens = layout or _ring_layout([r for rings in rings_per_face for r in rings])
     b = a[nxt]
     fc = np.repeat(np.repeat(np.arange(len(rings_per_face)),
                              [len(rings) for rings in rings_per_face]), lens)
@@ -350,12 +392,18 @@ def _candidate_pairs(lo, hi, tol):
     i = np.repeat(np.arange(len(order)), cnt)
     j = np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
     i, j = order[i], order[j]
-    keep = np.all((lo[i] <= hi[j] + tol) & (lo[j] <= hi[i] + tol), axis=1)
-    return i[keep], j[keep]
+    # the sweep already has them overlapping along x (j starts after i, before i's end):
+    # the other axes one at a time, each on the pairs still in
+    for axis in range(1, lo.shape[1]):
+        lo_a, hi_a = lo[:, axis], hi[:, axis]
+        keep = (lo_a[i] <= hi_a[j] + tol) & (lo_a[j] <= hi_a[i] + tol)
+        i, j = i[keep], j[keep]
+    return i, j
 
 
-def _self_intersections(verts, rings_per_face, tol, mesh):
-    """Face pairs whose triangles cross, or coplanar faces that overlap."""
+def _self_intersections(verts, rings_per_face, tol, mesh, outer_layout=None):
+    """Face pairs whose triangles cross, or coplanar faces that overlap.
+    ``outer_layout``: :func:`_ring_layout` of the faces' outer rings when already taken."""
     import shapely
 
     tris, face = mesh
@@ -366,9 +414,13 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     i, j = _candidate_pairs(lo, hi, tol)
     keep = face[i] != face[j]
-    shared = (tris[i][:, :, None] == tris[j][:, None, :]).any(axis=(1, 2))
-    keep &= ~shared
     i, j = i[keep], j[keep]
+    ti, tj = tris[i], tris[j]
+    shared = np.zeros(len(i), dtype=bool)
+    for a in range(3):
+        for b in range(3):
+            shared |= ti[:, a] == tj[:, b]
+    i, j = i[~shared], j[~shared]
     hits = np.zeros(len(i), dtype=bool)
     eps = 1e-9 * max(1.0, float(np.abs(verts).max()))
     chunk = 32_768  # triangle pairs at a time: a few MB of temporaries
@@ -376,6 +428,7 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
         ii, jj = i[s:s + chunk], j[s:s + chunk]
         ti, tj = corners[ii], corners[jj]
         h = np.zeros(len(ii), dtype=bool)
+        tests = []  # (pair, segment start, segment end, triangle, its normal and length)
         for (A, B, kb) in ((ti, tj, jj), (tj, ti, ii)):
             nb, nlb = tri_n[kb], tri_nl[kb]
             # an edge of A crosses B only when A has corners on both sides of B's plane
@@ -384,21 +437,22 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
             hi_d = np.maximum(np.maximum(d[0], d[1]), d[2])
             lo_d = np.minimum(np.minimum(d[0], d[1]), d[2])
             sel = np.flatnonzero((hi_d > eps) & (lo_d < -eps) & (nlb > 0))
-            if len(sel) == 0:
-                continue
-            As, Bs, ns = A[sel], B[sel], (nb[sel], nlb[sel])
-            for e in range(3):
-                h[sel] |= _segments_cross_triangles(As[:, e], As[:, (e + 1) % 3], Bs[:, 0],
-                                                    Bs[:, 1], Bs[:, 2], eps, ns)
+            for e in range(3) if len(sel) else ():
+                tests.append((sel, A[sel, e], A[sel, (e + 1) % 3], B[sel], nb[sel], nlb[sel]))
+        if tests:
+            # every edge of both triangles of every pair left in one row-wise test
+            sel, p, q, b, nb, nlb = (np.concatenate(c) for c in zip(*tests, strict=True))
+            h[sel[_segments_cross_triangles(p, q, b[:, 0], b[:, 1], b[:, 2], eps, (nb, nlb))]] = True
         hits[s:s + chunk] = h
     found = {(int(min(face[a], face[b])), int(max(face[a], face[b])))
              for a, b in zip(i[hits], j[hits], strict=True)}
     # coplanar faces overlapping (crossing tests miss them)
     outer = [rings[0] for rings in rings_per_face]
-    nw = _ring_normals(verts, outer)
+    layout = outer_layout or _ring_layout(outer)
+    nw = _ring_normals(verts, outer, layout)
     nn = np.sqrt(dot3(nw, nw))
     normals = nw / np.where(nn > 0, nn, 1.0)[:, None]
-    idx, _, starts, lens = _ring_layout(outer)
+    idx, _, starts, lens = layout
     centre = np.add.reduceat(verts[idx], starts, axis=0) / lens[:, None]
     offsets = dot3(centre, normals)
     # only faces whose boxes meet can overlap (every pair of faces would be quadratic)
@@ -409,19 +463,39 @@ def _self_intersections(verts, rings_per_face, tol, mesh):
     fi, fj = fi[pair_order], fj[pair_order]
     dot = np.einsum("ij,ij->i", normals[fi], normals[fj])
     cop = (np.abs(dot) > 1 - 1e-9) & (np.abs(offsets[fi] - np.sign(dot) * offsets[fj]) < tol)
-    for a, b in zip(fi[cop], fj[cop], strict=True):
-        u, v = plane_basis(normals[a])
-        polys = []
-        for f in (a, b):
-            rr = [np.column_stack([verts[r] @ u, verts[r] @ v]) for r in rings_per_face[f]]
-            polys.append(shapely.Polygon(rr[0], rr[1:]))
+    fi, fj = fi[cop], fj[cop]
+    if len(fi):
+        # both faces of each pair in the plane basis of its first: all pairs in one pass
+        u, v = plane_bases(normals[fi])
         try:
-            inter = shapely.intersection(polys[0], polys[1]).area
-        except Exception:  # invalid polygons were reported at the polygon level
-            inter = 0.0
-        if inter > tol * tol:
-            found.add((int(a), int(b)))
+            inter = shapely.area(shapely.intersection(
+                *[_planar_polygons(verts, rings_per_face, f, u, v) for f in (fi, fj)]))
+        except Exception:  # invalid polygons were reported at the polygon level: one by one
+            inter = np.zeros(len(fi))
+            for k in range(len(fi)):
+                one = slice(k, k + 1)
+                try:
+                    inter[k] = shapely.area(shapely.intersection(*[_planar_polygons(
+                        verts, rings_per_face, f[one], u[one], v[one]) for f in (fi, fj)]))[0]
+                except Exception:
+                    pass
+        found.update((int(a), int(b)) for a, b in zip(fi[inter > tol * tol], fj[inter > tol * tol],
+                                                     strict=True))
     return sorted(found)
+
+
+def _planar_polygons(verts, rings_per_face, faces, u, v):
+    """Shapely polygons of ``faces`` (F,) in the plane bases ``u, v`` (F, 3), one each."""
+    import shapely
+
+    rings = [r for f in faces for r in rings_per_face[f]]
+    n_rings = np.array([len(rings_per_face[f]) for f in faces])
+    idx, _, _, lens = _ring_layout(rings)
+    owner = np.repeat(np.repeat(np.arange(len(faces)), n_rings), lens)
+    p = verts[idx]
+    xy = np.column_stack([dot3(p, u[owner]), dot3(p, v[owner])])
+    ring_polys = shapely.linearrings(xy, indices=np.repeat(np.arange(len(rings)), lens))
+    return shapely.polygons(ring_polys, indices=np.repeat(np.arange(len(faces)), n_rings))
 
 
 def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: float = 0.001,
@@ -476,34 +550,44 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
                 issues.append(Issue(901, i, "vertex index out of range"))
     if issues:
         return issues
-    faces = [[remap[r] for r in rings] for rings in raw]
-    if _all_rings_clean([r for rings in faces for r in rings]):
+    n_rings = [len(rings) for rings in raw]
+    flat_rings = np.split(remap[flat], np.cumsum([len(r) for rings in raw for r in rings])[:-1])
+    ends = np.cumsum(n_rings).tolist()
+    faces = [flat_rings[i:j] for i, j in zip([0, *ends[:-1]], ends, strict=True)]
+    layout = _ring_layout(flat_rings)
+    if _all_rings_clean(flat_rings, layout):
         rings_per_face = faces
     else:
+        layout = None
         rings_per_face = [_ring_checks(rings, i, issues) for i, rings in enumerate(faces)]
     if issues:
         return issues
-    simple: dict[int, list] = {}
+    simple = []
     for i, rings in enumerate(rings_per_face):
         if len(rings) == 1:
-            simple.setdefault(len(rings[0]), []).append(i)
+            simple.append(i)
         else:
             _polygon_checks(verts, rings, i, issues, planarity_tolerance)
-    for _, faces in sorted(simple.items()):
-        _simple_faces_checks(verts, rings_per_face, np.array(faces), issues, planarity_tolerance)
+    # every face one ring (the common case): their layout is the solid's
+    _simple_faces_checks(verts, rings_per_face, simple, issues, planarity_tolerance,
+                         layout if len(simple) == len(flat_rings) else None)
     if issues or not shell:
         return issues
     if len(rings_per_face) < 4:
         return [Issue(301, None, f"{len(rings_per_face)} polygons")]
-    if not _edge_checks(rings_per_face, issues):
+    if not _edge_checks(rings_per_face, issues, layout):
         return issues
     tris, face = solid_mesh(solid)
-    inter = _self_intersections(verts, rings_per_face, overlap_tolerance, (remap[tris], face))
+    # one ring per face (the common case): the outer rings are all the rings
+    single = layout is not None and len(flat_rings) == len(rings_per_face)
+    inter = _self_intersections(verts, rings_per_face, overlap_tolerance, (remap[tris], face),
+                                layout if single else None)
     if inter:
         pairs = ", ".join(f"{a}-{b}" for a, b in inter[:5])
         issues.append(Issue(306, inter[0][0], f"{len(inter)} intersecting face pair(s): {pairs}"))
         return issues
-    vol = solid_volume(verts, rings_per_face)
+    vol = _volume(verts, rings_per_face, layout) if layout is not None \
+        else solid_volume(verts, rings_per_face)
     if vol <= 0:
         issues.append(Issue(307, None, f"all faces point inward (volume {vol:.3f} m3)"))
     return issues
