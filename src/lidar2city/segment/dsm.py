@@ -767,20 +767,18 @@ def _climb_to_markers(markers, z, mask, *, eps):
 def _join_parts(parts, heights, step, min_pixels):
     """Touching parts whose ridge heights differ by less than ``step`` joined, then small
     parts into the neighbour sharing the most edges; labels stay those of the parts kept."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     n = len(heights)
-    root = np.arange(n)
-
-    def find(a):
-        while root[a] != a:
-            root[a] = root[root[a]]
-            a = root[a]
-        return a
-
     pairs, _ = _part_pairs(parts)
-    for a, b in pairs:
-        if abs(heights[a] - heights[b]) < step:
-            root[find(b)] = find(a)
-    parts = np.array([find(a) for a in range(n)])[parts]
+    level = pairs[np.abs(heights[pairs[:, 0]] - heights[pairs[:, 1]]) < step]
+    graph = coo_matrix((np.ones(len(level)), (level[:, 0], level[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    # each joined group keeps the label of its first part
+    first = np.full(n, n)
+    np.minimum.at(first, comp, np.arange(n))
+    parts = first[comp][parts]
     for _ in range(n):
         sizes = np.bincount(parts.ravel(), minlength=n)
         small = [a for a in np.nonzero((sizes > 0) & (sizes < min_pixels))[0] if a > 0]
