@@ -674,6 +674,20 @@ def split_at_ridge_steps(labels, dsm, *, cell, step=0.5, radius=1.5, tolerance=0
         Pixel size (m).
     step : float
         Smallest ridge break (m) that splits; 0: no split.
+    radius : float
+        Window (m) within which a ridge pixel is (nearly) the highest.
+    tolerance : float
+        Height (m) within which pixels count as the highest, and as level along a ridge.
+    min_length : float
+        Shortest ridge piece (m, as pixels x cell) that marks a part.
+    min_pixels : int
+        Smallest part kept on its own.
+
+    Notes
+    -----
+    A piece runs on along every pixel connected to it at its level; on a
+    sloped face that is the face's contour at that height, so a flat dormer
+    top takes the face below its level as its own part.
 
     Returns
     -------
@@ -689,8 +703,6 @@ def split_at_ridge_steps(labels, dsm, *, cell, step=0.5, radius=1.5, tolerance=0
     >>> split_at_ridge_steps(np.ones(z.shape, int), z, cell=0.5, step=0.5)[1]
     2
     """
-    from skimage.segmentation import watershed
-
     labels = np.asarray(labels)
     dsm = _check_grid(dsm, "dsm")
     cell = _check_cell(cell)
