@@ -72,7 +72,7 @@ def score(pred, ref, hull, tree):
     am = area_metrics(clipped, ref)
     mo = match_objects(clipped, ref, min_iou=0.5)
     al = axis_alignment(touching, tolerance_deg=3.0)
-    return (f"quality {am['quality']:.3f} (completeness {am['completeness']:.3f}, correctness "
+    return (f"quality {am['quality']:.4f} (completeness {am['completeness']:.3f}, correctness "
             f"{am['correctness']:.3f}), matched IoU>=0.5 {mo['matched']}/{len(ref)}, aligned "
             f"{100 * al['aligned_share']:.1f} % ({len(touching)} predictions touching a reference)")
 

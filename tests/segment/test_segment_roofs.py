@@ -345,3 +345,59 @@ def test_roof_regions_two_sheds_joined_by_a_wall_are_two_regions():
     labels, n = roof_regions(nd + 1.0, nd, **kw)
     assert n == 2 and labels[10, 10] != labels[10, 40] and labels[10, 10] > 0
     assert roof_regions(nd + 1.0, nd, neck_width=0.0, **kw)[1] == 1
+
+
+def test_plane_test_keeps_roofs_between_steps_not_free_standing_strips():
+    # a 1 m wide flat garden wall on open ground: every 1.5 m slope window straddles its
+    # sides, so the slope test fails; its top lies on one plane, but it touches no other
+    # region, so the plane test does not keep it (the strip between two roofs is kept)
+    nd, strip, _ = _low_strip_between_roofs()
+    wall = np.zeros(nd.shape, bool)
+    wall[36:38, 4:40] = True
+    nd = nd.copy()
+    nd[36:, :] = 0.0
+    nd[wall] = 2.5
+    kw = dict(cell=0.5, edge_inset=0.0, saddle_depth=0.0, expand=0.0, edge_fraction=0.0,
+              merge_area=0.0)
+    on, _ = roof_regions(nd + 1.0, nd, **kw)
+    off, _ = roof_regions(nd + 1.0, nd, plane_contact=0.0, **kw)
+    assert (off[wall] > 0).all() and (on[wall] > 0).mean() == 0.0
+    assert (on[strip] > 0).all() and len(np.unique(on[strip])) == 1
+    with pytest.raises(InputError):
+        roof_regions(nd + 1.0, nd, plane_contact=1.5, **kw)
+
+
+def _gable_row(ridges, *, width=16, depth=30, cell=0.5):
+    """Row houses along x on a 0.5 m grid: eaves level, each gable rising to its own ridge."""
+    y = np.abs(np.arange(depth) - (depth - 1) / 2.0) * cell    # distance from the ridge line
+    nd = np.zeros((depth + 8, width * len(ridges) + 8))
+    for k, top in enumerate(ridges):
+        eave = 3.0
+        rise = (top - eave) / (y.max())
+        face = top - rise * y
+        nd[4:4 + depth, 4 + k * width:4 + (k + 1) * width] = face[:, None]
+    return nd
+
+
+def test_split_at_ridge_steps_splits_a_row_at_a_ridge_break_only():
+    from lidar2city.segment.dsm import split_at_ridge_steps
+
+    nd = _gable_row([8.0, 9.0, 9.0])      # eaves level: the growing joins the three houses
+    lab = (nd > 2.0).astype(np.int32)
+    out, n = split_at_ridge_steps(lab, nd + 1.0, cell=0.5, step=0.5)
+    assert n == 2 and ((out > 0) == (lab > 0)).all()
+    first = out[4:34, 4:20]
+    rest = out[4:34, 20:52]
+    assert len(np.unique(first)) == 1 and len(np.unique(rest)) == 1
+    assert first[0, 0] != rest[0, 0]
+    level, n_level = split_at_ridge_steps((_gable_row([8.0, 8.1, 8.0]) > 2).astype(int),
+                                          _gable_row([8.0, 8.1, 8.0]), cell=0.5, step=0.5)
+    assert n_level == 1
+    assert split_at_ridge_steps(lab, nd, cell=0.5, step=0.0)[1] == 1
+    with pytest.raises(InputError):
+        split_at_ridge_steps(lab, nd, cell=0.5, step=-1.0)
+    # in roof_regions: the growing joins the row at its level eaves, the ridge step splits it
+    kw = dict(cell=0.5, edge_inset=0.0, saddle_depth=0.0, expand=0.0, edge_fraction=0.0,
+              merge_area=0.0)
+    assert roof_regions(nd + 1.0, nd, ridge_step=0.0, **kw)[1] == 1
+    assert roof_regions(nd + 1.0, nd, **kw)[1] == 2

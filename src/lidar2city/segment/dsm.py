@@ -46,6 +46,7 @@ __all__ = [
     "trim_to_edges",
     "split_at_saddles",
     "split_at_necks",
+    "split_at_ridge_steps",
     "label_buildings",
     "grid_points",
 ]
@@ -553,6 +554,15 @@ class RoofRegionsConfig:
     plane_tolerance: float = field(0.2, "distance (m) from the region's plane within which a "
                                         "pixel counts as on it (the spread of a highest-point "
                                         "DSM on a roof face)")
+    plane_contact: float = field(0.5, "the plane test (min_plane_share) keeps only regions "
+                                      "with at least this share of the pixels around them in "
+                                      "other regions: a roof between steps, whose slope "
+                                      "windows straddle them; a free-standing region with no "
+                                      "planar window is a hedge or a crown; 0: any region")
+    ridge_step: float = field(0.5, "a region whose ridges break by at least this much (m) is "
+                                   "split where its faces drain from each ridge piece (row "
+                                   "houses of two heights whose eaves meet level, "
+                                   ":func:`split_at_ridge_steps`); 0: off")
     neck_width: float = field(2.0, "a region made of parts of at least min_area joined only "
                                    "through necks narrower than this (m) is split into those "
                                    "parts (two sheds joined by a fence, a wing reached through "
@@ -622,6 +632,178 @@ def split_at_saddles(labels, ndsm, *, depth=1.0, min_pixels=1):
             out[sl][parts == j] = nxt
             nxt += 1
     return out, nxt - 1
+
+
+def _part_pairs(parts):
+    """Unique 4-neighbour pairs (a, b), a < b, of different non-zero labels, with counts."""
+    pairs = []
+    for a, b in ((parts[:, :-1], parts[:, 1:]), (parts[:-1, :], parts[1:, :])):
+        ok = (a > 0) & (b > 0) & (a != b)
+        pairs.append(np.sort(np.column_stack([a[ok], b[ok]]), axis=1))
+    pairs = np.concatenate(pairs)
+    if len(pairs) == 0:
+        return pairs, np.zeros(0, int)
+    return np.unique(pairs, axis=0, return_counts=True)
+
+
+def split_at_ridge_steps(labels, dsm, *, cell, step=0.5, radius=1.5, tolerance=0.25,
+                         min_length=5.0, min_pixels=1):
+    """Split regions whose ridges break by at least ``step`` metres (row houses of two heights).
+
+    Region growing joins two row houses whose ridges differ by less than a
+    wall's step where their eaves or faces meet level. Inside each region the
+    ridge pixels are those within ``tolerance`` of the highest DSM height
+    within ``radius`` metres in the region; they form ridge pieces where
+    4-neighbours differ by at most ``tolerance`` (a ridge that steps up
+    breaks into two pieces). Pieces at least ``min_length`` metres long
+    (pixels x cell), run on along their own level, mark the parts: each pixel
+    joins the piece it reaches with the least climb (the rises along a path
+    of 4-neighbours; descending is free: a face goes to the ridge it drains
+    from, not over a wall's step to the other), then parts
+    whose ridges differ by less than ``step`` and that touch are joined again
+    (one block where the DSM shows no step), and parts smaller than
+    ``min_pixels`` join the neighbour they share most edges with.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        0 background, 1..n regions.
+    dsm : ndarray, shape (H, W)
+        Heights (m), NaN for nodata.
+    cell : float
+        Pixel size (m).
+    step : float
+        Smallest ridge break (m) that splits; 0: no split.
+    radius : float
+        Window (m) within which a ridge pixel is (nearly) the highest.
+    tolerance : float
+        Height (m) within which pixels count as the highest, and as level along a ridge.
+    min_length : float
+        Shortest ridge piece (m, as pixels x cell) that marks a part.
+    min_pixels : int
+        Smallest part kept on its own.
+
+    Notes
+    -----
+    A piece runs on along every pixel connected to it at its level; on a
+    sloped face that is the face's contour at that height, so a flat dormer
+    top takes the face below its level as its own part.
+
+    Returns
+    -------
+    labels : ndarray of int32, shape (H, W)
+        Relabelled 1..m (m >= n) in the order of the input regions.
+    m : int
+
+    Examples
+    --------
+    >>> y, x = np.mgrid[0:16, 0:40] * 0.5
+    >>> z = 10.0 - np.abs(y - 3.75)            # a gable along x ...
+    >>> z[:, 20:] += 1.0                       # ... whose second half is 1 m higher
+    >>> split_at_ridge_steps(np.ones(z.shape, int), z, cell=0.5, step=0.5)[1]
+    2
+    """
+    labels = np.asarray(labels)
+    dsm = _check_grid(dsm, "dsm")
+    cell = _check_cell(cell)
+    if labels.shape != dsm.shape:
+        raise InputError(f"labels {labels.shape} and DSM {dsm.shape} differ in shape")
+    if not step >= 0 or not radius > 0 or not tolerance > 0 or not min_length >= 0:
+        raise InputError("step and min_length must be >= 0 m, radius and tolerance > 0 m")
+    disk = _disk(radius / cell)
+    if disk is None:
+        disk = np.ones((3, 3), bool)
+    min_ridge = max(1, int(np.ceil(min_length / cell)))
+    out = np.zeros(labels.shape, dtype=np.int32)
+    nxt = 1
+    for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        m = (labels[sl] == i) & np.isfinite(dsm[sl])
+        parts = (labels[sl] == i).astype(np.int32)
+        if step > 0 and m.sum() >= 2 * max(1, int(min_pixels)):
+            z = np.where(m, dsm[sl], -np.inf)
+            ridge = m & (z >= ndimage.maximum_filter(z, footprint=disk) - tolerance)
+            pieces = _smooth_components(np.where(ridge, z, np.nan), ridge, tolerance)
+            pieces = np.where(ridge, pieces + 1, 0)
+            ids, counts = np.unique(pieces[ridge], return_counts=True)
+            big = ids[counts >= min_ridge]
+            if len(big) > 1:
+                heights = np.array([np.median(z[pieces == b]) for b in big])
+                if np.ptp(heights) >= step:
+                    # each piece runs on along its ridge's level (to the wall of a step,
+                    # which the window of `radius` stopped short of)
+                    markers = np.zeros(m.shape, np.int32)
+                    for k, (b, hk) in enumerate(zip(big, heights, strict=True), start=1):
+                        level, _ = ndimage.label(m & (np.abs(z - hk) <= tolerance))
+                        on = np.unique(level[pieces == b])
+                        markers[(markers == 0) & np.isin(level, on[on > 0])] = k
+                    ws = _climb_to_markers(markers, np.where(m, z, 0.0), m, eps=1e-3 * cell)
+                    ws = _join_parts(ws, np.concatenate([[0.0], heights]), step,
+                                     max(1, int(min_pixels)))
+                    parts = np.where(labels[sl] == i, np.maximum(ws, 1), 0)
+        for j in np.unique(parts[parts > 0]):
+            out[sl][parts == j] = nxt
+            nxt += 1
+    return out, nxt - 1
+
+
+def _climb_to_markers(markers, z, mask, *, eps):
+    """Each ``mask`` pixel joins the marker it reaches with the least climb: the sum of the
+    rises between 4-neighbours along the path (descending is free) plus ``eps`` a step, so
+    that faces go to the ridge they drain from, not over a wall's step to another."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    h, w = mask.shape
+    idx = np.arange(h * w).reshape(h, w)
+    rows, cols, wts = [], [], []
+    for a, b, za, zb, ma, mb in ((idx[:, :-1], idx[:, 1:], z[:, :-1], z[:, 1:], mask[:, :-1],
+                                  mask[:, 1:]),
+                                 (idx[:-1, :], idx[1:, :], z[:-1, :], z[1:, :], mask[:-1, :],
+                                  mask[1:, :])):
+        ok = ma & mb
+        rise = zb[ok] - za[ok]
+        rows += [a[ok], b[ok]]
+        cols += [b[ok], a[ok]]
+        wts += [np.maximum(rise, 0.0) + eps, np.maximum(-rise, 0.0) + eps]
+    graph = coo_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(h * w, h * w)).tocsr()
+    src = np.nonzero(markers.ravel() > 0)[0]
+    _, _, origin = dijkstra(graph, directed=True, indices=src, min_only=True,
+                            return_predecessors=True)
+    out = np.where(origin >= 0, markers.ravel()[np.maximum(origin, 0)], 0).reshape(h, w)
+    return np.where(mask, out, 0).astype(np.int32)
+
+
+def _join_parts(parts, heights, step, min_pixels):
+    """Touching parts whose ridge heights differ by less than ``step`` joined, then small
+    parts into the neighbour sharing the most edges; labels stay those of the parts kept."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(heights)
+    pairs, _ = _part_pairs(parts)
+    level = pairs[np.abs(heights[pairs[:, 0]] - heights[pairs[:, 1]]) < step]
+    graph = coo_matrix((np.ones(len(level)), (level[:, 0], level[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    # each joined group keeps the label of its first part
+    first = np.full(n, n)
+    np.minimum.at(first, comp, np.arange(n))
+    parts = first[comp][parts]
+    for _ in range(n):
+        sizes = np.bincount(parts.ravel(), minlength=n)
+        small = [a for a in np.nonzero((sizes > 0) & (sizes < min_pixels))[0] if a > 0]
+        if not small or len(np.unique(parts[parts > 0])) < 2:
+            break
+        pairs, counts = _part_pairs(parts)
+        a = small[0]
+        sel = (pairs == a).any(axis=1)
+        if not sel.any():
+            break
+        other = pairs[sel][np.argmax(counts[sel])]
+        parts[parts == a] = other[other != a][0]
+    return parts
 
 
 def split_at_necks(labels, *, cell, width=2.0, min_pixels=1):
@@ -855,6 +1037,19 @@ def plane_share(heights, rows, cols, *, cell, tolerance=0.2, iterations=3, keep_
     return float(np.mean(res <= tolerance))
 
 
+def _contact_share(lab):
+    """Per label: the share of the 4-neighbour pixels around the region in other regions."""
+    n = int(lab.max()) + 1
+    ring = np.zeros(n)
+    other = np.zeros(n)
+    for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:, 1:], lab[:, :-1]),
+                 (lab[:-1, :], lab[1:, :]), (lab[1:, :], lab[:-1, :])):
+        edge = (a > 0) & (a != b)
+        ring += np.bincount(a[edge], minlength=n)
+        other += np.bincount(a[edge & (b > 0)], minlength=n)
+    return other / np.maximum(ring, 1)
+
+
 def _on_one_plane(lab, dsm, todo, *, cell, tolerance, min_share):
     """Per label: True where a ``todo`` region has ``min_share`` of its pixels on one plane."""
     out = np.zeros(len(todo), dtype=bool)
@@ -872,7 +1067,7 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
                  saddle_depth=1.0, edge_fraction=0.2, edge_inset=0.5, min_pixels=8,
                  expand_roughness=0.2, merge_area=5.0, min_planar_share=0.4,
                  planar_spread=0.4, min_plane_share=0.5, plane_tolerance=0.2,
-                 neck_width=2.0):
+                 plane_contact=0.5, ridge_step=0.5, neck_width=2.0):
     """Building regions as smooth elevated surfaces grown on the DSM.
 
     The region growing of :func:`dtm_from_dsm` applied to the elevated pixels
@@ -903,7 +1098,10 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     rasters of 1 m or finer) -- unless at least ``min_plane_share`` of its
     pixels lie within ``plane_tolerance`` metres of one plane fitted to it
     (:func:`plane_share`): a small flat roof, or a roof under a little
-    canopy, holds too few windows wholly on its face for the slope test.
+    canopy, holds too few windows wholly on its face for the slope test --
+    and at least ``plane_contact`` of the pixels around it belong to other
+    regions (a roof between steps; a free-standing blob that fails the slope
+    test is a hedge or a crown even when its heights lie near one plane).
 
     Parameters
     ----------
@@ -942,6 +1140,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     if not 0 <= min_planar_share <= 1 or not planar_spread > 0:
         raise InputError(f"min_planar_share must be in [0, 1] and planar_spread > 0, got "
                          f"{min_planar_share} and {planar_spread}")
+    if not 0 <= plane_contact <= 1:
+        raise InputError(f"plane_contact must be in [0, 1], got {plane_contact}")
     if not 0 <= min_plane_share <= 1 or not plane_tolerance > 0:
         raise InputError(f"min_plane_share must be in [0, 1] and plane_tolerance > 0, got "
                          f"{min_plane_share} and {plane_tolerance}")
@@ -986,6 +1186,8 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
     if saddle_depth > 0:
         lab, _ = split_at_saddles(lab, ndsm, depth=saddle_depth,
                                   min_pixels=min_px)
+    if ridge_step > 0:
+        lab, _ = split_at_ridge_steps(lab, dsm, cell=cell, step=ridge_step, min_pixels=min_px)
     if edge_fraction > 0:
         lab = trim_to_edges(lab, ndsm, fraction=edge_fraction)
     # fill small holes region by region (courtyards stay)
@@ -1014,7 +1216,11 @@ def roof_regions(dsm, ndsm, *, cell, vegetation=None, min_height=2.0, max_step=0
         if min_plane_share > 0:
             # a small flat roof, or one under a little canopy, has too few 1.5 m windows
             # wholly on it for the slope test; it still lies on one plane, a crown does not
-            keep |= _on_one_plane(lab, dsm, ~keep, cell=cell, tolerance=plane_tolerance,
+            todo = ~keep
+            if plane_contact > 0:
+                # between steps, not free-standing: the pixels around it in other regions
+                todo &= _contact_share(lab) >= plane_contact
+            keep |= _on_one_plane(lab, dsm, todo, cell=cell, tolerance=plane_tolerance,
                                   min_share=min_plane_share)
         keep[0] = False
         lab = np.where(keep[lab], lab, 0)
