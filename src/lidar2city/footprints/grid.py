@@ -105,7 +105,9 @@ def point_spacing(xy, *, cell: float | None = None, distinct: int | None = None)
         return _spacing_on(xy, float(cell), len(xy))
     n = len(xy)
     if distinct is None:
-        distinct = len(np.unique(xy, axis=0))
+        from ..classify.features import distinct_positions
+
+        distinct = len(distinct_positions(xy))
     if n - distinct > 0.01 * n:  # first/last pulse pairs: one position, two records
         n = distinct
     cell = 2.0
