@@ -18,9 +18,11 @@ building points unless given):
    the Delft AHN3 tile the traced outlines lie about 0.2-0.3 m outside the BGT
    walls, while on synthetic scans without overhang they are unbiased to 0.03 m,
    so the default is 0: the outline the LiDAR sees);
-5. Douglas–Peucker with ``simplify = cell``, vertices refitted to the lines
-   through the traced outline (:func:`..trace.simplify_polygon`);
-6. a regulariser from :data:`..regularizers.REGULARIZERS`.
+5. a regulariser from :data:`..regularizers.REGULARIZERS`, with the
+   Douglas–Peucker tolerance ``simplify = cell``: ``none`` (and the fallback of
+   the others) keeps the simplified outline, vertices refitted to the lines
+   through the traced outline (:func:`..trace.simplify_polygon`); the snake
+   simplifies on its own.
 
 Row houses of one height sharing walls form one block: points alone do not show
 party walls where the roof does not step. The per-area quality does not depend
