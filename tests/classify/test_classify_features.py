@@ -127,3 +127,26 @@ def test_surface_noise_follows_the_height_noise_and_not_the_order():
     assert surface_noise(pts[rng.permutation(len(pts))], 8, max_points=10_000) == pytest.approx(
         surface_noise(pts, 8, max_points=10_000), rel=1e-9)
     assert surface_noise(pts[:5], 8) == 0.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(-3, 3), st.integers(-3, 3)), max_size=60),
+       st.sampled_from([0.5, -0.25, 1e7]))
+def test_distinct_positions_are_numpys_unique_rows(cells, scale):
+    from lidar2city.classify.features import distinct_positions
+
+    xy = np.array(cells, dtype=np.float64).reshape(-1, 2) * scale
+    xyz = np.column_stack([xy, np.arange(len(xy), dtype=np.float64)])
+    got = distinct_positions(xyz)
+    assert got.shape == (len(np.unique(xy, axis=0)), 2)
+    assert np.array_equal(got, np.unique(xy, axis=0).reshape(-1, 2))
+
+
+def test_scan_line_gap_on_distinct_positions_is_unchanged():
+    from lidar2city.classify.features import distinct_positions, scan_line_gap
+
+    x, y = np.meshgrid(np.arange(0, 40, 0.125), np.arange(0, 40, 1.0))
+    xy = np.column_stack([x.ravel(), y.ravel()])
+    xy = np.vstack([xy, xy[::3]])  # pulse pairs
+    s = point_spacing(xy)
+    assert scan_line_gap(distinct_positions(xy), s, distinct=True) == scan_line_gap(xy, s)

@@ -181,7 +181,7 @@ def test_config_fields_are_the_function_keywords():
 
     names = {f.name for f in dataclasses.fields(FootprintsConfig)}
     kw = {p.name for p in inspect.signature(extract_footprints).parameters.values()
-          if p.kind is p.KEYWORD_ONLY} - {"callback"}
+          if p.kind is p.KEYWORD_ONLY} - {"callback", "within"}
     assert names == kw
     import typing
 
@@ -449,3 +449,49 @@ def test_scan_lines_8_to_1_trace_one_footprint_per_building():
     for f in fps:
         truth = max(houses, key=lambda h: h.intersection(f.polygon).area)
         assert f.polygon.intersection(truth).area / f.polygon.union(truth).area > 0.85
+
+
+def test_within_a_box_gives_the_footprints_centred_there_unchanged():
+    """A block keeps the footprints centred in its cell: those come out as without
+    ``within`` (same polygons and attributes), regions far outside are not regularised."""
+    houses = [shapely.box(x, y, x + 12, y + 9) for x in (5, 35, 65, 95) for y in (5, 40)]
+    houses.append(shapely.Polygon([(50, 25), (75, 25), (75, 33), (58, 33), (58, 38), (50, 38)]))
+    xyz, cls = scan(houses, extent=(0.0, 0.0, 120.0, 60.0), seed=3)
+    every = extract_footprints(xyz, cls, regularize="snake")
+    box = (40.0, 0.0, 70.0, 60.0)
+
+    def centred(f):
+        x0, y0, x1, y1 = f.polygon.bounds
+        return box[0] <= (x0 + x1) / 2 < box[2] and box[1] <= (y0 + y1) / 2 < box[3]
+
+    some = extract_footprints(xyz, cls, regularize="snake", within=box)
+    want = [f for f in every if centred(f)]
+    got = [f for f in some if centred(f)]
+    assert len(want) == 3 and len(every) == 9
+    assert len(some) < len(every)  # the houses far outside were left out
+    assert [shapely.to_wkb(f.polygon) for f in got] == [shapely.to_wkb(f.polygon) for f in want]
+    assert [f.attributes for f in got] == [f.attributes for f in want]
+
+
+def test_regularised_outline_stays_within_its_reach():
+    from lidar2city.footprints.extract import grid_lengths, regularised_reach
+
+    xyz, cls = scan([affinity.rotate(L_SHAPE, 17, origin=(25, 25))], seed=5)
+    traced = extract_footprints(xyz, cls, regularize="none", simplify=0.0)[0].polygon
+    for f in extract_footprints(xyz, cls, regularize="snake"):
+        reach = regularised_reach(grid_lengths(point_spacing(xyz[cls == 6, :2])), window=3)
+        assert traced.buffer(reach / 4).contains(f.polygon)
+
+
+def test_none_regulariser_simplifies_with_the_tolerance_only_when_asked():
+    xyz, cls = scan([L_SHAPE], seed=7)
+    traced = extract_footprints(xyz, cls, regularize="none", simplify=0.0)[0].polygon
+    poly, _ = REGULARIZERS["none"](traced, tolerance=0.45)
+    assert shapely.equals_exact(poly, simplify_polygon(traced, 0.45), 0.0)
+    assert REGULARIZERS["none"](traced)[0] is traced
+
+
+def test_point_spacing_with_the_distinct_count_given():
+    xy = _jittered(1.0)
+    pairs = np.vstack([xy, xy[:700]])
+    assert point_spacing(pairs, distinct=len(xy)) == point_spacing(pairs)

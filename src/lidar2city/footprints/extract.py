@@ -18,9 +18,11 @@ building points unless given):
    the Delft AHN3 tile the traced outlines lie about 0.2-0.3 m outside the BGT
    walls, while on synthetic scans without overhang they are unbiased to 0.03 m,
    so the default is 0: the outline the LiDAR sees);
-5. Douglas–Peucker with ``simplify = cell``, vertices refitted to the lines
-   through the traced outline (:func:`..trace.simplify_polygon`);
-6. a regulariser from :data:`..regularizers.REGULARIZERS`.
+5. a regulariser from :data:`..regularizers.REGULARIZERS`, with the
+   Douglas–Peucker tolerance ``simplify = cell``: ``none`` (and the fallback of
+   the others) keeps the simplified outline, vertices refitted to the lines
+   through the traced outline (:func:`..trace.simplify_polygon`); the snake
+   simplifies on its own.
 
 Row houses of one height sharing walls form one block: points alone do not show
 party walls where the roof does not step. The per-area quality does not depend
@@ -37,17 +39,18 @@ from typing import Literal
 
 import numpy as np
 
-from ..classify.features import scan_line_gap
+from ..classify.features import distinct_positions, scan_line_gap
 from ..config import field as cfield
 from ..errors import AlgorithmError, ConfigError, EmptyInputError, InputError
 from .grid import (Grid, building_fraction, building_regions, cell_heights, point_spacing,
                    split_at_steps)
 from .regularizers import REGULARIZERS, vertex_count
-from .trace import simplify_polygon, trace_regions
+from .trace import trace_regions
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FootprintsConfig", "Footprint", "extract_footprints", "grid_lengths"]
+__all__ = ["FootprintsConfig", "Footprint", "extract_footprints", "grid_lengths",
+           "regularised_reach"]
 
 
 @dataclass(frozen=True)
@@ -146,7 +149,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        split_min_area: float = 10.0, edge_offset: float = 0.0,
                        simplify: float | None = None, regularize: str = "none",
                        snake_cell: float | None = None, snake_window: int = 3,
-                       snake_threshold: float | None = None, callback=None) -> list[Footprint]:
+                       snake_threshold: float | None = None, within=None,
+                       callback=None) -> list[Footprint]:
     """Building footprints (one polygon per building block, with courtyards) from classified points.
 
     Parameters
@@ -180,6 +184,12 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         default ``2 * snake_window * snake_cell``: moving both ends of an edge by
         at most the window, the snake can straighten an edge whose smaller
         extent is up to that, not more.
+    within : (xmin, ymin, xmax, ymax), optional
+        Local box: only the footprints whose bounding box may have its centre
+        in it are wanted (a block keeps those centred in its cell). The
+        regions whose traced outline, grown by :func:`regularised_reach`, stays
+        clear of the box are left out before they are regularised; the others
+        come out as without it (the caller picks the centred ones).
     callback : callable, optional
         Called as ``callback(done, total)`` after each building.
 
@@ -222,10 +232,13 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     bxy, oxy = xy[is_b], xy[~is_b]
     if len(bxy) < 3:
         raise EmptyInputError(f"no building points (class {building_class}) in the input")
-    spacing = point_spacing(bxy)
+    # the distinct positions, found once: the spacing counts them, the scan-line test
+    # looks at them (a first/last-pulse survey stores a one-echo pulse twice)
+    positions = distinct_positions(bxy)
+    spacing = point_spacing(bxy, distinct=len(positions))
     # scan lines far closer along than across: the grid must bridge the gap between
     # lines, or every line over a roof is a footprint of its own (8:1 at 8 pts/m2)
-    gap = scan_line_gap(bxy, spacing)
+    gap = scan_line_gap(positions, spacing, distinct=True)
     if gap is not None:
         logger.info("building points in scan lines %.2f m apart: spacing %.3f m taken as %.3f m",
                     gap, spacing, max(spacing, 0.75 * gap))
@@ -256,6 +269,9 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     region_of = np.zeros(int(labels.max()) + 1, dtype=np.int64)
     region_of[labels[labels > 0]] = regions[labels > 0]
     traced = trace_regions(fld, labels, grid, min_hole_area=min_hole_area)
+    if within is not None:
+        traced = _near(traced, region_of, within,
+                       regularised_reach(L, window=snake_window) + abs(edge_offset))
     bi, bj = grid.index(bxy)
     point_counts = np.bincount(labels[bi, bj], minlength=int(labels.max()) + 1)
 
@@ -268,15 +284,14 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         parts = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,
                        min_area)
         for part in parts:
-            simple = simplify_polygon(part, L["simplify"])
+            # each regulariser simplifies the outline if it uses the simplified one
             try:
-                reg, info = regularizer(part, simplified=simple, cell=L["snake_cell"],
-                                        window=snake_window, tolerance=L["simplify"],
-                                        t_adjust=threshold)
+                reg, info = regularizer(part, cell=L["snake_cell"], window=snake_window,
+                                        tolerance=L["simplify"], t_adjust=threshold)
                 if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
                     raise AlgorithmError("the regulariser returned no valid polygon")
             except AlgorithmError as exc:
-                reg, info = REGULARIZERS["none"](part, simplified=simple)
+                reg, info = REGULARIZERS["none"](part, tolerance=L["simplify"])
                 info.update(status="unregularised", reason=str(exc))
             if info["status"] != "ok":
                 logger.info("footprint %d kept unregularised: %s", len(out), info["reason"])
@@ -295,6 +310,38 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         if callback is not None:
             callback(n_done, len(traced))
     return _disjoint(out, regs, min_area)
+
+
+def regularised_reach(lengths: dict, *, window: int) -> float:
+    """How far (m) a regularised outline may lie outside its traced outline, with margin.
+
+    The snake moves each vertex of the Douglas-Peucker outline (traced vertices)
+    to a grid position at most ``window + 1`` cells of ``snake_cell`` away on each
+    axis, and its refit moves it at most ``window + 1`` cells more: under
+    ``(sqrt(2) + 1) (window + 1) snake_cell``, taken as ``4 (window + 1) snake_cell``;
+    a fallback's simplified outline moves a vertex at most ``3 simplify``. The
+    reach is twice their sum plus one grid ``cell``, lengths from
+    :func:`grid_lengths`.
+    """
+    snake = 4.0 * (window + 1) * lengths["snake_cell"]
+    return 2.0 * (snake + 3.0 * lengths["simplify"] + lengths["cell"])
+
+
+def _near(traced, region_of, box, reach):
+    """The ``(label, polygon)`` of ``traced`` whose connected region's outlines, grown by
+    ``reach``, meet ``box``: the others cannot give a footprint centred in it (the
+    parts of a region are kept together: each loses what its larger parts cover)."""
+    import shapely
+
+    if not traced:
+        return traced
+    bounds = shapely.bounds(np.array([poly for _, poly in traced], dtype=object))
+    reg = region_of[np.array([label for label, _ in traced])]
+    x0, y0, x1, y1 = box
+    meets = ((bounds[:, 0] - reach <= x1) & (bounds[:, 2] + reach >= x0)
+             & (bounds[:, 1] - reach <= y1) & (bounds[:, 3] + reach >= y0))
+    keep = np.isin(reg, reg[meets])
+    return [t for t, k in zip(traced, keep, strict=True) if k]
 
 
 def _disjoint(footprints, regions, min_area):

@@ -63,7 +63,7 @@ class Grid:
         return out.reshape(self.shape)
 
 
-def point_spacing(xy, *, cell: float | None = None) -> float:
+def point_spacing(xy, *, cell: float | None = None, distinct: int | None = None) -> float:
     """Mean point spacing (m) over the occupied area: ``sqrt(occupied area / N)``.
 
     The area is the number of ``cell``-sized squares holding at least one point
@@ -81,6 +81,9 @@ def point_spacing(xy, *, cell: float | None = None) -> float:
         1.4 m on 2 m squares), and ``N`` counts distinct positions when more
         than 1 % of the points repeat one (a first/last-pulse survey stores a
         one-echo pulse twice at the same x, y).
+    distinct : int, optional
+        How many distinct positions ``xy`` holds, when the caller has them
+        (they are counted otherwise).
 
     Raises
     ------
@@ -101,7 +104,10 @@ def point_spacing(xy, *, cell: float | None = None) -> float:
             raise InputError(f"cell must be > 0, got {cell}")
         return _spacing_on(xy, float(cell), len(xy))
     n = len(xy)
-    distinct = len(np.unique(xy, axis=0))
+    if distinct is None:
+        from ..classify.features import distinct_positions
+
+        distinct = len(distinct_positions(xy))
     if n - distinct > 0.01 * n:  # first/last pulse pairs: one position, two records
         n = distinct
     cell = 2.0

@@ -1,8 +1,10 @@
 """Footprint outline regularisers: a name -> function dict (``REGULARIZERS``).
 
-Every regulariser is called as ``f(traced, simplified=..., cell=..., window=...,
-tolerance=...)`` with the traced outline (a polygon, local metres) and its
-Douglas–Peucker simplification, and returns ``(polygon, info)``. ``info``
+Every regulariser is called as ``f(traced, cell=..., window=..., tolerance=...)``
+with the traced outline (a polygon, local metres) and the Douglas–Peucker
+tolerance (m) of its simplification (``simplified=`` may give the simplified
+outline instead; a regulariser that does not use it never makes it), and
+returns ``(polygon, info)``. ``info``
 holds ``direction`` (degrees, the building's dominant direction modulo 90),
 ``n_vertices``, ``reductions`` (dict of the snake's type "I".."IV" operation
 counts; zeros when no snake ran), ``mean_deviation`` (m, mean distance from the
@@ -15,6 +17,8 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+
+from .trace import simplify_polygon
 
 logger = logging.getLogger(__name__)
 
@@ -77,8 +81,14 @@ def _plain_info(poly, traced, **extra) -> dict:
     }
 
 
-def regularize_none(traced, *, simplified=None, **_ignored):
-    """No regularisation: the simplified outline (or ``traced``) with its descriptive ``info``."""
+def regularize_none(traced, *, simplified=None, tolerance: float | None = None, **_ignored):
+    """No regularisation: the simplified outline with its descriptive ``info``.
+
+    ``simplified`` when given, else ``traced`` simplified with ``tolerance``
+    (:func:`..trace.simplify_polygon`), else ``traced``.
+    """
+    if simplified is None and tolerance is not None:
+        simplified = simplify_polygon(traced, tolerance)
     poly = simplified if simplified is not None else traced
     return poly, _plain_info(poly, traced)
 
@@ -98,7 +108,8 @@ def regularize_snake(traced, *, cell: float, window: int, tolerance: float | Non
     outline, which simplifies it with ``tolerance`` and measures the deviation
     energy against it; ``kwargs`` are its keywords (``t_adjust``...). When the
     snake falls back (no valid result) the status is "unregularised" and the
-    simplified outline is kept.
+    simplified outline is kept (``simplified``, else made from ``traced`` with
+    ``tolerance`` then).
 
     References
     ----------
@@ -111,7 +122,8 @@ def regularize_snake(traced, *, cell: float, window: int, tolerance: float | Non
     out, raw = regularize_polygon(traced, cell=cell, window=window, **kwargs)
     raw = dict(raw)
     if raw.get("status") != "regularized" or out is None:
-        fallback, info = regularize_none(traced, simplified=simplified)
+        # the simplified outline is made here only: the snake simplifies on its own
+        fallback, info = regularize_none(traced, simplified=simplified, tolerance=tolerance)
         info["status"] = "unregularised"
         info["reason"] = str(raw.get("reason", "the snake fell back"))
         info["reductions"] = dict(raw.get("reductions", info["reductions"]))

@@ -235,13 +235,15 @@ def point_roles(cloud, config, *, classified=None, ground_filter: bool = False):
     return np.isin(cls, config.building_classes), np.isin(cls, config.ground_classes), cls
 
 
-def footprints_from_points(cloud, classes, *, config=None):
+def footprints_from_points(cloud, classes, *, config=None, within=None):
     """Footprints traced from the building points and regularised by the 2-D snake.
 
     What ``reconstruct`` uses when no footprint file is given: one footprint per
     building block (:func:`lidar2city.footprints.extract_footprints`), ids
     ``b1``, ``b2``... in a deterministic order. ``config`` (a run file's
     ``[footprints]`` section) replaces the default, which is the snake regulariser.
+    ``within`` (a local box): only the footprints that may be centred in it are
+    wanted (others may be left out; see ``extract_footprints``).
 
     Raises
     ------
@@ -255,7 +257,7 @@ def footprints_from_points(cloud, classes, *, config=None):
     from ..footprints import extract_footprints
 
     cfg = config if config is not None else stage_config("footprints", None, regularize="snake")
-    found = extract_footprints(cloud.xyz, classes, **dataclasses.asdict(cfg))
+    found = extract_footprints(cloud.xyz, classes, within=within, **dataclasses.asdict(cfg))
     if not found:
         raise EmptyInputError("no building footprint found in the points")
     keys = ("area", "direction", "n_vertices", "mean_deviation")

@@ -458,7 +458,8 @@ def _traced_footprints(spec, options, cloud, classes):
     from .reconstruct import _subset, footprints_from_points
 
     try:
-        fps = footprints_from_points(cloud, classes, config=options.footprints_config)
+        fps = footprints_from_points(cloud, classes, config=options.footprints_config,
+                                     within=_cell_box(spec, options.block_size))
     except EmptyInputError:
         return None
     bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
@@ -477,6 +478,19 @@ def _traced_footprints(spec, options, cloud, classes):
                     len(small), cfg.min_points)
         idx = [i for i in idx if i not in small]
     return _subset(fps, idx) if idx else None
+
+
+def _cell_box(spec, block_size: float) -> tuple:
+    """The local box of the spec's cell of the ``block_size`` grid: the buildings
+    traced there are those centred in it, and the regions far outside it are not
+    regularised (the box read around a cell is mostly other cells', which trace
+    their own buildings)."""
+    frame = spec.frame
+    step = block_size / frame.xy_unit
+    o = np.asarray(frame.origin[:2], dtype=np.float64)
+    cell = np.asarray(spec.cell, dtype=np.float64)
+    return tuple(float(v) for v in np.concatenate([(cell * step - o) * frame.xy_unit,
+                                                   ((cell + 1) * step - o) * frame.xy_unit]))
 
 
 def _block_traced(spec, options, cloud, classes):
@@ -912,7 +926,8 @@ def _trace_block(spec, config, block_size):
     building = cloud.xyz[cls == config.building_class, :2]
     if not len(building):
         return out
-    found = extract_footprints(cloud.xyz, cls, **dataclasses.asdict(config))
+    found = extract_footprints(cloud.xyz, cls, within=_cell_box(spec, block_size),
+                               **dataclasses.asdict(config))
     if not found:
         return out
     out.spacing = float(point_spacing(building))
