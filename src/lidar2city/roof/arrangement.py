@@ -634,7 +634,11 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     if not edges:
         return out
     e = np.array(edges, dtype=np.int64)
-    if reduction_work(np.full(len(xy), (2 * window + 1) ** 2), e) > max_work:
+    d = (2 * window + 1) ** 2
+    # a graph of paths and cycles (no vertex of degree 3) reduces by I-III alone, no table
+    # over more than three vertices: its work is at most len(xy) d^3 without simulating it
+    simple = np.bincount(e.ravel(), minlength=len(xy)).max() <= 2 and len(xy) * d ** 3 <= max_work
+    if not simple and reduction_work(np.full(len(xy), d), e) > max_work:
         return out
     new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
                                  window=window, direction=direction,
@@ -825,6 +829,13 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                 segs.append(np.vstack([foot + lo * u, foot + hi * u]))
                 kinds.append("intersection")
                 continue
+        # its split-and-merge pieces, made below only where the snake gives none (with
+        # ``step_snake`` they are the fallback, and the snake fits its chains itself)
+        steps.append((len(segs), c, closed))
+        segs.append(None)
+        kinds.append("step")
+
+    def pieces(c, closed):
         poly = _step_polyline(c, tol=step_tol * cell, direction=direction, snap_angle=snap_angle,
                               closed=closed)
         if poly is None or (closed and len(poly) < 4):
@@ -832,9 +843,9 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             poly = _dp(c, cell)
             if closed and len(poly) < 4:
                 poly = c
-        steps.append((len(segs), c, closed))
-        segs.append(poly if closed else _extend(poly, ext))
-        kinds.append("step")
+        return poly if closed else _extend(poly, ext)
+
+    snaked = [None] * len(steps)
     if step_snake and steps:
         try:
             snaked = snake_steps([c for _, c, _ in steps], [cl for _, _, cl in steps], cell=cell,
@@ -844,9 +855,11 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             # the step chains keep their split-and-merge pieces
             logger.debug("step snake skipped (%s)", exc)
             snaked = [None] * len(steps)
-        for (i, _, cl), poly in zip(steps, snaked, strict=True):
-            if poly is not None:
-                segs[i] = poly if cl else _extend(poly, ext)
+    for (i, c, cl), poly in zip(steps, snaked, strict=True):
+        if poly is not None:
+            segs[i] = poly if cl else _extend(poly, ext)
+        elif segs[i] is None:
+            segs[i] = pieces(c, cl)
     return segs, kinds
 
 

@@ -220,44 +220,46 @@ def boundary_chains(grid: LabelGrid):
     e1 = nbr_edge[starts[two]]
     e2 = nbr_edge[starts[two] + 1]
     junction[two[pair_key[e1] != pair_key[e2]]] = True
-    used = np.zeros(len(u), dtype=bool)
-    chains, chain_pairs = [], []
+    # the walk in Python lists (numpy scalars made per step cost more than the walk)
+    used = [False] * len(u)
+    ul, vl, jl = u.tolist(), v.tolist(), junction.tolist()
+    sl, nl = starts.tolist(), nbr_edge.tolist()
+    chains, chain_edges = [], []
 
     def walk(node, edge):
         path = [node]
         while True:
             used[edge] = True
-            nxt = v[edge] if u[edge] == node else u[edge]
+            nxt = vl[edge] if ul[edge] == node else ul[edge]
             path.append(nxt)
-            if junction[nxt]:
+            if jl[nxt]:
                 return path
-            s = starts[nxt]
-            cand = nbr_edge[s:s + 2]
-            edge_next = cand[0] if cand[0] != edge else cand[1]
+            s = sl[nxt]
+            edge_next = nl[s] if nl[s] != edge else nl[s + 1]
             if used[edge_next]:
                 return path
             node, edge = nxt, edge_next
 
-    for node in np.flatnonzero(junction & (deg > 0)):
-        for k in range(starts[node], starts[node + 1]):
-            e = nbr_edge[k]
+    for node in np.flatnonzero(junction & (deg > 0)).tolist():
+        for k in range(sl[node], sl[node + 1]):
+            e = nl[k]
             if used[e]:
                 continue
-            path = walk(node, e)
-            chains.append(np.array(path))
-            chain_pairs.append(tuple(pairs[e]))
+            chains.append(walk(node, e))
+            chain_edges.append(e)
     # closed loops without junctions
-    for e in np.flatnonzero(~used):
+    for e in range(len(ul)):
         if used[e]:
             continue
-        path = walk(u[e], e)
-        chains.append(np.array(path))
-        chain_pairs.append(tuple(pairs[e]))
-    out = []
-    for path in chains:
-        r, c = np.divmod(path, W)
-        out.append(np.column_stack([grid.x0 + c * grid.cell, grid.y0 + r * grid.cell]))
-    return out, [tuple(int(x) for x in p) for p in chain_pairs]
+        chains.append(walk(ul[e], e))
+        chain_edges.append(e)
+    if not chains:
+        return [], []
+    # every chain's corners to metres in one pass
+    r, c = np.divmod(np.array([x for path in chains for x in path], dtype=np.int64), W)
+    xy = np.column_stack([grid.x0 + c * grid.cell, grid.y0 + r * grid.cell])
+    out = np.split(xy, np.cumsum([len(path) for path in chains])[:-1])
+    return out, [tuple(p) for p in pairs[np.array(chain_edges, dtype=np.int64)].tolist()]
 
 
 @dataclass(eq=False)
