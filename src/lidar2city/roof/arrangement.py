@@ -916,6 +916,10 @@ def _cell_points(cells, xyz):
     return ip, ic, np.bincount(ic, minlength=len(cells)).astype(float)
 
 
+#: (cell, point) pairs tested together by :func:`_point_cells`
+_PAIR_BATCH = 1 << 17
+
+
 def _point_cells(cells, xy):
     """``(points, cells)``: the points of ``xy`` (n, 2) in a cell and the cell of each, in
     point order; a point on a shared edge counts once, in its first cell as an STRtree
@@ -935,13 +939,24 @@ def _point_cells(cells, xy):
     lo, hi = np.searchsorted(xs, box[:, 0], side="left"), np.searchsorted(xs, box[:, 2], side="right")
     cell_of = np.full(len(xy), -1, dtype=np.int64)
     hits = np.zeros(len(xy), dtype=np.int64)
-    for j in range(len(arr)):
-        cand = order[lo[j]:hi[j]]
+    # the (cell, point) pairs of the cells' x ranges, a batch of cells at a time (bounded
+    # memory), tested in one call each: a point in one cell only gets that cell, the
+    # others are settled by the tree's query below
+    span = hi - lo
+    j0 = 0
+    while j0 < len(arr):
+        j1 = j0 + 1 + int(np.searchsorted(np.cumsum(span[j0 + 1:]), _PAIR_BATCH - span[j0], side="right"))
+        js = np.repeat(np.arange(j0, j1), span[j0:j1])
+        first = np.cumsum(span[j0:j1]) - span[j0:j1]
+        cand = order[lo[js] + np.arange(len(js)) - np.repeat(first, span[j0:j1])]
         y = xy[cand, 1]
-        cand = cand[(y >= box[j, 1]) & (y <= box[j, 3])]
-        cand = cand[shapely.intersects_xy(arr[j], xy[cand, 0], xy[cand, 1])]
-        cell_of[cand] = j
-        hits[cand] += 1
+        inbox = (y >= box[js, 1]) & (y <= box[js, 3])
+        js, cand = js[inbox], cand[inbox]
+        inside = shapely.intersects_xy(arr[js], xy[cand, 0], xy[cand, 1])
+        js, cand = js[inside], cand[inside]
+        cell_of[cand] = js
+        hits += np.bincount(cand, minlength=len(xy))
+        j0 = j1
     multi = np.flatnonzero(hits > 1)
     if len(multi):
         ip, ic = shapely.STRtree(arr).query(shapely.points(xy[multi]), predicate="intersects")
