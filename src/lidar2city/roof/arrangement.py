@@ -1108,16 +1108,29 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
     segments : list of ndarray (m, 2)
     kinds : list of str
     """
-    from scipy.spatial import cKDTree
-
     planes = np.asarray(planes, dtype=np.float64)
     cap = 1.5 * t_step if cap is None else cap
     grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
     chains, pairs = boundary_chains(grid)
     return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
                           max_shift=max_shift, snap_angle=snap_angle,
-                          points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
+                          points=(xyz, labels, _LazyTree(xyz[:, :2])), cap=cap,
                           step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
+
+
+class _LazyTree:
+    """A ``cKDTree`` of points (n, 2) built at its first query: most roofs never ask
+    (:func:`_line_explains` runs only on chains near their planes' line)."""
+
+    def __init__(self, xy):
+        self.xy, self.tree = xy, None
+
+    def query_ball_point(self, *args, **kwargs):
+        if self.tree is None:
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(self.xy)
+        return self.tree.query_ball_point(*args, **kwargs)
 
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
