@@ -185,39 +185,13 @@ def test_screened_merge_is_the_fitted_merge(seed, n, tol):
 
 def _boundary_chains_numpy(grid):
     """boundary_chains' walk as it was, on numpy scalars (the same chains)."""
-    from lidar2city.roof.topology import boundary_chains
+    from lidar2city.roof.topology import _boundary_graph
 
-    L = grid.labels
-    h, w = L.shape
-    pad = np.full((h + 2, w + 2), -1, dtype=np.int64)
-    pad[1:-1, 1:-1] = L
-    segs, pairs = [], []
-    a, b = pad[:, :-1], pad[:, 1:]
-    ii, jj = np.nonzero(a != b)
-    segs.append(np.column_stack([ii - 1, jj, ii, jj]))
-    pairs.append(np.sort(np.column_stack([a[ii, jj], b[ii, jj]]), axis=1))
-    a, b = pad[:-1, :], pad[1:, :]
-    ii, jj = np.nonzero(a != b)
-    segs.append(np.column_stack([ii, jj - 1, ii, jj]))
-    pairs.append(np.sort(np.column_stack([a[ii, jj], b[ii, jj]]), axis=1))
-    segs, pairs = np.concatenate(segs), np.concatenate(pairs)
-    keep = ~((pairs[:, 0] == -1) & (pairs[:, 1] == -1))
-    segs, pairs = segs[keep], pairs[keep]
-    if not len(segs):
-        return boundary_chains(grid)
-    W = w + 1
-    u, v = segs[:, 0] * W + segs[:, 1], segs[:, 2] * W + segs[:, 3]
-    n_nodes = (h + 1) * W
-    deg = np.bincount(u, minlength=n_nodes) + np.bincount(v, minlength=n_nodes)
-    order_u = np.concatenate([u, v])
-    eid = np.concatenate([np.arange(len(u)), np.arange(len(u))])
-    srt = np.argsort(order_u, kind="stable")
-    starts = np.searchsorted(order_u[srt], np.arange(n_nodes + 1))
-    nbr_edge = eid[srt]
-    pair_key = pairs[:, 0] * 1_000_003 + pairs[:, 1]
-    junction = deg != 2
-    two = np.flatnonzero(deg == 2)
-    junction[two[pair_key[nbr_edge[starts[two]]] != pair_key[nbr_edge[starts[two] + 1]]]] = True
+    graph = _boundary_graph(grid)
+    if graph is None:
+        return [], []
+    u, v, pairs, deg, starts, nbr_edge, junction = graph
+    W = grid.labels.shape[1] + 1
     used = np.zeros(len(u), dtype=bool)
     chains, chain_pairs = [], []
 

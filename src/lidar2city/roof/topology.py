@@ -166,17 +166,11 @@ def _merge_small_regions(grid, inside, min_cells):
     return grid
 
 
-def boundary_chains(grid: LabelGrid):
-    """Chains of cell edges between different labels, split at junctions.
-
-    Returns
-    -------
-    chains : list of ndarray, shape (m, 2)
-        Polyline vertices (grid corner coordinates, metres); closed loops start
-        and end at the same vertex.
-    pairs : list of (int, int)
-        The two labels on either side of each chain (-1 for outside), sorted.
-    """
+def _boundary_graph(grid: LabelGrid):
+    """The unit cell edges between different labels as a graph on the grid's corners:
+    ``(u, v, pairs, deg, starts, nbr_edge, junction)`` (edge ends as corner indices, the
+    sorted label pair of each edge, corner degrees, each corner's edges as
+    ``nbr_edge[starts[c]:starts[c + 1]]``, junction corners), or None without such edges."""
     L = grid.labels
     h, w = L.shape
     pad = np.full((h + 2, w + 2), -1, dtype=np.int64)
@@ -201,7 +195,7 @@ def boundary_chains(grid: LabelGrid):
     keep = ~((pairs[:, 0] == -1) & (pairs[:, 1] == -1))
     segs, pairs = segs[keep], pairs[keep]
     if not len(segs):
-        return [], []
+        return None
     W = w + 1
     u = segs[:, 0] * W + segs[:, 1]
     v = segs[:, 2] * W + segs[:, 3]
@@ -220,6 +214,25 @@ def boundary_chains(grid: LabelGrid):
     e1 = nbr_edge[starts[two]]
     e2 = nbr_edge[starts[two] + 1]
     junction[two[pair_key[e1] != pair_key[e2]]] = True
+    return u, v, pairs, deg, starts, nbr_edge, junction
+
+
+def boundary_chains(grid: LabelGrid):
+    """Chains of cell edges between different labels, split at junctions.
+
+    Returns
+    -------
+    chains : list of ndarray, shape (m, 2)
+        Polyline vertices (grid corner coordinates, metres); closed loops start
+        and end at the same vertex.
+    pairs : list of (int, int)
+        The two labels on either side of each chain (-1 for outside), sorted.
+    """
+    graph = _boundary_graph(grid)
+    if graph is None:
+        return [], []
+    u, v, pairs, deg, starts, nbr_edge, junction = graph
+    W = grid.labels.shape[1] + 1
     # the walk in Python lists (numpy scalars made per step cost more than the walk)
     used = [False] * len(u)
     ul, vl, jl = u.tolist(), v.tolist(), junction.tolist()
