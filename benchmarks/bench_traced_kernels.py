@@ -4,8 +4,11 @@ the LoD1.2 / 1.3 RMSE's point-to-prism distances, the arrangement's cell labels,
 collapse and the LoD1.3 height parts.
 
 Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC] [--all]
+[--footprints] [--only NAME,...]
 (default data $LIDAR2CITY_DATA or ../shared/data, N = 5; SRC the ``src`` folder whose
-lidar2city is measured, default this checkout's: pass another checkout's to compare)
+lidar2city is measured, default this checkout's: pass another checkout's to compare;
+``--footprints``: the run with the tile's BGT footprints instead of traced ones;
+``--only``: just the named kernels, e.g. ``segment_planes,roof_lines,arrangement_partition``)
 
 Runs ``reconstruct`` of the Delft tile without footprints (LoD 1.2 + 1.3 + 2.2) once in
 this process, records the arguments of every call of
@@ -36,6 +39,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--src", default=str(ROOT / "src"))
     ap.add_argument("--all", action="store_true", help="also the LoD2.2 and LoD1.3 kernels")
+    ap.add_argument("--footprints", action="store_true", help="the run with the BGT footprints")
+    ap.add_argument("--only", default="", help="comma-separated kernel names (implies --all)")
     args = ap.parse_args()
     sys.path.insert(0, args.src)
     data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
@@ -51,9 +56,11 @@ def main():
 
     # name -> the module whose attribute the run calls it by
     where = {"prism_distance": lod1, "_cell_labels": arr}
-    if args.all:
-        where.update(segment_planes=bld, roof_lines=bld, refine_partition=bld,
-                     collapse_short_edges=bld, height_parts=lod1)
+    if args.all or args.only:
+        where.update(segment_planes=bld, roof_lines=bld, arrangement_partition=bld,
+                     refine_partition=bld, collapse_short_edges=bld, height_parts=lod1)
+    if args.only:
+        where = {name: where[name] for name in args.only.split(",")}
     calls = {name: [] for name in where}
     kernels = {name: getattr(mod, name) for name, mod in where.items()}
 
@@ -75,14 +82,17 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "traced.city.json"
         try:
-            cli.main(["reconstruct", str(laz), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
+            fp = ["--footprints", str(data / "delft" / "footprints_bgt.gpkg")] if args.footprints else []
+            cli.main(["reconstruct", str(laz), *fp, "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
                       "-o", str(out)], standalone_mode=False)
         finally:
             for name, mod in where.items():
                 setattr(mod, name, kernels[name])
         md5 = hashlib.md5(out.read_bytes()).hexdigest()
 
-    print(f"lidar2city from {args.src}; Delft reconstruct LoD 1.2+1.3+2.2, traced footprints")
+    kind = "BGT footprints" if args.footprints else "traced footprints"
+    print(f"lidar2city from {args.src}; Delft reconstruct LoD 1.2+1.3+2.2, {kind}")
+    total = 0.0
     for name, f in kernels.items():
         best, identical = float("inf"), True
         for _ in range(args.repeat):
@@ -93,8 +103,10 @@ def main():
             best = min(best, time.process_time() - t)
             identical &= all(_same(_frozen(o), r)
                              for o, (_, _, r) in zip(outs, calls[name], strict=True))
+        total += best
         print(f"{name}: {len(calls[name])} calls, least of {args.repeat} replays {best:.3f} CPU s; "
               f"replays identical to the run: {identical}")
+    print(f"all kernels above: {total:.3f} CPU s")
     print(f"output MD5 {md5}")
 
 

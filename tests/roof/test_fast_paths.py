@@ -150,3 +150,92 @@ def test_quantile_side_agrees_with_numpy(seed, n, q, rounded):
             assert side == bool(np.quantile(a, q) <= limit)
     # a limit far from the order statistics is decided without numpy
     assert quantile_side(a.copy(), q, 10.0) is True and quantile_side(a.copy(), q, -1.0) is False
+
+
+def _roof_cloud(seed, n):
+    """A gable, a lower flat annex, two level strips apart at one height and clutter."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2)) * [40.0, 30.0]
+    x, y = xy[:, 0], xy[:, 1]
+    z = np.where(y < 10, 10 + 0.5 * y, 20 - 0.5 * y)  # gable, ridge at y = 10
+    z = np.where(y >= 20, 6.0, z)  # the annex
+    z = np.where((x < 2) | (x > 38), 12.0, z)  # two rims at one height
+    z = z + rng.normal(0, 0.03, n)
+    clutter = rng.random(n) < 0.02
+    z[clutter] += rng.random(clutter.sum()) * 2
+    return np.column_stack([x, y, z])
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2500, 5000), tol=st.sampled_from([0.1, 0.2, 0.3]))
+def test_screened_merge_is_the_fitted_merge(seed, n, tol):
+    import lidar2city.roof.facets as facets
+
+    xyz = _roof_cloud(seed, n)
+    screened = facets.segment_planes(xyz, dist_tol=tol)
+    old = facets._SCREEN_POINTS
+    facets._SCREEN_POINTS = 10**12  # every union fitted
+    try:
+        fitted = facets.segment_planes(xyz, dist_tol=tol)
+    finally:
+        facets._SCREEN_POINTS = old
+    np.testing.assert_array_equal(screened[0], fitted[0])
+    np.testing.assert_array_equal(screened[1], fitted[1])
+
+
+def _boundary_chains_numpy(grid):
+    """boundary_chains' walk as it was, on numpy scalars (the same chains)."""
+    from lidar2city.roof.topology import _boundary_graph
+
+    graph = _boundary_graph(grid)
+    if graph is None:
+        return [], []
+    u, v, pairs, deg, starts, nbr_edge, junction = graph
+    W = grid.labels.shape[1] + 1
+    used = np.zeros(len(u), dtype=bool)
+    chains, chain_pairs = [], []
+
+    def walk(node, edge):
+        path = [node]
+        while True:
+            used[edge] = True
+            nxt = v[edge] if u[edge] == node else u[edge]
+            path.append(nxt)
+            if junction[nxt]:
+                return path
+            cand = nbr_edge[starts[nxt]:starts[nxt] + 2]
+            edge_next = cand[0] if cand[0] != edge else cand[1]
+            if used[edge_next]:
+                return path
+            node, edge = nxt, edge_next
+
+    for node in np.flatnonzero(junction & (deg > 0)):
+        for k in range(starts[node], starts[node + 1]):
+            if not used[nbr_edge[k]]:
+                chains.append(np.array(walk(node, nbr_edge[k])))
+                chain_pairs.append(tuple(pairs[nbr_edge[k]]))
+    for e in np.flatnonzero(~used):
+        if not used[e]:
+            chains.append(np.array(walk(u[e], e)))
+            chain_pairs.append(tuple(pairs[e]))
+    out = []
+    for path in chains:
+        r, c = np.divmod(path, W)
+        out.append(np.column_stack([grid.x0 + c * grid.cell, grid.y0 + r * grid.cell]))
+    return out, [tuple(int(x) for x in p) for p in chain_pairs]
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), h=st.integers(1, 14), w=st.integers(1, 14),
+       k=st.integers(1, 4))
+def test_boundary_chains_walk_is_the_numpy_walk(seed, h, w, k):
+    from lidar2city.roof.topology import LabelGrid, boundary_chains
+
+    labels = np.random.default_rng(seed).integers(-1, k, (h, w))
+    grid = LabelGrid(labels, 3.25, -7.5, 0.5)
+    chains, pairs = boundary_chains(grid)
+    ref_chains, ref_pairs = _boundary_chains_numpy(grid)
+    assert pairs == ref_pairs
+    assert len(chains) == len(ref_chains)
+    for c, r in zip(chains, ref_chains, strict=True):
+        np.testing.assert_array_equal(c, r)

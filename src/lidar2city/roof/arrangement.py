@@ -634,7 +634,11 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     if not edges:
         return out
     e = np.array(edges, dtype=np.int64)
-    if reduction_work(np.full(len(xy), (2 * window + 1) ** 2), e) > max_work:
+    d = (2 * window + 1) ** 2
+    # a graph of paths and cycles (no vertex of degree 3) reduces by I-III alone, no table
+    # over more than three vertices: its work is at most len(xy) d^3 without simulating it
+    simple = np.bincount(e.ravel(), minlength=len(xy)).max() <= 2 and len(xy) * d ** 3 <= max_work
+    if not simple and reduction_work(np.full(len(xy), d), e) > max_work:
         return out
     new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
                                  window=window, direction=direction,
@@ -825,6 +829,13 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
                 segs.append(np.vstack([foot + lo * u, foot + hi * u]))
                 kinds.append("intersection")
                 continue
+        # its split-and-merge pieces, made below only where the snake gives none (with
+        # ``step_snake`` they are the fallback, and the snake fits its chains itself)
+        steps.append((len(segs), c, closed))
+        segs.append(None)
+        kinds.append("step")
+
+    def pieces(c, closed):
         poly = _step_polyline(c, tol=step_tol * cell, direction=direction, snap_angle=snap_angle,
                               closed=closed)
         if poly is None or (closed and len(poly) < 4):
@@ -832,9 +843,9 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             poly = _dp(c, cell)
             if closed and len(poly) < 4:
                 poly = c
-        steps.append((len(segs), c, closed))
-        segs.append(poly if closed else _extend(poly, ext))
-        kinds.append("step")
+        return poly if closed else _extend(poly, ext)
+
+    snaked = [None] * len(steps)
     if step_snake and steps:
         try:
             snaked = snake_steps([c for _, c, _ in steps], [cl for _, _, cl in steps], cell=cell,
@@ -844,9 +855,11 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
             # the step chains keep their split-and-merge pieces
             logger.debug("step snake skipped (%s)", exc)
             snaked = [None] * len(steps)
-        for (i, _, cl), poly in zip(steps, snaked, strict=True):
-            if poly is not None:
-                segs[i] = poly if cl else _extend(poly, ext)
+    for (i, c, cl), poly in zip(steps, snaked, strict=True):
+        if poly is not None:
+            segs[i] = poly if cl else _extend(poly, ext)
+        elif segs[i] is None:
+            segs[i] = pieces(c, cl)
     return segs, kinds
 
 
@@ -903,6 +916,10 @@ def _cell_points(cells, xyz):
     return ip, ic, np.bincount(ic, minlength=len(cells)).astype(float)
 
 
+#: (cell, point) pairs tested together by :func:`_point_cells`
+_PAIR_BATCH = 1 << 17
+
+
 def _point_cells(cells, xy):
     """``(points, cells)``: the points of ``xy`` (n, 2) in a cell and the cell of each, in
     point order; a point on a shared edge counts once, in its first cell as an STRtree
@@ -922,13 +939,24 @@ def _point_cells(cells, xy):
     lo, hi = np.searchsorted(xs, box[:, 0], side="left"), np.searchsorted(xs, box[:, 2], side="right")
     cell_of = np.full(len(xy), -1, dtype=np.int64)
     hits = np.zeros(len(xy), dtype=np.int64)
-    for j in range(len(arr)):
-        cand = order[lo[j]:hi[j]]
+    # the (cell, point) pairs of the cells' x ranges, a batch of cells at a time (bounded
+    # memory), tested in one call each: a point in one cell only gets that cell, the
+    # others are settled by the tree's query below
+    span = hi - lo
+    j0 = 0
+    while j0 < len(arr):
+        j1 = j0 + 1 + int(np.searchsorted(np.cumsum(span[j0 + 1:]), _PAIR_BATCH - span[j0], side="right"))
+        js = np.repeat(np.arange(j0, j1), span[j0:j1])
+        first = np.cumsum(span[j0:j1]) - span[j0:j1]
+        cand = order[lo[js] + np.arange(len(js)) - np.repeat(first, span[j0:j1])]
         y = xy[cand, 1]
-        cand = cand[(y >= box[j, 1]) & (y <= box[j, 3])]
-        cand = cand[shapely.intersects_xy(arr[j], xy[cand, 0], xy[cand, 1])]
-        cell_of[cand] = j
-        hits[cand] += 1
+        inbox = (y >= box[js, 1]) & (y <= box[js, 3])
+        js, cand = js[inbox], cand[inbox]
+        inside = shapely.intersects_xy(arr[js], xy[cand, 0], xy[cand, 1])
+        js, cand = js[inside], cand[inside]
+        cell_of[cand] = js
+        hits += np.bincount(cand, minlength=len(xy))
+        j0 = j1
     multi = np.flatnonzero(hits > 1)
     if len(multi):
         ip, ic = shapely.STRtree(arr).query(shapely.points(xy[multi]), predicate="intersects")
@@ -1080,16 +1108,29 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
     segments : list of ndarray (m, 2)
     kinds : list of str
     """
-    from scipy.spatial import cKDTree
-
     planes = np.asarray(planes, dtype=np.float64)
     cap = 1.5 * t_step if cap is None else cap
     grid = label_grid(footprint, xyz[:, :2], labels, cell=cell)
     chains, pairs = boundary_chains(grid)
     return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
                           max_shift=max_shift, snap_angle=snap_angle,
-                          points=(xyz, labels, cKDTree(xyz[:, :2])), cap=cap,
+                          points=(xyz, labels, _LazyTree(xyz[:, :2])), cap=cap,
                           step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
+
+
+class _LazyTree:
+    """A ``cKDTree`` of points (n, 2) built at its first query: most roofs never ask
+    (:func:`_line_explains` runs only on chains near their planes' line)."""
+
+    def __init__(self, xy):
+        self.xy, self.tree = xy, None
+
+    def query_ball_point(self, *args, **kwargs):
+        if self.tree is None:
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(self.xy)
+        return self.tree.query_ball_point(*args, **kwargs)
 
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,

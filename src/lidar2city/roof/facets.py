@@ -252,16 +252,21 @@ def _point_plane_dist(xyz, planes):
     return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
 
 
-def _union_rms(xyz, labels, n_labels, ii, jj):
-    """Vertical RMS of the least-squares plane through the points of facets ii[m] and jj[m]."""
+def _facet_moments(xyz, labels, n_labels):
+    """Point moments ``(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of every facet, (K, 10)."""
     on = labels >= 0
     x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
     cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
     # the moments of each facet: one weighted bincount over (facet, column) keys adds
     # every point's row in point order, as np.add.at does, at a fraction of its cost
     key = (labels[on][:, None] * 10 + np.arange(10)).ravel()
-    mom = np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
-    n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = (mom[ii] + mom[jj]).T
+    return np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
+
+
+def _moment_fit(mom):
+    """From moments (..., 10): ``(rms, det, cxx * cyy)``, the perpendicular RMS of the points
+    about their least-squares plane z = a x + b y + c (inf where ``det`` <= 1e-12)."""
+    n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz = np.moveaxis(mom, -1, 0)
     mx, my, mz = sx / n, sy / n, sz / n
     cxx, cxy, cxz = sxx / n - mx * mx, sxy / n - mx * my, sxz / n - mx * mz
     cyy, cyz, czz = syy / n - my * my, syz / n - my * mz, szz / n - mz * mz
@@ -270,7 +275,18 @@ def _union_rms(xyz, labels, n_labels, ii, jj):
     a = (cxz * cyy - cyz * cxy) / safe
     b = (cyz * cxx - cxz * cxy) / safe
     var = czz - a * cxz - b * cyz
-    return np.where(det > 1e-12, np.sqrt(np.maximum(var, 0.0) / (1 + a * a + b * b)), np.inf)
+    rms = np.where(det > 1e-12, np.sqrt(np.maximum(var, 0.0) / (1 + a * a + b * b)), np.inf)
+    return rms, det, cxx * cyy
+
+
+def _union_rms(xyz, labels, n_labels, ii, jj, mom=None):
+    """Vertical RMS of the least-squares plane through the points of facets ii[m] and jj[m]."""
+    mom = _facet_moments(xyz, labels, n_labels) if mom is None else mom
+    return _moment_fit(mom[ii] + mom[jj])[0]
+
+
+#: Labelled points from which :func:`_merge` screens its candidate unions by their moments
+_SCREEN_POINTS = 2000
 
 
 def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
@@ -300,7 +316,8 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         touching = np.zeros((n_labels, n_labels), dtype=bool)
         touching[pairs[:, 0], pairs[:, 1]] = True
         far = np.flatnonzero(~touching[ii, jj])
-        rms = _union_rms(xyz, labels, n_labels, ii[far], jj[far])
+        mom = _facet_moments(xyz, labels, n_labels)
+        rms = _union_rms(xyz, labels, n_labels, ii[far], jj[far], mom)
         fit = rms <= dist_tol / 2
         far, rms = far[fit], rms[fit]
         # and one of the two planes (the better supported) carries the other's points: two
@@ -353,21 +370,35 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
     group = {k: order[bounds[k]:bounds[k + 1]] for k in range(n_labels)}
+    # large facets: a union whose moments put its RMS far over the limit fails the exact
+    # test too (the moments' rounding is ~1e-10 of it where the plane is well posed), so
+    # it is rejected without fitting its points; the merges are those of fitting every one
+    screen = (bounds[n_labels] - bounds[0]) >= _SCREEN_POINTS
+    if screen:
+        gmom = dict(enumerate(mom if coplanar else _facet_moments(xyz, labels, n_labels)))
     for idx in np.argsort(-cos, kind="stable"):
         if cos[idx] < cos_merge and idx < n_touch:
             continue
         a, b = find(pairs[idx, 0]), find(pairs[idx, 1])
         if a == b:
             continue
+        if screen:
+            union = gmom[a] + gmom[b]
+            est, det, scale = _moment_fit(union)
+            if det > 1e-6 * scale and est > 1.5 * (dist_tol / 2):
+                continue
         members = np.sort(np.concatenate([group[a], group[b]]))
-        p = fit_plane(xyz[members])
+        pts = xyz[members]
+        p = fit_plane(pts)
         if p is None:
             continue
-        r = _point_plane_dist(xyz[members], p[None])[:, 0]
+        r = _point_plane_dist(pts, p[None])[:, 0]
         if np.sqrt(np.mean(r * r)) <= dist_tol / 2 and _quantile_le(r, 0.95, dist_tol):
             parent[b] = a
             group[a] = members
             del group[b]
+            if screen:
+                gmom[a] = union
     roots = np.array([find(x) for x in range(n_labels)])
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)

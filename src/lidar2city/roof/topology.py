@@ -166,17 +166,11 @@ def _merge_small_regions(grid, inside, min_cells):
     return grid
 
 
-def boundary_chains(grid: LabelGrid):
-    """Chains of cell edges between different labels, split at junctions.
-
-    Returns
-    -------
-    chains : list of ndarray, shape (m, 2)
-        Polyline vertices (grid corner coordinates, metres); closed loops start
-        and end at the same vertex.
-    pairs : list of (int, int)
-        The two labels on either side of each chain (-1 for outside), sorted.
-    """
+def _boundary_graph(grid: LabelGrid):
+    """The unit cell edges between different labels as a graph on the grid's corners:
+    ``(u, v, pairs, deg, starts, nbr_edge, junction)`` (edge ends as corner indices, the
+    sorted label pair of each edge, corner degrees, each corner's edges as
+    ``nbr_edge[starts[c]:starts[c + 1]]``, junction corners), or None without such edges."""
     L = grid.labels
     h, w = L.shape
     pad = np.full((h + 2, w + 2), -1, dtype=np.int64)
@@ -201,7 +195,7 @@ def boundary_chains(grid: LabelGrid):
     keep = ~((pairs[:, 0] == -1) & (pairs[:, 1] == -1))
     segs, pairs = segs[keep], pairs[keep]
     if not len(segs):
-        return [], []
+        return None
     W = w + 1
     u = segs[:, 0] * W + segs[:, 1]
     v = segs[:, 2] * W + segs[:, 3]
@@ -220,44 +214,65 @@ def boundary_chains(grid: LabelGrid):
     e1 = nbr_edge[starts[two]]
     e2 = nbr_edge[starts[two] + 1]
     junction[two[pair_key[e1] != pair_key[e2]]] = True
-    used = np.zeros(len(u), dtype=bool)
-    chains, chain_pairs = [], []
+    return u, v, pairs, deg, starts, nbr_edge, junction
+
+
+def boundary_chains(grid: LabelGrid):
+    """Chains of cell edges between different labels, split at junctions.
+
+    Returns
+    -------
+    chains : list of ndarray, shape (m, 2)
+        Polyline vertices (grid corner coordinates, metres); closed loops start
+        and end at the same vertex.
+    pairs : list of (int, int)
+        The two labels on either side of each chain (-1 for outside), sorted.
+    """
+    graph = _boundary_graph(grid)
+    if graph is None:
+        return [], []
+    u, v, pairs, deg, starts, nbr_edge, junction = graph
+    W = grid.labels.shape[1] + 1
+    # the walk in Python lists (numpy scalars made per step cost more than the walk)
+    used = [False] * len(u)
+    ul, vl, jl = u.tolist(), v.tolist(), junction.tolist()
+    sl, nl = starts.tolist(), nbr_edge.tolist()
+    chains, chain_edges = [], []
 
     def walk(node, edge):
         path = [node]
         while True:
             used[edge] = True
-            nxt = v[edge] if u[edge] == node else u[edge]
+            nxt = vl[edge] if ul[edge] == node else ul[edge]
             path.append(nxt)
-            if junction[nxt]:
+            if jl[nxt]:
                 return path
-            s = starts[nxt]
-            cand = nbr_edge[s:s + 2]
-            edge_next = cand[0] if cand[0] != edge else cand[1]
+            s = sl[nxt]
+            edge_next = nl[s] if nl[s] != edge else nl[s + 1]
             if used[edge_next]:
                 return path
             node, edge = nxt, edge_next
 
-    for node in np.flatnonzero(junction & (deg > 0)):
-        for k in range(starts[node], starts[node + 1]):
-            e = nbr_edge[k]
+    for node in np.flatnonzero(junction & (deg > 0)).tolist():
+        for k in range(sl[node], sl[node + 1]):
+            e = nl[k]
             if used[e]:
                 continue
-            path = walk(node, e)
-            chains.append(np.array(path))
-            chain_pairs.append(tuple(pairs[e]))
+            chains.append(walk(node, e))
+            chain_edges.append(e)
     # closed loops without junctions
-    for e in np.flatnonzero(~used):
+    for e in range(len(ul)):
         if used[e]:
             continue
-        path = walk(u[e], e)
-        chains.append(np.array(path))
-        chain_pairs.append(tuple(pairs[e]))
-    out = []
-    for path in chains:
-        r, c = np.divmod(path, W)
-        out.append(np.column_stack([grid.x0 + c * grid.cell, grid.y0 + r * grid.cell]))
-    return out, [tuple(int(x) for x in p) for p in chain_pairs]
+        chains.append(walk(ul[e], e))
+        chain_edges.append(e)
+    if not chains:
+        return [], []
+    # every chain's corners to metres in one pass
+    r, c = np.divmod(np.array([x for path in chains for x in path], dtype=np.int64), W)
+    xy = np.column_stack([grid.x0 + c * grid.cell, grid.y0 + r * grid.cell])
+    out = np.split(xy, np.cumsum([len(path) for path in chains])[:-1])
+    return out, [tuple(p) for p in pairs[np.array(chain_edges, dtype=np.int64)].tolist()]
 
 
 @dataclass(eq=False)
