@@ -449,12 +449,23 @@ THREADED_CELLS = 50_000
 
 
 def _thread_count() -> int:
-    """Threads for :func:`thread_map`: the cores this process may use, at most 4."""
+    """Threads for :func:`thread_map`: the cores this process may use that other processes
+    leave idle (by the 1-minute load average, this process counted in it), at least 1 and
+    at most 4.
+
+    On a busy machine (more runnable processes than cores: other jobs, or the workers of
+    a ``--workers`` run) the passes stay on one thread: two threads of one process then
+    wait on each other and on the interpreter lock, and took more time, not less.
+    """
     try:
-        n = len(os.sched_getaffinity(0))
+        cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(n, 4))
+        cores = os.cpu_count() or 1
+    try:
+        idle = cores - os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average: use the cores
+        idle = cores
+    return max(1, min(cores, 4, 1 + int(idle + 0.5)))
 
 
 def thread_map(fn, items, *, cells: int = THREADED_CELLS) -> list:
