@@ -13,7 +13,9 @@ error of each method on the synthetic terrains of
 process against plainly reading and writing the same file with laspy (best
 of ``--repeat`` runs each) and prints the ratio, for each method and for
 ``smrf_vote`` with its ``veto`` off, with ``above`` 3 m and with ``connect`` 3
-(:data:`SPEED_VARIANTS`).
+(:data:`SPEED_VARIANTS`), with the load average and the threads the filter's
+grid passes would take at that load (two on an idle two-core machine, one on a
+busy one).
 
 ``--loo`` adds the leave-one-sample-out check of SMRF, smrf_refined and
 smrf_segments (the same grid for the three) and of ptd (its iteration angle
@@ -217,13 +219,17 @@ def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_
             base = tuple(map(min, base, best_times(base_cmd, env, 1)))
             for m, cmd in cli_cmds.items():
                 cli[m] = tuple(map(min, cli[m], best_times(cmd, env, 1)))
+    from lidar2city.ground._grid import _thread_count
+
     load = os.getloadavg()[0]
+    # the filter's grid passes take the cores the load leaves idle (1 on a busy machine)
+    threads = _thread_count()
     for m in cli_cmds:
         how = f"--method {m}" if m in methods else f"({m})"
         print(f"\nspeed on {site.name}: laspy read+write {base[0]:.2f} s, lidar2city ground {how} "
               f"{cli[m][0]:.2f} s, ratio {cli[m][0] / base[0]:.2f} (best of {repeat}); CPU seconds "
               f"{base[1]:.2f} and {cli[m][1]:.2f}, ratio {cli[m][1] / base[1]:.2f} "
-              f"(load average {load:.1f})")
+              f"(load average {load:.1f}, filter threads {threads})")
 
 
 def main():

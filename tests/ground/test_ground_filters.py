@@ -198,6 +198,45 @@ def test_disk_opening_properties():
     assert open_disk(spike, 3).max() == 0.0
 
 
+@pytest.mark.parametrize("shape", [(1, 9), (2, 2), (5, 2), (300, 260)])
+def test_threaded_passes_give_the_same_bytes(shape, monkeypatch):
+    """The opening series, the dilation chains and a vote on threads equal them on one."""
+    from lidar2city.ground import _grid, smrf_vote
+    from lidar2city.synthetic_terrain import make_terrain
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=shape).cumsum(axis=0).astype(np.float32)
+    a[rng.random(shape) < 0.05] = np.inf
+    one = {}
+    for threads in (1, 2):
+        monkeypatch.setattr(_grid, "_thread_count", lambda n=threads: n)
+        series = [(r, o.copy()) for r, o in open_disk_series(a, range(1, 9))]
+        chains = [_grid._disk_chain(a, r, m) for r in (0, 1, 5) for m in (False, True)]
+        if threads == 1:
+            one = {"series": series, "chains": chains}
+            continue
+        assert [r for r, _ in series] == [r for r, _ in one["series"]]
+        for (_, got), (_, want) in zip(series, one["series"]):
+            np.testing.assert_array_equal(got, want)
+        for got, want in zip(chains, one["chains"]):
+            np.testing.assert_array_equal(got, want)
+    # a chain of unit steps by the buffered code equals the plain one step by step
+    for r in (1, 2, 5):
+        for m in (False, True):
+            want = a
+            for i in range(1, r + 1):
+                want = _grid._unit_step(want, _grid._is_square_step(i), m)
+            np.testing.assert_array_equal(_grid._disk_chain(a, r, m), want)
+    if shape == (300, 260):  # a grid large enough for threads
+        xyz = make_terrain("terraces", spacing=1.0, seed=2).xyz
+        masks = []
+        for threads in (1, 2):
+            monkeypatch.setattr(_grid, "_thread_count", lambda n=threads: n)
+            monkeypatch.setattr(_grid, "THREADED_CELLS", 100)
+            masks.append(smrf_vote(xyz))
+        np.testing.assert_array_equal(masks[0], masks[1])
+
+
 def test_inpaint_keeps_known_and_interpolates():
     yy, xx = np.mgrid[0:60, 0:80].astype(float)
     plane = 2.0 + 0.5 * xx - 0.25 * yy

@@ -7,6 +7,7 @@ north-up: row 0 is the top (largest y), as in GeoTIFFs. A grid is described by
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,7 @@ __all__ = [
     "open_square",
     "open_disk",
     "open_disk_series",
+    "thread_map",
     "bilinear_weights",
     "sample_bilinear",
     "gradient_magnitude",
@@ -192,7 +194,9 @@ def _relax(values, unknown, iterations, omega=1.6):
             mid_r, mid_c = _every_other(ri + 1, nr), _every_other(cj + 1, nc)
             blocks.append((v[ri::2, cj::2], u[ri::2, cj::2],
                            (p[_every_other(ri, nr), mid_c], p[_every_other(ri + 2, nr), mid_c],
-                            p[mid_r, _every_other(cj, nc)], p[mid_r, _every_other(cj + 2, nc)])))
+                            p[mid_r, _every_other(cj, nc)], p[mid_r, _every_other(cj + 2, nc)]),
+                           np.empty((nr, nc), dtype=values.dtype),
+                           np.empty((nr, nc), dtype=values.dtype)))
         sweeps.append(blocks)
     for _ in range(iterations):
         for blocks in sweeps:
@@ -200,12 +204,15 @@ def _relax(values, unknown, iterations, omega=1.6):
             p[-1, 1:-1] = v[-1]
             p[1:-1, 0] = v[:, 0]
             p[1:-1, -1] = v[:, -1]
-            for cells, mask, (up, down, left, right) in blocks:
-                new = up + down
+            # the same arithmetic as ((up + down + left + right) * quarter + keep * cells),
+            # into buffers allocated once
+            for cells, mask, (up, down, left, right), new, kept in blocks:
+                np.add(up, down, out=new)
                 new += left
                 new += right
                 new *= quarter
-                new += keep * cells
+                np.multiply(keep, cells, out=kept)
+                new += kept
                 np.copyto(cells, new, where=mask)
     values[r0:r1, c0:c1] = v
     return values
@@ -381,9 +388,46 @@ def _is_square_step(i: int) -> bool:
 
 
 def _disk_chain(a, radius: int, maximum: bool) -> np.ndarray:
+    """``radius`` unit steps (square or cross, :func:`_is_square_step`) from ``a``: a new
+    array (``a`` itself when ``radius`` is 0)."""
+    if radius < 1:
+        return a
+    if a.ndim != 2 or min(a.shape) < 2:
+        for i in range(1, radius + 1):
+            a = _unit_step(a, _is_square_step(i), maximum)
+        return a
+    # the steps of _unit_step, into buffers allocated once for the chain (same values)
+    op = np.maximum if maximum else np.minimum
+    h, w = a.shape
+    bufs = (np.empty_like(a), np.empty_like(a))
+    tmp = np.empty_like(a)
+    down = np.empty((h - 1, w), dtype=a.dtype)
+    across = np.empty((h, w - 1), dtype=a.dtype)
+
+    def triple0(src, out):
+        op(src[:-1], src[1:], out=down)
+        op(down[:-1], down[1:], out=out[1:-1])
+        out[0] = down[0]
+        out[-1] = down[-1]
+
+    def triple1(src, out):
+        op(src[:, :-1], src[:, 1:], out=across)
+        op(across[:, :-1], across[:, 1:], out=out[:, 1:-1])
+        out[:, 0] = across[:, 0]
+        out[:, -1] = across[:, -1]
+
+    src = a
     for i in range(1, radius + 1):
-        a = _unit_step(a, _is_square_step(i), maximum)
-    return a
+        out = bufs[i % 2]
+        if _is_square_step(i):
+            triple0(src, tmp)
+            triple1(tmp, out)
+        else:
+            triple0(src, out)
+            op(out[:, 1:], src[:, :-1], out=out[:, 1:])
+            op(out[:, :-1], src[:, 1:], out=out[:, :-1])
+        src = out
+    return src
 
 
 def open_disk(a, radius: int) -> np.ndarray:
@@ -399,14 +443,68 @@ def open_disk(a, radius: int) -> np.ndarray:
     return _disk_chain(_disk_chain(a, radius, False), radius, True)
 
 
+#: grids of at least this many cells have their independent passes run on threads
+#: (:func:`thread_map`); smaller ones cost less than starting the threads
+THREADED_CELLS = 50_000
+
+
+def _thread_count() -> int:
+    """Threads for :func:`thread_map`: the cores this process may use that other processes
+    leave idle (by the 1-minute load average, this process counted in it), at least 1 and
+    at most 4.
+
+    On a busy machine (more runnable processes than cores: other jobs, or the workers of
+    a ``--workers`` run) the passes stay on one thread: two threads of one process then
+    wait on each other and on the interpreter lock, and took more time, not less. The
+    environment variable ``LIDAR2CITY_THREADS`` (an integer >= 1) sets the count instead
+    (e.g. to compare one thread with two on a quiet machine).
+    """
+    forced = os.environ.get("LIDAR2CITY_THREADS", "").strip()
+    if forced.isdigit() and int(forced) >= 1:
+        return int(forced)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    try:
+        idle = cores - os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average: use the cores
+        idle = cores
+    return max(1, min(cores, 4, 1 + int(idle + 0.5)))
+
+
+def thread_map(fn, items, *, cells: int = THREADED_CELLS) -> list:
+    """``[fn(x) for x in items]``, on threads when the grids are large (``cells`` at least
+    :data:`THREADED_CELLS`) and the process may use more than one core.
+
+    For independent passes over grids (an inpainting, an opening, a sampling):
+    numpy releases the GIL in its array loops, so they overlap; each result is
+    the same as computed alone, whatever the scheduling (same bytes).
+    """
+    items = list(items)
+    n = min(_thread_count(), len(items))
+    if n <= 1 or cells < THREADED_CELLS:
+        return [fn(x) for x in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(n) as pool:
+        return list(pool.map(fn, items))
+
+
 def open_disk_series(a, radii):
     """Openings of ``a`` by disks of increasing ``radii``, reusing the erosions.
 
     Yields ``(radius, opened)``. Erosion by a radius-r octagon is the erosion by
     the previous radius followed by the missing unit steps (Minkowski
-    additivity of the octagon family), so only the dilations cost O(r).
+    additivity of the octagon family), so only the dilations cost O(r). On a
+    large grid the dilations (independent of each other) run on threads, a
+    few radii ahead of the one yielded (:func:`thread_map`).
     """
     eroded = np.asarray(a)
+    n = _thread_count()
+    if n > 1 and eroded.size >= THREADED_CELLS:
+        yield from _open_disk_series_threaded(eroded, radii, n)
+        return
     done = 0
     for radius in radii:
         radius = int(radius)
@@ -414,6 +512,29 @@ def open_disk_series(a, radii):
             eroded = _unit_step(eroded, _is_square_step(i), False)
         done = max(done, radius)
         yield radius, _disk_chain(eroded, radius, True)
+
+
+def _open_disk_series_threaded(eroded, radii, threads, ahead: int = 2):
+    """:func:`open_disk_series` with each dilation a task of a pool of ``threads``; at most
+    ``ahead`` tasks per thread wait beyond the one yielded (memory: a few grids)."""
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    pending = deque()
+    done = 0
+    with ThreadPoolExecutor(threads) as pool:
+        for radius in radii:
+            radius = int(radius)
+            for i in range(done + 1, radius + 1):
+                eroded = _unit_step(eroded, _is_square_step(i), False)
+            done = max(done, radius)
+            pending.append((radius, pool.submit(_disk_chain, eroded, radius, True)))
+            while len(pending) > ahead * threads:
+                r, opened = pending.popleft()
+                yield r, opened.result()
+        while pending:
+            r, opened = pending.popleft()
+            yield r, opened.result()
 
 
 def bilinear_weights(spec: GridSpec, xy):

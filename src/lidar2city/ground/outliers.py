@@ -1,17 +1,21 @@
-"""Low outliers: isolated points far below their neighbourhood (multipath, birds' shadows).
+"""Low outliers: isolated points far below their neighbourhood (multipath, birds' shadows);
+stray returns far from the survey.
 
-They would drag any minimum-based ground surface down, so the filters remove
-them first; ``classify`` writes them as ASPRS class 7 (noise).
+Low outliers would drag any minimum-based ground surface down, so the filters
+remove them first; ``classify`` writes them as ASPRS class 7 (noise). A few
+points kilometres away (:func:`far_points`) would make every grid over the
+tile's extent enormous: the tools leave them out before filtering.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .._components import component_labels
 from ..errors import InputError
 from ._grid import cell_of, erode_square, grid_spec
 
-__all__ = ["low_outliers"]
+__all__ = ["far_points", "low_outliers"]
 
 
 def _check_xyz(xyz) -> np.ndarray:
@@ -174,3 +178,101 @@ def _deep_clusters(xyz, block, depth, percentile, reach):
     if reach:
         level = erode_square(level, 2 * reach + 1)
     return z < level.ravel()[flat] - depth
+
+
+def far_points(xy, *, gap: float = 100.0, max_points: int = 100,
+               spread: float = 2.0) -> np.ndarray:
+    """Points in small clumps far from the survey, when they blow up its extent.
+
+    The points are binned in square cells of ``gap`` metres; occupied cells
+    touching (8-neighbours) form clumps; the clump holding most points is the
+    survey. Clumps of at most ``max_points`` points are stray when the extent of
+    all the points is more than ``spread`` times the survey clumps' extent (plus
+    ``2 * gap``) along x or y; otherwise nothing is stray: a small clump beside
+    the survey costs no more than the survey's own extent.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, 2)
+        Point coordinates in metres.
+    gap : float
+        Cell side (m): clumps farther apart than one empty cell are separate.
+    max_points : int
+        Largest clump that can be stray (a handful of bad returns, not an island).
+    spread : float
+        How much larger than the survey's the extent must be for strays to count.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        True for the stray points.
+
+    Examples
+    --------
+    >>> xy = np.vstack([np.random.default_rng(0).uniform(0, 50, (500, 2)), [[1e6, 0.0]]])
+    >>> np.flatnonzero(far_points(xy)).tolist()
+    [500]
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(xy), dtype=bool)
+    if len(xy) < 2:
+        return out
+    # 1-D reductions of the columns (an axis-0 reduction of the (N, 2) view is ~10x slower)
+    x, y = xy[:, 0], xy[:, 1]
+    lo = np.array([np.min(x), np.min(y)])
+    hi = np.array([np.max(x), np.max(y)])
+    i = np.floor((x - lo[0]) / gap).astype(np.int64)
+    j = np.floor((y - lo[1]) / gap).astype(np.int64)
+    span = (int(np.max(i)) + 1, int(np.max(j)) + 1)
+    if max(span) <= 2:  # every point within two cells of every other: one clump
+        return out
+    key = i * span[1] + j
+    cells, counts, inverse = _occupied(key, span[0] * span[1])
+    clump = _clumps(cells, span[0], span[1])
+    sizes = np.bincount(clump, weights=counts).astype(np.int64)
+    small_clump = sizes <= max_points
+    small_clump[int(np.argmax(sizes))] = False
+    if not small_clump.any():  # the usual tile: no point-by-point labels needed
+        return out
+    small = small_clump[clump][inverse()]
+    kept = xy[~small]
+    extent, kept_extent = hi - lo, kept.max(axis=0) - kept.min(axis=0)
+    if np.any(extent > spread * kept_extent + 2 * gap):
+        out = small
+    return out
+
+
+def _occupied(key, size: int):
+    """The occupied cells of points keyed ``key`` (cell ids < ``size``), sorted; the points
+    in each; and a function giving each point's index in ``cells`` (computed on demand)."""
+    if size <= 4_000_000:  # a tile's extent: the occupied cells from a dense grid
+        per_cell = np.bincount(key, minlength=size)
+        cells = np.flatnonzero(per_cell)
+
+        def inverse():
+            index = np.zeros(size, dtype=np.int64)
+            index[cells] = np.arange(len(cells))
+            return index[key]
+
+        return cells, per_cell[cells], inverse
+    cells, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return cells, counts, lambda: inv.reshape(-1)
+
+
+def _clumps(cells, rows: int, cols: int) -> np.ndarray:
+    """The 8-neighbour clump of each occupied cell (``cells``: sorted ids ``i * cols + j`` on a
+    ``rows`` x ``cols`` grid); clumps numbered in raster order (of their first cell).
+
+    Pure numpy: no scipy import (``ndimage`` or ``spatial``, 0.1-0.3 s) in a ground run.
+    """
+    ci, cj = np.divmod(cells, cols)
+    a, b = [], []
+    for di, dj in ((0, 1), (1, -1), (1, 0), (1, 1)):  # each neighbour pair once
+        ni, nj = ci + di, cj + dj
+        nk = ni * cols + nj
+        pos = np.minimum(np.searchsorted(cells, nk), len(cells) - 1)
+        hit = (ni < rows) & (nj >= 0) & (nj < cols) & (cells[pos] == nk)
+        a.append(np.flatnonzero(hit))
+        b.append(pos[hit])
+    # component_labels numbers clumps by their smallest cell: raster order
+    return component_labels(len(cells), np.concatenate(a), np.concatenate(b))

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 
 import numpy as np
 
 from .._components import component_labels
 from ..errors import InputError
-from ._grid import inpaint, min_surface
-from .smrf_filter import _checked_outliers, _near_surface, _smrf_grids
+from ._grid import inpaint, thread_map
+from .smrf_filter import _checked_outliers, _minimum_grid, _near_surface, _smrf_grids
 
 logger = logging.getLogger(__name__)
 
@@ -168,8 +169,8 @@ def _terrain_segments(zmin, masks, *, jump, raised, min_cells, block=1):
     smooth = np.abs(dz) < jump
     both = filled[a] & filled[b]
     n = z.size
-    out = []
-    for objects in masks:
+
+    def kept(objects):
         obj = objects.ravel()
         join = smooth & obj[a] & obj[b]
         label = _grid_labels(join[:h * (w - 1)].reshape(h, w - 1),
@@ -181,8 +182,9 @@ def _terrain_segments(zmin, masks, *, jump, raised, min_cells, block=1):
             high += np.bincount(label[side[m]], weights=sign * dz[m] >= jump, minlength=n)
         cells = np.bincount(label[obj & filled], minlength=n)
         terrain = (edges > 0) & (high < raised * edges) & (cells >= min_cells)
-        out.append((obj & ~terrain[label]).reshape(zmin.shape))
-    return out
+        return (obj & ~terrain[label]).reshape(zmin.shape)
+
+    return thread_map(kept, masks, cells=n)  # the masks are independent
 
 
 def smrf_segments(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,
@@ -290,19 +292,25 @@ def _check_segment_params(*, raised, min_cells):
 
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
-                      strong_slope=None, also=(), marks=()):
+                      strong_slope=None, also=(), marks=(), then=None):
     """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
     SMRF's own surface at ``slope`` (no segments given back); the grid; and, when ``marks``
     are given, the cells judged object at each of those slopes (a list of masks) and the
-    minimum surface (float32 heights above ``base``, NaN where empty) with ``base``."""
+    minimum surface (float32 heights above ``base``, NaN where empty) with ``base``.
+
+    With ``then``, a function of the grid returning a function of a surface, each
+    surface is replaced by ``then(spec)(surface)``, computed right after it. The
+    surfaces (their inpainting and ``then``) are computed on threads
+    (:func:`~lidar2city.ground._grid.thread_map`)."""
     pts = xyz[~out]
     more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
+    minimum = _minimum_grid(pts, cell=cell)  # one minimum surface for every step
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
-                                                exclude=out, extend=extend, more=more)
-    base = float(np.min(pts[:, 2]))
-    zmin = min_surface(pts, spec, base=base, dtype=np.float32)
+                                                exclude=out, extend=extend, more=more,
+                                                minimum=minimum, lazy=True)
+    _, base, zmin = minimum
     filled = ~np.isnan(zmin)
     terrain_share = float((filled & ~objects).sum() / filled.sum())
     if extend > 0 and terrain_share < 0.5:
@@ -310,7 +318,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            more=more)
+                            more=more, minimum=minimum, lazy=True)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
@@ -323,7 +331,8 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         ~np.isnan(_block_lowest(zmin, objects, coarse)[0]))
     spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
     block = max(1, int(np.floor(spacing / cell + 0.5)))
-    surfaces = []
+    surface = functools.cache(surface)  # plain SMRF's: needed twice when nothing is given back
+    tasks = []  # a function of no argument per surface
     masks = [objects, *extra]
     kept_all = _terrain_segments(zmin, masks, jump=jump * max(cell * block, 1.0), raised=raised,
                                  min_cells=min_cells, block=block)
@@ -334,12 +343,13 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m)",
                      int(given.sum()), int(obj.sum()), cell * block)
         if given.any():
-            provisional = np.where(kept | ~filled, np.float32(np.nan), zmin)
-            surfaces.append(inpaint(provisional).astype(np.float64) + base)
+            tasks.append(functools.partial(_inpainted, zmin, kept | ~filled, base))
         else:
-            surfaces.append(surface if k == 0 else _inpainted(zmin, obj, base))
+            tasks.append(surface if k == 0 else functools.partial(_inpainted, zmin, obj, base))
     if also:
-        surfaces.append(surface)
+        tasks.append(surface)
+    after = (lambda s: s) if then is None else then(spec)
+    surfaces = thread_map(lambda task: after(task()), tasks, cells=zmin.size)
     return (surfaces, spec, marked, (zmin, base)) if marks else (surfaces, spec)
 
 

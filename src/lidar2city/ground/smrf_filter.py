@@ -64,21 +64,32 @@ def smrf_surface(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float =
     return surface, objects, spec
 
 
-def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0.0,
-                more=()):
-    """:func:`smrf_surface` and, from the same opening series, the cells judged object
-    at each slope of ``more`` (a list of masks)."""
-    xyz = _check_xyz(xyz)
-    _check_positive(cell=cell, slope=slope, window=window)
-    if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
-        raise InputError(f"extend must be a number >= 0, got {extend!r}")
-    pts = xyz if exclude is None else xyz[~np.asarray(exclude, dtype=bool)]
+def _minimum_grid(pts, *, cell, bounds=None):
+    """The grid over ``pts`` (N, 3), the lowest height ``base`` and SMRF's minimum surface
+    ``ZImin`` (float32 heights above ``base``, NaN where empty)."""
     if len(pts) == 0:
         raise InputError("no points to build a surface from")
     spec = grid_spec(pts[:, :2], cell=cell, bounds=bounds)
     # float32 heights relative to the lowest point: exact to well below 1 mm
     base = float(np.min(pts[:, 2]))
-    zmin = min_surface(pts, spec, base=base, dtype=np.float32)
+    return spec, base, min_surface(pts, spec, base=base, dtype=np.float32)
+
+
+def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0.0,
+                more=(), minimum=None, lazy=False):
+    """:func:`smrf_surface` and, from the same opening series, the cells judged object
+    at each slope of ``more`` (a list of masks). ``minimum``: :func:`_minimum_grid` of the
+    points (those not excluded), when the caller holds it. With ``lazy`` the surface is
+    a function of no argument that computes it (its inpainting left to the caller, e.g.
+    to run beside others')."""
+    xyz = _check_xyz(xyz)
+    _check_positive(cell=cell, slope=slope, window=window)
+    if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
+        raise InputError(f"extend must be a number >= 0, got {extend!r}")
+    if minimum is None:
+        pts = xyz if exclude is None else xyz[~np.asarray(exclude, dtype=bool)]
+        minimum = _minimum_grid(pts, cell=cell, bounds=bounds)
+    spec, base, zmin = minimum
     empty = np.isnan(zmin)
     zfilled = inpaint(zmin)
     max_radius = max(int(np.ceil(window / cell)), 1)
@@ -102,11 +113,13 @@ def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
         logger.warning("SMRF judged every cell object; using the opened surface")
-        surface = last
+
+        def surface():
+            return last.astype(np.float64) + base
     else:
-        surface = inpaint(provisional)
-    surface = surface.astype(np.float64) + base
-    return surface, objects, spec, extra
+        def surface():
+            return inpaint(provisional).astype(np.float64) + base
+    return surface if lazy else surface(), objects, spec, extra
 
 
 def smrf(xyz, *, cell: float = 1.0, slope: float = 0.15, window: float = 24.0,

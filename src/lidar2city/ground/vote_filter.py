@@ -131,22 +131,30 @@ def vote_features(xyz, *, cell: float = 1.0, window: float = 24.0, scalar: float
     features = np.full((n, 3 + len(also) + (rise is not None)), np.inf)
     if n == 0 or out.all():
         return features, out
-    surfaces, spec, (walls,), (zmin, base) = _segment_surfaces(
+    def ratios(spec):
+        """The tolerance ratio of every point to a surface of grid ``spec``."""
+        weights = bilinear_weights(spec, xyz[:, :2])
+
+        def ratio(surface):
+            ref = sample_bilinear(surface, spec, weights=weights)
+            tol = threshold + scalar * sample_bilinear(gradient_magnitude(surface, spec.cell),
+                                                       spec, weights=weights)
+            return np.abs(xyz[:, 2] - ref) / tol
+
+        return ratio
+
+    columns, spec, (walls,), (zmin, base) = _segment_surfaces(
         xyz, out, cell=cell, slope=slopes[0], window=window, extend=extend, jump=jump,
-        raised=raised, min_cells=min_cells, also=also, marks=(WALL_SLOPE,))
+        raised=raised, min_cells=min_cells, also=also, marks=(WALL_SLOPE,), then=ratios)
     r, c = cell_of(xyz[:, :2], spec)
     features[:, 3] = _distance_to(walls, int(np.ceil(WALL_REACH / cell)))[r, c] * cell
     if rise is not None:
         tops = np.where(walls & ~np.isnan(zmin), zmin.astype(np.float64) + base, np.inf)
         lowest = _disk_chain(tops, int(np.floor(rise / cell)), False)
         features[:, -1] = lowest[r, c] - xyz[:, 2]
-    weights = bilinear_weights(spec, xyz[:, :2])
     # surfaces: strict, lenient, [fourth,] plain; columns: strict, lenient, plain, wall, [fourth]
-    for k, surface in zip((0, 1, 4, 2) if fourth is not None else (0, 1, 2), surfaces):
-        ref = sample_bilinear(surface, spec, weights=weights)
-        tol = threshold + scalar * sample_bilinear(gradient_magnitude(surface, spec.cell), spec,
-                                                   weights=weights)
-        features[:, k] = np.abs(xyz[:, 2] - ref) / tol
+    for k, column in zip((0, 1, 4, 2) if fourth is not None else (0, 1, 2), columns):
+        features[:, k] = column
     features[out, :3] = np.inf
     features[out, 4:] = np.inf
     return features, out

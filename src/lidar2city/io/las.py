@@ -177,9 +177,17 @@ def read_las(path, *, crs=None) -> LasTile:
 
     p = check_input_file(path)
     with _reading(p):
-        with laspy.open(p) as f:
-            _check_point_count(f, p)
-        las = laspy.read(p)
+        try:
+            las = laspy.read(p)
+        except Exception:
+            # a header counting more points than the file holds: say so (its last chunk
+            # decoded); checked only on failure, since a whole read finds it too
+            with laspy.open(p) as f:
+                _check_point_count(f, p)
+            raise
+        if las.header.point_count and not las.header.are_points_compressed:
+            # an uncompressed file holding more records than its header counts: a warning
+            _check_record_count(las.header, p)
     resolved = _forced_crs(parse_crs(crs), las, p) if crs is not None else _read_crs(las, p)
     _check_scale(las.header, p, resolved)
     return LasTile(str(p), las, resolved)
@@ -199,8 +207,14 @@ def _to_point_cloud(las, crs, *, origin=None) -> PointCloud:
     attrs = {name: np.asarray(las[name]) for name in POINT_ATTRIBUTES if name in names}
     if not np.isfinite(world).all():
         raise InputError("point coordinates contain NaN or infinite values")
-    return PointCloud.from_world(world, crs=crs, xy_unit=xy_unit, z_unit=z_unit,
-                                 origin=origin, attributes=attrs)
+    # PointCloud.from_world's origin and local coordinates, computed in place (no copy of
+    # the N x 3 array; 1-D reductions of the columns)
+    if origin is None:
+        origin = np.array([np.floor(np.min(world[:, 0])), np.floor(np.min(world[:, 1])), 0.0])
+    origin = np.asarray(origin, dtype=np.float64)
+    world -= origin
+    world *= np.array([xy_unit, xy_unit, z_unit])
+    return PointCloud(world, origin, crs, xy_unit, z_unit, attrs)
 
 
 def read_points(paths, *, crs=None, require_crs=False) -> PointCloud:
@@ -364,8 +378,15 @@ def _check_point_count(reader, path, *, exact: bool = True) -> None:
                 f"points but its compressed point data ends before the last{why}: a wrong "
                 "header point count, or a truncated file")
         return
+    _check_record_count(h, path)
+
+
+def _check_record_count(h, path) -> None:
+    """Warn when an uncompressed file's point data holds more records than its header
+    ``h`` counts (only those are read)."""
     import os
 
+    n = int(h.point_count)
     end = int(getattr(h, "start_of_first_evlr", 0) or 0) or os.path.getsize(path)
     held = (end - int(h.offset_to_point_data)) // int(h.point_format.size)
     if held > n:

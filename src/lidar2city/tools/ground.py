@@ -83,8 +83,8 @@ def ground_file(input_path, output_path, *, dtm_path=None, config=None, method=N
     InputError
         NaN coordinates, bad options.
     """
-    from ..classify.outliers import far_points
     from ..ground import dtm_from_ground, ground_mask
+    from ..ground.outliers import far_points
     from ..io.las import read_las, with_neighbours
 
     cfg = ground_config(config, method=method, dtm_cell=dtm_cell)
