@@ -41,9 +41,10 @@ from ._options import (EngineProgress, check_not_input, crs_option, engine_optio
               help="With --method primitives: folder for a PNG per building (wire frame over "
                    "its points).")
 @click.option("--block-size", type=click.FloatRange(min=50.0), default=None,
+              show_default="1000; with footprints on classified points halved while a block "
+                           "would read over 2 M points",
               help="Side (m) of the processing blocks (grid on the CRS origin): memory is "
-                   "bounded by a few tiles and results do not depend on the tiling. Default: "
-                   "1000, halved with footprints while a block would read over 2 M points.")
+                   "bounded by a few tiles and results do not depend on the tiling.")
 @click.option("--edits", type=click.Path(dir_okay=False), default=None,
               help="EDITS.json written by `lidar2city edit` or the viewer: re-apply every edit "
                    "(needs --footprints).")
