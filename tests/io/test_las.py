@@ -85,6 +85,47 @@ def test_tiles_decoded_in_chunks_equal_the_whole_file(data, name):
             assert np.array_equal(attrs[n], np.asarray(las[n]))
 
 
+@pytest.mark.parametrize("case", ["true", "far", "above", "wide"])
+def test_tile_steps_whatever_the_header_says(tmp_path, case):
+    """read_tile's steps and base are the file's integer steps from their lowest,
+    int32 unless the tile spans 2**31 steps, whether the header's lower corner is
+    right, far off, above the points, or the points outgrow int32 after a chunk."""
+    import struct
+
+    import laspy
+
+    from lidar2city.io.las import read_tile
+
+    rng = np.random.default_rng(3)
+    xyz = np.column_stack([85_000 + rng.uniform(0, 50, 500), 447_000 + rng.uniform(0, 40, 500),
+                           rng.uniform(-5, 30, 500)])
+    if case == "wide":  # 25 km in x at 0.01 mm: 2.5e9 steps, the far points after the first chunk
+        xyz[400:, 0] += 25_000.0
+    h = laspy.LasHeader(point_format=1, version="1.2")
+    h.scales = np.array([1e-5, 1e-5, 1e-3]) if case == "wide" else np.array([1e-3] * 3)
+    h.offsets = np.array([97_525.0 if case == "wide" else 85_000.0, 447_000.0, 0.0])
+    las = laspy.LasData(h)
+    las.x, las.y, las.z = xyz.T
+    las.classification = rng.integers(1, 7, 500).astype(np.uint8)
+    path = tmp_path / f"{case}.las"
+    las.write(path)
+    if case in ("far", "above"):  # min x and min y of the LAS 1.2 header (offsets 187, 203)
+        shift = 1e12 if case == "far" else 7.5
+        raw = bytearray(path.read_bytes())
+        for at in (187, 203):
+            v = struct.unpack_from("<d", raw, at)[0]
+            struct.pack_into("<d", raw, at, v + shift)
+        path.write_bytes(bytes(raw))
+    back = laspy.read(path)
+    steps = np.round(np.column_stack([back.x, back.y, back.z]) / back.header.scales).astype(np.int64)
+    for chunk in (64, 1_000):
+        tile = read_tile(path, chunk=chunk)
+        assert np.array_equal(tile.base, steps.min(axis=0)) and tile.base.dtype == np.int64
+        assert tile.steps.dtype == (np.int64 if case == "wide" else np.int32)
+        assert np.array_equal(tile.steps.astype(np.int64) + tile.base, steps)
+        assert np.array_equal(tile.attrs["classification"], np.asarray(back.classification))
+
+
 def test_chunked_tile_read_reports_a_bad_file(tmp_path):
     from lidar2city.io.las import _read_world
 

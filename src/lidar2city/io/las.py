@@ -826,31 +826,72 @@ def read_tile(path, *, chunk: int = READ_CHUNK) -> DecodedTile:
             n = int(f.header.point_count)
             scales = np.asarray(f.header.scales, dtype=np.float64)
             names = [d for d in POINT_ATTRIBUTES if d in set(f.header.point_format.dimension_names)]
-            steps = np.empty((n, 3), dtype=np.int64)
+            # the steps go straight into int32 from the header's lower corner (the
+            # result's base is the true lowest step, applied at the end): no int64
+            # copy of every step is held beside them; a header too far off, or a tile
+            # too wide for int32, takes the int64 path
+            guess = _header_steps(f.header.mins, scales)
+            rel = np.empty((n, 3), dtype=np.int32 if guess is not None else np.int64)
+            lo = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
             attrs: dict = {}
             i = 0
             for pts in f.chunk_iterator(chunk):
                 m = min(len(pts), n - i)
+                steps = np.empty((m, 3), dtype=np.int64)
                 for d, axis in enumerate("xyz"):
                     w = np.asarray(pts[axis], dtype=np.float64)[:m] / scales[d]
                     if not np.isfinite(w).all():
                         raise InputError(f"{path}: point coordinates contain NaN or infinite "
                                          "values")
-                    steps[i:i + m, d] = np.round(w)
+                    steps[:, d] = np.round(w)
+                if m:
+                    lo = np.minimum(lo, steps.min(axis=0))
+                if guess is not None:
+                    steps -= guess
+                    if m and (steps.min() < _INT32[0] or steps.max() > _INT32[1]):
+                        # out of int32 from the guess: the steps so far back to int64
+                        wide = np.empty((n, 3), dtype=np.int64)
+                        np.add(rel[:i], guess, out=wide[:i], casting="unsafe")
+                        rel, steps = wide, steps + guess
+                        guess = None
+                rel[i:i + m] = steps
+                del steps
                 for d in names:
                     v = np.asarray(pts[d])[:m]
                     if d not in attrs:
                         attrs[d] = np.empty(n, dtype=v.dtype)
                     attrs[d][i:i + m] = v
                 i += m
-    steps = steps[:i]
+    rel = rel[:i]
     attrs = {d: (attrs[d][:i].copy() if i < n else attrs[d]) if d in attrs
              else np.zeros(i, dtype=np.uint8) for d in names}
-    base = steps.min(axis=0) if i else np.zeros(3, dtype=np.int64)
-    span = int((steps.max(axis=0) - base).max()) if i else 0
-    rel = np.empty((i, 3), dtype=np.int32 if span < 2 ** 31 else np.int64)
-    np.subtract(steps, base, out=rel, casting="unsafe")
-    return DecodedTile(rel, base.astype(np.int64), scales, attrs)
+    if not i:
+        return DecodedTile(np.empty((0, 3), dtype=np.int32), np.zeros(3, dtype=np.int64),
+                           scales, attrs)
+    base = lo
+    shift = base - (guess if guess is not None else 0)  # rel + shift: the steps from base
+    top = rel.max(axis=0).astype(np.int64) - shift
+    if guess is not None and int(top.max()) < 2 ** 31:
+        # every step from the guess fits int32 and so does every step from the base
+        # (0 <= step - base <= step - guess + |shift|): shifted in place
+        np.subtract(rel, shift.astype(np.int32), out=rel, casting="unsafe")
+        return DecodedTile(rel if i == n else rel.copy(), base, scales, attrs)
+    wide = rel.astype(np.int64) - shift if rel.dtype != np.int64 else rel - shift
+    out = np.empty((i, 3), dtype=np.int32 if int(top.max()) < 2 ** 31 else np.int64)
+    np.copyto(out, wide, casting="unsafe")
+    return DecodedTile(out, base.astype(np.int64), scales, attrs)
+
+
+_INT32 = (int(np.iinfo(np.int32).min), int(np.iinfo(np.int32).max))
+
+
+def _header_steps(mins, scales):
+    """The header's lower corner in steps of the resolution (int64), or None when it is
+    not usable (not finite, or beyond int64)."""
+    m = np.asarray(mins, dtype=np.float64)[:3] / scales
+    if not np.isfinite(m).all() or (np.abs(m) > 2.0 ** 62).any():
+        return None
+    return np.floor(m).astype(np.int64)
 
 
 def with_neighbours(cloud, neighbours, *, buffer=50.0, crs=None):

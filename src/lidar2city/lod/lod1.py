@@ -425,8 +425,9 @@ def _lod13(polys, inside, ground, cfg) -> list:
 
     solids = []
     for poly in polys:
-        sel = shapely.contains_xy(poly, inside[:, 0], inside[:, 1])
-        pts = inside[sel]
+        # one polygon: ``inside`` was selected by this very polygon, all of it is in it
+        pts = inside if len(polys) == 1 else inside[
+            shapely.contains_xy(poly, inside[:, 0], inside[:, 1])]
         parts = height_parts(poly, pts, cell=lod13_cell(poly, cfg.lod13_cell), step=cfg.lod13_step,
                              min_area=cfg.lod13_min_area, grid=cfg.precision)
         tol = 2.5 * max(cfg.precision, 0.001)
@@ -438,8 +439,11 @@ def _lod13(polys, inside, ground, cfg) -> list:
             [orient(r, 1.0) for r in _separate_rings(part, cfg.precision, 2.0 * tol)]
             if part.interiors and _ring_contact(part, tol) is not None else [part])]
         for part in parts:
-            in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
-            zz = pts[in_part, 2] if in_part.sum() >= 1 else pts[:, 2]
+            if part is poly:  # the polygon whole (one height part): every one of its points
+                zz = pts[:, 2]
+            else:
+                in_part = shapely.contains_xy(part, pts[:, 0], pts[:, 1])
+                zz = pts[in_part, 2] if in_part.sum() >= 1 else pts[:, 2]
             if len(zz) == 0:
                 zz = inside[:, 2]
             h = max(roof_height(zz, cfg.roof_statistic), ground + cfg.min_height)

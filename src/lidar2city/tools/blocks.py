@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["BlockSpec", "Frame", "FootprintRef", "footprint_blocks", "traced_blocks", "block_keys",
-           "split_size", "SPLIT_LEAST", "traced_parts"]
+           "split_size", "SPLIT_LEAST", "traced_parts", "BLOCK_POINTS", "footprint_block_size"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,17 +155,9 @@ def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: flo
         footprints on classified points: :func:`lidar2city.tools.task.splittable`);
         None (default): a block is one spec.
     """
-    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
-    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
-    empty = ~np.isfinite(centre).all(axis=1)
-    keys = block_keys(np.where(empty[:, None], 0.0, centre), frame, block_size)
-    # group by block, row by row (y, then x); footprint order kept inside a block
-    cells, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
-    which = np.asarray(which).reshape(-1)
-    order = np.argsort(which, kind="stable")
-    cuts = np.flatnonzero(np.diff(which[order])) + 1
+    bounds, centre, empty, cells, which, blocks = _footprint_cells(bounds, frame, block_size)
     specs = []
-    for block in np.split(order, cuts):
+    for block in blocks:
         row, col = cells[which[block[0]]]
         for idx in _split_parts(block, centre, empty, split):
             b = bounds[[i for i in idx if not empty[i]]]
@@ -176,6 +168,96 @@ def footprint_blocks(tiles, frame: Frame, bounds, block_size: float, margin: flo
             specs.append(BlockSpec(len(specs), (int(col), int(row)), world,
                                    _tiles_meeting(tiles, world), frame, footprints(idx)))
     return specs
+
+
+def _footprint_cells(bounds, frame: Frame, block_size: float) -> tuple:
+    """``(bounds, centres, empty, cells, which, blocks)``: the footprints' grid cells
+    (``cells`` row by row, y then x; ``which`` cell of each footprint) and the
+    positions of each cell's footprints (``blocks``, in footprint order)."""
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
+    centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
+    empty = ~np.isfinite(centre).all(axis=1)
+    keys = block_keys(np.where(empty[:, None], 0.0, centre), frame, block_size)
+    # group by block, row by row (y, then x); footprint order kept inside a block
+    cells, which = np.unique(keys[:, ::-1], axis=0, return_inverse=True)
+    which = np.asarray(which).reshape(-1)
+    order = np.argsort(which, kind="stable")
+    cuts = np.flatnonzero(np.diff(which[order])) + 1
+    return bounds, centre, empty, cells, which, np.split(order, cuts)
+
+
+#: the most tile points a block of given footprints should read
+#: (:func:`footprint_block_size`): held compact while the block runs (17 bytes a
+#: point, ~34 MB), besides the decoded tiles it reads them from. Delft (640,510
+#: points) stays one 1 km block; on 4 x 4 copies of it (10.2 M points) 1 km
+#: blocks read up to ~4 M points each (peak RSS 263 MB), 250 m blocks ~1.3 M
+BLOCK_POINTS = 2_000_000
+
+
+def footprint_block_size(tiles, frame: Frame, bounds, margin: float, largest: float, *,
+                         budget: int | None = None) -> float:
+    """The block size of a run of given footprints: ``largest``, halved while a block
+    would read more than ``budget`` tile points, not below ``2 * margin`` (a block
+    smaller than the margin its buildings read around them reads mostly its
+    neighbours' points again).
+
+    A block's points are estimated from the tile headers (each tile's points
+    spread evenly over its header box) within the box the block reads (its
+    footprints' box plus ``margin``, :func:`footprint_blocks`). With given
+    footprints a building's points do not depend on its block, so neither
+    does the output: the size only bounds what a block holds at once.
+
+    Parameters
+    ----------
+    tiles : sequence of TileInfo
+    bounds : ndarray, shape (N, 4)
+        Local bounds of the footprints (NaN for an empty one).
+    margin : float
+        What a building reads around its footprint's box (m).
+    largest : float
+        The largest (and first tried) block size (m).
+    budget : int, optional
+        The most points a block should read (default :data:`BLOCK_POINTS`).
+
+    Returns
+    -------
+    float
+    """
+    budget = BLOCK_POINTS if budget is None else budget
+    full = [t for t in tiles if t.count]
+    if not full:
+        return float(largest)
+    lo = np.array([t.mins[:2] for t in full], dtype=np.float64)
+    hi = np.array([t.maxs[:2] for t in full], dtype=np.float64)
+    count = np.array([t.count for t in full], dtype=np.float64)
+    size = float(largest)
+    while size / 2 >= 2 * margin and _most_points(lo, hi, count, frame, bounds, size,
+                                                  margin) > budget:
+        size /= 2
+    return size
+
+
+def _most_points(lo, hi, count, frame, bounds, block_size, margin) -> float:
+    """The most tile points (by the headers, spread evenly) a block of ``block_size``
+    reads."""
+    bounds, _, empty, _, _, blocks = _footprint_cells(bounds, frame, block_size)
+    o, u = np.asarray(frame.origin[:2]), frame.xy_unit
+    most = 0.0
+    for block in blocks:
+        b = bounds[block[~empty[block]]]
+        if not len(b):
+            continue
+        x0, y0 = o + (b[:, :2].min(axis=0) - margin) / u
+        x1, y1 = o + (b[:, 2:].max(axis=0) + margin) / u
+        w = np.clip(np.minimum(hi[:, 0], x1) - np.maximum(lo[:, 0], x0), 0.0, None)
+        h = np.clip(np.minimum(hi[:, 1], y1) - np.maximum(lo[:, 1], y0), 0.0, None)
+        span = hi - lo
+        # the share of a tile's box inside the block's (a box without width: all of it)
+        fx = np.where(span[:, 0] > 0, w / np.where(span[:, 0] > 0, span[:, 0], 1.0), 1.0)
+        fy = np.where(span[:, 1] > 0, h / np.where(span[:, 1] > 0, span[:, 1], 1.0), 1.0)
+        meets = (hi[:, 0] >= x0) & (lo[:, 0] <= x1) & (hi[:, 1] >= y0) & (lo[:, 1] <= y1)
+        most = max(most, float((count * np.where(meets, fx * fy, 0.0)).sum()))
+    return most
 
 
 #: the fewest footprints a part of a split block holds (:func:`split_size`):

@@ -732,13 +732,17 @@ def fixed_gpkg_date():
         pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
 
 
+#: the side (m) of the processing blocks by default (with footprints, the largest:
+#: :func:`lidar2city.tools.blocks.footprint_block_size` halves it for dense areas)
+BLOCK_SIZE = 1000.0
+
 #: how LoD2.2 roofs are made: the roof-topology framework or fitted primitives
 LOD22_METHODS = ("roof", "primitives")
 
 
 def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None, fmt=None,
                 id_field=None, layer=None, progress=None, method="roof",
-                primitives=None, check_images=None, block_size=1000.0, workers=1,
+                primitives=None, check_images=None, block_size=None, workers=1,
                 scheduler=None, resume=False, block_progress=None,
                 edits=None) -> ReconstructSummary:
     """Read tiles and footprints, reconstruct every building, write ``output``.
@@ -786,8 +790,13 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
     check_images : path, optional
         With ``method="primitives"``: a folder for one PNG per building, the fitted
         wire frame over its points, for checking by eye.
-    block_size : float
-        Side (m) of the processing blocks.
+    block_size : float, optional
+        Side (m) of the processing blocks. None (default): with ``footprints``
+        on classified points, :data:`BLOCK_SIZE` halved while a block would read
+        more than :data:`lidar2city.tools.blocks.BLOCK_POINTS` tile points (the
+        output is the same at any size; only what a block holds changes);
+        else :data:`BLOCK_SIZE` (traced blocks shape the footprints, a raw
+        block is classified on its own).
     workers : int or "auto"
         1 (default): blocks run in this process; N > 1: on a Dask
         ``LocalCluster`` of N worker processes. The output is the same bytes.
@@ -938,7 +947,8 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
         # the edits' content: a run resumed with other edits is refused
         "edits": [e.to_dict() for e in plan.options.edits],
         "options": [plan.fmt, plan.lods, plan.resolved, crs, id_field, layer, method,
-                    float(block_size), None if check_images is None else str(check_images)],
+                    plan.options.block_size,
+                    None if check_images is None else str(check_images)],
         # blocks cut into parts for several workers: the journal's blocks are those parts
         **({} if plan.split is None else {"split": plan.split}),
         **({"traced_parts": True} if plan.parts else {})})
@@ -995,6 +1005,8 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
         if not journal.done():  # nothing to resume: leave nothing behind
             journal.remove()
         raise
+    finally:
+        ordered.close()
     journal.remove()
     summary = tally.summary
     summary.blocks, summary.resumed = n_blocks, n_blocks - len(pending)
@@ -1027,6 +1039,9 @@ class InOrder:
         self.points = plan.points
         # outputs in blocks (traced in the block), or footprint by footprint
         self.by_block = plan.traced and not plan.parts
+        # encoded results waiting for those before them: on disk (their number grows
+        # with the area when the footprint file is not in spatial order)
+        self.spilled = None
 
     def add(self, out) -> list:
         """The results that ``out`` makes ready, in order."""
@@ -1041,10 +1056,24 @@ class InOrder:
         else:
             self.pending.update(zip(fps.attributes["_index"], items, strict=True))
         ready = []
-        while self.next in self.pending:
-            got = self.pending.pop(self.next)
+        spilled = self.spilled
+        while True:
+            if self.next in self.pending:
+                got = self.pending.pop(self.next)
+            elif spilled is not None and self.next in spilled:
+                got = spilled.pop(self.next)
+            else:
+                break
             ready += got if self.by_block else [got]
             self.next += 1
+        if out.encoded is not None and self.pending and not self.by_block:
+            # this block's results that wait: their text (and light results) to disk
+            if spilled is None:
+                from ..io.spill import SpillFile
+
+                spilled = self.spilled = SpillFile()
+            for key in list(self.pending):
+                spilled.put(key, self.pending.pop(key))
         for r, _, _ in ready:
             if self.plan.traced:
                 self.numbered += 1
@@ -1065,8 +1094,14 @@ class InOrder:
             raise EmptyInputError("no building point found in the input, even after "
                                   "classification" if not self.plan.traced
                                   else "no building footprint found in the points")
-        if self.pending:  # pragma: no cover - every block is given once
-            raise RuntimeError(f"{len(self.pending)} results left out of order")
+        left = len(self.pending) + (len(self.spilled) if self.spilled is not None else 0)
+        if left:  # pragma: no cover - every block is given once
+            raise RuntimeError(f"{left} results left out of order")
+
+    def close(self) -> None:
+        """Remove the scratch file of the results that waited, if any."""
+        if self.spilled is not None:
+            self.spilled.close()
 
 
 class _Collect:
@@ -1205,7 +1240,7 @@ class ReconstructPlan:
 
 def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=None,
                      fmt=None, id_field=None, layer=None, method="roof", primitives=None,
-                     check_images=None, block_size=1000.0, edits=None,
+                     check_images=None, block_size=None, edits=None,
                      workers: int = 1) -> ReconstructPlan:
     """Check the options, index the tiles and cut the area into block specs (no point read).
 
@@ -1217,7 +1252,8 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     shared by the workers, with the same results.
     """
     from ..io.las import TileReader, check_header_bounds, scan_tiles
-    from .blocks import FootprintRef, Frame, footprint_blocks, split_size, traced_blocks
+    from .blocks import (BLOCK_POINTS, FootprintRef, Frame, footprint_block_size,
+                         footprint_blocks, split_size, traced_blocks)
     from .engine import RUNS_PER_WORKER
     from .task import BlockOptions, splittable
 
@@ -1227,7 +1263,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     if primitives is not None or check_images is not None:
         if not ("2.2" in (lods or ()) and method == "primitives"):
             raise InputError("--primitives and --check-images go with --method primitives --lod 2.2")
-    if not block_size > 0:
+    if block_size is not None and not block_size > 0:
         raise InputError(f"block_size must be positive, got {block_size}")
     if edits is not None and footprints is None:
         # traced footprints are numbered when the run is assembled, after the
@@ -1284,7 +1320,7 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
             if spec.get("primitive") not in PRIMITIVES:
                 raise InputError(f"{primitives}: footprint {fid}: unknown primitive "
                                  f"{spec.get('primitive')!r}; known: {', '.join(PRIMITIVES)}")
-    options = BlockOptions(cfg, classified, float(block_size), lod22=lod22,
+    options = BlockOptions(cfg, classified, float(block_size or BLOCK_SIZE), lod22=lod22,
                            primitives=others.get("primitives") if want22 and method == "primitives"
                            else None,
                            user_primitives=user_prims,
@@ -1301,7 +1337,8 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     split, first = None, False
     if footprints is None:
         logger.info("no footprints given: tracing them from the building points")
-        specs = traced_blocks(tiles, frame, reader.world_bounds(), block_size, margin + 100.0)
+        specs = traced_blocks(tiles, frame, reader.world_bounds(), options.block_size,
+                              margin + 100.0)
         # fewer blocks than the executor's runs: each is traced first, and its
         # buildings built in parts by all the workers (the same results)
         first = (int(workers or 1) > 1 and splittable(options)
@@ -1324,7 +1361,17 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
         # one process runs the blocks whole: the same plan as ever
         split = (split_size(len(fids), RUNS_PER_WORKER * int(workers))
                  if int(workers or 1) > 1 and splittable(options) else None)
-        specs = footprint_blocks(tiles, frame, bounds, block_size, margin, ref, split=split)
+        if block_size is None and splittable(options):
+            # as large as the points a block should hold allow; only where a building's
+            # model does not depend on its block (classified points: no block classifies
+            # or filters its ground on its own), so the output is the same bytes
+            size = footprint_block_size(tiles, frame, bounds, margin, BLOCK_SIZE)
+            if size != BLOCK_SIZE:
+                logger.info("blocks of %g m (%d points by the tile headers; at most ~%d a "
+                            "block)", size, reader.count, BLOCK_POINTS)
+            options = dataclasses.replace(options, block_size=size)
+        specs = footprint_blocks(tiles, frame, bounds, options.block_size, margin, ref,
+                                 split=split)
         if len({spec.cell for spec in specs}) == len(specs):
             split = None  # no block was cut: the plan of one process
         if options.edits:  # an unknown building id: an error before any block runs
