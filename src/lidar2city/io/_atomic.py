@@ -206,13 +206,19 @@ def check_output_path(path) -> Path:
     if not parent.is_dir():
         raise FileFormatError(f"cannot write {str(path)!r}: {str(parent)!r} is a file, not a folder")
     probe = parent / f".lidar2city-probe{os.getpid()}-{threading.get_ident()}"
+    # registered before it is made: an interrupt (the CLI's handler removes what is
+    # being written, then exits) between its creation and removal leaves nothing
+    _PENDING.add(probe)
     try:
-        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    except OSError as exc:
-        raise FileFormatError(f"cannot write to {str(parent)!r}: {_reason(exc)}") from None
-    os.close(fd)
-    with contextlib.suppress(OSError):
-        os.unlink(probe)
+        try:
+            fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        except OSError as exc:
+            raise FileFormatError(f"cannot write to {str(parent)!r}: {_reason(exc)}") from None
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            os.unlink(probe)
+    finally:
+        _PENDING.discard(probe)
     return path
 
 
