@@ -89,25 +89,33 @@ class PointCloud:
 
     @classmethod
     def from_world(cls, world_xyz, *, crs=None, xy_unit=1.0, z_unit=1.0, origin=None,
-                   attributes=None) -> PointCloud:
+                   attributes=None, copy: bool = True) -> PointCloud:
         """Build a cloud from world coordinates (CRS units), choosing a local origin.
 
-        The origin is the minimum corner rounded down to whole CRS units unless given.
+        The origin is the minimum corner (of the points with finite coordinates)
+        rounded down to whole CRS units unless given. ``copy=False``: a float64
+        ``world_xyz`` is converted in place and becomes the cloud's coordinates
+        (no second N x 3 array while a tile is read).
         """
         world_xyz = np.asarray(world_xyz, dtype=np.float64)
         if world_xyz.ndim != 2 or world_xyz.shape[1] != 3:
             raise InputError(f"coordinates must have shape (N, 3), got {world_xyz.shape}")
         if origin is None:
-            if len(world_xyz) == 0:
-                origin = np.zeros(3)
-            else:
-                finite = world_xyz[np.isfinite(world_xyz).all(axis=1)]
-                origin = np.floor(finite.min(axis=0)) if len(finite) else np.zeros(3)
-                origin[2] = 0.0
+            origin = np.zeros(3)
+            if len(world_xyz):
+                # 1-D reductions of the columns (an axis-0 one of the (N, 3) array is slower)
+                cols = [world_xyz[:, d] for d in range(3)]
+                finite = np.isfinite(cols[0]) & np.isfinite(cols[1]) & np.isfinite(cols[2])
+                if finite.all():
+                    origin[:2] = np.floor([np.min(cols[0]), np.min(cols[1])])
+                elif finite.any():
+                    origin[:2] = np.floor(world_xyz[finite, :2].min(axis=0))
         origin = np.asarray(origin, dtype=np.float64)
         scale = np.array([xy_unit, xy_unit, z_unit])
-        return cls((world_xyz - origin) * scale, origin, crs, xy_unit, z_unit,
-                   dict(attributes or {}))
+        local = world_xyz if not copy else world_xyz.copy()
+        local -= origin
+        local *= scale
+        return cls(local, origin, crs, xy_unit, z_unit, dict(attributes or {}))
 
     @property
     def unit_scale(self) -> np.ndarray:

@@ -207,14 +207,8 @@ def _to_point_cloud(las, crs, *, origin=None) -> PointCloud:
     attrs = {name: np.asarray(las[name]) for name in POINT_ATTRIBUTES if name in names}
     if not np.isfinite(world).all():
         raise InputError("point coordinates contain NaN or infinite values")
-    # PointCloud.from_world's origin and local coordinates, computed in place (no copy of
-    # the N x 3 array; 1-D reductions of the columns)
-    if origin is None:
-        origin = np.array([np.floor(np.min(world[:, 0])), np.floor(np.min(world[:, 1])), 0.0])
-    origin = np.asarray(origin, dtype=np.float64)
-    world -= origin
-    world *= np.array([xy_unit, xy_unit, z_unit])
-    return PointCloud(world, origin, crs, xy_unit, z_unit, attrs)
+    return PointCloud.from_world(world, crs=crs, xy_unit=xy_unit, z_unit=z_unit,
+                                 origin=origin, attributes=attrs, copy=False)
 
 
 def read_points(paths, *, crs=None, require_crs=False) -> PointCloud:
