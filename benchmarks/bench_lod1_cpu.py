@@ -1,7 +1,7 @@
 """CPU of the LoD1.2 / LoD1.3 stage on the Delft tile, this tree against another, in pairs.
 
 Usage: ``python benchmarks/bench_lod1_cpu.py [DATA_DIR] [--other SRC] [--rounds 5] [--repeat 3]
-[--lod22]`` (default $LIDAR2CITY_DATA or ../shared/data; SRC: the ``src`` folder of
+[--lod22] [--profile]`` (default $LIDAR2CITY_DATA or ../shared/data; SRC: the ``src`` folder of
 another checkout, e.g. /work/wt/base/src)
 
 In a fresh process per tree, the tile is read and its 132 BGT footprints are
@@ -13,6 +13,11 @@ reported, with an MD5 of every result (attributes but the run time, solids and
 LoD1.3 parts) to show whether the two trees build the same models. The trees
 run alternately, ``--rounds`` times (A B A B ...): the pairs' CPU ratios A/B
 and their median are printed with the load average before and after.
+
+``--profile``: instead, per round and tree, the issue's command (``reconstruct`` of the
+tile with its footprints, LoD 1.2 + 1.3 + 2.2, one process) runs under cProfile timed
+in process CPU seconds, and the cumulative CPU of the LoD1 stage's functions and of
+the run's serial start is printed (the profiler inflates them, ~2x: compare trees).
 """
 
 from __future__ import annotations
@@ -74,6 +79,40 @@ print(json.dumps({"cpu": min(cpu), "n": len(res), "md5": digest(res),
 '''
 
 
+PROFILED = r'''
+import cProfile, json, pstats, sys, time
+from lidar2city.cli.main import cli
+d, out = sys.argv[1], sys.argv[2]
+pr = cProfile.Profile(time.process_time)
+pr.enable()
+cli.main(["reconstruct", d + "/ahn3_cropped_1.laz", "--footprints", d + "/footprints_bgt.gpkg",
+          "--lod", "1.2", "--lod", "1.3", "--lod", "2.2", "-o", out], standalone_mode=False)
+pr.disable()
+st = pstats.Stats(pr)
+cum = {}
+for (f, _, name), v in st.stats.items():
+    key = f.replace("\\", "/").split("lidar2city/")[-1] + ":" + name
+    cum[key] = cum.get(key, 0.0) + v[3]
+print(json.dumps({"total": st.total_tt, "cum": cum}))
+'''
+
+#: the functions whose cumulative CPU ``--profile`` prints (module path: name)
+STAGE = ("lod/lod1.py:reconstruct_building", "lod/lod1.py:_lod13", "lod/lod13.py:height_parts",
+         "lod/lod13.py:_height_labels", "lod/lod1.py:_rmse", "lod/lod1.py:_codes",
+         "roof/building.py:part_floor", "tools/reconstruct.py:plan_reconstruct",
+         "io/las.py:scan_tiles", "io/las.py:read_tile")
+
+
+def profiled(src, d) -> dict:
+    import tempfile
+
+    env = dict(os.environ, PYTHONPATH=str(src), OMP_NUM_THREADS="1")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", PROFILED, str(d), tmp + "/out.city.json"],
+                             env=env, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def data_dir(arg):
     if arg:
         return Path(arg)
@@ -100,10 +139,25 @@ def main():
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--lod22", action="store_true", help="LoD2.2 too")
+    ap.add_argument("--profile", action="store_true", help="the stage's cProfile CPU")
     a = ap.parse_args()
     d = data_dir(a.data) / "delft"
     mine = ROOT / "src"
     print(f"load average before: {_load()} ({os.cpu_count()} cores)", flush=True)
+    if a.profile:
+        trees = [("this tree", mine)] + ([("other", Path(a.other))] if a.other else [])
+        got = {name: [] for name, _ in trees}
+        for _ in range(max(1, a.rounds)):
+            for name, src in trees:
+                got[name].append(profiled(src, d))
+        for key in ("total",) + STAGE:
+            cells = []
+            for name, _ in trees:
+                v = [g["total"] if key == "total" else g["cum"].get(key, 0.0) for g in got[name]]
+                cells.append(f"{name} {statistics.median(v):7.3f}")
+            print(f"{key:40s} " + "  ".join(cells) + "  (CPU s under cProfile, median)")
+        print(f"load average after: {_load()}")
+        return
     ratios = []
     for k in range(max(1, a.rounds)):
         ra = run(mine, d, a.repeat, a.lod22)
