@@ -1,7 +1,7 @@
 """CPU of the LoD1.2 / LoD1.3 stage on the Delft tile, this tree against another, in pairs.
 
 Usage: ``python benchmarks/bench_lod1_cpu.py [DATA_DIR] [--other SRC] [--rounds 5] [--repeat 3]
-[--lod22] [--profile]`` (default $LIDAR2CITY_DATA or ../shared/data; SRC: the ``src`` folder of
+[--lod22] [--profile] [--imports]`` (default $LIDAR2CITY_DATA or ../shared/data; SRC: the ``src`` folder of
 another checkout, e.g. /work/wt/base/src)
 
 In a fresh process per tree, the tile is read and its 132 BGT footprints are
@@ -18,6 +18,10 @@ and their median are printed with the load average before and after.
 tile with its footprints, LoD 1.2 + 1.3 + 2.2, one process) runs under cProfile timed
 in process CPU seconds, and the cumulative CPU of the LoD1 stage's functions and of
 the run's serial start is printed (the profiler inflates them, ~2x: compare trees).
+``--imports``: instead, per tree, the least CPU of ``--rounds`` fresh processes importing
+what a run with footprints imports before its first building (``lidar2city.tools.reconstruct``
+and ``lidar2city.lod.lod1``; numpy, shapely and scipy imported first, as a run has them
+anyway), and how many modules that import adds.
 """
 
 from __future__ import annotations
@@ -113,6 +117,22 @@ def profiled(src, d) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+IMPORTS = r'''
+import json, sys, time
+import numpy, scipy, shapely  # noqa: F401
+n0, t0 = len(sys.modules), time.process_time()
+import lidar2city.lod.lod1, lidar2city.tools.reconstruct  # noqa: F401
+print(json.dumps({"cpu": time.process_time() - t0, "modules": len(sys.modules) - n0}))
+'''
+
+
+def imports(src) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(src))
+    out = subprocess.run([sys.executable, "-c", IMPORTS], env=env, check=True,
+                         capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def data_dir(arg):
     if arg:
         return Path(arg)
@@ -140,10 +160,18 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--lod22", action="store_true", help="LoD2.2 too")
     ap.add_argument("--profile", action="store_true", help="the stage's cProfile CPU")
+    ap.add_argument("--imports", action="store_true", help="the imports before a building")
     a = ap.parse_args()
     d = data_dir(a.data) / "delft"
     mine = ROOT / "src"
     print(f"load average before: {_load()} ({os.cpu_count()} cores)", flush=True)
+    if a.imports:
+        for name, src in [("this tree", mine)] + ([("other", Path(a.other))] if a.other else []):
+            got = [imports(src) for _ in range(max(1, a.rounds))]
+            print(f"{name}: least {1000 * min(g['cpu'] for g in got):.1f} CPU ms of "
+                  f"{len(got)} processes, {got[0]['modules']} modules")
+        print(f"load average after: {_load()}")
+        return
     if a.profile:
         trees = [("this tree", mine)] + ([("other", Path(a.other))] if a.other else [])
         got = {name: [] for name, _ in trees}
