@@ -9,7 +9,7 @@ ground points in two strips just outside it. It is written as a LAS tile
 :func:`lidar2city.tools.reconstruct.reconstruct` (in this process) at LoD 1.2,
 1.2 + 1.3 and 1.2 + 1.3 + 2.2. For each run: CPU seconds (``resource.getrusage``),
 those spent in the main phases (each wrapped, CPU time accumulated: the LoD1.3 height
-raster ``height_parts``, the prism RMSE ``prism_distance``, the prisms' solid checks
+raster ``height_parts``, the prism RMSE ``_rmse``, the prisms' solid checks
 ``lod1._codes``, the LoD2.2 roof ``reconstruct_lod22``), the LoD1.3 parts, the
 building's validity and the MD5 of the CityJSON written (same bytes before and after a
 speed-up). ``--profile`` also prints the top 15 functions of the last run by
@@ -69,7 +69,7 @@ def write_hall(tmp: Path):
 
 
 PHASES = (("height_parts", "lidar2city.lod.lod1", "height_parts"),
-          ("prism RMSE", "lidar2city.lod.lod1", "prism_distance"),
+          ("prism RMSE", "lidar2city.lod.lod1", "_rmse"),
           ("solid checks", "lidar2city.lod.lod1", "_codes"),
           ("LoD2.2 roof", "lidar2city.roof.building", "reconstruct_lod22"))
 

@@ -12,7 +12,8 @@ lidar2city is measured, default this checkout's: pass another checkout's to comp
 
 Runs ``reconstruct`` of the Delft tile without footprints (LoD 1.2 + 1.3 + 2.2) once in
 this process, records the arguments of every call of
-:func:`lidar2city.lod.prism.prism_distance` and of
+:func:`lidar2city.lod.prism.prism_distance` (``_layout_distance``, ``_layout_inside_distance``:
+the prisms' layouts as built) and of
 ``lidar2city.roof.arrangement._cell_labels``, then calls each again N times on them and
 prints the least CPU (``time.process_time``) of one pass over all the calls: the
 kernels' cost per Delft run, little affected by other processes on the machine. It
@@ -55,7 +56,8 @@ def main():
     from lidar2city.cli.main import cli
 
     # name -> the module whose attribute the run calls it by
-    where = {"prism_distance": lod1, "_cell_labels": arr}
+    # (LoD1 measures its prisms' distances from the layouts they were built with)
+    where = {"_layout_distance": lod1, "_layout_inside_distance": lod1, "_cell_labels": arr}
     if args.all or args.only:
         where.update(segment_planes=bld, roof_lines=bld, arrangement_partition=bld,
                      refine_partition=bld, collapse_short_edges=bld, height_parts=lod1)

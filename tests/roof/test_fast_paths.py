@@ -239,3 +239,55 @@ def test_boundary_chains_walk_is_the_numpy_walk(seed, h, w, k):
     assert len(chains) == len(ref_chains)
     for c, r in zip(chains, ref_chains, strict=True):
         np.testing.assert_array_equal(c, r)
+
+
+def _part_floor_plain(poly, xyz, labels, planes, ground_z, *, min_height, spacing,
+                      flat_slope=3.0, share=1 / 3, building_points=None):
+    """part_floor as it was: every plane's points in a tree, its lowest height measured."""
+    corners = np.asarray(poly.exterior.coords)[:, :2]
+    lows, held, flat_lows, flat_held = [], 0, [], 0
+    for k, (a, b, c) in enumerate(np.asarray(planes)):
+        flat = np.degrees(np.arctan(np.hypot(a, b))) < flat_slope
+        own = xyz[labels == k]
+        if not len(own):
+            continue
+        near = cKDTree(own[:, :2]).query(corners, distance_upper_bound=2 * spacing)[0] < np.inf
+        low = float(np.min(np.vstack([own[:, :2], corners[near]]) @ (a, b) + c))
+        if low >= ground_z + min_height:
+            continue
+        if flat:
+            flat_lows.append(low)
+            flat_held += len(own)
+        else:
+            lows.append(low)
+            held += len(own)
+    if lows and held >= share * len(xyz):
+        return min(ground_z, min(lows) - 2 * min_height)
+    total = len(xyz) if building_points is None else max(int(building_points), len(xyz))
+    if flat_lows and held + flat_held >= share * total:
+        return min(ground_z, min(lows + flat_lows) - 2 * min_height)
+    return ground_z
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 80), k=st.integers(0, 6),
+       ground=st.floats(-2.0, 12.0))
+def test_part_floor_passes_planes_only_when_the_plain_loop_would(seed, n, k, ground):
+    # planes whose lowest height over their points and every corner stays above the floor's
+    # reach are passed without a tree: the floor is the one the plain loop finds
+    from shapely.geometry import box
+
+    from lidar2city.roof.building import part_floor
+
+    rng = np.random.default_rng(seed)
+    poly = box(0, 0, 10, 8)
+    xyz = np.column_stack([rng.uniform(-0.5, 10.5, n), rng.uniform(-0.5, 8.5, n),
+                           rng.uniform(0, 10, n)])
+    labels = rng.integers(-1, k + 1, n)
+    planes = np.column_stack([rng.normal(0, 0.5, k) * (rng.random(k) < 0.7),
+                              rng.normal(0, 0.5, k) * (rng.random(k) < 0.7),
+                              rng.uniform(-2, 12, k)])
+    kw = dict(min_height=0.5, spacing=float(rng.uniform(0.3, 2.0)),
+              building_points=int(rng.integers(0, 2 * n + 1)))
+    assert part_floor(poly, xyz, labels, planes, ground, **kw) == \
+        _part_floor_plain(poly, xyz, labels, planes, ground, **kw)

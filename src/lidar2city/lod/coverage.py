@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..footprints.grid import point_spacing
+from .._spacing import point_spacing
 
 __all__ = ["reach_coverage"]
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._stats import percentile as _percentile
 from ..errors import InputError
 
 __all__ = ["ROOF_STATISTICS", "roof_height", "ground_height"]
@@ -21,7 +22,7 @@ def _statistic(z, stat):
                          f"got {stat!r}")
     if not 0 <= float(stat) <= 100:
         raise InputError(f"percentile must be in [0, 100], got {stat}")
-    return float(np.percentile(z, float(stat)))
+    return float(_percentile(z, float(stat)))
 
 
 #: Names accepted besides a percentile number for the roof height.
@@ -96,11 +97,15 @@ def ground_height(footprint, ground_xyz, *, percentile: float = 10.0, ring_width
                 continue
             zone = footprint.buffer(width, quad_segs=4)
             shapely.prepare(zone)
-            sel = shapely.contains_xy(zone, g[:, 0], g[:, 1]) & ~inside
-            if sel.sum() >= min_points:
-                return float(np.percentile(g[sel, 2], percentile)), source
+            # only the points in the zone's box can be in it
+            zx0, zy0, zx1, zy1 = zone.bounds
+            idx = np.flatnonzero((g[:, 0] >= zx0) & (g[:, 0] <= zx1) & (g[:, 1] >= zy0)
+                                 & (g[:, 1] <= zy1) & ~inside)
+            idx = idx[shapely.contains_xy(zone, g[idx, 0], g[idx, 1])]
+            if len(idx) >= min_points:
+                return float(_percentile(g[idx, 2], percentile)), source
         if inside.sum() >= min_points:
-            return float(np.percentile(g[inside, 2], percentile)), "inside footprint"
+            return float(_percentile(g[inside, 2], percentile)), "inside footprint"
     if building_z is not None and len(building_z):
         return float(np.min(building_z)), "lowest building point"
     if callable(fallback_z):

@@ -21,8 +21,8 @@ from ..errors import ConfigError, InputError
 from .coverage import reach_coverage
 from .heights import ROOF_STATISTICS, ground_height, roof_height
 from .lod13 import height_parts
-from .prism import (_ring_contact, _separate_rings, clean_polygon, prism_distance,
-                    prism_is_valid, prism_solid)
+from .prism import (_layout_distance, _layout_inside_distance, _layout_is_valid, _prism_solid,
+                    _ring_contact, _separate_rings, clean_polygon)
 
 logger = logging.getLogger(__name__)
 
@@ -314,23 +314,28 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
         issues: list[int] = []
         solids, codes12 = None, []
         if "1.2" in cfg.lods:
-            solids = [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
+            # each prism with its layout, as built: the RMSE and the checks need not find it
+            solids, layouts = _prisms(polys, ground, roof, cfg.precision)
             result.solids["1.2"] = solids[0] if len(solids) == 1 else solids
-            result.attributes["rmse_lod12"] = round(_rmse(inside, solids), 4)
+            result.attributes["rmse_lod12"] = round(_rmse(inside, solids, layouts, True), 4)
             if cfg.validate:
-                codes12 = _codes(solids)
+                codes12 = _codes(solids, layouts)
                 issues += codes12
         if "1.3" in cfg.lods and low_coverage:
             # the LoD1.2 prism stands in: no roof parts invented where there are no points
-            prisms = solids or [prism_solid(p, ground, roof, grid=cfg.precision) for p in polys]
+            if solids:
+                prisms = solids
+            else:
+                prisms, layouts = _prisms(polys, ground, roof, cfg.precision)
             result.parts["1.3"] = list(prisms)
             result.attributes["lod13_parts"] = len(prisms)
             result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"] if solids else round(
-                _rmse(inside, prisms), 4)
+                _rmse(inside, prisms, layouts, True), 4)
             if cfg.validate:
-                issues += codes12 if solids else _codes(prisms)
+                issues += codes12 if solids else _codes(prisms, layouts)
         elif "1.3" in cfg.lods:
-            parts = _lod13(polys, inside, ground, cfg)
+            parts, layouts13 = _lod13(polys, inside, ground, cfg,
+                                      lod12=None if solids is None else (roof, solids, layouts))
             result.parts["1.3"] = parts
             result.attributes["lod13_parts"] = len(parts)
             if solids is not None and _same_solids(parts, solids):
@@ -338,9 +343,9 @@ def reconstruct_building(footprint, building_xyz, ground_xyz, *, config: Lod1Con
                 result.attributes["rmse_lod13"] = result.attributes["rmse_lod12"]
                 issues += codes12
             else:
-                result.attributes["rmse_lod13"] = round(_rmse(inside, parts), 4)
+                result.attributes["rmse_lod13"] = round(_rmse(inside, parts, layouts13), 4)
                 if cfg.validate:
-                    issues += _codes(parts)
+                    issues += _codes(parts, layouts13)
         if cfg.validate:
             result.attributes["valid"] = not issues
             result.attributes["validity_errors"] = " ".join(str(c) for c in sorted(set(issues)))
@@ -358,6 +363,8 @@ def _same_solids(a, b) -> bool:
     if len(a) != len(b):
         return False
     for s, t in zip(a, b, strict=True):
+        if s is t:
+            continue
         if (s.vertices.shape != t.vertices.shape or not np.array_equal(s.vertices, t.vertices)
                 or len(s.surfaces) != len(t.surfaces)):
             return False
@@ -382,23 +389,34 @@ def _empty_parts(polys, xy, reach: float) -> list[int]:
     return empty
 
 
-def _rmse(points, solids) -> float:
+def _prisms(polys, ground, roof, grid):
+    """The prisms of ``polys`` from ``ground`` to ``roof`` (:func:`prism_solid`), and their
+    layouts (:func:`lidar2city.lod.prism._prism_layout`)."""
+    built = [_prism_solid(p, ground, roof, grid) for p in polys]
+    return [b[0] for b in built], [b[1] for b in built]
+
+
+def _rmse(points, solids, layouts, inside=False) -> float:
     """RMSE of the 3-D distances of ``points`` to the prisms' faces (as
-    :func:`lidar2city.metrics.model.model_rmse`, from the footprint rings)."""
-    from ..metrics.model import model_rmse, rmse
+    :func:`lidar2city.metrics.model.model_rmse`, from the footprint rings:
+    :func:`lidar2city.lod.prism.prism_distance` of the prisms laid out as ``layouts``).
+    ``inside``: the points were selected inside the footprint the prisms were built on
+    (the LoD1.2 prisms): one prism's distances are measured knowing it."""
+    from ..metrics.model import rmse
 
-    d = prism_distance(points, solids)
-    return model_rmse(points, solids) if d is None else rmse(d)
+    if inside and len(layouts) == 1:
+        return rmse(_layout_inside_distance(points, layouts[0]))
+    return rmse(_layout_distance(points, layouts))
 
 
-def _codes(solids) -> list[int]:
+def _codes(solids, layouts) -> list[int]:
     """val3dity codes of prisms: none for those valid by construction (their footprint
-    proves it, :func:`prism_is_valid`), the full check for the others."""
+    proves it, :func:`lidar2city.lod.prism.prism_is_valid`), the full check for the others."""
     from ..validate.solid import solid_error_codes
 
     out: list[int] = []
-    for s in solids:
-        if not prism_is_valid(s):
+    for s, layout in zip(solids, layouts, strict=True):
+        if not _layout_is_valid(layout):
             out += solid_error_codes(s)
     return out
 
@@ -418,13 +436,16 @@ def lod13_cell(polygon, cell: float) -> float:
     return max(cell, float(np.sqrt((x1 - x0) * (y1 - y0) / LOD13_MAX_CELLS)))
 
 
-def _lod13(polys, inside, ground, cfg) -> list:
-    """Prisms of the roof-height parts of each footprint polygon."""
+def _lod13(polys, inside, ground, cfg, lod12=None) -> tuple[list, list]:
+    """Prisms of the roof-height parts of each footprint polygon, and their layouts.
+
+    ``lod12``: ``(roof, prisms, layouts)`` of the LoD1.2 prisms of ``polys``: a polygon
+    that is one part at that height keeps its LoD1.2 prism (the same one built again)."""
     import shapely
     from shapely.geometry.polygon import orient
 
-    solids = []
-    for poly in polys:
+    solids, layouts = [], []
+    for i, poly in enumerate(polys):
         # one polygon: ``inside`` was selected by this very polygon, all of it is in it
         pts = inside if len(polys) == 1 else inside[
             shapely.contains_xy(poly, inside[:, 0], inside[:, 1])]
@@ -447,5 +468,10 @@ def _lod13(polys, inside, ground, cfg) -> list:
             if len(zz) == 0:
                 zz = inside[:, 2]
             h = max(roof_height(zz, cfg.roof_statistic), ground + cfg.min_height)
-            solids.append(prism_solid(part, ground, h, grid=cfg.precision))
-    return solids
+            if part is poly and lod12 is not None and h == lod12[0]:
+                solid, layout = lod12[1][i], lod12[2][i]
+            else:
+                solid, layout = _prism_solid(part, ground, h, cfg.precision)
+            solids.append(solid)
+            layouts.append(layout)
+    return solids, layouts

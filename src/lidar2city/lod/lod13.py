@@ -189,6 +189,31 @@ def _cell_boxes(r, c, x0, y_top, cell):
     return shapely.box(x0 + c * cell, y_top - (r + 1) * cell, x0 + (c + 1) * cell, y_top - r * cell)
 
 
+def _near_outline(footprint, x, y, reach):
+    """Whether each point ``(x, y)`` lies within ``reach`` of an edge of ``footprint``'s
+    rings (a polygon), measured in plan, all edges at once."""
+    import shapely
+
+    if len(x) == 0:
+        return np.zeros(0, dtype=bool)
+    rings = shapely.get_rings(footprint)
+    c, ring = shapely.get_coordinates(rings, return_index=True)
+    same = ring[1:] == ring[:-1]  # consecutive vertices of one ring: an edge
+    a, b = c[:-1][same], c[1:][same]
+    ab = b - a
+    ll = np.einsum("ij,ij->i", ab, ab)
+    ll[ll == 0] = 1.0
+    out = np.empty(len(x), dtype=bool)
+    step = max(1, (1 << 16) // max(len(a), 1))  # point-edge pairs at a time
+    for s0 in range(0, len(x), step):
+        dx = x[s0:s0 + step, None] - a[:, 0]
+        dy = y[s0:s0 + step, None] - a[:, 1]
+        t = np.clip((dx * ab[:, 0] + dy * ab[:, 1]) / ll, 0.0, 1.0)
+        ex, ey = dx - t * ab[:, 0], dy - t * ab[:, 1]
+        out[s0:s0 + step] = (ex * ex + ey * ey).min(axis=1) <= reach * reach
+    return out
+
+
 def _touched_cells(footprint, x0, y_top, cell, rows, cols):
     """Boolean raster (rows, cols) of the cells whose interior meets the footprint."""
     import shapely
@@ -197,8 +222,15 @@ def _touched_cells(footprint, x0, y_top, cell, rows, cols):
     shapely.prepare(footprint)
     # a cell whose centre is in the footprint's interior meets it there; only the others
     # (along the outline) need the test on the cell's square
-    hit = shapely.contains_xy(footprint, x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell)
+    cx, cy = x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell
+    hit = shapely.contains_xy(footprint, cx, cy)
     rest = np.flatnonzero(~hit)
+    # a cell whose centre is outside meets the interior only where the outline crosses
+    # it: the outline comes within half the cell's diagonal of its centre (with a margin
+    # for rounding; the cells farther cannot meet the footprint)
+    near = _near_outline(footprint, cx[rest], cy[rest], cell * (0.5 * np.sqrt(2.0) + 1e-6))
+    hit[rest[~near]] = False
+    rest = rest[near]
     boxes = _cell_boxes(r[rest], c[rest], x0, y_top, cell)
     meets = shapely.intersects(footprint, boxes)
     meets[meets] &= ~shapely.touches(footprint, boxes[meets])

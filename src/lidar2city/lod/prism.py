@@ -159,6 +159,12 @@ def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -
     >>> len(s.vertices), len(s.surfaces)
     (8, 6)
     """
+    return _prism_solid(polygon, ground_z, roof_z, grid)[0]
+
+
+def _prism_solid(polygon, ground_z: float, roof_z: float, grid: float = 0.0):
+    """:func:`prism_solid` and its layout, as :func:`_prism_layout` would find it from the
+    solid (what :func:`_layout_distance` and :func:`_layout_is_valid` take)."""
     from shapely.geometry.polygon import orient
 
     if polygon is None or polygon.geom_type != "Polygon" or polygon.is_empty:
@@ -179,15 +185,18 @@ def prism_solid(polygon, ground_z: float, roof_z: float, *, grid: float = 0.0) -
     vertices[k:, :2] = xy
     vertices[k:, 2] = roof_z
     starts = np.cumsum([0] + [len(r) for r in rings2d])[:-1]
+    lens = [len(r) for r in rings2d]
     idx_rings = [np.arange(s, s + len(r)) for s, r in zip(starts, rings2d, strict=True)]
     ground = Surface([r[::-1].copy() for r in idx_rings], "GroundSurface")
     roof = Surface([r + k for r in idx_rings], "RoofSurface")
-    walls = []
+    walls, quads = [], []
     for r in idx_rings:
         nxt = np.roll(r, -1)
-        quads = np.column_stack([r, nxt, nxt + k, r + k])
-        walls.extend(Surface([q], "WallSurface") for q in quads)
-    return Solid(vertices, [ground, roof, *walls])
+        q = np.column_stack([r, nxt, nxt + k, r + k])
+        quads.append(q)
+        walls.extend(Surface([w], "WallSurface") for w in q)
+    solid = Solid(vertices, [ground, roof, *walls])
+    return solid, (solid.vertices, k, starts, lens, quads)
 
 
 def _prism_layout(solid):
@@ -253,21 +262,28 @@ def prism_distance(points, solids, *, chunk_pairs: int = 1 << 16):
     ndarray, shape (N,) or None
         None when a solid is not such a prism (measure it on its mesh then).
     """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    rings = []  # per prism: edges from a to b, ground, roof, its rings' vertices
+    layouts = []
     for s in solids:
         layout = _prism_layout(s)
         if layout is None:
             return None
-        v, k, starts, lens, _ = layout
-        ids = np.concatenate([np.arange(s0, s0 + m) for s0, m in zip(starts, lens, strict=True)])
-        nxt = np.concatenate([np.roll(np.arange(s0, s0 + m), -1)
-                              for s0, m in zip(starts, lens, strict=True)])
-        rings.append((v[ids, :2], v[nxt, :2], v[0, 2], v[k, 2],
+        layouts.append(layout)
+    return _layout_distance(points, layouts, chunk_pairs=chunk_pairs)
+
+
+def _layout_distance(points, layouts, *, chunk_pairs: int = 1 << 16):
+    """:func:`prism_distance` of the prisms laid out as ``layouts`` (:func:`_prism_layout`)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    rings = []  # per prism: edges from a to b, ground, roof, its rings' vertices
+    for v, k, starts, lens, quads in layouts:
+        q = quads[0] if len(quads) == 1 else np.concatenate(quads)
+        rings.append((v[q[:, 0], :2], v[q[:, 1], :2], v[0, 2], v[k, 2],
                       [v[s0:s0 + m, :2] for s0, m in zip(starts, lens, strict=True)]))
-    if not solids or len(pts) == 0:
-        return np.full(len(pts), np.inf) if not solids else np.zeros(0)
-    if len(rings) == 1:
+    if not layouts or len(pts) == 0:
+        return np.full(len(pts), np.inf) if not layouts else np.zeros(0)
+    if len(rings) == 1 or len(pts) * sum(len(q[0]) for q in rings) <= DIRECT_PAIRS:
+        # one prism, or few points and edges (a house's parts): every point against every
+        # edge at once costs less than sorting them into tiles
         return np.sqrt(_prism_d2(pts, rings, chunk_pairs))
     # many prisms (the parts of a hall, one of them winding through all of it): each
     # point against the prisms that can be its nearest only, and against the edges of
@@ -329,6 +345,53 @@ def prism_distance(points, solids, *, chunk_pairs: int = 1 << 16):
                 best[sel] = np.minimum(best[sel], _prism_d2(p, [(a, b, g[j], r[j])],
                                                             chunk_pairs))
     return np.sqrt(best)
+
+
+def _layout_inside_distance(points, layout, *, chunk_pairs: int = 1 << 16):
+    """:func:`prism_distance` of points inside the footprint of one prism laid out as
+    ``layout``: their plan position known inside (GEOS), the ray casting is left out, and
+    the plan distance to the walls is measured only for the points between floor and roof
+    (the others are nearest to a cap). Each value is the one :func:`prism_distance` finds
+    for a point its ray casting also puts inside; for one it puts outside (within
+    rounding of an edge, or of a vertex the prism dropped: :func:`_ring_coords`) the two
+    differ by that point's squared plan distance to the outline (under 1e-5 m2)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    v, k, _, _, quads = layout
+    q = quads[0] if len(quads) == 1 else np.concatenate(quads)
+    a, b = v[q[:, 0], :2], v[q[:, 1], :2]
+    g, r = v[0, 2], v[k, 2]
+    z = pts[:, 2]
+    d2 = np.minimum(np.abs(z - r), np.abs(z - g)) ** 2
+    between = np.flatnonzero((z >= g) & (z <= r))
+    ab = b - a
+    ll = np.einsum("ij,ij->i", ab, ab)
+    ll_safe = np.where(ll > 0, ll, 1.0)
+    ax, ay, abx, aby = a[:, 0], a[:, 1], ab[:, 0], ab[:, 1]
+    step = max(1, chunk_pairs // len(a))
+    for s0 in range(0, len(between), step):
+        sel = between[s0:s0 + step]
+        px, py = pts[sel, :1], pts[sel, 1:2]
+        # the plan distance as _prism_d2 computes it, operation by operation
+        dx = px - ax
+        dy = py - ay
+        t = dx * abx
+        t += dy * aby
+        t /= ll_safe
+        np.clip(t, 0.0, 1.0, out=t)
+        u = t * abx
+        u -= dx
+        u *= u
+        t *= aby
+        t = dy - t
+        t *= t
+        u += t
+        d2[sel] = np.minimum(d2[sel], u.min(axis=1))
+    return np.sqrt(d2)
+
+
+#: point-edge pairs up to which :func:`prism_distance` measures every point against every
+#: edge of every prism (a few chunks of ``chunk_pairs``) rather than tile by tile
+DIRECT_PAIRS = 1 << 18
 
 
 def _prism_d2(pts, rings, chunk_pairs):
@@ -426,16 +489,20 @@ def prism_is_valid(solid, *, tolerance: float = 0.001) -> bool:
     >>> prism_is_valid(prism_solid(box(0, 0, 2, 1), 0.0, 3.0))
     True
     """
+    layout = _prism_layout(solid)
+    return layout is not None and _layout_is_valid(layout, tolerance=tolerance)
+
+
+def _layout_is_valid(layout, *, tolerance: float = 0.001) -> bool:
+    """:func:`prism_is_valid` of a prism laid out as ``layout`` (:func:`_prism_layout`)."""
     import shapely
 
-    layout = _prism_layout(solid)
-    if layout is None:
-        return False
     v, k, starts, lens, quads = layout
     if not v[k, 2] - v[0, 2] >= 2.0 * tolerance:
         return False
     xy = v[:k, :2]
-    if len(np.unique(xy, axis=0)) < k:
+    o = np.lexsort((xy[:, 1], xy[:, 0]))
+    if np.any((xy[o[1:], 0] == xy[o[:-1], 0]) & (xy[o[1:], 1] == xy[o[:-1], 1])):
         # a vertex shared by two rings (holes touching at a point): GEOS's minimum
         # clearance leaves such contacts out, the shell's edge there is non-manifold
         return False

@@ -191,7 +191,20 @@ def part_floor(poly, xyz, labels, planes, ground_z, *, min_height, spacing, flat
 
     corners = np.asarray(poly.exterior.coords)[:, :2]
     lows, held, flat_lows, flat_held = [], 0, [], 0
-    for k, (a, b, c) in enumerate(np.asarray(planes)):
+    planes = np.asarray(planes)
+    # each plane's lowest height over its points and every corner: no lower than over its
+    # points and the corners near them, so a plane whose bound stays above the floor's
+    # reach (by more than rounding) is passed without its points' tree
+    bound = np.full(len(planes), np.inf)
+    if len(planes):
+        lab = np.asarray(labels)
+        mine = np.flatnonzero((lab >= 0) & (lab < len(planes)))
+        pl = planes[lab[mine]]
+        np.minimum.at(bound, lab[mine], xyz[mine, 0] * pl[:, 0] + xyz[mine, 1] * pl[:, 1] + pl[:, 2])
+        bound = np.minimum(bound, (corners @ planes[:, :2].T + planes[:, 2]).min(axis=0))
+    for k, (a, b, c) in enumerate(planes):
+        if bound[k] >= ground_z + min_height + 1e-6:
+            continue
         flat = np.degrees(np.arctan(np.hypot(a, b))) < flat_slope
         own = xyz[labels == k]
         if not len(own):
