@@ -324,3 +324,23 @@ def test_as_rebuilt_keeps_clean_faces():
     got = _as_rebuilt(faces, rings, lambda fi, mp: ("rebuilt", fi))
     assert got == [clean, ("rebuilt", 1), ("rebuilt", 2), ("rebuilt", 3), clean]
     assert got[0] is clean
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_lines=st.integers(0, 6), lift=st.floats(0.0, 3.0))
+def test_held_faces_are_supported(seed, n_lines, lift):
+    from lidar2city.roof.building import _fixed_face, _held_faces
+
+    rng = np.random.default_rng(seed)
+    faces = _random_cells(seed, n_lines)
+    planes = [np.array([a, b, c]) for a, b, c in rng.normal(0.0, 0.5, (len(faces), 3))]
+    labels = np.arange(len(faces))
+    xyz = np.column_stack([rng.random((400, 2)) * 10, rng.normal(0.0, 1.0, 400) + lift])
+    x = xyz[:, 0]
+    by_x = np.argsort(x, kind="stable")
+    sorted_x = (by_x, x[by_x])
+    zmin = float(xyz[:, 2].min())
+    held = _held_faces(faces, labels, planes, xyz, sorted_x, zmin, spacing=0.5, t_step=0.3)
+    want = [_fixed_face(f, planes[k], xyz, sorted_x, zmin, spacing=0.5, t_step=0.3) is None
+            for k, f in enumerate(faces)]
+    assert not (held & ~np.asarray(want, dtype=bool)).any()  # held: supported

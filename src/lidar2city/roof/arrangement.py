@@ -61,13 +61,18 @@ def arrangement_cells(footprint, segments):
     Returns a list of shapely Polygons covering the footprint without overlap.
     """
     import shapely
-    from shapely.geometry import MultiLineString
 
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
     lines = rings + [np.asarray(s, dtype=np.float64) for s in segments if len(s) >= 2]
     # snap-rounded noding on a micrometre grid (robust: a crossing computed twice lands on
-    # one vertex, overlapping collinear pieces dissolve)
-    noded = shapely.set_precision(shapely.union_all(MultiLineString(lines), grid_size=1e-6), 0)
+    # one vertex, overlapping collinear pieces dissolve); plane lines made in one call
+    if all(c.ndim == 2 and c.shape[1] == 2 for c in lines):
+        sizes = np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+        multi = shapely.multilinestrings(shapely.linestrings(
+            np.concatenate(lines), indices=np.repeat(np.arange(len(lines)), sizes)))
+    else:
+        multi = shapely.MultiLineString(lines)
+    noded = shapely.set_precision(shapely.union_all(multi, grid_size=1e-6), 0)
     cells = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
     cells = cells[shapely.area(cells) > 1e-9]
     inside = shapely.dwithin(footprint, shapely.point_on_surface(cells), 1e-9)

@@ -272,9 +272,11 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=Tru
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
     by_x = np.argsort(x, kind="stable")  # each face's box of points by two binary searches
     xs = x[by_x]
+    held = _held_faces(faces, face_labels, planes, xyz, (by_x, xs), zmin, spacing=spacing,
+                       t_step=t_step)
     for fi, f in enumerate(faces):
-        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, (by_x, xs), zmin, spacing=spacing,
-                            t_step=t_step, cap=cap)
+        fixed = None if held[fi] else _fixed_face(
+            f, planes[face_labels[fi]], xyz, (by_x, xs), zmin, spacing=spacing, t_step=t_step, cap=cap)
         if fixed is None:
             out[0].append(f)
             out[1].append(face_labels[fi])
@@ -320,6 +322,54 @@ def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
         drop.add(i)
     keep = [k for k in range(len(faces)) if k not in drop]
     return [faces[k] for k in keep], labels[keep], planes
+
+
+#: the most (face, point) pairs :func:`_held_faces` tests in one call
+_HELD_PAIRS = 1 << 21
+
+
+def _held_faces(faces, face_labels, planes, xyz, sorted_x, zmin, *, spacing, t_step):
+    """Per face, True when :func:`_fixed_face` finds it supported by its first two tests
+    (its highest corner no higher than the lowest point, or than its own points, plus its
+    tolerance), the tests of all faces in vectorised calls: the same doubles, compared the
+    same way. False says nothing (the face goes through :func:`_fixed_face`)."""
+    import shapely
+
+    n = len(faces)
+    if not n or not len(xyz):
+        return np.zeros(n, dtype=bool)
+    arr = np.asarray(faces, dtype=object)
+    pl = np.array([np.asarray(planes[k], dtype=np.float64) for k in face_labels]).reshape(n, 3)
+    c, which = shapely.get_coordinates(shapely.get_exterior_ring(arr), return_index=True)
+    if len(np.unique(which)) != n:
+        return np.zeros(n, dtype=bool)
+    p = pl[which]
+    z = p[:, 0] * c[:, 0] + p[:, 1] * c[:, 1] + p[:, 2]
+    top = np.maximum.reduceat(z, np.flatnonzero(np.r_[True, which[1:] != which[:-1]]))
+    tol = t_step + np.minimum(np.minimum(np.hypot(pl[:, 0], pl[:, 1]), _SPIKE_MAX_TAN) * spacing,
+                              max(spacing / 2, 2 * t_step))
+    held = top <= zmin + tol
+    rest = np.flatnonzero(~held)
+    if not len(rest):
+        return held
+    # the highest of each face's own points (in its box, then inside it)
+    x, y = xyz[:, 0], xyz[:, 1]
+    by_x, xs = sorted_x
+    box = shapely.bounds(arr[rest])
+    lo, hi = np.searchsorted(xs, box[:, 0], "left"), np.searchsorted(xs, box[:, 2], "right")
+    span = hi - lo
+    if int(span.sum()) > _HELD_PAIRS:
+        return held
+    js = np.repeat(np.arange(len(rest)), span)
+    cand = by_x[lo[js] + np.arange(len(js)) - np.repeat(np.cumsum(span) - span, span)]
+    inbox = (y[cand] >= box[js, 1]) & (y[cand] <= box[js, 3])
+    js, cand = js[inbox], cand[inbox]
+    shapely.prepare(arr[rest])
+    inside = shapely.contains_xy(arr[rest][js], x[cand], y[cand])
+    high = np.full(len(rest), -np.inf)
+    np.maximum.at(high, js[inside], xyz[cand[inside], 2])
+    held[rest] = top[rest] <= high + tol[rest]
+    return held
 
 
 def _fixed_face(f, pl, xyz, sorted_x, zmin, *, spacing, t_step, cap=True):
@@ -908,6 +958,7 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     """
     info = {}
     restored = None
+    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     if method in ("rims", "arrangement"):
         kw = dict(cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
                   max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, step_snake=cfg.step_snake,
@@ -919,7 +970,6 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
             poly, pts, labels, planes, rims=method == "rims", lines=shared["lines"], **kw)
         info["rims"] = kinds.count("rim")
         if cfg.restore:
-            spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
             restored = restore_facets(faces, face_labels, poly, pts, labels, planes, direction=direction,
                                       spacing=spacing, t_step=2 * cfg.elevation_error,
                                       min_area=cfg.min_facet_area)
@@ -929,13 +979,15 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
         if cfg.snake:
             faces, info = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
                                         direction=direction, window=cfg.snake_window)
-    out = _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, cell=cell, cfg=cfg, info=info)
+    out = _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, cell=cell, cfg=cfg, info=info,
+                        spacing=spacing)
     if restored is None or not restored[2]:
         return out
     import shapely
 
     try:
-        alt = _finish_solid(method, poly, pts, *restored[:2], planes, ground_z, cell=cell, cfg=cfg, info=info)
+        alt = _finish_solid(method, poly, pts, *restored[:2], planes, ground_z, cell=cell, cfg=cfg, info=info,
+                            spacing=spacing)
     except (FitError, ValueError, shapely.errors.GEOSException):
         return out
     if not _closed_shell(alt[0]) or check_solid(alt[0]):
@@ -999,12 +1051,16 @@ def _with_raised_parts(part, method, poly, pts, ground_z, *, cell, direction, sp
 _RAISED_MIN_CORNERS = 2
 
 
-def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info):
-    """Refine a roof partition (intersection lines, short edges) and build its solid."""
+def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info, spacing=None):
+    """Refine a roof partition (intersection lines, short edges) and build its solid.
+
+    ``spacing``: the points' spacing over the footprint grown by ``cfg.overhang``
+    (:func:`_spacing`), computed here when not given."""
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
-    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+    if spacing is None:
+        spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     variants = [(faces, face_labels)]
     if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
