@@ -344,3 +344,24 @@ def test_held_faces_are_supported(seed, n_lines, lift):
     want = [_fixed_face(f, planes[k], xyz, sorted_x, zmin, spacing=0.5, t_step=0.3) is None
             for k, f in enumerate(faces)]
     assert not (held & ~np.asarray(want, dtype=bool)).any()  # held: supported
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_lines=st.integers(0, 6))
+def test_repeat_vertices_is_ring_by_ring(seed, n_lines):
+    import shapely
+
+    from lidar2city.roof.building import _repeat_vertices, _repeats_a_vertex
+
+    faces = _random_cells(seed, n_lines)
+    # a shell through one vertex twice (a hole pinched into it) and a hole that does
+    pinch = shapely.Polygon([(0, 0), (4, 0), (4, 4), (2, 4), (2.5, 2), (1.5, 2), (2, 4), (0, 4)])
+    holed = shapely.Polygon([(0, 0), (4, 0), (4, 4), (0, 4)],
+                            [[(1, 1), (2, 1), (2, 2), (1.5, 1.00001), (1, 2)]])
+    arr = np.asarray([*faces, pinch, shapely.Polygon(), holed,
+                      shapely.MultiPolygon([shapely.box(0, 0, 1, 1)])], dtype=object)
+    which = (shapely.get_type_id(arr) == 3) & ~shapely.is_empty(arr)
+    want = [bool(w) and any(_repeats_a_vertex(r) for r in shapely.get_rings(f))
+            for f, w in zip(arr, which, strict=True)]
+    assert _repeat_vertices(arr, which).tolist() == want
+    assert want[len(faces)] and not want[len(faces) + 1]

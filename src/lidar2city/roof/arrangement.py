@@ -1472,10 +1472,11 @@ def collapse_short_edges(faces, footprint, *, min_length):
     def rebuild_face(fi, mp):
         new_rs = []
         for r, keys in zip(rings[fi], ring_keys[fi], strict=True):
-            pts = np.array(r, dtype=float)
-            moved = [(i, mp[k]) for i, k in enumerate(keys) if k in mp] if mp else ()
+            moved = [i for i, k in enumerate(keys) if k in mp] if mp else ()
+            pts = r
             if moved:
-                pts[[i for i, _ in moved]] = [q for _, q in moved]
+                pts = np.array(r, dtype=float)
+                pts[moved] = [mp[keys[i]] for i in moved]
             # a vertex equal to the one before it (moved onto it) goes
             step = pts[1:] - pts[:-1]
             pts = pts[np.concatenate(([True], np.hypot(step[:, 0], step[:, 1]) > 1e-9))]
@@ -1484,8 +1485,9 @@ def collapse_short_edges(faces, footprint, *, min_length):
             new_rs.append(_spike_free(pts))
         if len(new_rs[0]) < 3:
             return None
-        poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
-        return None if poly.area <= 1e-9 else poly
+        holes = [shapely.linearrings(h) for h in new_rs[1:] if len(h) >= 3]
+        poly = shapely.polygons(shapely.linearrings(new_rs[0]), holes=holes or None)
+        return None if shapely.area(poly) <= 1e-9 else poly
 
     # the faces as of the accepted moves; a cluster rebuilds and checks only the faces
     # using its vertices (the others keep their edges), so each check is local

@@ -460,18 +460,21 @@ def _clean_faces(faces, labels, precision=5e-3):
     # snapping, so distinct vertices stay distinct after them): shared vertices
     # snap alike, and near-zero-width spikes collapse and vanish on both sides
     snapped = shapely.set_precision(np.asarray(faces, dtype=object), precision)
+    # emptiness, kind, validity and repeated vertices of all faces in vectorised calls
+    empty = shapely.is_empty(snapped)
+    polygon = (shapely.get_type_id(snapped) == 3) & ~empty
+    valid = shapely.is_valid(snapped)
+    pinched = _repeat_vertices(snapped, polygon)
     out_f, out_l = [], []
-    for f, lab in zip(snapped, labels, strict=True):
-        if f.is_empty:
+    for i, (f, lab) in enumerate(zip(snapped, labels, strict=True)):
+        if empty[i]:
             continue
-        if f.geom_type != "Polygon":
+        if not polygon[i]:
             parts = [g for g in shapely.get_parts(f) if g.geom_type == "Polygon" and g.area > 1e-9]
             out_f += parts
             out_l += [lab] * len(parts)
             continue
-        rings = [f.exterior, *f.interiors]
-        pinched = any(_repeats_a_vertex(r) for r in rings)
-        if f.is_valid and not pinched:
+        if valid[i] and not pinched[i]:
             out_f.append(f)
             out_l.append(lab)
             continue
@@ -481,6 +484,26 @@ def _clean_faces(faces, labels, precision=5e-3):
                 out_f.append(g)
                 out_l.append(lab)
     return _absorb_slivers(out_f, np.asarray(out_l, dtype=np.int64))
+
+
+def _repeat_vertices(faces, which):
+    """Per face, whether one of its rings passes twice through one vertex (to 0.1 mm), its
+    closing vertex aside (:func:`_repeats_a_vertex` of every ring); only the polygons
+    ``which`` (a mask) are looked at, the rings of all of them at once."""
+    from .arrangement import _flat_rings
+
+    out = np.zeros(len(faces), dtype=bool)
+    idx = np.flatnonzero(which)
+    if not len(idx):
+        return out
+    xy, owner, sizes = _flat_rings(faces[idx])
+    r = np.round(xy, 4)
+    ring = np.repeat(np.arange(len(sizes)), sizes)
+    order = np.lexsort((r[:, 1], r[:, 0], ring))
+    rs, gs = r[order], ring[order]
+    dup = (gs[1:] == gs[:-1]) & (rs[1:, 0] == rs[:-1, 0]) & (rs[1:, 1] == rs[:-1, 1])
+    out[idx[owner[gs[1:][dup]]]] = True
+    return out
 
 
 def _repeats_a_vertex(ring) -> bool:
