@@ -139,7 +139,13 @@ def _close_points(p, q) -> bool:
 
 
 def _seq_sum(values) -> float:
-    """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in)."""
+    """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in); a short
+    list of floats is added in Python (the same double additions, without numpy's set-up)."""
+    if isinstance(values, list) and len(values) < 64:
+        total = 0.0
+        for v in values:
+            total += v
+        return total
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
 
 
@@ -212,14 +218,17 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
     for i in range(n):
         members.setdefault(find(i), []).append(i)
 
+    area_l, w_l, length_l = area.tolist(), w.tolist(), length.tolist()
+    pair2_l = (2 * pair_len).tolist()
+
     def exact(r):
         """(area, weight, perimeter) of face r, summed in cell order."""
         m = members[r]
         perim = 0.0
         if min_width > 0:
             inner = sorted({p for i in m for j, _, p in nbr.get(i, ()) if find(j) == r})
-            perim = _seq_sum(length[m]) - _seq_sum(2 * pair_len[inner])
-        return _seq_sum(area[m]), _seq_sum(w[m]), perim
+            perim = _seq_sum([length_l[i] for i in m]) - _seq_sum([pair2_l[p] for p in inner])
+        return _seq_sum([area_l[i] for i in m]), _seq_sum([w_l[i] for i in m]), perim
 
     def is_bad(a, wt, perim, lab):
         return (a < min_area or wt <= 0 or lab < 0

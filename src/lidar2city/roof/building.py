@@ -362,13 +362,13 @@ def _held_faces(faces, face_labels, planes, xyz, sorted_x, zmin, *, spacing, t_s
         return held
     js = np.repeat(np.arange(len(rest)), span)
     cand = by_x[lo[js] + np.arange(len(js)) - np.repeat(np.cumsum(span) - span, span)]
-    inbox = (y[cand] >= box[js, 1]) & (y[cand] <= box[js, 3])
+    # only points high enough to hold the face are tested for being in it (rounding is
+    # monotonic: top <= max(z) + tol exactly when top <= z + tol for one of the z)
+    t_r, tol_r = top[rest], tol[rest]
+    inbox = (y[cand] >= box[js, 1]) & (y[cand] <= box[js, 3]) & (t_r[js] <= xyz[cand, 2] + tol_r[js])
     js, cand = js[inbox], cand[inbox]
-    shapely.prepare(arr[rest])
     inside = shapely.contains_xy(arr[rest][js], x[cand], y[cand])
-    high = np.full(len(rest), -np.inf)
-    np.maximum.at(high, js[inside], xyz[cand[inside], 2])
-    held[rest] = top[rest] <= high + tol[rest]
+    held[rest[np.unique(js[inside])]] = True
     return held
 
 
