@@ -1442,8 +1442,17 @@ def collapse_short_edges(faces, footprint, *, min_length):
 
     from .solid import _key, _ring_keys
 
-    rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
-    ring_keys = [[_ring_keys(r) for r in rs] for rs in rings]
+    # every face's rings (without the closing vertex) and their vertex keys, taken at once
+    flat_xy, owner, sizes = _flat_rings(faces) if len(faces) else (np.zeros((0, 2)), [], [])
+    cuts = np.cumsum(sizes)[:-1].tolist() if len(sizes) else []
+    flat_rings = np.split(flat_xy, cuts) if len(sizes) else []
+    flat_keys = _ring_keys(flat_xy) if len(flat_xy) else []
+    bounds = [0, *cuts, len(flat_keys)]
+    rings = [[] for _ in faces]
+    ring_keys = [[] for _ in faces]
+    for ri, fi in enumerate(np.asarray(owner).tolist()):
+        rings[fi].append(flat_rings[ri])
+        ring_keys[fi].append(flat_keys[bounds[ri]:bounds[ri + 1]])
     xy_of = {}
     edges = set()
     faces_of: dict = {}  # vertex key -> faces using it
