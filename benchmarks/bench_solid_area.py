@@ -12,6 +12,8 @@ seconds of one function, summed over its calls):
   ``collapse_short_edges`` (the roof partition's), plus the ``check_solid`` and
   ``_closed_shell`` calls outside it (the written solid's validation, restored facets),
   plus ``part_floor``;
+- ``partition_to_solid`` (session 13): ``_part_solid`` without ``roof_lines`` but with its
+  ``label_grid``, that is the arrangement partition, restored facets, ``_finish_solid``;
 - ``check_solid`` in all, its mesh (``solid_mesh``) and self-intersection test,
   ``refine_partition``, ``_manifold_solid``, ``partition_solid``.
 
@@ -65,6 +67,13 @@ parts = {
     "refine_partition": cum("refine_partition"),
     "_manifold_solid": cum("_manifold_solid"),
     "partition_solid": cum("partition_solid"),
+    "arrangement_partition": cum("arrangement_partition"),
+    "dissolve_cells": cum("dissolve_cells"),
+    "collapse_short_edges": cum("collapse_short_edges"),
+    "label_grid": cum("label_grid"),
+    # session 13's stage: the roof partition to the solid, without the roof lines
+    # (label_grid, in them, counted back)
+    "partition_to_solid": cum("_part_solid") - cum("roof_lines") + cum("label_grid"),
 }
 stage = (cum("_finish_solid") - cum("collapse_short_edges")
          + cum("check_solid", exclude=outside + ("solid_error_codes",))
@@ -116,6 +125,10 @@ def main():
     if args.other:
         ratios = [a["stage"] / b["stage"] for a, b in zip(res["A"], res["B"], strict=True)]
         cpu = [a["cpu"] / b["cpu"] for a, b in zip(res["A"], res["B"], strict=True)]
+        p2s = [a["partition_to_solid"] / b["partition_to_solid"]
+               for a, b in zip(res["A"], res["B"], strict=True)]
+        print(f"A/B partition_to_solid CPU {statistics.median(p2s):.3f} (runs "
+              + ", ".join(f"{x:.3f}" for x in p2s) + ")")
         print(f"A/B stage CPU {statistics.median(ratios):.3f} (runs "
               + ", ".join(f"{x:.3f}" for x in ratios)
               + f"), profiled process CPU {statistics.median(cpu):.3f}; "

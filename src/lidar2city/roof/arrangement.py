@@ -61,13 +61,18 @@ def arrangement_cells(footprint, segments):
     Returns a list of shapely Polygons covering the footprint without overlap.
     """
     import shapely
-    from shapely.geometry import MultiLineString
 
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
     lines = rings + [np.asarray(s, dtype=np.float64) for s in segments if len(s) >= 2]
     # snap-rounded noding on a micrometre grid (robust: a crossing computed twice lands on
-    # one vertex, overlapping collinear pieces dissolve)
-    noded = shapely.set_precision(shapely.union_all(MultiLineString(lines), grid_size=1e-6), 0)
+    # one vertex, overlapping collinear pieces dissolve); plane lines made in one call
+    if all(c.ndim == 2 and c.shape[1] == 2 for c in lines):
+        sizes = np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+        multi = shapely.multilinestrings(shapely.linestrings(
+            np.concatenate(lines), indices=np.repeat(np.arange(len(lines)), sizes)))
+    else:
+        multi = shapely.MultiLineString(lines)
+    noded = shapely.set_precision(shapely.union_all(multi, grid_size=1e-6), 0)
     cells = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
     cells = cells[shapely.area(cells) > 1e-9]
     inside = shapely.dwithin(footprint, shapely.point_on_surface(cells), 1e-9)
@@ -84,9 +89,42 @@ def _adjacency(cells):
     a, b = a[keep], b[keep]
     if not len(a):
         return {}
-    bounds = shapely.boundary(np.asarray(cells, dtype=object))
-    lengths = shapely.length(shapely.intersection(bounds[a], bounds[b]))
+    lengths = _shared_lengths(cells, a, b)
     return {(int(i), int(j)): float(L) for i, j, L in zip(a, b, lengths, strict=True) if L > 1e-9}
+
+
+def _shared_lengths(cells, a, b):
+    """Length of the boundary cells ``a[k]`` and ``b[k]`` share, for noded cells (a shared
+    edge has the same vertices in both): the edges of all rings keyed by their two end
+    points, each edge held by two cells counted for that pair, in vectorised passes
+    (``shapely.length(shapely.intersection(boundary(a), boundary(b)))`` without an overlay
+    per pair)."""
+    xy, owner, sizes = _flat_rings(cells)
+    if not len(xy) or not len(a):
+        return np.zeros(len(a))
+    _, nxt = _ring_neighbours(sizes)
+    cell = np.repeat(owner, sizes)
+    p, q = xy, xy[nxt]
+    swap = (q[:, 0] < p[:, 0]) | ((q[:, 0] == p[:, 0]) & (q[:, 1] < p[:, 1]))
+    lo, hi = np.where(swap[:, None], q, p), np.where(swap[:, None], p, q)
+    d = hi - lo
+    seg_len = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    order = np.lexsort((cell, hi[:, 1], hi[:, 0], lo[:, 1], lo[:, 0]))
+    key = np.column_stack([lo, hi])[order]
+    same = np.all(key[1:] == key[:-1], axis=1)  # the next edge in the order is this one
+    i, j = order[:-1][same], order[1:][same]
+    ci, cj = cell[i], cell[j]
+    ok = ci != cj
+    ci, cj, L = ci[ok], cj[ok], seg_len[i[ok]]
+    lo_c, hi_c = np.minimum(ci, cj), np.maximum(ci, cj)
+    n = len(cells)
+    # each queried pair's edges summed in ring order of the lower cell
+    by = np.argsort(np.minimum(i[ok], j[ok]), kind="stable")
+    pair_key = lo_c[by] * n + hi_c[by]
+    want = np.asarray(a, dtype=np.int64) * n + np.asarray(b, dtype=np.int64)
+    uk, inv = np.unique(np.concatenate([pair_key, want]), return_inverse=True)
+    tot = np.bincount(inv[:len(pair_key)], weights=L[by], minlength=len(uk))
+    return tot[inv[len(pair_key):]]
 
 
 _INF = float("inf")
@@ -101,7 +139,13 @@ def _close_points(p, q) -> bool:
 
 
 def _seq_sum(values) -> float:
-    """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in)."""
+    """Left-to-right sum from 0.0 (the order ``np.bincount`` adds its weights in); a short
+    list of floats is added in Python (the same double additions, without numpy's set-up)."""
+    if isinstance(values, list) and len(values) < 64:
+        total = 0.0
+        for v in values:
+            total += v
+        return total
     return float(np.cumsum(values)[-1]) if len(values) else 0.0
 
 
@@ -174,14 +218,17 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
     for i in range(n):
         members.setdefault(find(i), []).append(i)
 
+    area_l, w_l, length_l = area.tolist(), w.tolist(), length.tolist()
+    pair2_l = (2 * pair_len).tolist()
+
     def exact(r):
         """(area, weight, perimeter) of face r, summed in cell order."""
         m = members[r]
         perim = 0.0
         if min_width > 0:
             inner = sorted({p for i in m for j, _, p in nbr.get(i, ()) if find(j) == r})
-            perim = _seq_sum(length[m]) - _seq_sum(2 * pair_len[inner])
-        return _seq_sum(area[m]), _seq_sum(w[m]), perim
+            perim = _seq_sum([length_l[i] for i in m]) - _seq_sum([pair2_l[p] for p in inner])
+        return _seq_sum([area_l[i] for i in m]), _seq_sum([w_l[i] for i in m]), perim
 
     def is_bad(a, wt, perim, lab):
         return (a < min_area or wt <= 0 or lab < 0
@@ -287,40 +334,111 @@ def _merge_close(rings, tol):
     return out
 
 
+def _flat_rings(faces):
+    """Every ring of every face without its closing vertex, flat: coordinates (N, 2), each
+    ring's face, its vertex count, in vectorised calls (the rings of a face in
+    ``shapely.get_rings`` order)."""
+    import shapely
+
+    rings, owner = shapely.get_rings(np.asarray(faces, dtype=object), return_index=True)
+    xy, which = shapely.get_coordinates(rings, return_index=True)
+    sizes = np.bincount(which, minlength=len(rings))
+    last = np.cumsum(sizes) - 1
+    keep = np.ones(len(xy), dtype=bool)
+    keep[last[sizes > 0]] = False  # the closing vertex
+    return xy[keep], owner, np.maximum(sizes - 1, 0)
+
+
+def _ring_neighbours(sizes):
+    """Index of the vertex before and after each vertex of flat rings of ``sizes`` vertices
+    (cyclic within each ring): ``np.roll(r, 1)`` and ``np.roll(r, -1)`` of every ring at once."""
+    n = int(sizes.sum())
+    ids = np.arange(n)
+    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    size = np.repeat(sizes, sizes)
+    pos = ids - start
+    return start + (pos - 1) % np.maximum(size, 1), start + (pos + 1) % np.maximum(size, 1)
+
+
+def _merge_close_flat(pts, sizes, tol):
+    """:func:`_merge_close` of flat rings (coordinates (N, 2), vertex count per ring): the
+    merged coordinates of the vertices kept and the rings' new vertex counts."""
+    from scipy.spatial import cKDTree
+
+    from .._components import component_labels
+
+    if not len(pts):
+        return pts, sizes
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
+    if len(pairs):
+        comp = component_labels(len(pts), pairs[:, 0], pairs[:, 1])
+        first = np.full(comp.max() + 1, -1)
+        first[comp[::-1]] = np.arange(len(pts))[::-1]
+        pts = pts[first[comp]]
+    prev, _ = _ring_neighbours(sizes)
+    keep = np.any(pts != pts[prev], axis=1)  # a vertex equal to the one before it goes
+    ring = np.repeat(np.arange(len(sizes)), sizes)
+    return pts[keep], np.bincount(ring[keep], minlength=len(sizes))
+
+
+def _key_groups(pts):
+    """Group id of each vertex by its :func:`.solid._key` (equal keys, equal ids)."""
+    from .solid import _KEY
+
+    k = np.rint(pts * _KEY).astype(np.int64)
+    order = np.lexsort((k[:, 1], k[:, 0]))
+    ks = k[order]
+    new = np.ones(len(ks), dtype=bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    gid = np.empty(len(ks), dtype=np.int64)
+    gid[order] = np.cumsum(new) - 1
+    return gid
+
+
 def drop_collinear(faces, *, tol=1e-6, merge=1e-4):
     """Faces without the vertices that are straight (within ``tol`` m) in every ring holding them.
 
     Such vertices are where a dissolved cut ended; a vertex where any face turns
     (a junction) is kept in every face, so shared edges keep identical vertices.
     Vertices closer than ``merge`` (m; nearly concurrent lines) are first made one.
+    The rings of all faces are handled as one flat array (coordinates and ring sizes).
     """
     import shapely
 
-    from .solid import _ring_keys
-
-    rings = _merge_close([[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces], merge)
-    turning = set()
-    for rs in rings:
-        for r in rs:
-            if len(r) < 3:
-                continue
-            prev, nxt = np.concatenate([r[-1:], r[:-1]]), np.concatenate([r[1:], r[:1]])  # np.roll
-            u, v = r - prev, nxt - r
-            cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
-            dev = cross / np.maximum(np.hypot(*(nxt - prev).T), 1e-12)
-            back = np.einsum("ij,ij->i", u, v) < 0
-            turning.update(_ring_keys(r[(dev > tol) | back]))
-    out = []
-    for f, rs in zip(faces, rings, strict=True):
-        kept = [r[[k in turning for k in _ring_keys(r)]] for r in rs]
-        if len(kept[0]) < 3:
-            out.append(f)
-            continue
-        out.append(shapely.Polygon(kept[0], [h for h in kept[1:] if len(h) >= 3]))
-    if not all(f.is_valid and f.area > 0 for f in out) or \
-            abs(sum(f.area for f in out) - sum(f.area for f in faces)) > 1e-3 * max(1.0, len(faces)):
-        return list(faces)
-    return out
+    faces = list(faces)
+    if not faces:
+        return []
+    xy, owner, sizes = _flat_rings(faces)
+    pts, sizes = _merge_close_flat(xy, sizes, merge)
+    prev, nxt = _ring_neighbours(sizes)
+    u, v = pts - pts[prev], pts[nxt] - pts
+    cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    w = pts[nxt] - pts[prev]
+    dev = cross / np.maximum(np.hypot(w[:, 0], w[:, 1]), 1e-12)
+    back = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] < 0
+    turns = ((dev > tol) | back) & (np.repeat(sizes, sizes) >= 3)
+    gid = _key_groups(pts)
+    turning = np.zeros(int(gid.max()) + 1 if len(gid) else 0, dtype=bool)
+    turning[gid[turns]] = True
+    kept = turning[gid]
+    ring = np.repeat(np.arange(len(sizes)), sizes)
+    n_kept = np.bincount(ring[kept], minlength=len(sizes))
+    first = np.ones(len(owner), dtype=bool)
+    first[1:] = owner[1:] != owner[:-1]
+    shell_ok = np.zeros(len(faces), dtype=bool)
+    shell_ok[owner[first]] = n_kept[first] >= 3
+    use = shell_ok[owner] & (n_kept >= 3)  # a face's shell and its holes of 3 vertices or more
+    out = np.asarray(faces, dtype=object).copy()
+    if use.any():
+        take = kept & use[ring]
+        lr = shapely.linearrings(pts[take], indices=np.repeat(np.arange(use.sum()), n_kept[use]))
+        face_of = np.cumsum(np.r_[True, owner[use][1:] != owner[use][:-1]]) - 1
+        out[shell_ok] = shapely.polygons(lr, indices=face_of)
+    areas = shapely.area(out)
+    if not (shapely.is_valid(out).all() and (areas > 0).all()) or \
+            abs(sum(areas.tolist()) - sum(f.area for f in faces)) > 1e-3 * max(1.0, len(faces)):
+        return faces
+    return list(out)
 
 
 def _dp(points, tol):
@@ -1268,6 +1386,34 @@ def _spike_free(ring):
     return np.asarray(_remove_spikes(list(ring)), dtype=float).reshape(-1, 2)
 
 
+def _as_rebuilt(faces, rings, rebuild_face):
+    """``[rebuild_face(fi, {}) for fi in range(len(faces))]`` of :func:`collapse_short_edges`:
+    a face none of whose rings repeats a vertex (within 1e-9 m of the one before it, or the
+    last of the first) or turns back on itself (:func:`_spike_free`'s test) comes back as
+    it is (the same coordinates), tested for all rings at once; the others are rebuilt."""
+    import shapely
+
+    flat = [r for rs in rings for r in rs]
+    if not flat:
+        return []
+    sizes = np.fromiter(map(len, flat), dtype=np.int64, count=len(flat))
+    xy = np.concatenate(flat)
+    prev, nxt = _ring_neighbours(sizes)
+    back = xy - xy[prev]  # to the vertex before (the first vertex: to the last)
+    gap = xy[prev] - xy[nxt]
+    ring = np.repeat(np.arange(len(flat)), sizes)
+    bad = np.zeros(len(flat), dtype=bool)
+    np.logical_or.at(bad, ring, np.hypot(back[:, 0], back[:, 1]) <= 1e-9)
+    np.logical_or.at(bad, ring, (np.hypot(gap[:, 0], gap[:, 1]) < 1e-6) & (sizes[ring] >= 3))
+    bad |= sizes < 3
+    owner = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
+    redo = np.zeros(len(rings), dtype=bool)
+    np.logical_or.at(redo, owner, bad)
+    area = shapely.area(np.asarray(faces, dtype=object))
+    return [rebuild_face(fi, {}) if redo[fi] or area[fi] <= 1e-9 else faces[fi]
+            for fi in range(len(rings))]
+
+
 def collapse_short_edges(faces, footprint, *, min_length):
     """A partition without edges shorter than ``min_length`` where they can go.
 
@@ -1296,8 +1442,17 @@ def collapse_short_edges(faces, footprint, *, min_length):
 
     from .solid import _key, _ring_keys
 
-    rings = [[np.asarray(r.coords)[:-1] for r in shapely.get_rings(f)] for f in faces]
-    ring_keys = [[_ring_keys(r) for r in rs] for rs in rings]
+    # every face's rings (without the closing vertex) and their vertex keys, taken at once
+    flat_xy, owner, sizes = _flat_rings(faces) if len(faces) else (np.zeros((0, 2)), [], [])
+    cuts = np.cumsum(sizes)[:-1].tolist() if len(sizes) else []
+    flat_rings = np.split(flat_xy, cuts) if len(sizes) else []
+    flat_keys = _ring_keys(flat_xy) if len(flat_xy) else []
+    bounds = [0, *cuts, len(flat_keys)]
+    rings = [[] for _ in faces]
+    ring_keys = [[] for _ in faces]
+    for ri, fi in enumerate(np.asarray(owner).tolist()):
+        rings[fi].append(flat_rings[ri])
+        ring_keys[fi].append(flat_keys[bounds[ri]:bounds[ri + 1]])
     xy_of = {}
     edges = set()
     faces_of: dict = {}  # vertex key -> faces using it
@@ -1335,10 +1490,11 @@ def collapse_short_edges(faces, footprint, *, min_length):
     def rebuild_face(fi, mp):
         new_rs = []
         for r, keys in zip(rings[fi], ring_keys[fi], strict=True):
-            pts = np.array(r, dtype=float)
-            moved = [(i, mp[k]) for i, k in enumerate(keys) if k in mp] if mp else ()
+            moved = [i for i, k in enumerate(keys) if k in mp] if mp else ()
+            pts = r
             if moved:
-                pts[[i for i, _ in moved]] = [q for _, q in moved]
+                pts = np.array(r, dtype=float)
+                pts[moved] = [mp[keys[i]] for i in moved]
             # a vertex equal to the one before it (moved onto it) goes
             step = pts[1:] - pts[:-1]
             pts = pts[np.concatenate(([True], np.hypot(step[:, 0], step[:, 1]) > 1e-9))]
@@ -1347,12 +1503,13 @@ def collapse_short_edges(faces, footprint, *, min_length):
             new_rs.append(_spike_free(pts))
         if len(new_rs[0]) < 3:
             return None
-        poly = shapely.Polygon(new_rs[0], [h for h in new_rs[1:] if len(h) >= 3])
-        return None if poly.area <= 1e-9 else poly
+        holes = [shapely.linearrings(h) for h in new_rs[1:] if len(h) >= 3]
+        poly = shapely.polygons(shapely.linearrings(new_rs[0]), holes=holes or None)
+        return None if shapely.area(poly) <= 1e-9 else poly
 
     # the faces as of the accepted moves; a cluster rebuilds and checks only the faces
     # using its vertices (the others keep their edges), so each check is local
-    current = [rebuild_face(fi, {}) for fi in range(len(rings))]
+    current = _as_rebuilt(faces, rings, rebuild_face)
     tol = 1e-6 * max(total, 1)
 
     def local_ok(old, new):

@@ -285,9 +285,11 @@ def _fix_high_faces(faces, face_labels, planes, xyz, *, spacing, t_step, cap=Tru
     zmin = float(xyz[:, 2].min()) if len(xyz) else 0.0
     by_x = np.argsort(x, kind="stable")  # each face's box of points by two binary searches
     xs = x[by_x]
+    held = _held_faces(faces, face_labels, planes, xyz, (by_x, xs), zmin, spacing=spacing,
+                       t_step=t_step)
     for fi, f in enumerate(faces):
-        fixed = _fixed_face(f, planes[face_labels[fi]], xyz, (by_x, xs), zmin, spacing=spacing,
-                            t_step=t_step, cap=cap)
+        fixed = None if held[fi] else _fixed_face(
+            f, planes[face_labels[fi]], xyz, (by_x, xs), zmin, spacing=spacing, t_step=t_step, cap=cap)
         if fixed is None:
             out[0].append(f)
             out[1].append(face_labels[fi])
@@ -333,6 +335,54 @@ def _merge_thin_caps(faces, labels, planes, caps, *, spacing):
         drop.add(i)
     keep = [k for k in range(len(faces)) if k not in drop]
     return [faces[k] for k in keep], labels[keep], planes
+
+
+#: the most (face, point) pairs :func:`_held_faces` tests in one call
+_HELD_PAIRS = 1 << 21
+
+
+def _held_faces(faces, face_labels, planes, xyz, sorted_x, zmin, *, spacing, t_step):
+    """Per face, True when :func:`_fixed_face` finds it supported by its first two tests
+    (its highest corner no higher than the lowest point, or than its own points, plus its
+    tolerance), the tests of all faces in vectorised calls: the same doubles, compared the
+    same way. False says nothing (the face goes through :func:`_fixed_face`)."""
+    import shapely
+
+    n = len(faces)
+    if not n or not len(xyz):
+        return np.zeros(n, dtype=bool)
+    arr = np.asarray(faces, dtype=object)
+    pl = np.array([np.asarray(planes[k], dtype=np.float64) for k in face_labels]).reshape(n, 3)
+    c, which = shapely.get_coordinates(shapely.get_exterior_ring(arr), return_index=True)
+    if len(np.unique(which)) != n:
+        return np.zeros(n, dtype=bool)
+    p = pl[which]
+    z = p[:, 0] * c[:, 0] + p[:, 1] * c[:, 1] + p[:, 2]
+    top = np.maximum.reduceat(z, np.flatnonzero(np.r_[True, which[1:] != which[:-1]]))
+    tol = t_step + np.minimum(np.minimum(np.hypot(pl[:, 0], pl[:, 1]), _SPIKE_MAX_TAN) * spacing,
+                              max(spacing / 2, 2 * t_step))
+    held = top <= zmin + tol
+    rest = np.flatnonzero(~held)
+    if not len(rest):
+        return held
+    # the highest of each face's own points (in its box, then inside it)
+    x, y = xyz[:, 0], xyz[:, 1]
+    by_x, xs = sorted_x
+    box = shapely.bounds(arr[rest])
+    lo, hi = np.searchsorted(xs, box[:, 0], "left"), np.searchsorted(xs, box[:, 2], "right")
+    span = hi - lo
+    if int(span.sum()) > _HELD_PAIRS:
+        return held
+    js = np.repeat(np.arange(len(rest)), span)
+    cand = by_x[lo[js] + np.arange(len(js)) - np.repeat(np.cumsum(span) - span, span)]
+    # only points high enough to hold the face are tested for being in it (rounding is
+    # monotonic: top <= max(z) + tol exactly when top <= z + tol for one of the z)
+    t_r, tol_r = top[rest], tol[rest]
+    inbox = (y[cand] >= box[js, 1]) & (y[cand] <= box[js, 3]) & (t_r[js] <= xyz[cand, 2] + tol_r[js])
+    js, cand = js[inbox], cand[inbox]
+    inside = shapely.contains_xy(arr[rest][js], x[cand], y[cand])
+    held[rest[np.unique(js[inside])]] = True
+    return held
 
 
 def _fixed_face(f, pl, xyz, sorted_x, zmin, *, spacing, t_step, cap=True):
@@ -423,18 +473,21 @@ def _clean_faces(faces, labels, precision=5e-3):
     # snapping, so distinct vertices stay distinct after them): shared vertices
     # snap alike, and near-zero-width spikes collapse and vanish on both sides
     snapped = shapely.set_precision(np.asarray(faces, dtype=object), precision)
+    # emptiness, kind, validity and repeated vertices of all faces in vectorised calls
+    empty = shapely.is_empty(snapped)
+    polygon = (shapely.get_type_id(snapped) == 3) & ~empty
+    valid = shapely.is_valid(snapped)
+    pinched = _repeat_vertices(snapped, polygon)
     out_f, out_l = [], []
-    for f, lab in zip(snapped, labels, strict=True):
-        if f.is_empty:
+    for i, (f, lab) in enumerate(zip(snapped, labels, strict=True)):
+        if empty[i]:
             continue
-        if f.geom_type != "Polygon":
+        if not polygon[i]:
             parts = [g for g in shapely.get_parts(f) if g.geom_type == "Polygon" and g.area > 1e-9]
             out_f += parts
             out_l += [lab] * len(parts)
             continue
-        rings = [f.exterior, *f.interiors]
-        pinched = any(_repeats_a_vertex(r) for r in rings)
-        if f.is_valid and not pinched:
+        if valid[i] and not pinched[i]:
             out_f.append(f)
             out_l.append(lab)
             continue
@@ -444,6 +497,26 @@ def _clean_faces(faces, labels, precision=5e-3):
                 out_f.append(g)
                 out_l.append(lab)
     return _absorb_slivers(out_f, np.asarray(out_l, dtype=np.int64))
+
+
+def _repeat_vertices(faces, which):
+    """Per face, whether one of its rings passes twice through one vertex (to 0.1 mm), its
+    closing vertex aside (:func:`_repeats_a_vertex` of every ring); only the polygons
+    ``which`` (a mask) are looked at, the rings of all of them at once."""
+    from .arrangement import _flat_rings
+
+    out = np.zeros(len(faces), dtype=bool)
+    idx = np.flatnonzero(which)
+    if not len(idx):
+        return out
+    xy, owner, sizes = _flat_rings(faces[idx])
+    r = np.round(xy, 4)
+    ring = np.repeat(np.arange(len(sizes)), sizes)
+    order = np.lexsort((r[:, 1], r[:, 0], ring))
+    rs, gs = r[order], ring[order]
+    dup = (gs[1:] == gs[:-1]) & (rs[1:, 0] == rs[:-1, 0]) & (rs[1:, 1] == rs[:-1, 1])
+    out[idx[owner[gs[1:][dup]]]] = True
+    return out
 
 
 def _repeats_a_vertex(ring) -> bool:
@@ -921,6 +994,7 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
     """
     info = {}
     restored = None
+    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     if method in ("rims", "arrangement"):
         kw = dict(cell=cell, direction=direction, t_step=2 * cfg.elevation_error,
                   max_shift=cfg.max_shift, snap_angle=cfg.snap_angle, step_snake=cfg.step_snake,
@@ -932,7 +1006,6 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
             poly, pts, labels, planes, rims=method == "rims", lines=shared["lines"], **kw)
         info["rims"] = kinds.count("rim")
         if cfg.restore:
-            spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
             restored = restore_facets(faces, face_labels, poly, pts, labels, planes, direction=direction,
                                       spacing=spacing, t_step=2 * cfg.elevation_error,
                                       min_area=cfg.min_facet_area)
@@ -942,13 +1015,15 @@ def _part_solid(method, poly, pts, labels, planes, ground_z, *, cell, direction,
         if cfg.snake:
             faces, info = _snake_adjust(faces, poly, part.raw_chains, cell=cell * cfg.snake_cell,
                                         direction=direction, window=cfg.snake_window)
-    out = _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, cell=cell, cfg=cfg, info=info)
+    out = _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, cell=cell, cfg=cfg, info=info,
+                        spacing=spacing)
     if restored is None or not restored[2]:
         return out
     import shapely
 
     try:
-        alt = _finish_solid(method, poly, pts, *restored[:2], planes, ground_z, cell=cell, cfg=cfg, info=info)
+        alt = _finish_solid(method, poly, pts, *restored[:2], planes, ground_z, cell=cell, cfg=cfg, info=info,
+                            spacing=spacing)
     except (FitError, ValueError, shapely.errors.GEOSException):
         return out
     if not _closed_shell(alt[0]) or check_solid(alt[0]):
@@ -1012,12 +1087,16 @@ def _with_raised_parts(part, method, poly, pts, ground_z, *, cell, direction, sp
 _RAISED_MIN_CORNERS = 2
 
 
-def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info):
-    """Refine a roof partition (intersection lines, short edges) and build its solid."""
+def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, cell, cfg, info, spacing=None):
+    """Refine a roof partition (intersection lines, short edges) and build its solid.
+
+    ``spacing``: the points' spacing over the footprint grown by ``cfg.overhang``
+    (:func:`_spacing`), computed here when not given."""
     faces, refined = refine_partition(faces, face_labels, planes, t_step=2 * cfg.elevation_error,
                                       max_shift=cfg.max_shift)
     info = {**info, **refined}
-    spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
+    if spacing is None:
+        spacing = _spacing(pts[:, :2], poly.buffer(cfg.overhang).area)
     variants = [(faces, face_labels)]
     if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)

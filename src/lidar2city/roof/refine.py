@@ -206,7 +206,8 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
         ``intersection`` and ``step`` edge counts, ``moved`` vertices, ``fallback`` flag.
     """
     import shapely
-    from shapely.geometry import Polygon
+
+    from .arrangement import _spike_free
 
     types = edge_types(faces, labels, planes, t_step=t_step, max_shift=max_shift)
     n_int = sum(v["type"] == "intersection" for v in types.values())
@@ -308,41 +309,63 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                 moves[k] = target
     info["moved"] = len(moves)
 
+    # every vertex of every ring, flat, with what a rebuild asks of it: moved (its
+    # target), an intersection line's interior, redundant
+    flat_keys = [k for rings_f in ring_data for _, keys in rings_f for k in keys]
+    ring_sizes = [len(keys) for rings_f in ring_data for _, keys in rings_f]
+    flat_xy = (np.concatenate([c for rings_f in ring_data for c, _ in rings_f])
+               if flat_keys else np.zeros((0, 2)))
+    moved_at = [i for i, k in enumerate(flat_keys) if k in moves]
+    if moved_at:
+        flat_xy = flat_xy.copy()
+        flat_xy[moved_at] = [moves[flat_keys[i]] for i in moved_at]
+    interior = np.fromiter((k in interior_of_intersection for k in flat_keys), dtype=bool,
+                           count=len(flat_keys))
+    dropped = np.fromiter((k in redundant for k in flat_keys), dtype=bool, count=len(flat_keys))
+    ring_ends = np.cumsum(ring_sizes)
+
     def rebuild(drop_interior):
-        out = []
-        for rings_f in ring_data:
+        gone = dropped | interior if drop_interior else dropped
+        rings_all, ring_face, r = [], [], 0
+        for fi, rings_f in enumerate(ring_data):
             rings = []
-            for coords, keys in rings_f:
-                sub = [moves.get(k, p) for p, k in zip(coords, keys, strict=True)
-                       if not ((drop_interior and k in interior_of_intersection) or k in redundant)]
-                pts = sub
-                if len(sub) > 1:
-                    step = np.diff(np.array(sub, dtype=float), axis=0)
+            for _ in rings_f:
+                lo, hi = ring_ends[r] - ring_sizes[r], ring_ends[r]
+                r += 1
+                pts = flat_xy[lo:hi][~gone[lo:hi]]
+                if len(pts) > 1:
+                    step = pts[1:] - pts[:-1]
                     if (np.hypot(step[:, 0], step[:, 1]) < 1e-6).any():
                         # a vertex on (or moved onto) the one before: dropped, in order
-                        pts = []
-                        for q in sub:
-                            if pts and np.hypot(*(np.asarray(pts[-1]) - q)) < 1e-6:
+                        seq = []
+                        for q in pts:
+                            if seq and np.hypot(*(seq[-1] - q)) < 1e-6:
                                 continue
-                            pts.append(q)
-                if len(pts) > 1 and np.hypot(*(np.asarray(pts[0]) - pts[-1])) < 1e-6:
-                    pts.pop()
-                rings.append(_remove_spikes(pts))
+                            seq.append(q)
+                        pts = np.asarray(seq).reshape(-1, 2)
+                if len(pts) > 1 and np.hypot(*(pts[0] - pts[-1])) < 1e-6:
+                    pts = pts[:-1]
+                rings.append(_spike_free(pts))
             if len(rings[0]) < 3:
                 return None
-            out.append(Polygon(rings[0], [r for r in rings[1:] if len(r) >= 3]))
-        return out
+            for h in [rings[0], *(h for h in rings[1:] if len(h) >= 3)]:
+                rings_all.append(h)
+                ring_face.append(fi)
+        lr = shapely.linearrings(np.concatenate(rings_all),
+                                 indices=np.repeat(np.arange(len(rings_all)), list(map(len, rings_all))))
+        return shapely.polygons(lr, indices=ring_face)
 
     total = sum(f.area for f in faces)
     for drop in (True, False):
         new = rebuild(drop)
         if new is None:
             continue
-        if all(f.is_valid and f.area > 1e-6 for f in new):
+        areas = shapely.area(new)
+        if shapely.is_valid(new).all() and (areas > 1e-6).all():
             union_area = shapely.union_all(new).area
-            if abs(sum(f.area for f in new) - total) < 1e-6 * max(total, 1) and \
+            if abs(sum(areas.tolist()) - total) < 1e-6 * max(total, 1) and \
                     abs(union_area - total) < 1e-6 * max(total, 1):
-                return [shapely.normalize(f) for f in new], info
+                return list(shapely.normalize(new)), info
     info["fallback"] = True
     logger.debug("refinement would break the partition; keeping the unrefined faces")
     return faces, info
