@@ -8,6 +8,10 @@ goes on). With Dask, a worker that dies is replaced and its task rerun on
 another worker; a task that kills two workers comes back as ``KilledWorker``.
 
 - :class:`InProcess` (``workers=1``, the default): tasks one after the other.
+- :class:`lidar2city.tools.forked.ForkExecutor` (``workers=N`` on this machine,
+  where the system forks: :func:`make_executor`, :func:`local_executor`): this
+  process and ``N - 1`` processes forked from it when the items are handed out,
+  inheriting what it has imported, planned and decoded.
 - :class:`DaskExecutor`: a ``dask.distributed`` ``LocalCluster`` of ``workers``
   processes (one thread each), or an existing cluster given by its scheduler
   address (started with ``dask scheduler`` / ``dask worker``). A cluster task
