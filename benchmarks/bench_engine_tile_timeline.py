@@ -1,7 +1,8 @@
 """Where the wall time of ``reconstruct`` on the Delft tile goes: a timeline of the client, the server workers are forked from, and each worker.
 
 Usage: ``python benchmarks/bench_engine_tile_timeline.py [DATA_DIR] [--workers 2] [--traced] [--log]``
-(default $LIDAR2CITY_DATA or ../shared/data)
+(default $LIDAR2CITY_DATA or ../shared/data; ``LIDAR2CITY_LOCAL_EXECUTOR=dask`` in the
+environment: the Dask cluster instead of workers forked from the client)
 
 The command a user types (``lidar2city reconstruct ahn3_cropped_1.laz
 --footprints footprints_bgt.gpkg --lod 1.2 --lod 1.3 --lod 2.2 -o OUT
@@ -78,6 +79,8 @@ def main():
         mark("server started (its preload goes on)"))
     wrap(R, "plan_reconstruct", "plan begun", lambda p: f"plan done ({len(p.specs)} tasks)")
     wrap(task, "predecode", None, lambda d: f"client decoded {len(d)} tile(s) for the workers")
+    wrap(task, "hold_tiles", None,
+         lambda n: f"client decoded {n} tile(s) held for the workers it forks")
     real_start = engine.DaskExecutor._start
 
     def start(self):  # in the thread that starts the cluster: its CPU so far

@@ -620,10 +620,15 @@ def test_reading_a_geopackage_leaves_no_aux_xml(block, tmp_path):
 
 
 @pytest.mark.slow
-def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
+@pytest.mark.parametrize("executor", ["fork", "dask"])
+def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path, executor):
     """SIGINT to ``reconstruct --workers 2`` (CityJSONSeq, streamed through a spool): exit 130
     in one line; the output, its temporary name and the spool are gone, the journal (meant
-    for --resume) is kept, and no worker process outlives the run."""
+    for --resume) is kept, and no worker process outlives the run; with the workers
+    forked from the run's process (the default here) and on a Dask cluster."""
+    from lidar2city.tools.engine import LOCAL_EXECUTOR_ENV
+
+    env = {**os.environ, LOCAL_EXECUTOR_ENV: executor}
     import psutil
 
     from lidar2city.io.las import read_points, write_points
@@ -648,13 +653,14 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path):
             str(tmp_path / "fp.gpkg"), "--workers", "2", "--block-size", "50",
             "-o", str(out / "x.city.jsonl")]
     t0 = time.perf_counter()
-    subprocess.run(args, check=True, capture_output=True, timeout=600)
+    subprocess.run(args, check=True, capture_output=True, timeout=600, env=env)
     full = time.perf_counter() - t0
     assert _left(out) == ["x.city.jsonl"]
     (out / "x.city.jsonl").unlink()
     interrupted = 0
     for frac in (0.5, 0.8):
-        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=env)
         time.sleep(frac * full)
         children = psutil.Process(proc.pid).children(recursive=True)
         proc.send_signal(signal.SIGINT)

@@ -943,12 +943,18 @@ def test_a_tile_decoded_by_the_client_is_loaded_by_the_workers_bit_for_bit(area,
     assert not [p for p in tmp_path.iterdir() if p.name.startswith("lidar2city-tile-")]
 
 
+@pytest.mark.parametrize("executor", ["dask", "fork"])
 def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tmp_path,
-                                                                        monkeypatch):
+                                                                        monkeypatch, executor):
     """A plan of whole blocks decodes nothing in the client; a block cut into parts
-    for two workers has its tiles decoded ahead; a 2-worker run of it gives the
-    bytes of one process and leaves no saved tile behind."""
+    for two workers has its tiles decoded ahead (saved for a Dask cluster's
+    workers, held in memory for workers forked from the client); a 2-worker run
+    of it gives the bytes of one process and leaves no saved or held tile behind."""
     import tempfile
+
+    if executor == "fork" and not engine.local_executor() == "fork":
+        pytest.skip("this platform does not fork")
+    monkeypatch.setenv(engine.LOCAL_EXECUTOR_ENV, executor)
 
     from lidar2city.tools import blocks
     from lidar2city.tools.reconstruct import plan_reconstruct, shared_tiles
@@ -971,8 +977,13 @@ def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tm
         calls.append(saved := real(tiles, stack))
         return saved
 
-    real = task.predecode
-    monkeypatch.setattr(task, "predecode", predecode)
+    def hold_tiles(tiles, stack):
+        calls.append([None] * (held := real_hold(tiles, stack)))
+        return held
+
+    real, real_hold = task.predecode, task.hold_tiles
+    monkeypatch.setattr(task, "predecode" if executor == "dask" else "hold_tiles",
+                        predecode if executor == "dask" else hold_tiles)
     one, two = tmp_path / "w1.city.json", tmp_path / "w2.city.json"
     _run(area, one, block_size=1000.0)
     assert not calls  # one process decodes each tile once anyway
@@ -980,6 +991,7 @@ def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tm
     assert len(calls) == 1 and len(calls[0]) == 1
     assert s2.blocks > 1 and two.read_bytes() == one.read_bytes()
     assert not [p for p in scratch.iterdir() if p.name.startswith("lidar2city-tile-")]
+    assert not task._cache.held
 
 
 def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, monkeypatch):

@@ -100,13 +100,15 @@ def engine_options(f=None, *, auto=False):
                           "input paths.")(f)
     if auto:
         return click.option("--workers", type=_Workers(), default="1", show_default=True,
-                            help="Worker processes: 1 runs the tasks in this process, N > 1 on "
-                                 "a local Dask cluster of N processes (same output bytes); "
+                            help="Worker processes: 1 runs the tasks in this process, N > 1 in "
+                                 "it and N - 1 processes forked from it (a local Dask cluster "
+                                 "where the system does not fork; same output bytes); "
                                  "auto: the machine's cores when the input is large enough to "
                                  "gain from them, else 1.")(f)
     return click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-                        help="Worker processes: 1 runs the tasks in this process, N > 1 on a "
-                             "local Dask cluster of N processes (same output bytes).")(f)
+                        help="Worker processes: 1 runs the tasks in this process, N > 1 in it "
+                             "and N - 1 processes forked from it (a local Dask cluster where "
+                             "the system does not fork; same output bytes).")(f)
 
 
 def run_on_tiles(job, input, output, *, neighbours, workers, scheduler, extra=None, suffix=None,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,6 +15,32 @@ from ..errors import CRSError, EmptyInputError, FileFormatError, InputError
 from ._atomic import atomic_path, check_input_file
 
 logger = logging.getLogger(__name__)
+
+#: set in a process forked from another (:func:`laz_backend`)
+_FORKED = [False]
+
+
+def _forked() -> None:
+    _FORKED[0] = True
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forked)
+
+
+def laz_backend():
+    """The LAZ decoder this process reads with: laspy's choice (lazrs on a thread pool
+    of all the cores), except in a process forked from another
+    (:class:`lidar2city.tools.forked.ForkExecutor`'s workers), which decodes on its
+    calling thread: the pool of the process it was forked from, created by that
+    process's first decoding, has no threads in it, and a decoding handed to it
+    would wait for ever (measured: a child's ``laspy.read`` after its parent's
+    never returns)."""
+    if not _FORKED[0]:
+        return None
+    import laspy
+
+    return laspy.LazBackend.Lazrs
 
 __all__ = ["DecodedTile", "SpilledTile", "LasTile", "TileInfo", "TileReader", "read_las",
            "read_tile", "save_tile", "load_tile", "read_points", "count_points", "scan_tiles",
@@ -178,11 +205,11 @@ def read_las(path, *, crs=None) -> LasTile:
     p = check_input_file(path)
     with _reading(p):
         try:
-            las = laspy.read(p)
+            las = laspy.read(p, laz_backend=laz_backend())
         except Exception:
             # a header counting more points than the file holds: say so (its last chunk
             # decoded); checked only on failure, since a whole read finds it too
-            with laspy.open(p) as f:
+            with laspy.open(p, laz_backend=laz_backend()) as f:
                 _check_point_count(f, p)
             raise
         if las.header.point_count and not las.header.are_points_compressed:
@@ -283,7 +310,7 @@ def scan_tiles(paths, *, crs=None, allow_empty=False, check_count=True) -> list:
     out, shared = [], {}
     for path in paths:
         p = check_input_file(path)
-        with _reading(p), laspy.open(p) as f:
+        with _reading(p), laspy.open(p, laz_backend=laz_backend()) as f:
             h = f.header
             mins, maxs, count = np.array(h.mins, float), np.array(h.maxs, float), int(h.point_count)
             tile_crs = _read_crs(f, p) if forced is None else _forced_crs(forced, f, p)
@@ -403,7 +430,7 @@ def count_points(paths, *, at_least: int | None = None) -> int:
     total = 0
     for path in paths:
         p = check_input_file(path)
-        with _reading(p), laspy.open(p) as f:
+        with _reading(p), laspy.open(p, laz_backend=laz_backend()) as f:
             total += int(f.header.point_count)
         if at_least is not None and total >= at_least:
             break
@@ -422,7 +449,7 @@ def check_header_bounds(tiles, *, limit: int = 100) -> None:
     import laspy
 
     for t in [t for t in tiles if t.count][:limit]:
-        with _reading(t.path), laspy.open(t.path) as f:
+        with _reading(t.path), laspy.open(t.path, laz_backend=laz_backend()) as f:
             pts = f.read_points(1)
             if not len(pts):
                 continue
@@ -446,7 +473,7 @@ def occupied_cells(path, step: float) -> np.ndarray:
     import laspy
 
     parts = [np.zeros((0, 2), dtype=np.int64)]
-    with _reading(path), laspy.open(path) as f:
+    with _reading(path), laspy.open(path, laz_backend=laz_backend()) as f:
         for chunk in f.chunk_iterator(READ_CHUNK):
             ij = np.floor(np.column_stack([np.asarray(chunk.x), np.asarray(chunk.y)]) / step)
             parts.append(np.unique(ij.astype(np.int64), axis=0))
@@ -513,7 +540,7 @@ class TileReader:
         for t in self.tiles:
             if not t.count:
                 continue
-            with _reading(t.path), laspy.open(t.path) as f:
+            with _reading(t.path), laspy.open(t.path, laz_backend=laz_backend()) as f:
                 if "classification" not in f.header.point_format.dimension_names:
                     continue
                 size, left = 16_384, int(f.header.point_count)
@@ -816,7 +843,7 @@ def read_tile(path, *, chunk: int = READ_CHUNK) -> DecodedTile:
 
     p = check_input_file(path)
     with _reading(p):  # laspy log silenced, any read error one line
-        with laspy.open(p) as f:
+        with laspy.open(p, laz_backend=laz_backend()) as f:
             n = int(f.header.point_count)
             scales = np.asarray(f.header.scales, dtype=np.float64)
             names = [d for d in POINT_ATTRIBUTES if d in set(f.header.point_format.dimension_names)]

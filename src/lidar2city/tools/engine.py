@@ -8,6 +8,10 @@ goes on). With Dask, a worker that dies is replaced and its task rerun on
 another worker; a task that kills two workers comes back as ``KilledWorker``.
 
 - :class:`InProcess` (``workers=1``, the default): tasks one after the other.
+- :class:`lidar2city.tools.forked.ForkExecutor` (``workers=N`` on this machine,
+  where the system forks: :func:`make_executor`, :func:`local_executor`): this
+  process and ``N - 1`` processes forked from it when the items are handed out,
+  inheriting what it has imported, planned and decoded.
 - :class:`DaskExecutor`: a ``dask.distributed`` ``LocalCluster`` of ``workers``
   processes (one thread each), or an existing cluster given by its scheduler
   address (started with ``dask scheduler`` / ``dask worker``). A cluster task
@@ -37,7 +41,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["InProcess", "DaskExecutor", "make_executor", "runs_of", "shares_of", "RETRIES",
            "kill_forkserver", "START_METHOD", "start_worker_server", "worker_modules",
-           "CONNECT_TIMEOUT",
+           "CONNECT_TIMEOUT", "local_executor", "LOCAL_EXECUTOR_ENV",
            "RUNS_PER_WORKER", "RUN_MAX_COST", "AHEAD_RUNS"]
 
 #: times a failed task is tried again before its failure is reported
@@ -635,6 +639,8 @@ def start_worker_server(workers, scheduler=None, preload=()) -> bool:
     to the cluster's start, which tries again."""
     if scheduler is not None or not isinstance(workers, int) or workers < 2:
         return False
+    if local_executor() != "dask":  # the workers are forked from this process: no server
+        return False
     try:
         _start_forkserver(preload)
     except Exception as exc:  # noqa: BLE001 - the cluster starts it as it would have
@@ -897,6 +903,33 @@ def make_executor(workers: int = 1, scheduler: str | None = None, preload=(),
         return DaskExecutor(scheduler=scheduler)
     if int(workers) < 1:
         raise InputError(f"workers must be at least 1, got {workers}")
-    return InProcess() if int(workers) == 1 else DaskExecutor(workers=int(workers),
-                                                               preload=preload,
-                                                               client_computes=client_computes)
+    if int(workers) == 1:
+        return InProcess()
+    if local_executor() == "fork":
+        from .forked import ForkExecutor
+
+        return ForkExecutor(int(workers))
+    return DaskExecutor(workers=int(workers), preload=preload, client_computes=client_computes)
+
+
+#: the environment variable that chooses the executor of ``--workers N`` on this
+#: machine (:func:`local_executor`)
+LOCAL_EXECUTOR_ENV = "LIDAR2CITY_LOCAL_EXECUTOR"
+#: the executors ``--workers N`` may run on this machine
+LOCAL_EXECUTORS = ("fork", "dask")
+
+
+def local_executor() -> str:
+    """The executor of ``--workers N`` (N > 1) without ``--scheduler``: ``"fork"``,
+    workers forked from this process when it hands the blocks out
+    (:class:`lidar2city.tools.forked.ForkExecutor`), where the platform forks; else
+    ``"dask"``, a Dask ``LocalCluster`` (:class:`DaskExecutor`). The environment
+    variable :data:`LOCAL_EXECUTOR_ENV` set to ``dask`` chooses the cluster
+    (e.g. to compare them: ``benchmarks/bench_engine_tile.py --executor``)."""
+    from .forked import CAN_FORK
+
+    chosen = os.environ.get(LOCAL_EXECUTOR_ENV, "").strip().lower() or "fork"
+    if chosen not in LOCAL_EXECUTORS:
+        raise InputError(f"{LOCAL_EXECUTOR_ENV} must be one of {', '.join(LOCAL_EXECUTORS)}, "
+                         f"got {chosen!r}")
+    return chosen if chosen == "dask" or CAN_FORK else "dask"

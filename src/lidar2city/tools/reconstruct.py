@@ -798,8 +798,11 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         else :data:`BLOCK_SIZE` (traced blocks shape the footprints, a raw
         block is classified on its own).
     workers : int or "auto"
-        1 (default): blocks run in this process; N > 1: on a Dask
-        ``LocalCluster`` of N worker processes. The output is the same bytes.
+        1 (default): blocks run in this process; N > 1: in this process and
+        N - 1 processes forked from it once the run is planned and the tiles the
+        workers share are decoded (:class:`lidar2city.tools.forked.ForkExecutor`;
+        a Dask ``LocalCluster`` of N worker processes where the system does not
+        fork, or with ``LIDAR2CITY_LOCAL_EXECUTOR=dask``). The output is the same bytes.
         ``"auto"``: the machine's cores when the run is large enough to gain
         from them, else 1 (:func:`auto_workers`).
     scheduler : str, optional
@@ -937,6 +940,14 @@ def _reconstruct(executor, t0, inputs, output, *, footprints, lods, crs, config,
             plan = dataclasses.replace(plan, options=dataclasses.replace(
                 plan.options, decoded=predecode(shared, scratch)))
             give_back_memory()  # the decoding's arrays: the client holds no point
+    elif getattr(executor, "inherits", False) and scratch is not None:
+        # the workers will be forked from this process: the tiles they share are
+        # decoded once, here, and inherited (:class:`~lidar2city.tools.forked.ForkExecutor`)
+        shared = shared_tiles(plan)
+        if shared:
+            from .task import hold_tiles
+
+            hold_tiles(shared, scratch)
     first = {}
     if plan.trace_first:  # traced blocks too few for the workers: traced first, built in parts
         plan = trace_then_split(executor, plan, first)

@@ -37,7 +37,7 @@ from .engine import LOD22_MODULES, WORKER_MODULES, worker_modules  # noqa: F401
 logger = logging.getLogger(__name__)
 
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
-           "give_back_memory", "predecode", "run_block", "reconstruct_block", "splittable", "tile_keeper",
+           "give_back_memory", "hold_tiles", "predecode", "run_block", "reconstruct_block", "splittable", "tile_keeper",
            "TracedBlock", "worker_modules", "trace_footprints",
            "trace_block"]
 
@@ -151,6 +151,9 @@ class _TileCache:
         self.decoded = 0
         self.largest = 0  # points of the largest block read
         self.saved = {}  # key -> a file of the tile decoded by the run's client
+        # key -> a tile this process decoded before its workers were forked from it
+        # (:func:`hold_tiles`): read by the blocks, never cut nor dropped by them
+        self.held = {}
 
     def read(self, n: int) -> None:
         """Note a block's read of ``n`` points."""
@@ -173,7 +176,9 @@ class _TileCache:
                 spilled.close()
                 self.tiles[key] = hit
         if hit is None:
-            hit = self._load_saved(key)
+            hit = self.held.get(key)
+            if hit is None:
+                hit = self._load_saved(key)
             if hit is None:
                 hit = decode()
                 with self.lock:
@@ -244,7 +249,7 @@ class _TileCache:
                 if path is not None and key[0] != path:
                     continue
                 boxes = [] if k is None else [e for e in later.get(key[0], ()) if e[0] > k]
-                if not boxes:
+                if not boxes or key in self.held:  # (a held tile is read again from memory)
                     self._drop([key])
                     continue
                 tile = self.tiles[key]
@@ -292,6 +297,17 @@ class _TileCache:
         with self.lock:
             return sum(len(tile) for tile in self.tiles.values())
 
+    def after_fork(self) -> None:
+        """In a process just forked from this one: a lock of its own (another thread
+        may have held the parent's), and none of the tiles kept in scratch files
+        (their files' offsets are shared with the parent's): read again if needed.
+        The tiles held in memory (:attr:`held`, decoded tiles) are kept, shared
+        copy-on-write."""
+        self.lock = threading.Lock()
+        for key in [k for k, t in self.tiles.items() if isinstance(t, SpilledTile)]:
+            del self.tiles[key]  # the parent's file: never closed nor read here
+            self.covers.pop(key, None)
+
 
 #: the tile points a process keeps in scratch files between blocks: at most
 #: this many times its largest block read (besides what the next block reads),
@@ -299,6 +315,8 @@ class _TileCache:
 #: of tiles a row of blocks leaves to the next row on areas tens of blocks wide
 KEEP_BLOCKS = 8
 _cache = _TileCache()
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_cache.after_fork)
 
 
 #: the most points the run's client decodes for its workers (:func:`predecode`):
@@ -341,6 +359,41 @@ def predecode(tiles, stack) -> tuple:
         del tile
         out.append(((t.path, st.st_size, st.st_mtime_ns), path))
     return tuple(out)
+
+
+def hold_tiles(tiles, stack) -> int:
+    """Decode ``tiles`` once, here, for this process and the workers it will fork
+    (:class:`lidar2city.tools.forked.ForkExecutor`: they inherit them copy-on-write)
+    to read instead of decoding them again: the tiles of a block cut into parts
+    that every worker shares (:func:`lidar2city.tools.reconstruct.shared_tiles`).
+    As :func:`predecode`, up to :data:`PREDECODE_POINTS` points, a tile that cannot
+    be decoded left to the blocks; the tiles are let go when ``stack`` (a
+    :class:`contextlib.ExitStack`) closes. Returns the tiles held."""
+    from ..io.las import read_tile
+
+    total, held = 0, []
+    for t in {t.path: t for t in tiles}.values():
+        total += int(t.count)
+        if total > PREDECODE_POINTS:
+            break
+        try:
+            st = os.stat(t.path)
+            tile = read_tile(t.path)
+        except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
+            logger.debug("%s not decoded ahead: %s", t.path, exc)
+            continue
+        key = (t.path, st.st_size, st.st_mtime_ns)
+        with _cache.lock:
+            _cache.held[key] = tile
+        held.append(key)
+
+    def let_go():
+        with _cache.lock:
+            for key in held:
+                _cache.held.pop(key, None)
+
+    stack.callback(let_go)
+    return len(held)
 
 
 def tile_keeper(specs, ahead=()):
