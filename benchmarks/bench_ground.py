@@ -194,7 +194,8 @@ def best_times(cmd, env, repeat):
 #: (method, the ``[ground]`` table of a run TOML given with ``--config``).
 SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf"),
                   "smrf_vote, above 3": ("smrf_vote", "above = 3.0"),
-                  "smrf_vote, connect 3": ("smrf_vote", "connect = 3")}
+                  "smrf_vote, connect 3": ("smrf_vote", "connect = 3"),
+                  "smrf_vote, ring 1.25": ("smrf_vote", "ring = 1.25")}
 
 
 def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),

@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues] [--anatomy [PNG_DIR]] [--fit-held-out-kinds]
+        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--anatomy [PNG_DIR]]
+        [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -58,12 +59,26 @@ script:
    ground on both sides in its second most raised direction
    (:func:`raised_all_sides`), the cloth simulation filter's call when its
    package is installed, the tolerance ratio to a TIN densified from the
-   points all four surfaces call ground (:func:`seeded_tin_ratio`)), the
-   worst sample's error with such trees fitted
+   points all four surfaces call ground (:func:`seeded_tin_ratio`), how high
+   the point's surface patch stands over the ground on its uphill side
+   (:func:`uphill_steps`: median and low quantile, against the ground
+   inpainted from the points all four surfaces call ground, or against those
+   cells only)), the worst sample's error with such trees fitted
    on that sample itself over every cue (the ceiling of the rule family
    there); the cues tried for issue 18 (the first became the veto; see the
-   README); a few minutes with the cloth filter;
-9. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
+   README); a few minutes with the cloth filter; ``--only-cues`` runs only
+   the cues named;
+9. with ``--uphill``, the leave-one-out of the coded rule (and veto, per
+   fold) with points near the lenient surface given back when their patch
+   stands at most ``t`` over the ground uphill (:func:`uphill_loo`, ``t``
+   chosen per fold), then fitted on all seven and scored on the held-out
+   kinds (session 13: not lower; ``benchmarks/HISTORY.md``);
+   with ``--ring``, the same with a point of an object patch given back
+   when within ``t`` tolerances of the plane of the ground around the
+   patch (:func:`~lidar2city.ground.ring_plane.ring_ratios`, ``smrf_vote``'s
+   ``ring`` option, alone or also near the lenient surface; and the slow
+   exact-ring form, :func:`ring_cue_exact`);
+10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
    interleaved).
@@ -94,6 +109,9 @@ from lidar2city.ground import (  # noqa: E402
     smrf_vote,
     vote_features,
 )
+from lidar2city.ground._grid import dilate_square, grid_spec, inpaint  # noqa: E402
+from lidar2city.ground.connect_filter import surface_patches  # noqa: E402
+from lidar2city.ground.ring_plane import ring_ratios  # noqa: E402
 from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
@@ -114,7 +132,8 @@ ANATOMY_WORST = 2
 #: the further cues of the ``--cues`` check (the first: the ratio to the fourth surface of
 #: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
 CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3",
-        "raised on all sides", "cloth (CSF) ground", "seeded TIN ratio")
+        "raised on all sides", "cloth (CSF) ground", "seeded TIN ratio", "uphill step",
+        "lowest uphill step", "uphill step to ground", "lowest uphill step to ground")
 #: reach (m) of the ``raised on all sides`` cue.
 RAISED_REACH = 12.0
 CUE_DEPTH = 3
@@ -343,6 +362,249 @@ def raised_all_sides(xyz, cell=1.0, reach=RAISED_REACH):
     return np.sort(np.nan_to_num(sides, nan=0.0), axis=1)[:, 1]
 
 
+#: join step (m) of the patches of the ``uphill step`` cues, the rise (m per metre) of the
+#: agreed-ground surface that makes a neighbour cell uphill, and the share of a patch's
+#: uphill edges the ``lowest uphill step`` takes (a low quantile, not the minimum: one edge
+#: can be a stray point).
+UPHILL_JUMP = 0.6
+UPHILL_RISE = 0.05
+UPHILL_LOW = 0.1
+
+
+def uphill_steps(xyz, features, cell=None, jump=UPHILL_JUMP, rise=UPHILL_RISE, low=UPHILL_LOW,
+                 on_ground=False):
+    """Per patch, how high its edge stands over the ground surface on its uphill side.
+
+    Patches are :func:`~lidar2city.ground.connect_filter.surface_patches` (lowest
+    point per ``cell``, None: the point spacing, joined across steps of at most
+    ``jump`` m): a roof, a terrace bench, ground running between buildings. The
+    ground surface ``S`` is inpainted from the cells whose lowest point all four
+    surfaces of ``features`` (N, 5) call ground (a parameter-free agreement, no
+    fitted rule). Across each edge from a patch cell ``a`` to a cell ``b`` of
+    another patch, the patch's edge height is ``z_a - S(b)``; the edge is uphill
+    when ``S(b) - S(a)`` exceeds ``rise`` per metre. A roof stands above the
+    ground on every side, the uphill one too; a terrace bench or the ground
+    between buildings on a slope lies at or below the ground uphill of it (the
+    riser, or a building's foot, rises over it), while it stands above the
+    ground downhill, which is what SMRF's opening sees.
+
+    Returns two per-point cues (N,) from each point's cell's patch: the median of
+    its uphill edge heights and their ``low`` quantile (over all its edges when
+    it has no uphill edge, e.g. on flat ground; 0 when it has no edge at all;
+    with ``on_ground`` only the edges to agreed-ground cells count),
+    each plus the point's height over its cell's lowest point (a crown over the
+    ground stands that high over the ground uphill).
+    """
+    out = ~np.isfinite(features[:, 0])
+    p = surface_patches(xyz, exclude=out, cell=cell, jump=jump)
+    h, w = p["shape"]
+    cell = p["cell"]
+    zmin, label = p["zmin"], p["label"]
+    agreed = (features[p["lowest"], :3] <= 1).all(axis=1) & (features[p["lowest"], 4] <= 1)
+    known = np.full(h * w, np.nan)
+    known[p["cells"][agreed]] = zmin[p["cells"][agreed]]
+    if not agreed.any():
+        return np.zeros(len(xyz)), np.zeros(len(xyz))
+    s = inpaint(known.reshape(h, w)).ravel()
+    a, b = np.concatenate([p["a"], p["b"]]), np.concatenate([p["b"], p["a"]])
+    if on_ground:  # only edges to agreed ground, measured against its own lowest point
+        is_agreed = np.zeros(h * w, dtype=bool)
+        is_agreed[p["cells"][agreed]] = True
+        a, b = a[is_agreed[b]], b[is_agreed[b]]
+    dist = cell * np.hypot(a // w - b // w, a % w - b % w)
+    value = zmin[a] - s[b]
+    up = s[b] - s[a] > rise * dist
+    lab = label[a]
+    n_lab = int(label.max()) + 1
+    has_up = np.bincount(lab[up], minlength=n_lab) > 0
+    use = up | ~has_up[lab]
+    lab, value = lab[use], value[use]
+    order = np.lexsort((value, lab))
+    lab, value = lab[order], value[order]
+    start = np.searchsorted(lab, np.arange(n_lab))
+    count = np.bincount(lab, minlength=n_lab)
+    med = np.zeros(n_lab)
+    lowq = np.zeros(n_lab)
+    some = count > 0
+    med[some] = value[start[some] + (count[some] - 1) // 2]
+    lowq[some] = value[start[some] + np.floor(low * (count[some] - 1)).astype(np.int64)]
+    point_label = label[p["flat"]]
+    over = np.where(out, np.inf, xyz[:, 2] - zmin[p["flat"]])
+    return med[point_label] + over, lowq[point_label] + over
+
+
+def ring_cue(xyz, features):
+    """Each point's ratio to the plane of the ground around its object patch
+    (:func:`~lidar2city.ground.ring_plane.ring_ratios`), the ground being the points within
+    tolerance of all four surfaces of ``features`` (N, 5)."""
+    out = ~np.isfinite(features[:, 0])
+    agreed = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
+    return ring_ratios(xyz, agreed, exclude=out)
+
+
+def ring_cue_exact(xyz, features, cell=None, jump=UPHILL_JUMP, reaches=(3.0, 6.0, 12.0, 24.0),
+                   rms=0.3, threshold=0.5, scalar=1.25):
+    """:func:`ring_cue` with each neighbourhood the ring of agreed-ground cells within a
+    Chebyshev distance of the patch's own cells (not its grown bounding box), found patch by
+    patch (a Python loop: ~1.4 CPU s on samp11's 38k points, too slow for the library), and
+    the plane fitted to the cell centres."""
+    out = ~np.isfinite(features[:, 0])
+    ratio = np.full(len(xyz), np.inf)
+    p = surface_patches(xyz, exclude=out, cell=cell, jump=jump)
+    h, w = p["shape"]
+    cell = p["cell"]
+    spec = grid_spec(xyz[:, :2], cell=cell)
+    zmin, label = p["zmin"], p["label"]
+    agreed = (features[p["lowest"], :3] <= 1).all(axis=1) & (features[p["lowest"], 4] <= 1)
+    is_agreed = np.zeros(h * w, dtype=bool)
+    is_agreed[p["cells"][agreed]] = True
+    cell_lab = label[p["cells"]]
+    n_lab = int(label.max()) + 1
+    n_cells = np.bincount(cell_lab, minlength=n_lab)
+    n_agreed = np.bincount(cell_lab[agreed], minlength=n_lab)
+    objects = np.flatnonzero((n_cells >= 4) & (2 * n_agreed < n_cells))
+    if len(objects) == 0 or not agreed.any():
+        return ratio
+    steps = [int(np.ceil(r / cell)) for r in reaches]
+    big = steps[-1]
+    order = np.argsort(cell_lab, kind="stable")
+    starts = np.searchsorted(cell_lab[order], np.arange(n_lab + 1))
+    point_lab = np.where(out, -1, label[p["flat"]])
+    porder = np.argsort(point_lab, kind="stable")
+    pstarts = np.searchsorted(point_lab[porder], np.arange(n_lab + 1))
+    for lab in objects:
+        cells = p["cells"][order[starts[lab]:starts[lab + 1]]]
+        rr, cc = cells // w, cells % w
+        r0, r1 = max(rr.min() - big, 0), min(rr.max() + big + 1, h)
+        c0, c1 = max(cc.min() - big, 0), min(cc.max() + big + 1, w)
+        box = np.zeros((r1 - r0, c1 - c0), dtype=np.uint8)
+        box[rr - r0, cc - c0] = 1
+        dist = np.where(box > 0, 0, big + 1)
+        reached = box
+        for i in range(1, big + 1):
+            grown = dilate_square(reached, 3)
+            dist[grown > reached] = i
+            reached = grown
+        ground = is_agreed.reshape(h, w)[r0:r1, c0:c1] & (dist > 0)
+        chosen = None
+        for k in steps:
+            ring = ground & (dist <= k)
+            if ring.sum() < 6:
+                continue
+            gi, gj = np.nonzero(ring)
+            gx, gy = (gj + c0 + 0.5) * cell, -(gi + r0 + 0.5) * cell
+            gz = zmin.reshape(h, w)[r0:r1, c0:c1][ring]
+            a = np.column_stack([gx, gy, np.ones(len(gx))])
+            coef, _, rank, _ = np.linalg.lstsq(a, gz, rcond=None)
+            if rank < 3:
+                continue
+            fit_rms = float(np.sqrt(np.mean((a @ coef - gz) ** 2)))
+            if chosen is None or fit_rms <= rms:
+                chosen = coef
+            if fit_rms > rms:
+                break
+        if chosen is None:
+            continue
+        pts = porder[pstarts[lab]:pstarts[lab + 1]]
+        plane = chosen[0] * (xyz[pts, 0] - spec.x0) + chosen[1] * (xyz[pts, 1] - spec.y_top)
+        tol = threshold + scalar * float(np.hypot(chosen[0], chosen[1]))
+        ratio[pts] = np.abs(xyz[pts, 2] - plane - chosen[2]) / tol
+    return ratio
+
+
+#: heights (m) over the ground uphill at or below which :func:`uphill_loo` gives a point
+#: near the lenient surface back (-inf: off; inf: every such point).
+UPHILL_GIVE = (-np.inf, -3.0, -2.0, -1.0, -0.5, 0.0, 0.5, 1.0, np.inf)
+
+
+def uphill_loo(samples, scenes, feats, syn):
+    """Print the leave-one-out of ``smrf_vote``'s rule (fitted per fold, veto too) with a
+    give-back: a point within SMRF's tolerance of the lenient surface is ground when its
+    patch's low uphill step (:func:`uphill_steps`, against the inpainted agreed ground, or
+    against the agreed-ground cells only) is at most ``t``, ``t`` of :data:`UPHILL_GIVE`
+    chosen per fold by the same objective."""
+    giveback_loo(samples, scenes, feats, syn, UPHILL_GIVE, "m", {
+        "vs surface": (lambda xyz, f: uphill_steps(xyz, f)[1], True),
+        "vs ground cells": (lambda xyz, f: uphill_steps(xyz, f, on_ground=True)[1], True)},
+        "points within tolerance of the lenient surface given back when their patch's low "
+        "uphill step is <= t")
+
+
+#: tolerance ratios to the plane of the ground around an object patch at or below which
+#: :func:`ring_loo` gives a point back (-inf: off; inf: every point of such a patch).
+RING_GIVE = (-np.inf, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, np.inf)
+
+
+def ring_loo(samples, scenes, feats, syn):
+    """Print the leave-one-out of ``smrf_vote``'s rule (fitted per fold, veto too) with a
+    give-back: a point of an object patch is ground when its ratio to the plane of the ground
+    around that patch (:func:`ring_cue`) is at most ``t`` (alone, or also within SMRF's
+    tolerance of the lenient surface), ``t`` of :data:`RING_GIVE` chosen per fold."""
+    giveback_loo(samples, scenes, feats, syn, RING_GIVE, "", {
+        "ring plane": (ring_cue, False),
+        "ring + lenient": (ring_cue, True),
+        "exact + lenient": (ring_cue_exact, True)},
+        "object-patch points given back when their ratio to the plane of the ground around "
+        "the patch is <= t")
+
+
+def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
+    """The leave-one-out of :func:`uphill_loo` and :func:`ring_loo`: for each variant
+    ``name: (cue(xyz, features) -> (N,), near_lenient)``, the rule and veto fitted per fold,
+    then ``pred | (cue <= t) [& lenient ratio <= 1]`` with ``t`` of ``grid`` chosen per fold;
+    then fitted on all seven and scored on the held-out kinds."""
+    print(f"\nleave-one-out, the rule and veto per fold, then {what} (t among "
+          f"{', '.join(f'{v:g}' for v in grid)}{' ' + unit if unit else ''}, per fold)")
+    syn_set = [(f, g, 1.0 / len(syn)) for f, g in syn]
+    for key, (cue_of, near_lenient) in variants.items():
+        real = {n: cue_of(xyz, feats[n]) for n, (xyz, _) in samples.items()}
+        fake = [cue_of(sc.xyz, f) for sc, (f, _) in zip(scenes.values(), syn)]
+
+        def fitted(names):
+            sets = [(feats[n], samples[n][1], 1.0) for n in names] + syn_set
+            cue = [real[n] for n in names] + fake
+            rule, _ = fit_rule(sets)
+            veto = fit_veto(sets, rule)[0]
+            total = sum(w for _, _, w in sets)
+
+            def give(f, c, t):
+                extra = c <= t
+                if near_lenient:
+                    extra &= f[:, 1] <= 1.0
+                return vote_rule(f, **rule, veto=veto) | extra
+
+            t = min(grid, key=lambda t: sum(
+                w * np.mean(give(f, c, t) != g) for (f, g, w), c in zip(sets, cue)) / total)
+            return give, t, rule, veto
+
+        held, base, line = [], [], []
+        for name, (_, ref) in samples.items():
+            give, t, rule, veto = fitted([n for n in samples if n != name])
+            held.append(ground_errors(give(feats[name], real[name], t), ref)["total"])
+            base.append(ground_errors(vote_rule(feats[name], **rule, veto=veto), ref)["total"])
+            line.append(f"{name} {100 * held[-1]:.2f} (t {t:g})")
+        print(f"{key:<16} leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} "
+              f"% against {100 * np.mean(base):.2f} %: {'; '.join(line)}")
+        give, t, _, _ = fitted(list(samples))
+        seven = [ground_errors(give(feats[n], real[n], t), ref)["total"]
+                 for n, (_, ref) in samples.items()]
+        synth = np.mean([np.mean(give(f, c, t) != g) for (f, g), c in zip(syn, fake)])
+        kinds_line = []
+        for kind in HELD_OUT_KINDS:
+            for spacing in (1.0, 2.5):
+                scene = make_terrain(kind, spacing=spacing, seed=1)
+                f = vote_features(scene.xyz, fourth=VETO_SLOPE)[0]
+                c = cue_of(scene.xyz, f)
+                e = [ground_errors(give(f, c, tt), scene.ground)["total"]
+                     for tt in (-np.inf, t, np.inf)]
+                kinds_line.append(f"{kind}@{spacing:g}m " + " / ".join(f"{100 * v:.2f}"
+                                                                       for v in e))
+        print(f"{'':<16} fitted on all seven: t {t:g}, seven {100 * np.mean(seven):.2f} % "
+              f"({' '.join(f'{100 * v:.2f}' for v in seven)}), synthetic terrains "
+              f"{100 * synth:.2f} %; held-out kinds (total % off / t / inf): "
+              f"{'; '.join(kinds_line)}")
+
+
 def cloth_ground(xyz):
     """1 for the points the cloth simulation filter (``bench_ground_bounds.csf``, rigidness 2)
     calls ground, else 0; NaN everywhere when the package is not installed."""
@@ -370,24 +632,34 @@ def seeded_tin_ratio(xyz, features):
     return np.where(out | np.isnan(ratio), np.inf, ratio)
 
 
-def cues(samples, scenes, feats, syn):
+def cues(samples, scenes, feats, syn, only=None):
     """Print the leave-one-out of a depth-:data:`CUE_DEPTH` tree over the three ratios plus
     each further cue of :data:`CUES` (see ``--cues``), and the worst sample's error with the
     tree fitted on that sample itself over the ratios and every cue (the rule family's
     ceiling there, with hindsight)."""
+    makers = {"segments 0.4 ratio": lambda xyz, f: f[:, 4],
+              "wall distance": lambda xyz, f: f[:, 3],
+              "height above lowest 3x3": lambda xyz, f: height_above_lowest(xyz),
+              "raised on all sides": lambda xyz, f: raised_all_sides(xyz),
+              "cloth (CSF) ground": lambda xyz, f: cloth_ground(xyz),
+              "seeded TIN ratio": lambda xyz, f: np.minimum(seeded_tin_ratio(xyz, f), 1e6),
+              "uphill step": lambda xyz, f: np.minimum(uphill_steps(xyz, f)[0], 1e6),
+              "lowest uphill step": lambda xyz, f: np.minimum(uphill_steps(xyz, f)[1], 1e6),
+              "uphill step to ground": lambda xyz, f: np.minimum(
+                  uphill_steps(xyz, f, on_ground=True)[0], 1e6),
+              "lowest uphill step to ground": lambda xyz, f: np.minimum(
+                  uphill_steps(xyz, f, on_ground=True)[1], 1e6)}
+    chosen = tuple(c for c in CUES if only is None or c in only)
+
     def cue_columns(xyz, f):
-        return {"segments 0.4 ratio": f[:, 4],
-                "wall distance": f[:, 3], "height above lowest 3x3": height_above_lowest(xyz),
-                "raised on all sides": raised_all_sides(xyz),
-                "cloth (CSF) ground": cloth_ground(xyz),
-                "seeded TIN ratio": np.minimum(seeded_tin_ratio(xyz, f), 1e6)}
+        return {c: makers[c](xyz, f) for c in chosen}
 
     real = {n: cue_columns(xyz, feats[n]) for n, (xyz, _) in samples.items()}
     fake = [cue_columns(s.xyz, f) for s, (f, _) in zip(scenes.values(), syn)]
     print(f"\nleave-one-out of a depth-{CUE_DEPTH} tree over the three ratios and one more cue "
           f"(held-out total % per sample; the tree fitted on all seven)")
     worst = None
-    for cue in (None, *CUES):
+    for cue in (None, *chosen):
         def x(f, more, cue=cue):
             return f[:, :3] if cue is None else np.column_stack([f[:, :3], more[cue]])
 
@@ -408,7 +680,7 @@ def cues(samples, scenes, feats, syn):
               f"{100 * np.max(held):.2f} % ({' '.join(f'{100 * v:.2f}' for v in held)}); "
               f"{show(tree, (*NAMES, cue))}")
         worst = worst or list(samples)[int(np.argmax(held))]
-    known = [c for c in CUES if not np.isnan(real[worst][c]).all()]
+    known = [c for c in chosen if not np.isnan(real[worst][c]).all()]
     every = np.column_stack([feats[worst][:, :3]] + [real[worst][c] for c in known])
     for depth in (CUE_DEPTH, 2 * CUE_DEPTH):
         tree = fit_tree([(every, samples[worst][1], 1.0)], depth=depth)
@@ -496,6 +768,12 @@ def main():
                     help="fit on the scenes of HELD_OUT_KINDS too (no longer held out)")
     ap.add_argument("--cues", action="store_true",
                     help="leave-one-out of depth-3 trees with one more cue each")
+    ap.add_argument("--uphill", action="store_true",
+                    help="leave-one-out of the rule with the uphill-step give-back")
+    ap.add_argument("--ring", action="store_true",
+                    help="leave-one-out of the rule with the ground-ring-plane give-back")
+    ap.add_argument("--only-cues", default=None, metavar="NAMES",
+                    help="with --cues: only these cues (comma-separated names of CUES)")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
                     help="where smrf_vote's errors are on its worst samples (maps to PNG_DIR)")
     args = ap.parse_args()
@@ -590,7 +868,12 @@ def main():
     if args.anatomy is not None:
         anatomy(samples, feats, None if args.anatomy is True else Path(args.anatomy))
     if args.cues:
-        cues(samples, scenes, feats, syn)
+        cues(samples, scenes, feats, syn,
+             None if args.only_cues is None else args.only_cues.split(","))
+    if args.uphill:
+        uphill_loo(samples, scenes, feats, syn)
+    if args.ring:
+        ring_loo(samples, scenes, feats, syn)
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:

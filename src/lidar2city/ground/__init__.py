@@ -35,6 +35,7 @@ from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
+from .ring_plane import ring_ratios
 from .segment_filter import anchored_objects, smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
 from .tin_filter import ptd
@@ -54,6 +55,7 @@ __all__ = [
     "vote_features",
     "connect_ground",
     "surface_patches",
+    "ring_ratios",
     "VOTE_RULE",
     "VOTE_VETO",
     "VETO_SLOPE",
@@ -145,6 +147,10 @@ class GroundConfig:
                                       "(smooth patches running on from its ground given to it, "
                                       "patches raised all round and pits taken away); default "
                                       "none")
+    ring: float | None = field(None, "smrf_vote: a point called object but within tolerance of "
+                                     "the lenient surface is ground when within this many "
+                                     "tolerances of the plane of the ground around its surface "
+                                     "patch (e.g. 1.25); default none")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -186,6 +192,8 @@ class GroundConfig:
             raise ConfigError(f"ground.veto: must be > 0, got {self.veto!r}")
         if self.above is not None and not self.above > 0:
             raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
+        if self.ring is not None and not self.ring > 0:
+            raise ConfigError(f"ground.ring: must be > 0, got {self.ring!r}")
         if self.connect is not None and not (isinstance(self.connect, int) and self.connect >= 0):
             raise ConfigError(f"ground.connect: must be an integer >= 0, got {self.connect!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
