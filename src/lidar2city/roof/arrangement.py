@@ -670,14 +670,35 @@ def _extend(poly, ext):
     return poly
 
 
+def _near_chain(xyz, lab, chain, a, b, radius, *, block=256):
+    """Indices (ascending) of the points (N, 2+) of facets ``a`` or ``b`` within ``radius`` of
+    a vertex of ``chain`` (m, 2): a k-d tree's ball query at every vertex (squared distance
+    against ``radius**2``), by brute force over the two facets' points in the chain's box,
+    ``block`` vertices at a time (bounded memory), with no tree to build."""
+    idx = np.flatnonzero((lab == a) | (lab == b))
+    chain = np.asarray(chain, dtype=np.float64).reshape(-1, 2)
+    if not len(chain) or not len(idx):
+        return np.zeros(0, np.int64)
+    pad = radius * (1 + 1e-9) + 1e-9  # the box only prefilters: a little wide, never narrow
+    lo, hi = chain.min(axis=0) - pad, chain.max(axis=0) + pad
+    x, y = xyz[idx, 0], xyz[idx, 1]
+    box = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+    idx, x, y = idx[box], x[box], y[box]
+    r2 = radius * radius
+    keep = np.zeros(len(idx), dtype=bool)
+    for s in range(0, len(chain), block):
+        c = chain[s:s + block]
+        d2 = (x[:, None] - c[None, :, 0]) ** 2 + (y[:, None] - c[None, :, 1]) ** 2
+        keep |= (d2 <= r2).any(axis=1)
+    return idx[keep].astype(np.int64)
+
+
 def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
     """Whether the planes' intersection line explains the points of facets ``a`` and ``b``
     near a chain about as well as the chain (a step) does: points beyond the line take
     the other plane; their mean capped residual may grow by at most ``tol`` (m)."""
-    xyz, lab, tree = points
-    near = np.unique(np.concatenate(tree.query_ball_point(chain, radius)).astype(np.int64)) \
-        if len(chain) else np.zeros(0, np.int64)
-    near = near[(lab[near] == a) | (lab[near] == b)]
+    xyz, lab = points[:2]
+    near = _near_chain(xyz, lab, chain, a, b, radius)
     if len(near) < 6:
         return True
     p = xyz[near]
@@ -765,7 +786,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         Largest distance (in cells) of a step chain's raw vertices from its straight piece.
     overshoot : float, optional
         Length (m) by which open polylines are extended; default one cell.
-    points : (xyz (N, 3), labels (N,), cKDTree of xyz[:, :2]), optional
+    points : (xyz (N, 3), labels (N,)), optional
         With points, a chain near its planes' intersection line is an intersection
         edge only when that line explains the nearby points of both facets about as
         well as the chain does (mean capped residual, at most ``cap`` m per point,
@@ -1114,23 +1135,8 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
     chains, pairs = boundary_chains(grid)
     return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
                           max_shift=max_shift, snap_angle=snap_angle,
-                          points=(xyz, labels, _LazyTree(xyz[:, :2])), cap=cap,
+                          points=(xyz, labels), cap=cap,
                           step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
-
-
-class _LazyTree:
-    """A ``cKDTree`` of points (n, 2) built at its first query: most roofs never ask
-    (:func:`_line_explains` runs only on chains near their planes' line)."""
-
-    def __init__(self, xy):
-        self.xy, self.tree = xy, None
-
-    def query_ball_point(self, *args, **kwargs):
-        if self.tree is None:
-            from scipy.spatial import cKDTree
-
-            self.tree = cKDTree(self.xy)
-        return self.tree.query_ball_point(*args, **kwargs)
 
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
