@@ -541,8 +541,8 @@ def _straight(pts, closed):
     return pts
 
 
-def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, tol=None,
-                t_adjust=None, c_short=None, max_work=1e8):
+def snake_steps(chains, closed, *, cell, direction, window=2, snake_cell=0.5, tol=None,
+                t_adjust=None, c_short=None, max_work=1e8, subdivide=4, sample_step=2.0):
     """Step chains regularised together by the exact 2-D snake (seed step 5).
 
     Each raw step chain (the label grid's staircase between two facets at different
@@ -571,7 +571,18 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         Building direction (rad).
     window, snake_cell : int, float
         Snake half-window (candidates ``(2w+1)^2`` per vertex) and grid step as a
-        fraction of ``cell``.
+        fraction of ``cell``. The default window 2 (25 candidates within one cell)
+        costs about a third of window 3's energy tables (49 candidates within 1.5
+        cells) for roofs as good on Delft and the synthetic roofs
+        (benchmarks/HISTORY.md, session 13, lines15). A coarser
+        grid step with the same reach (0.75 with window 2) lets a short wall escape
+        the direction energy by turning oblique (beyond ``t_adjust``).
+    subdivide, sample_step : int, float
+        Distance raster cells per snake grid step and the spacing (raster cells)
+        of the deviation's samples along a candidate edge
+        (:func:`lidar2city.regularize.snake.adjust_planar_graph`); the default
+        step 2 reads every other raster cell, half the samples of the footprint
+        snake's, within a raster cell of its integral.
     tol : float, optional
         Simplification tolerance (m) of the chains before the snake, and the length
         below which an edge is a jog (``E_Short``, weight ``tol**2``); default
@@ -643,7 +654,8 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
                                  window=window, direction=direction,
                                  t_adjust=2 * cell if t_adjust is None else t_adjust,
-                                 c_short=tol * tol if c_short is None else c_short, short_length=tol)
+                                 c_short=tol * tol if c_short is None else c_short, short_length=tol,
+                                 subdivide=subdivide, sample_step=sample_step)
     for i, row in enumerate(ids):
         if row is None:
             continue
@@ -763,7 +775,7 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
 
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
                    snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
-                   tol_gain=0.05, step_snake=False, snake_window=3, snake_cell=0.5):
+                   tol_gain=0.05, step_snake=False, snake_window=2, snake_cell=0.5):
     """Straight boundary polylines replacing the label grid's chains.
 
     Parameters
@@ -1113,7 +1125,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
 
 
 def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
-               snap_angle=15.0, cap=None, step_snake=False, snake_window=3, snake_cell=0.5):
+               snap_angle=15.0, cap=None, step_snake=False, snake_window=2, snake_cell=0.5):
     """The straight boundary polylines of a footprint's roof facets, before any rim.
 
     The label grid of the facets (:func:`.topology.label_grid`), its inner
@@ -1141,7 +1153,7 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
                           max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True,
-                          step_snake=False, snake_window=3, snake_cell=0.5, lines=None):
+                          step_snake=False, snake_window=2, snake_cell=0.5, lines=None):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters
