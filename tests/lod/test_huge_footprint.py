@@ -42,7 +42,7 @@ def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeyp
     # the hall's LoD2.2 roof (256 planes, thousands of faces): the same solid as before its
     # retries were cut (a saddle cut that cuts nothing, a levelled roof equal to the capped
     # one, repair rounds reusing the faces' edges), and no retry rebuilds a solid it built
-    # (pinned again in session 13: the step snake's window 2 and sparser deviation samples;
+    # (pinned again in session 13: the step snake's deviation sampled every other raster cell;
     # the same planes, edges and surface count)
     import lidar2city.roof.building as building
 

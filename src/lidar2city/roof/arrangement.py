@@ -541,7 +541,7 @@ def _straight(pts, closed):
     return pts
 
 
-def snake_steps(chains, closed, *, cell, direction, window=2, snake_cell=0.5, tol=None,
+def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, tol=None,
                 t_adjust=None, c_short=None, max_work=1e8, subdivide=4, sample_step=2.0):
     """Step chains regularised together by the exact 2-D snake (seed step 5).
 
@@ -571,12 +571,11 @@ def snake_steps(chains, closed, *, cell, direction, window=2, snake_cell=0.5, to
         Building direction (rad).
     window, snake_cell : int, float
         Snake half-window (candidates ``(2w+1)^2`` per vertex) and grid step as a
-        fraction of ``cell``. The default window 2 (25 candidates within one cell)
-        costs about a third of window 3's energy tables (49 candidates within 1.5
-        cells) for roofs as good on Delft and the synthetic roofs
-        (benchmarks/HISTORY.md, session 13, lines15). A coarser
-        grid step with the same reach (0.75 with window 2) lets a short wall escape
-        the direction energy by turning oblique (beyond ``t_adjust``).
+        fraction of ``cell``. Window 2 (25 candidates) would cost about a third of
+        these energy tables for roofs as good on Delft and the synthetic roofs, but
+        made a roof spike on ISPRS samp11 (benchmarks/HISTORY.md, session 13,
+        lines15); a coarser grid step with the same reach (0.75 with window 2)
+        lets a short wall escape the direction energy by turning oblique.
     subdivide, sample_step : int, float
         Distance raster cells per snake grid step and the spacing (raster cells)
         of the deviation's samples along a candidate edge
@@ -775,7 +774,7 @@ def _mixed_runs(chain, dz, dist, t_step, min_dist, min_length):
 
 def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
                    snap_angle=15.0, step_tol=1.5, overshoot=None, points=None, cap=0.45,
-                   tol_gain=0.05, step_snake=False, snake_window=2, snake_cell=0.5):
+                   tol_gain=0.05, step_snake=False, snake_window=3, snake_cell=0.5):
     """Straight boundary polylines replacing the label grid's chains.
 
     Parameters
@@ -1125,7 +1124,7 @@ def rim_strips(footprint, xyz, labels, planes, *, cell, t_step=0.3, level_tol=0.
 
 
 def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, max_shift=1.0,
-               snap_angle=15.0, cap=None, step_snake=False, snake_window=2, snake_cell=0.5):
+               snap_angle=15.0, cap=None, step_snake=False, snake_window=3, snake_cell=0.5):
     """The straight boundary polylines of a footprint's roof facets, before any rim.
 
     The label grid of the facets (:func:`.topology.label_grid`), its inner
@@ -1153,7 +1152,7 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,
                           max_shift=1.0, snap_angle=15.0, min_face_area=None, cap=None, rims=True,
-                          step_snake=False, snake_window=2, snake_cell=0.5, lines=None):
+                          step_snake=False, snake_window=3, snake_cell=0.5, lines=None):
     """A partition of a footprint polygon into roof faces with straight boundaries.
 
     Parameters

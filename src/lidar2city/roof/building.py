@@ -50,8 +50,7 @@ class Lod22Config:
     min_height: float = field(0.5, "Smallest roof height above the floor (m).")
     snake: bool = field(True, "Adjust the roof topology with the 2-D snake (E_Dir + E_Dis).")
     snake_cell: float = field(0.5, "Snake grid step as a fraction of the label grid cell.")
-    snake_window: int = field(2, "Snake half-window w: (2w+1)^2 candidate positions per vertex "
-                              "(2: 25 candidates within one label cell).")
+    snake_window: int = field(3, "Snake half-window w: (2w+1)^2 candidate positions per vertex.")
     min_edge: float = field(1.5, "Roof edges shorter than this many label cells are collapsed "
                             "(their ends merge) where the partition stays valid; 0 keeps them.")
     topology: str = field("arrangement", "Roof partition method: 'arrangement' (straight exact "
