@@ -5,7 +5,9 @@ Usage: python benchmarks/bench_snake_steps.py [DATA_DIR] [--repeat N] [--traced]
 
 Runs ``reconstruct`` (LoD 1.2 + 1.3 + 2.2; the 132 BGT footprints, or with
 ``--traced`` none: blocks traced and their footprints regularised by the snake) once
-in this process with the LoD2.2 step-edge snake
+in this process with the LoD2.2 roof lines
+(:func:`lidar2city.roof.arrangement.roof_lines`: the label grid's boundary chains
+made straight polylines), its step-edge snake
 (:func:`lidar2city.roof.arrangement.snake_steps`) and every snake solve
 (``lidar2city.regularize.snake._frame_solve``: candidates, distance raster, energy
 tables and the graph-reduction minimum, for the step edges and the traced
@@ -99,8 +101,8 @@ def main(argv: list[str]) -> int:
     import lidar2city.roof.arrangement as arrangement
     from lidar2city.cli.main import cli
 
-    with tempfile.TemporaryDirectory() as tmp, _Timed(arrangement, "snake_steps") as steps, \
-            _Timed(snake, "_frame_solve") as solves:
+    with tempfile.TemporaryDirectory() as tmp, _Timed(arrangement, "roof_lines") as lines, \
+            _Timed(arrangement, "snake_steps") as steps, _Timed(snake, "_frame_solve") as solves:
         out = Path(tmp) / "delft.city.json"
         args = ["-q", "reconstruct", str(tile)] + ([] if traced else ["--footprints", str(fp)])
         t = _cpu()
@@ -113,7 +115,8 @@ def main(argv: list[str]) -> int:
         digest = hashlib.md5(out.read_bytes()).hexdigest()
     what = "traced footprints" if traced else "132 footprints"
     print(f"Delft reconstruct LoD 1.2+1.3+2.2, {what}: whole run {whole:.2f} CPU s in this process")
-    for label, timed in (("snake_steps", steps), ("snake solves (_frame_solve)", solves)):
+    for label, timed in (("roof_lines", lines), ("snake_steps", steps),
+                         ("snake solves (_frame_solve)", solves)):
         best, same = timed.replay(repeat)
         print(f"{label}: {timed.spent:.3f} CPU s in the run ({100 * timed.spent / whole:.1f} %), "
               f"{len(timed.calls)} calls; least of {repeat} replays {best:.3f} CPU s; "

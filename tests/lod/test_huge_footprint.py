@@ -42,6 +42,8 @@ def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeyp
     # the hall's LoD2.2 roof (256 planes, thousands of faces): the same solid as before its
     # retries were cut (a saddle cut that cuts nothing, a levelled roof equal to the capped
     # one, repair rounds reusing the faces' edges), and no retry rebuilds a solid it built
+    # (pinned again in session 13: the step snake's deviation sampled every other raster cell;
+    # the same planes, edges and surface count)
     import lidar2city.roof.building as building
 
     built = []
@@ -65,5 +67,5 @@ def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeyp
             h.update(sf.semantic.encode())
             for r in sf.rings:
                 h.update(np.asarray(r, dtype=np.int64).tobytes())
-    assert h.hexdigest() == "148ec58abccf07429a6682817f38525f65f33782916edbf890cf8e94569c17b7"
+    assert h.hexdigest() == "4d8685b8aab653eb9d889fda3626a118e3313ea67596d9d7d7e1dbb915ef425b"
     assert len(built) == len(set(built)), "a partition's solid was built twice"

@@ -497,3 +497,26 @@ def test_straightened_outline_keeps_the_roof_valid_and_close():
     from lidar2city.metrics.wireframe import roof_cleanliness, roof_wireframe
 
     assert roof_cleanliness(roof_wireframe(straight.solids))[0] == 4 < roof_cleanliness(roof_wireframe(given.solids))[0]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_near_chain_is_the_kd_tree_ball_query(seed):
+    """The chain's neighbour points by brute force in its box are those of a k-d tree's
+    ball query at every chain vertex, filtered to the two facets, in ascending order."""
+    from scipy.spatial import cKDTree
+
+    from lidar2city.roof.arrangement import _near_chain
+
+    rng = np.random.default_rng(seed)
+    xyz = np.column_stack([rng.uniform(0, 20, (3000, 2)), rng.uniform(0, 5, 3000)])
+    xyz[:50, :2] = np.round(xyz[:50, :2] * 2) / 2  # points exactly on the grid the chain is on
+    lab = rng.integers(-1, 4, 3000)
+    chain = np.cumsum(rng.choice([-0.5, 0.0, 0.5], (int(rng.integers(1, 60)), 2)), axis=0) + 10.0
+    tree = cKDTree(xyz[:, :2])
+    for radius in (0.5, 1.0, 1.5, 3.0):
+        ref = np.unique(np.concatenate(tree.query_ball_point(chain, radius)).astype(np.int64))
+        ref = ref[(lab[ref] == 1) | (lab[ref] == 2)]
+        for block in (1, 7, 256):
+            got = _near_chain(xyz, lab, chain, 1, 2, radius, block=block)
+            assert got.dtype == np.int64 and np.array_equal(got, ref)
+    assert len(_near_chain(xyz, lab, np.zeros((0, 2)), 1, 2, 1.0)) == 0

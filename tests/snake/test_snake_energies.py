@@ -177,7 +177,8 @@ def test_window_tables_are_bitwise_the_edge_by_edge_tables(seed, chunk, monkeypa
     r = distance_raster(seg, margin=window + 2, subdivide=int(rng.choice([1, 2, 4])))
     c_dir = rng.choice([0.0, 1.0, 2.5], size=len(edges)) if seed % 2 else 1.0
     kw = dict(cell=0.5, t_adjust=1.0, c_dir=c_dir, c_dis=float(rng.choice([0.5, 1.0])),
-              c_short=float(rng.choice([0.0, 0.5])), short_length=1.0)
+              c_short=float(rng.choice([0.0, 0.5])), short_length=1.0,
+              step=float(rng.choice([1.0, 1.5, 2.0])))  # sparser samples too (the step snake's)
     assert _window_layout(cands, r) is not None
     got = edge_energy_tables(cands, edges, r, **kw)
     ref = _edge_tables_general(cands, edges, r, **kw)
@@ -213,3 +214,24 @@ def test_window_layout_needs_one_integer_window_everywhere():
     assert _window_layout(candidate_positions(xy, 2, fixed=[True, False]), r) is None
     odd = candidate_positions(xy, 1)
     assert _window_layout([odd[0], odd[1][::-1][:8]], r) is None  # not the same window
+
+
+def test_sparser_deviation_samples_stay_close_and_exact_on_the_data():
+    """Samples every 2 raster cells (the roof step snake's) instead of every cell: zero
+    on the data still, and the integral within about a raster cell of distance x length
+    of the dense one (the distance is 1-Lipschitz in raster cells)."""
+    seg = np.array([[[0.0, 0.0], [12.0, 0.0]], [[12.0, 0.0], [12.0, 7.0]]])
+    r = distance_raster(seg, margin=5)
+    xy = np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 7.0]])
+    edges = np.array([(0, 1), (1, 2)])
+    cands = candidate_positions(xy, 2)
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=1.0, c_dis=1.0)
+    dense = edge_energy_tables(cands, edges, r, **kw)
+    sparse = edge_energy_tables(cands, edges, r, step=2.0, **kw)
+    for a, b, (u, v) in zip(dense, sparse, edges, strict=True):
+        assert a[0, 0] == 0.0 and b[0, 0] == 0.0  # the candidates on the data
+        length = np.hypot(*(cands[v][None, :, :] - cands[u][:, None, :]).transpose(2, 0, 1)) * 0.5
+        assert np.all(np.abs(a - b) <= length * 0.5 / r.scale + 1e-12)
+        assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.99
+    with pytest.raises(InputError):
+        edge_energy_tables(cands, edges, r, step=0.0, **kw)

@@ -85,16 +85,17 @@ def _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolera
 
 
 def _frame_solve(xy, edges, segs, *, cell, window, direction, t_adjust, c_dir, c_dis, c_move,
-                 fixed, strategy, c_short=0.0, short_length=0.0):
+                 fixed, strategy, c_short=0.0, short_length=0.0, subdivide=4, sample_step=1.0):
     """Solve the snake in the building frame; return grid positions and details."""
     # Pivot on a grid node, so that with direction 0 the grid is the world grid.
     pivot = np.round(xy.mean(axis=0) / cell) * cell if len(xy) else np.zeros(2)
     q = to_frame(xy, direction, pivot) / cell
     seg_q = to_frame(segs, direction, pivot) / cell
     cands = candidate_positions(q, window, fixed=fixed)
-    raster = distance_raster(seg_q, margin=int(window) + 2)
+    raster = distance_raster(seg_q, margin=int(window) + 2, subdivide=subdivide)
     tables = edge_energy_tables(cands, edges, raster, cell=cell, t_adjust=t_adjust,
-                                c_dir=c_dir, c_dis=c_dis, c_short=c_short, short_length=short_length)
+                                c_dir=c_dir, c_dis=c_dis, c_short=c_short, short_length=short_length,
+                                step=sample_step)
     unary = vertex_energy_tables(cands, q, cell=cell, c_move=c_move)
     sol = minimize_energy(unary, edges, tables, strategy=strategy)
     grid = np.array([cands[v][s] for v, s in enumerate(sol.states)]).reshape(-1, 2)
@@ -129,6 +130,8 @@ def adjust_planar_graph(
     short_length: float | None = None,
     fixed=None,
     strategy: str = "auto",
+    subdivide: int = 4,
+    sample_step: float = 1.0,
 ) -> tuple[np.ndarray, dict]:
     """Move the vertices of a planar topology graph to the snake's global minimum.
 
@@ -162,6 +165,11 @@ def adjust_planar_graph(
         Vertices that keep their exact position (one state).
     strategy : {"auto", "paper"}
         Passed to :func:`~lidar2city.snake.minimize_energy`.
+    subdivide : int
+        Distance raster cells per grid cell (:func:`~lidar2city.snake.energies.distance_raster`).
+    sample_step : float
+        Spacing (raster cells) of the deviation's samples along each candidate
+        edge (:func:`~lidar2city.snake.energies.edge_energy_tables`).
 
     Returns
     -------
@@ -216,7 +224,8 @@ def adjust_planar_graph(
     cs, ls = _short_defaults(cell, c_short, short_length)
     grid, pivot, sol = _frame_solve(xy, e, segs, cell=cell, window=window, direction=direction,
                                     t_adjust=t, c_dir=c, c_dis=c_dis, c_move=c_move,
-                                    fixed=fixed_arr, strategy=strategy, c_short=cs, short_length=ls)
+                                    fixed=fixed_arr, strategy=strategy, c_short=cs, short_length=ls,
+                                    subdivide=subdivide, sample_step=sample_step)
     new = from_frame(grid * cell, direction, pivot)
     new[fixed_arr] = xy[fixed_arr]
     info = {

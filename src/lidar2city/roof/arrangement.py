@@ -660,7 +660,7 @@ def _straight(pts, closed):
 
 
 def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, tol=None,
-                t_adjust=None, c_short=None, max_work=1e8):
+                t_adjust=None, c_short=None, max_work=1e8, subdivide=4, sample_step=2.0):
     """Step chains regularised together by the exact 2-D snake (seed step 5).
 
     Each raw step chain (the label grid's staircase between two facets at different
@@ -689,7 +689,17 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         Building direction (rad).
     window, snake_cell : int, float
         Snake half-window (candidates ``(2w+1)^2`` per vertex) and grid step as a
-        fraction of ``cell``.
+        fraction of ``cell``. Window 2 (25 candidates) would cost about a third of
+        these energy tables for roofs as good on Delft and the synthetic roofs, but
+        made a roof spike on ISPRS samp11 (benchmarks/HISTORY.md, session 13,
+        lines15); a coarser grid step with the same reach (0.75 with window 2)
+        lets a short wall escape the direction energy by turning oblique.
+    subdivide, sample_step : int, float
+        Distance raster cells per snake grid step and the spacing (raster cells)
+        of the deviation's samples along a candidate edge
+        (:func:`lidar2city.regularize.snake.adjust_planar_graph`); the default
+        step 2 reads every other raster cell, half the samples of the footprint
+        snake's, within a raster cell of its integral.
     tol : float, optional
         Simplification tolerance (m) of the chains before the snake, and the length
         below which an edge is a jog (``E_Short``, weight ``tol**2``); default
@@ -761,7 +771,8 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
                                  window=window, direction=direction,
                                  t_adjust=2 * cell if t_adjust is None else t_adjust,
-                                 c_short=tol * tol if c_short is None else c_short, short_length=tol)
+                                 c_short=tol * tol if c_short is None else c_short, short_length=tol,
+                                 subdivide=subdivide, sample_step=sample_step)
     for i, row in enumerate(ids):
         if row is None:
             continue
@@ -788,14 +799,35 @@ def _extend(poly, ext):
     return poly
 
 
+def _near_chain(xyz, lab, chain, a, b, radius, *, block=256):
+    """Indices (ascending) of the points (N, 2+) of facets ``a`` or ``b`` within ``radius`` of
+    a vertex of ``chain`` (m, 2): a k-d tree's ball query at every vertex (squared distance
+    against ``radius**2``), by brute force over the two facets' points in the chain's box,
+    ``block`` vertices at a time (bounded memory), with no tree to build."""
+    idx = np.flatnonzero((lab == a) | (lab == b))
+    chain = np.asarray(chain, dtype=np.float64).reshape(-1, 2)
+    if not len(chain) or not len(idx):
+        return np.zeros(0, np.int64)
+    pad = radius * (1 + 1e-9) + 1e-9  # the box only prefilters: a little wide, never narrow
+    lo, hi = chain.min(axis=0) - pad, chain.max(axis=0) + pad
+    x, y = xyz[idx, 0], xyz[idx, 1]
+    box = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+    idx, x, y = idx[box], x[box], y[box]
+    r2 = radius * radius
+    keep = np.zeros(len(idx), dtype=bool)
+    for s in range(0, len(chain), block):
+        c = chain[s:s + block]
+        d2 = (x[:, None] - c[None, :, 0]) ** 2 + (y[:, None] - c[None, :, 1]) ** 2
+        keep |= (d2 <= r2).any(axis=1)
+    return idx[keep].astype(np.int64)
+
+
 def _line_explains(points, chain, a, b, pa, pb, g, c0, *, radius, cap, tol):
     """Whether the planes' intersection line explains the points of facets ``a`` and ``b``
     near a chain about as well as the chain (a step) does: points beyond the line take
     the other plane; their mean capped residual may grow by at most ``tol`` (m)."""
-    xyz, lab, tree = points
-    near = np.unique(np.concatenate(tree.query_ball_point(chain, radius)).astype(np.int64)) \
-        if len(chain) else np.zeros(0, np.int64)
-    near = near[(lab[near] == a) | (lab[near] == b)]
+    xyz, lab = points[:2]
+    near = _near_chain(xyz, lab, chain, a, b, radius)
     if len(near) < 6:
         return True
     p = xyz[near]
@@ -883,7 +915,7 @@ def chain_segments(chains, pairs, planes, *, cell, direction, t_step=0.3, max_sh
         Largest distance (in cells) of a step chain's raw vertices from its straight piece.
     overshoot : float, optional
         Length (m) by which open polylines are extended; default one cell.
-    points : (xyz (N, 3), labels (N,), cKDTree of xyz[:, :2]), optional
+    points : (xyz (N, 3), labels (N,)), optional
         With points, a chain near its planes' intersection line is an intersection
         edge only when that line explains the nearby points of both facets about as
         well as the chain does (mean capped residual, at most ``cap`` m per point,
@@ -1232,23 +1264,8 @@ def roof_lines(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3, m
     chains, pairs = boundary_chains(grid)
     return chain_segments(chains, pairs, planes, cell=cell, direction=direction, t_step=t_step,
                           max_shift=max_shift, snap_angle=snap_angle,
-                          points=(xyz, labels, _LazyTree(xyz[:, :2])), cap=cap,
+                          points=(xyz, labels), cap=cap,
                           step_snake=step_snake, snake_window=snake_window, snake_cell=snake_cell)
-
-
-class _LazyTree:
-    """A ``cKDTree`` of points (n, 2) built at its first query: most roofs never ask
-    (:func:`_line_explains` runs only on chains near their planes' line)."""
-
-    def __init__(self, xy):
-        self.xy, self.tree = xy, None
-
-    def query_ball_point(self, *args, **kwargs):
-        if self.tree is None:
-            from scipy.spatial import cKDTree
-
-            self.tree = cKDTree(self.xy)
-        return self.tree.query_ball_point(*args, **kwargs)
 
 
 def arrangement_partition(footprint, xyz, labels, planes, *, cell, direction, t_step=0.3,

@@ -331,6 +331,7 @@ def edge_energy_tables(
     c_dis: float,
     c_short: float = 0.0,
     short_length: float = 0.0,
+    step: float = 1.0,
 ) -> list[np.ndarray]:
     """``C_Dir E_Dir + C_Dis E_Dis`` (eq. 6) for every edge: the solver's edge tables.
 
@@ -348,14 +349,19 @@ def edge_energy_tables(
         direction energy off for an edge, e.g. the hip edges of a roof).
     c_short, short_length : float
         Weight (m^2) and length (m) of :func:`short_edge_energy` (0 = off).
+    step : float
+        Spacing (raster cells) of the deviation's samples along a candidate edge
+        (:func:`deviation_energy`); 1 reads every raster cell the edge crosses.
 
     Returns
     -------
     list of ndarray, shape (d_u, d_v) each
     """
+    if not (np.isfinite(step) and step > 0):
+        raise InputError(f"step must be a positive number of raster cells, got {step}")
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     kwargs = dict(cell=cell, t_adjust=t_adjust, c_dir=c_dir, c_dis=c_dis, c_short=c_short,
-                  short_length=short_length)
+                  short_length=short_length, step=step)
     layout = _window_layout(candidates, raster)
     if layout is None or not len(edges):
         return _edge_tables_general(candidates, edges, raster, **kwargs)
@@ -363,7 +369,7 @@ def edge_energy_tables(
 
 
 def _edge_tables_general(candidates, edges, raster: DistanceRaster, *, cell, t_adjust, c_dir, c_dis,
-                         c_short=0.0, short_length=0.0) -> list[np.ndarray]:
+                         c_short=0.0, short_length=0.0, step=1.0) -> list[np.ndarray]:
     """Edge tables edge by edge (any candidate sets): see :func:`edge_energy_tables`."""
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
@@ -384,7 +390,7 @@ def _edge_tables_general(candidates, edges, raster: DistanceRaster, *, cell, t_a
             dirs = _direction(dx, dy, length, cell=cell, t_adjust=t_adjust) if np.any(weights) else None
             shorts = _short(length, cell=cell, short_length=short_length) if c_short else None
         pu, pv = candidates[u], candidates[v]
-        e = c_dis * _deviation(pu, pv, ends[u], ends[v], raster, cell=cell)
+        e = c_dis * _deviation(pu, pv, ends[u], ends[v], raster, cell=cell, step=step)
         if wd:
             e = e + wd * (dirs[j] if pos is not None else
                           direction_energy(pu, pv, cell=cell, t_adjust=t_adjust))

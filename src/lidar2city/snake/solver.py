@@ -358,9 +358,10 @@ def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
         # element is the same sum in the same order, and the argmin runs along
         # contiguous memory instead of a transposed copy.
         out_shape = shape[:axis] + shape[axis + 1:]
-        total = np.ascontiguousarray(np.moveaxis(arrays[0], axis, -1))
+        last = tuple(i for i in range(len(shape)) if i != axis) + (axis,)  # np.moveaxis(a, axis, -1)
+        total = np.ascontiguousarray(arrays[0].transpose(last))
         for a in arrays[1:]:
-            total = total + np.ascontiguousarray(np.moveaxis(a, axis, -1))
+            total = total + np.ascontiguousarray(a.transpose(last))
         flat = np.broadcast_to(total, out_shape + (shape[axis],)).reshape(-1, shape[axis])
         arg = flat.argmin(axis=1)
         best = flat[np.arange(len(flat)), arg]
