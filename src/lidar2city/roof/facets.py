@@ -739,5 +739,9 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
 
 
 def _area_estimate(xy, cell=0.5):
+    """Area (m2) of the ``cell`` grid cells holding points of ``xy`` (N, 2)."""
     ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
-    return len(np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1])) * cell * cell
+    key = ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1]
+    if len(key) and key.max() < 8 * len(key) + 1024:  # a small grid: count the filled cells
+        return int(np.count_nonzero(np.bincount(key))) * cell * cell
+    return len(np.unique(key)) * cell * cell
