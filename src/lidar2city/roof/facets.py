@@ -394,9 +394,13 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     n_labels = len(planes)
     if n_labels < 2:
         return labels, n_labels
-    li = labels[:, None].repeat(nbrs.shape[1], axis=1)
-    lj = labels[nbrs]
-    m = (li >= 0) & (lj >= 0) & (li != lj)
+    # the neighbour edges whose ends differ (gathered as int32: half the bytes), then those
+    # between two facets
+    lab = labels.astype(np.int32) if n_labels < 2 ** 31 else labels
+    lj = lab[nbrs]
+    edge = np.flatnonzero(lj != lab[:, None])
+    li, lj = lab[edge // nbrs.shape[1]], lj.ravel()[edge]
+    m = (li >= 0) & (lj >= 0)
     # the distinct (low, high) label pairs in lexicographic order, as np.unique(axis=0)
     # gives them, from one integer key (several times faster than sorting rows)
     lo, hi = np.minimum(li[m], lj[m]), np.maximum(li[m], lj[m])
