@@ -355,12 +355,13 @@ def _point_plane_dist(xyz, planes):
 def _facet_moments(xyz, labels, n_labels):
     """Point moments ``(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of every facet, (K, 10)."""
     on = labels >= 0
+    lab = labels[on]
     x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
-    cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
-    # the moments of each facet: one weighted bincount over (facet, column) keys adds
-    # every point's row in point order, as np.add.at does, at a fraction of its cost
-    key = (labels[on][:, None] * 10 + np.arange(10)).ravel()
-    return np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
+    # one bincount per moment adds each facet's points in point order, as np.add.at does
+    cols = [np.bincount(lab, minlength=n_labels).astype(np.float64)]
+    cols += [np.bincount(lab, weights=w, minlength=n_labels)
+             for w in (x, y, z, x * x, x * y, x * z, y * y, y * z, z * z)]
+    return np.stack(cols, axis=1)
 
 
 def _moment_fit(mom):
