@@ -352,6 +352,13 @@ def _point_plane_dist(xyz, planes):
     return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
 
 
+def _pair_dist(xyz, planes):
+    """Perpendicular distances (N,) of points (N, 3) to planes (N, 3), pair by pair: the
+    doubles of :func:`_point_plane_dist`'s matrix at those pairs."""
+    num = xyz[:, 2] - xyz[:, 0] * planes[:, 0] - xyz[:, 1] * planes[:, 1] - planes[:, 2]
+    return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
+
+
 def _facet_moments(xyz, labels, n_labels):
     """Point moments ``(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of every facet, (K, 10)."""
     on = labels >= 0
@@ -716,17 +723,19 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
     # unassigned points join the nearest-fitting adjacent facet when close to its plane
     un = np.flatnonzero(labels < 0)
     if len(un) and n_labels:
-        d = _point_plane_dist(local[un], planes)
+        # each point against the facets among its neighbours' only: the nearest plane,
+        # the lowest facet on ties
         nb_labels = labels[nbrs[un, 1:]]
-        allowed = np.zeros_like(d, dtype=bool)
         rows = np.repeat(np.arange(len(un)), nb_labels.shape[1])
         cols = nb_labels.ravel()
         ok = cols >= 0
-        allowed[rows[ok], cols[ok]] = True
-        d = np.where(allowed, d, np.inf)
-        best = d.argmin(axis=1)
-        take = d[np.arange(len(un)), best] <= dist_tol
-        labels[un[take]] = best[take]
+        key = np.unique(rows[ok] * n_labels + cols[ok])
+        rows, cols = key // n_labels, key % n_labels
+        d = _pair_dist(local[un[rows]], planes[cols])
+        first = np.lexsort((d, rows))
+        first = first[np.r_[True, rows[first[1:]] != rows[first[:-1]]][:len(first)]]
+        take = first[d[first] <= dist_tol]
+        labels[un[rows[take]]] = cols[take]
         planes = _refit(local, labels, n_labels, dist_tol, fitted)
         fitted = (labels.copy(), planes)
     n_before = len(planes)
