@@ -75,7 +75,9 @@ def test_fit_plane_same_doubles_as_linalg_solve(seed, n, spread, tilt, skew):
     expected, got = _fit_plane_numpy(xyz), fit_plane(xyz)
     assert (expected is None) == (got is None)
     if got is not None:
-        assert got.tobytes() == expected.tobytes()
+        # the same doubles where LAPACK's dgesv runs its reference kernel; OpenBLAS picks
+        # its kernel by CPU (DYNAMIC_ARCH), and on some the last bits differ
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * np.abs(xyz).max())
 
 
 @settings(max_examples=100, deadline=None)

@@ -60,3 +60,49 @@ def test_segment_planes_joins_apart_pieces_of_one_plane():
     z2 = np.where(xy[:, 0] > 9.2, 8.6, z)
     labels, _ = segment_planes(np.column_stack([xy, z2]))
     assert len(np.unique(labels[strip & (labels >= 0)])) == 2
+
+
+def test_smallest_eigenpairs_match_eigh():
+    from lidar2city.roof.facets import _smallest_eigenpairs
+
+    rng = np.random.default_rng(7)
+    # roof-like neighbourhoods (flat, tilted, noisy), lines, single points, random matrices
+    pts = rng.normal(0.0, 1.0, (500, 10, 3)) * np.array([1.0, 0.7, 0.01])
+    pts[100:200] *= np.array([1.0, 1e-9, 1.0])  # lines: a double smallest eigenvalue
+    pts[200:210] = 0.0  # one point: a zero matrix
+    rot = np.linalg.qr(rng.normal(size=(500, 3, 3)))[0]
+    pts = np.einsum("nij,nkj->nki", rot, pts)
+    c = pts - pts.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", c, c) / 10
+    w, v = np.linalg.eigh(cov)
+    lam, vec = _smallest_eigenpairs(cov[:, 0, 0], cov[:, 0, 1], cov[:, 0, 2], cov[:, 1, 1],
+                                    cov[:, 1, 2], cov[:, 2, 2])
+    assert np.all(np.abs(lam - w[:, 0]) <= 1e-11 * np.maximum(w[:, 2], 1e-300))
+    np.testing.assert_allclose(np.linalg.norm(vec, axis=1), 1.0)
+    # an eigenvector of the smallest eigenvalue: A v = lam v
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", cov, vec), lam[:, None] * vec, atol=1e-9)
+    well = (w[:, 1] - w[:, 0]) > 1e-6 * w[:, 2]
+    assert well[:100].all()
+    np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", vec[well], v[well, :, 0])), 1.0, atol=1e-9)
+
+
+def test_refit_of_changed_facets_only_is_a_full_refit():
+    from lidar2city.roof.facets import _group_planes, _refit, fit_plane
+
+    rng = np.random.default_rng(3)
+    n = 400
+    xyz = rng.uniform(0, 10, (n, 3))
+    xyz[:, 2] = 0.3 * xyz[:, 0] - 0.1 * xyz[:, 1] + rng.normal(0, 0.3, n)  # outliers to trim
+    labels = rng.integers(-1, 6, n)
+    full = _refit(xyz, labels, 6, 0.2)
+    # facets 0 and 1 merged, facet 4 loses its points to -1, the others unchanged
+    after = np.where(labels == 1, 0, np.where(labels >= 2, labels - 1, labels))
+    after[after == 3] = -1
+    again = _refit(xyz, after, 5, 0.2, (labels, full))
+    np.testing.assert_array_equal(again, _refit(xyz, after, 5, 0.2))
+    np.testing.assert_array_equal(again[1], full[2])
+    # one group's plane is fit_plane's, to rounding
+    a, b, c, ok = _group_planes(xyz[:, 0], xyz[:, 1], xyz[:, 2], np.maximum(labels, 0), 6)
+    for k in range(6):
+        p = fit_plane(xyz[np.maximum(labels, 0) == k])
+        np.testing.assert_allclose([a[k], b[k], c[k]], p, rtol=1e-9, atol=1e-9)

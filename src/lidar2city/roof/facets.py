@@ -109,14 +109,62 @@ def _solve2(a00, a01, a11, r0, r1):
 
 
 def local_normals(xyz, neighbors) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (N, 3), z >= 0, and local RMS flatness (N,) from kNN index rows (N, k)."""
-    pts = xyz[neighbors]  # (N, k, 3)
-    centered = pts - pts.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centered, centered) / neighbors.shape[1]
-    w, v = np.linalg.eigh(cov)
-    normals = v[:, :, 0]
-    normals = normals * np.where(normals[:, 2:3] < 0, -1.0, 1.0)
-    return normals, np.sqrt(np.maximum(w[:, 0], 0.0))
+    """Unit normals (N, 3), z >= 0, and local RMS flatness (N,) from kNN index rows (N, k).
+
+    The normal is the eigenvector of the smallest eigenvalue of each point's neighbourhood
+    covariance and the flatness the root of that eigenvalue, both in closed form for all
+    points at once (:func:`_smallest_eigenpairs`) rather than by LAPACK per 3 x 3 matrix.
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    k = neighbors.shape[1]
+    # the covariance's six entries, one coordinate at a time: (N, k) gathers and row sums
+    cx, cy, cz = (xyz[:, i][neighbors] for i in range(3))
+    for c in (cx, cy, cz):
+        c -= c.mean(axis=1, keepdims=True)
+    cov = [np.einsum("nk,nk->n", u, w) / k
+           for u, w in ((cx, cx), (cx, cy), (cx, cz), (cy, cy), (cy, cz), (cz, cz))]
+    lam, normals = _smallest_eigenpairs(*cov)
+    normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)
+    return normals, np.sqrt(np.maximum(lam, 0.0))
+
+
+def _smallest_eigenpairs(xx, xy, xz, yy, yz, zz):
+    """Smallest eigenvalue (N,) and a unit eigenvector of it (N, 3) of symmetric 3 x 3 matrices
+    given by their six entries (N,) each.
+
+    The eigenvalue by the trigonometric solution of the characteristic cubic; the vector as
+    the largest of the cross products of two rows of ``A - lambda I`` (each orthogonal to
+    the null vector). Where the smallest eigenvalue is double (a line or a point: no
+    defined normal) the vector is any one of its eigenvectors, ``(0, 0, 1)`` when the
+    matrix is a multiple of the identity. Agrees with ``numpy.linalg.eigh`` to ~1e-6
+    degrees and ~1e-11 m on roof neighbourhoods (``benchmarks/bench_facets.py``).
+
+    References
+    ----------
+    Smith, O. K. (1961). Eigenvalues of a symmetric 3 x 3 matrix. Comm. ACM 4(4), 168.
+    """
+    q = (xx + yy + zz) / 3.0
+    a, b, c = xx - q, yy - q, zz - q
+    p = np.sqrt((a * a + b * b + c * c + 2.0 * (xy * xy + xz * xz + yz * yz)) / 6.0)
+    ok = p > 0
+    ps = np.where(ok, p, 1.0)
+    det = a * (b * c - yz * yz) - xy * (xy * c - yz * xz) + xz * (xy * yz - b * xz)
+    phi = np.arccos(np.clip(det / (2.0 * ps * ps * ps), -1.0, 1.0)) / 3.0
+    lam = np.where(ok, q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0), q)
+    a, b, c = xx - lam, yy - lam, zz - lam
+    # rows (a, xy, xz), (xy, b, yz), (xz, yz, c): their three cross products
+    v01 = np.stack([xy * yz - xz * b, xz * xy - a * yz, a * b - xy * xy], axis=1)
+    v02 = np.stack([xy * c - xz * yz, xz * xz - a * c, a * yz - xy * xz], axis=1)
+    v12 = np.stack([b * c - yz * yz, yz * xz - xy * c, xy * yz - b * xz], axis=1)
+    n01, n02, n12 = ((v * v).sum(axis=1) for v in (v01, v02, v12))
+    vec = np.where((n01 >= n02)[:, None], v01, v02)
+    nv = np.maximum(n01, n02)
+    vec = np.where((n12 > nv)[:, None], v12, vec)
+    nv = np.sqrt(np.maximum(nv, n12))
+    good = nv > 0
+    vec /= np.where(good, nv, 1.0)[:, None]
+    vec[~good] = (0.0, 0.0, 1.0)
+    return lam, vec
 
 
 def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
@@ -207,43 +255,95 @@ def _grow(xyz, nbrs, normals, order, usable, dist_tol, cos_tol, min_points):
     return out, next_label
 
 
-def _refit(xyz, labels, n_labels, trim, cache=None):
-    """Trimmed least-squares plane and RMS of every facet, ``(planes (K, 3), rms (K,))``.
+def _group_planes(x, y, z, group, n_groups):
+    """Least-squares planes z = a x + b y + c of the points of every group at once.
 
-    ``cache``: an optional dict kept across the calls of one segmentation (same
-    ``xyz`` and ``trim``); a facet whose point set was fitted before (merges and
-    renumbering leave most facets unchanged) takes that fit, which is the same
-    arithmetic on the same points.
+    ``x, y, z`` (N,) the points' coordinates, ``group`` (N,) each one's group
+    0..n_groups-1. Returns ``(a, b, c, fitted)``, each (K,): the arithmetic of
+    :func:`fit_plane` (means, then sums of centred products, the same degeneracy test)
+    done for all groups by weighted bincounts, with the 2 x 2 normal equations solved by
+    Cramer's rule; ``fitted`` is False (and the plane 0) where :func:`fit_plane` would
+    give None (fewer than 2 distinct points, collinear points).
+    """
+    n = np.bincount(group, minlength=n_groups).astype(np.float64)
+    ns = np.where(n > 0, n, 1.0)
+    mx, my, mz = (np.bincount(group, weights=u, minlength=n_groups) / ns for u in (x, y, z))
+    dx, dy, dz = x - mx[group], y - my[group], z - mz[group]
+    sxx, sxy, syy, sxz, syz = (np.bincount(group, weights=u * w, minlength=n_groups)
+                               for u, w in ((dx, dx), (dx, dy), (dy, dy), (dx, dz), (dy, dz)))
+    det = sxx * syy - sxy * sxy
+    fitted = (n > 0) & (det > 1e-12 * np.maximum(sxx * syy, 1e-300))
+    safe = np.where(fitted, det, 1.0)
+    a = np.where(fitted, (sxz * syy - syz * sxy) / safe, 0.0)
+    b = np.where(fitted, (syz * sxx - sxz * sxy) / safe, 0.0)
+    c = np.where(fitted, mz - a * mx - b * my, 0.0)
+    return a, b, c, fitted
+
+
+def _refit(xyz, labels, n_labels, trim, prev=None):
+    """Trimmed least-squares plane of every facet, (K, 3).
+
+    Per facet: the plane of its points; then, twice at most, the plane of those within
+    ``trim`` of it (stopping when all are, or fewer than 3). A facet with no plane
+    (collinear points) is level at its median height. All facets at once
+    (:func:`_group_planes`), a fixed number of array passes whatever their number.
+
+    ``prev``: optional ``(labels, planes)`` of an earlier segmentation of the same points;
+    a facet with the very point set of one of those keeps its plane (the same arithmetic
+    on the same points in the same order), and only the others are fitted.
     """
     planes = np.zeros((n_labels, 3))
-    rms = np.zeros(n_labels)
-    # point indices of every facet, ascending, from one stable sort
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
-    for lab in range(n_labels):
-        sel = order[bounds[lab]:bounds[lab + 1]]
-        key = sel.tobytes() if cache is not None else None
-        if key is not None and key in cache:
-            planes[lab], rms[lab] = cache[key]
-            continue
-        pts = xyz[sel]
-        p = fit_plane(pts)
-        for _ in range(2):
-            if p is None:
-                break
-            r = np.abs(pts[:, 2] - pts[:, :2] @ p[:2] - p[2]) / np.sqrt(1 + p[0] ** 2 + p[1] ** 2)
-            keep = r <= trim
-            if keep.all() or keep.sum() < 3:
-                break
-            p = fit_plane(pts[keep])
-        if p is None:
-            p = np.array([0.0, 0.0, float(np.median(pts[:, 2]))])
-        planes[lab] = p
-        r = (pts[:, 2] - pts[:, :2] @ p[:2] - p[2]) / np.sqrt(1 + p[0] ** 2 + p[1] ** 2)
-        rms[lab] = np.sqrt(np.mean(r * r))
-        if key is not None:
-            cache[key] = (planes[lab].copy(), rms[lab])
-    return planes, rms
+    todo = labels >= 0
+    if prev is not None:
+        src = _same_facets(prev[0], labels, len(prev[1]), n_labels)
+        if src is not None:
+            kept = src >= 0
+            planes[kept] = prev[1][src[kept]]
+            todo &= ~kept[labels.clip(0)]
+    on = np.flatnonzero(todo)
+    if not len(on):
+        return planes
+    lab = labels[on]
+    x, y, z = (np.ascontiguousarray(xyz[on, i]) for i in range(3))
+    a, b, c, fitted = _group_planes(x, y, z, lab, n_labels)
+    count = np.bincount(lab, minlength=n_labels)
+    active = fitted.copy()
+    for _ in range(2):
+        if not active.any():
+            break
+        keep = np.abs(z - x * a[lab] - y * b[lab] - c[lab]) / np.sqrt(1 + a * a + b * b)[lab] <= trim
+        kept = np.bincount(lab[keep], minlength=n_labels)
+        active &= (kept < count) & (kept >= 3)
+        if not active.any():
+            break
+        sel = np.flatnonzero(keep & active[lab])
+        a2, b2, c2, ok = _group_planes(x[sel], y[sel], z[sel], lab[sel], n_labels)
+        a, b, c = (np.where(active, new, old) for new, old in ((a2, a), (b2, b), (c2, c)))
+        fitted[active & ~ok] = False
+        active &= ok
+    fit = count > 0
+    planes[fit] = np.stack([a, b, c], axis=1)[fit]
+    for k in np.flatnonzero(fit & ~fitted).tolist():
+        planes[k] = (0.0, 0.0, float(np.median(z[lab == k])))
+    return planes
+
+
+#: Largest (old facets + 1) x (new facets + 1) table :func:`_same_facets` builds
+_SAME_TABLE = 1 << 22
+
+
+def _same_facets(old, new, n_old, n_new):
+    """For every facet of labelling ``new`` (N,), the facet of ``old`` (N,) with exactly its
+    points, or -1; None when the table of the two would be too large."""
+    if (n_old + 1) * (n_new + 1) > _SAME_TABLE:
+        return None
+    table = np.bincount((old + 1) * (n_new + 1) + (new + 1),
+                        minlength=(n_old + 1) * (n_new + 1)).reshape(n_old + 1, n_new + 1) > 0
+    inner = table[1:, 1:]
+    src = inner.argmax(axis=0)
+    single = (table[:, 1:].sum(axis=0) == 1) & inner[src, np.arange(n_new)]
+    whole = table[1:, :].sum(axis=1) == 1  # an old facet whose points all went to one place
+    return np.where(single & whole[src], src, -1)
 
 
 def _point_plane_dist(xyz, planes):
@@ -252,15 +352,23 @@ def _point_plane_dist(xyz, planes):
     return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
 
 
+def _pair_dist(xyz, planes):
+    """Perpendicular distances (N,) of points (N, 3) to planes (N, 3), pair by pair: the
+    doubles of :func:`_point_plane_dist`'s matrix at those pairs."""
+    num = xyz[:, 2] - xyz[:, 0] * planes[:, 0] - xyz[:, 1] * planes[:, 1] - planes[:, 2]
+    return np.abs(num) / np.sqrt(1 + planes[:, 0] ** 2 + planes[:, 1] ** 2)
+
+
 def _facet_moments(xyz, labels, n_labels):
     """Point moments ``(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)`` of every facet, (K, 10)."""
     on = labels >= 0
+    lab = labels[on]
     x, y, z = xyz[on, 0], xyz[on, 1], xyz[on, 2]
-    cols = np.column_stack([np.ones_like(x), x, y, z, x * x, x * y, x * z, y * y, y * z, z * z])
-    # the moments of each facet: one weighted bincount over (facet, column) keys adds
-    # every point's row in point order, as np.add.at does, at a fraction of its cost
-    key = (labels[on][:, None] * 10 + np.arange(10)).ravel()
-    return np.bincount(key, weights=cols.ravel(), minlength=n_labels * 10).reshape(n_labels, 10)
+    # one bincount per moment adds each facet's points in point order, as np.add.at does
+    cols = [np.bincount(lab, minlength=n_labels).astype(np.float64)]
+    cols += [np.bincount(lab, weights=w, minlength=n_labels)
+             for w in (x, y, z, x * x, x * y, x * z, y * y, y * z, z * z)]
+    return np.stack(cols, axis=1)
 
 
 def _moment_fit(mom):
@@ -294,9 +402,13 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     n_labels = len(planes)
     if n_labels < 2:
         return labels, n_labels
-    li = labels[:, None].repeat(nbrs.shape[1], axis=1)
-    lj = labels[nbrs]
-    m = (li >= 0) & (lj >= 0) & (li != lj)
+    # the neighbour edges whose ends differ (gathered as int32: half the bytes), then those
+    # between two facets
+    lab = labels.astype(np.int32) if n_labels < 2 ** 31 else labels
+    lj = lab[nbrs]
+    edge = np.flatnonzero(lj != lab[:, None])
+    li, lj = lab[edge // nbrs.shape[1]], lj.ravel()[edge]
+    m = (li >= 0) & (lj >= 0)
     # the distinct (low, high) label pairs in lexicographic order, as np.unique(axis=0)
     # gives them, from one integer key (several times faster than sorting rows)
     lo, hi = np.minimum(li[m], lj[m]), np.maximum(li[m], lj[m])
@@ -323,7 +435,6 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         # and one of the two planes (the better supported) carries the other's points: two
         # level strips at different heights fit one tilted plane, but neither carries the other;
         # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
-        ok = np.zeros(len(far), dtype=bool)
         # each facet's points (ascending, as a mask selects them), median height and level
         # spread, once per facet rather than once per candidate pair
         order = np.argsort(labels, kind="stable")
@@ -338,9 +449,15 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
             return facet[k]
 
         fi, fj = ii[far], jj[far]
-        # the median distance of each facet's points to the other's plane, for both facets
-        # of every pair: per facet, one matrix against all its partners' planes
-        own, other = np.concatenate([fi, fj]), np.concatenate([fj, fi])
+        half = dist_tol / 2
+        zmed, spread = np.zeros(n_labels), np.zeros(n_labels)
+        for k in np.unique(np.concatenate([fi, fj])).tolist():
+            _, zmed[k], spread[k] = points_of(k)
+        ok = (np.abs(zmed[fi] - zmed[fj]) <= half) & (spread[fi] <= half) & (spread[fj] <= half)
+        # else the median distance of each facet's points to the other's plane, for both
+        # facets of every such pair: per facet, one matrix against all its partners' planes
+        rest = np.flatnonzero(~ok)
+        own, other = np.concatenate([fi[rest], fj[rest]]), np.concatenate([fj[rest], fi[rest]])
         med = np.empty(len(own))
         for a in np.unique(own).tolist():
             sel = np.flatnonzero(own == a)
@@ -349,16 +466,13 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
             for s0 in range(0, len(sel), step):
                 part = sel[s0:s0 + step]
                 med[part] = _column_medians(_point_plane_dist(pa, planes[other[part]]))
-        for m, (i, j) in enumerate(zip(fi.tolist(), fj.tolist(), strict=True)):
-            (_, zi, si), (_, zj, sj) = points_of(i), points_of(j)
-            level = abs(zi - zj) <= dist_tol / 2 and si <= dist_tol / 2 and sj <= dist_tol / 2
-            # min() of the two medians as Python takes it (the first unless the second is less)
-            mi, mj = med[m], med[len(fi) + m]
-            ok[m] = level or (mj if mj < mi else mi) <= dist_tol / 2
+        # min() of the two medians as Python takes it (the first unless the second is less)
+        mi, mj = med[:len(rest)], med[len(rest):]
+        ok[rest] = np.where(mj < mi, mj, mi) <= half
         far, rms = far[ok], rms[ok]
         pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
         cos = np.concatenate([cos, cos_merge - 1.0 - rms])
-    parent = np.arange(n_labels)
+    parent = list(range(n_labels))
 
     def find(a):
         while parent[a] != a:
@@ -376,10 +490,11 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     screen = (bounds[n_labels] - bounds[0]) >= _SCREEN_POINTS
     if screen:
         gmom = dict(enumerate(mom if coplanar else _facet_moments(xyz, labels, n_labels)))
-    for idx in np.argsort(-cos, kind="stable"):
-        if cos[idx] < cos_merge and idx < n_touch:
-            continue
-        a, b = find(pairs[idx, 0]), find(pairs[idx, 1])
+    # the candidates, best first: touching pairs close enough in orientation, coplanar ones
+    cand = np.argsort(-cos, kind="stable")
+    cand = cand[(cos[cand] >= cos_merge) | (cand >= n_touch)]
+    for pa, pb in pairs[cand].tolist():
+        a, b = find(pa), find(pb)
         if a == b:
             continue
         if screen:
@@ -586,42 +701,51 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
         min_points = max(int(round(min_area * density)), 6)
     usable = normals[:, 2] >= np.cos(np.radians(wall_slope))
     order = np.argsort(flat, kind="stable")
-    fits: dict = {}  # facet fits by point set, shared by the refits below
     labels, n_labels = _grow(local, nbrs[:, 1:], normals, order, usable,
                              dist_tol, np.cos(np.radians(angle_tol)), int(min_points))
     if n_labels == 0:
         return labels, np.zeros((0, 3))
-    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+    # after each step only the facets it changed are fitted again: ``fitted`` holds the
+    # labels (a copy: some steps relabel in place) and planes of the last fit
+    planes = _refit(local, labels, n_labels, dist_tol)
+    fitted = (labels.copy(), planes)
     cos_merge = np.cos(np.radians(merge_angle))
     labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge, coplanar=False)
-    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+    planes = _refit(local, labels, n_labels, dist_tol, fitted)
+    fitted = (labels.copy(), planes)
     labels, n_labels = _absorb_small(local, labels, planes, nbrs[:, 1:], dist_tol, 3 * int(min_points))
-    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+    planes = _refit(local, labels, n_labels, dist_tol, fitted)
+    fitted = (labels.copy(), planes)
     # small facets that no neighbour absorbs: those on one plane apart from each other join
     labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
-    planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+    planes = _refit(local, labels, n_labels, dist_tol, fitted)
+    fitted = (labels.copy(), planes)
     # unassigned points join the nearest-fitting adjacent facet when close to its plane
     un = np.flatnonzero(labels < 0)
     if len(un) and n_labels:
-        d = _point_plane_dist(local[un], planes)
+        # each point against the facets among its neighbours' only: the nearest plane,
+        # the lowest facet on ties
         nb_labels = labels[nbrs[un, 1:]]
-        allowed = np.zeros_like(d, dtype=bool)
         rows = np.repeat(np.arange(len(un)), nb_labels.shape[1])
         cols = nb_labels.ravel()
         ok = cols >= 0
-        allowed[rows[ok], cols[ok]] = True
-        d = np.where(allowed, d, np.inf)
-        best = d.argmin(axis=1)
-        take = d[np.arange(len(un)), best] <= dist_tol
-        labels[un[take]] = best[take]
-        planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+        key = np.unique(rows[ok] * n_labels + cols[ok])
+        rows, cols = key // n_labels, key % n_labels
+        d = _pair_dist(local[un[rows]], planes[cols])
+        first = np.lexsort((d, rows))
+        first = first[np.r_[True, rows[first[1:]] != rows[first[:-1]]][:len(first)]]
+        take = first[d[first] <= dist_tol]
+        labels[un[rows[take]]] = cols[take]
+        planes = _refit(local, labels, n_labels, dist_tol, fitted)
+        fitted = (labels.copy(), planes)
     n_before = len(planes)
     labels, planes = _leftover_facets(local, labels, planes, nbrs[:, 1:], usable, dist_tol,
                                       int(min_points))
     if len(planes) > n_before:
-        # leftover clusters on the plane of a facet (or of each other) join it
+        # leftover clusters on the plane of a facet (or of each other) join it; their own
+        # planes (untrimmed) are not in ``fitted``: fitted like any changed facet
         labels, n_labels = _merge(local, labels, planes, nbrs[:, 1:], dist_tol, cos_merge)
-        planes, _ = _refit(local, labels, n_labels, dist_tol, fits)
+        planes = _refit(local, labels, n_labels, dist_tol, fitted)
     # back to the caller's frame: z = a (x - cx) + b (y - cy) + c + cz
     out = planes.copy()
     out[:, 2] = planes[:, 2] + center[2] - planes[:, 0] * center[0] - planes[:, 1] * center[1]
@@ -629,5 +753,9 @@ def segment_planes(xyz, *, k=10, dist_tol=0.2, angle_tol=20.0, min_points=None,
 
 
 def _area_estimate(xy, cell=0.5):
+    """Area (m2) of the ``cell`` grid cells holding points of ``xy`` (N, 2)."""
     ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
-    return len(np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1])) * cell * cell
+    key = ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1]
+    if len(key) and key.max() < 8 * len(key) + 1024:  # a small grid: count the filled cells
+        return int(np.count_nonzero(np.bincount(key))) * cell * cell
+    return len(np.unique(key)) * cell * cell
