@@ -37,6 +37,22 @@ def test_the_halls_lod13_model_is_pinned():
     assert h.hexdigest() == "938ed0d5623c512aa022cb987129d542755ab200f4c4cf02140df01c873bbc9d"
 
 
+#: the hall's LoD2.2 solid (digest below) by OpenBLAS kernel: both give 254 planes, 66 / 4888
+#: edges and 9290 faces (Haswell: any AVX2 CPU, or OPENBLAS_CORETYPE=Haswell)
+HALL_LOD22_DIGESTS = {
+    "Haswell": "c9ab84d88b700da2772f6659a30e481637089015d4d5649fd71e02d857371580",
+    "SkylakeX": "36cac1052c67029f95bfb07fd6019403f5820fe0a2cdede6c3461256ad02dd98",
+}
+
+
+def _blas_kernel():
+    import threadpoolctl
+
+    kernels = {i.get("architecture") for i in threadpoolctl.threadpool_info()
+               if i.get("internal_api") == "openblas"}
+    return kernels.pop() if len(kernels) == 1 else None
+
+
 @pytest.mark.slow
 def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeypatch):
     # the hall's LoD2.2 roof (254 planes, thousands of faces): the same solid as before its
@@ -68,5 +84,10 @@ def test_the_halls_lod22_model_is_pinned_and_no_partition_is_built_twice(monkeyp
             h.update(sf.semantic.encode())
             for r in sf.rings:
                 h.update(np.asarray(r, dtype=np.int64).tobytes())
-    assert h.hexdigest() == "36cac1052c67029f95bfb07fd6019403f5820fe0a2cdede6c3461256ad02dd98"
+    # the last bits of a float sum depend on the BLAS kernel OpenBLAS picks for the CPU
+    # (AVX2 or AVX-512), and rounding to the millimetre does not hide every one of them:
+    # the solid is pinned per kernel; on another kernel its counts above still hold
+    kernel = _blas_kernel()
+    if kernel in HALL_LOD22_DIGESTS:
+        assert h.hexdigest() == HALL_LOD22_DIGESTS[kernel], kernel
     assert len(built) == len(set(built)), "a partition's solid was built twice"
