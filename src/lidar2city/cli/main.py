@@ -119,6 +119,9 @@ def _stop_workers():  # pragma: no cover - exercised in a subprocess
     mp = sys.modules.get("multiprocessing")
     if mp is None:
         return
+    forked = sys.modules.get("lidar2city.tools.forked")
+    if forked is not None:  # its children, killed below, are no failure to run again
+        forked.STOPPING.set()
     engine = sys.modules.get("lidar2city.tools.engine")
     if engine is not None:
         # no semaphore made from now on (the queues of a worker a nanny starts in place

@@ -49,6 +49,10 @@ __all__ = ["ForkExecutor", "CAN_FORK"]
 #: several workers is a Dask cluster (:func:`lidar2city.tools.engine.make_executor`)
 CAN_FORK = hasattr(os, "fork") and "fork" in multiprocessing.get_all_start_methods()
 
+#: set when this process is stopping (an interrupt, :func:`lidar2city.cli.main._stop_workers`):
+#: a child that ends from then on was killed by it, no failure to report or run again
+STOPPING = threading.Event()
+
 #: the signals a child must not take from this process's handlers between its fork
 #: and its own set-up (blocked around the fork, inherited blocked by the child)
 _SIGNALS = {signal.SIGINT, signal.SIGTERM}
@@ -171,7 +175,7 @@ class ForkExecutor:
                         results.put((runs[r][0], outs))
                     r = None
             except (EOFError, OSError) as exc:  # the child died (or was killed)
-                if r is not None:
+                if r is not None and not STOPPING.is_set():  # (not by this process's stop)
                     logger.warning("a forked worker ended (%s) with items %d to %d: run "
                                    "again here", type(exc).__name__, *runs[r])
                     with lock:
@@ -225,6 +229,12 @@ class ForkExecutor:
                     yield a + j, out
                     yield from drain(False)
             yield from drain(False)
+            if run_hook is not None:
+                # the runs this process kept inputs ahead for may have gone to a child:
+                # keep only what the caller's next items read, as InProcess.map ends
+                after = run_hook([], list(ahead))
+                if after is not None:
+                    after(-1)
         finally:
             _end_children(procs, conns, threads)
 
