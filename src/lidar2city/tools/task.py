@@ -339,26 +339,37 @@ def predecode(tiles, stack) -> tuple:
     Returns :attr:`BlockOptions.decoded`.
     """
     from ..io._atomic import new_scratch_file, scratch_path
-    from ..io.las import read_tile, save_tile
+    from ..io.las import save_tile
 
-    out, total = [], 0
+    out = []
+    for key, tile in _decoded_ahead(tiles):
+        # named by host and process: a later run removes what a killed one left
+        name = new_scratch_file("lidar2city-tile-", ".npz")
+        path = str(stack.enter_context(scratch_path(name)))
+        save_tile(tile, path)
+        del tile
+        out.append((key, path))
+    return tuple(out)
+
+
+def _decoded_ahead(tiles):
+    """``(key, decoded tile)`` of ``tiles`` in order (each path once) while their points
+    add up to at most :data:`PREDECODE_POINTS`; a tile that cannot be decoded is
+    skipped, left to the blocks, which state its failure per building."""
+    from ..io.las import read_tile
+
+    total = 0
     for t in {t.path: t for t in tiles}.values():
         total += int(t.count)
         if total > PREDECODE_POINTS:
-            break
+            return
         try:
             st = os.stat(t.path)
             tile = read_tile(t.path)
         except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
             logger.debug("%s not decoded ahead: %s", t.path, exc)
             continue
-        # named by host and process: a later run removes what a killed one left
-        name = new_scratch_file("lidar2city-tile-", ".npz")
-        path = str(stack.enter_context(scratch_path(name)))
-        save_tile(tile, path)
-        del tile
-        out.append(((t.path, st.st_size, st.st_mtime_ns), path))
-    return tuple(out)
+        yield (t.path, st.st_size, st.st_mtime_ns), tile
 
 
 def hold_tiles(tiles, stack) -> int:
@@ -369,20 +380,8 @@ def hold_tiles(tiles, stack) -> int:
     As :func:`predecode`, up to :data:`PREDECODE_POINTS` points, a tile that cannot
     be decoded left to the blocks; the tiles are let go when ``stack`` (a
     :class:`contextlib.ExitStack`) closes. Returns the tiles held."""
-    from ..io.las import read_tile
-
-    total, held = 0, []
-    for t in {t.path: t for t in tiles}.values():
-        total += int(t.count)
-        if total > PREDECODE_POINTS:
-            break
-        try:
-            st = os.stat(t.path)
-            tile = read_tile(t.path)
-        except Exception as exc:  # noqa: BLE001 - left to the blocks, which state it per building
-            logger.debug("%s not decoded ahead: %s", t.path, exc)
-            continue
-        key = (t.path, st.st_size, st.st_mtime_ns)
+    held = []
+    for key, tile in _decoded_ahead(tiles):
         with _cache.lock:
             _cache.held[key] = tile
         held.append(key)
