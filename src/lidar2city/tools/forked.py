@@ -38,6 +38,7 @@ import os
 import pickle
 import queue
 import signal
+import sys
 import threading
 from collections import deque
 
@@ -45,9 +46,13 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["ForkExecutor", "CAN_FORK"]
 
-#: whether this platform forks (Linux, the BSDs, macOS): elsewhere a local run of
-#: several workers is a Dask cluster (:func:`lidar2city.tools.engine.make_executor`)
-CAN_FORK = hasattr(os, "fork") and "fork" in multiprocessing.get_all_start_methods()
+#: whether the workers are forked here: on Linux only. macOS forks, but its system
+#: libraries (Accelerate, the Objective-C runtime) are not safe in a child forked
+#: from a process that used them, which is why Python starts macOS processes by
+#: spawning; elsewhere a local run of several workers is a Dask cluster
+#: (:func:`lidar2city.tools.engine.make_executor`)
+CAN_FORK = (sys.platform.startswith("linux") and hasattr(os, "fork")
+            and "fork" in multiprocessing.get_all_start_methods())
 
 #: set when this process is stopping (an interrupt, :func:`lidar2city.cli.main._stop_workers`):
 #: a child that ends from then on was killed by it, no failure to report or run again
