@@ -306,23 +306,30 @@ def dissolve_cells(cells, labels, *, min_area=0.0, weights=None, min_width=0.0):
     return drop_collinear(faces), np.asarray(face_labels, dtype=np.int64)
 
 
-def _merge_close(rings, tol):
-    """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
-    across all rings) and consecutive repeats removed."""
+def _snap_close(pts, tol):
+    """``pts`` with every vertex within ``tol`` of another (transitively) moved onto
+    the first vertex of its cluster."""
     from scipy.spatial import cKDTree
 
     from .._components import component_labels
 
-    flat = [r for rs in rings for r in rs]
-    if not flat:
-        return rings
-    pts = np.concatenate(flat)
     pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
     if len(pairs):
         comp = component_labels(len(pts), pairs[:, 0], pairs[:, 1])
         first = np.full(comp.max() + 1, -1)
         first[comp[::-1]] = np.arange(len(pts))[::-1]
         pts = pts[first[comp]]
+    return pts
+
+
+def _merge_close(rings, tol):
+    """Rings (lists of (m, 2) arrays) with vertices closer than ``tol`` made one (consistently
+    across all rings) and consecutive repeats removed."""
+    flat = [r for rs in rings for r in rs]
+    if not flat:
+        return rings
+    pts = np.concatenate(flat)
+    pts = _snap_close(pts, tol)
     out, k = [], 0
     for rs in rings:
         new_rs = []
@@ -363,18 +370,9 @@ def _ring_neighbours(sizes):
 def _merge_close_flat(pts, sizes, tol):
     """:func:`_merge_close` of flat rings (coordinates (N, 2), vertex count per ring): the
     merged coordinates of the vertices kept and the rings' new vertex counts."""
-    from scipy.spatial import cKDTree
-
-    from .._components import component_labels
-
     if not len(pts):
         return pts, sizes
-    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
-    if len(pairs):
-        comp = component_labels(len(pts), pairs[:, 0], pairs[:, 1])
-        first = np.full(comp.max() + 1, -1)
-        first[comp[::-1]] = np.arange(len(pts))[::-1]
-        pts = pts[first[comp]]
+    pts = _snap_close(pts, tol)
     prev, _ = _ring_neighbours(sizes)
     keep = np.any(pts != pts[prev], axis=1)  # a vertex equal to the one before it goes
     ring = np.repeat(np.arange(len(sizes)), sizes)
