@@ -36,6 +36,59 @@ def test_extend_to_hits_closes_a_cell():
     assert len(arrangement_cells(SQ, ext)) == 2
 
 
+def _first_hits_by_every_line(segments, footprint, max_ext, eps=1e-3):
+    """extend_to_hits by brute force: each end's whole ray cut with every line by GEOS."""
+    from shapely.geometry import LineString
+
+    lines = [LineString(r.coords) for r in shapely.get_rings(footprint)]
+    lines += [LineString(s) for s in segments if len(s) >= 2]
+    out = [np.array(s, dtype=float) for s in segments]
+    for k, s in enumerate(segments):
+        if np.allclose(s[0], s[-1]):
+            continue
+        for i, j in ((0, 1), (-1, -2)):
+            d = (s[i] - s[j]) / np.hypot(*(s[i] - s[j]))
+            ray = LineString([s[i] + d * 1e-6, s[i] + d * max_ext])
+            pts = [shapely.get_coordinates(ray.intersection(line)) for line in lines]
+            pts = np.concatenate(pts) if pts else np.zeros((0, 2))
+            if len(pts):
+                out[k][i] = s[i] + d * (((pts - s[i]) @ d).min() + eps)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_extend_to_hits_first_hit_as_by_every_line(seed):
+    # random chains in a 60 m block (most rays cross many lines; some meet none, some
+    # run along a line): the first hit of each ray as when cut with every whole line
+    rng = np.random.default_rng(seed)
+    block = shapely.Polygon([(0, 0), (60, 0), (60, 25), (35, 25), (35, 40), (0, 40)])
+    segs = []
+    for _ in range(40):
+        a = rng.uniform([0, 0], [60, 40])
+        steps = rng.normal(0, 3, size=(rng.integers(1, 4), 2))
+        if rng.random() < 0.3:
+            steps[:, 1] = 0.0  # axis-parallel: rays along other chains and the outline
+        segs.append(np.vstack([a, a + np.cumsum(steps, axis=0)]))
+    segs.append(np.array([[10.0, 10.0], [20.0, 10.0]]))
+    segs.append(np.array([[22.0, 10.0], [30.0, 10.0]]))  # on the line of the one before
+    got = extend_to_hits(segs, block, max_ext=75.0)
+    want = _first_hits_by_every_line(segs, block, 75.0)
+    assert len(got) == len(want)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-9)
+    assert np.array_equal(got[-2][-1], [22.001, 10.0])  # stops at the next chain's end
+
+
+def test_extend_to_hits_a_far_hit_near_the_start_does_not_hide_a_nearer_one():
+    # the long diagonal piece's box meets the ray's first metres but crosses it at x = 18.5;
+    # the short upright piece, away from them, crosses it first, at x = 16
+    segs = [np.array([[5.0, 5.0], [12.0, 5.0]]), np.array([[13.5, 5.5], [23.5, 4.5]]),
+            np.array([[16.0, 4.0], [16.0, 6.0]])]
+    got = extend_to_hits(segs, shapely.box(0, 0, 40, 10), max_ext=40.0)
+    np.testing.assert_allclose(got[0][-1], [16.001, 5.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[0][0], [-0.001, 5.0], rtol=0, atol=1e-12)
+
+
 def test_dissolve_merges_labels_small_and_empty_cells():
     lines = [np.array([[-1, y], [11, y]]) for y in (3, 6)] + [np.array([[5, -1], [5, 11]])]
     cells = arrangement_cells(SQ, lines)

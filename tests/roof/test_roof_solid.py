@@ -211,3 +211,33 @@ def test_crossing_vertex_off_its_edge_on_the_grid_is_nudged():
     assert nudge_on_grid(written, [], 0.001) == (written, [])
     other = [type(issues[0])(307, None, "")]
     assert nudge_on_grid(written, other, 0.001)[0] is written
+
+
+def test_several_crossing_vertices_off_their_edges_are_nudged_one_pair_at_a_time():
+    from lidar2city.roof.solid import nudge_on_grid, on_grid
+    from lidar2city.validate.solid import check_solid
+
+    # two crossing-split squares side by side (a step between them): each crossing vertex
+    # rounded off its edge on the grid, two face pairs crossing; one grid step each mends both
+    p, q = (6.331, 0.0), (6.148, 10.0)
+    pair = [[-0.417009, 0.602375, 5.0], [-0.706291, -0.262213, 9.324838]]
+    faces, planes = [], []
+    for k, dx in enumerate((0.0, 10.0)):
+        faces += [Polygon([(dx, 0), (p[0] + dx, p[1]), (q[0] + dx, q[1]), (dx, 10)]),
+                  Polygon([(p[0] + dx, p[1]), (10 + dx, 0), (10 + dx, 10), (q[0] + dx, q[1])])]
+        planes += [[a, b, c - a * dx + 3 * k] for a, b, c in pair]
+    solid = partition_solid(faces, np.asarray(planes), -2.0, min_height=0.1)
+    assert check_solid(solid) == []
+    written = on_grid(solid, 0.001)
+    issues = check_solid(written)
+    assert [i.code for i in issues] == [306] and issues[0].detail.startswith("2 ")
+    fixed, left = nudge_on_grid(written, issues, 0.001)
+    assert left == [] and check_solid(fixed) == []
+    moved = np.flatnonzero(np.any(fixed.vertices != written.vertices, axis=1))
+    assert len(moved) == 2  # one vertex per crossing pair, each by one grid step
+    step = fixed.vertices[moved] - written.vertices[moved]
+    assert np.allclose(np.abs(step[:, :2]).max(axis=1), 0.001) and np.all(step[:, 2] == 0)
+    # more pairs than it repairs, or a budget too small for the second pair: left as it is
+    assert nudge_on_grid(written, issues, 0.001, max_pairs=1) == (written, issues)
+    one = nudge_on_grid(written, issues, 0.001, max_checks=1)
+    assert one[1] == issues or one[1] == []

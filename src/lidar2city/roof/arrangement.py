@@ -1019,12 +1019,15 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     stopped short of its junction; a polyline that meets nothing keeps its end.
     """
     import shapely
-    from shapely.geometry import LineString
 
     segments = [np.array(s, dtype=float) for s in segments]
     rings = [np.asarray(r.coords) for r in shapely.get_rings(footprint)]
-    lines = np.asarray([LineString(c) for c in rings + [s for s in segments if len(s) >= 2]],
-                       dtype=object)
+    # the outline and the polylines cut into their straight pieces: a ray is tested against
+    # the few pieces near it, not against every vertex of a long line whose box it meets
+    # (the long outline of a large block met most rays); the hits are the same points
+    chains = rings + [s for s in segments if len(s) >= 2]
+    pieces = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in chains])
+    lines = shapely.linestrings(pieces[np.any(pieces[:, 0] != pieces[:, 1], axis=1)])
     rays, where = [], []
     for k, s in enumerate(segments):
         if len(s) < 2 or _close_points(s[0], s[-1]):
@@ -1040,21 +1043,98 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
     out = [s.copy() for s in segments]
     if not rays:
         return out
-    # each ray against the lines whose boxes it meets (an index, not every line); the
-    # rays made in one call
-    rays = shapely.linestrings(np.stack(rays))
-    ir, il = shapely.STRtree(lines).query(rays, predicate="intersects")
+    # each ray against the pieces whose boxes meet the ray's first ``reach`` metres (an
+    # index, not every piece), ``reach`` growing while rays are left without a hit in it:
+    # a ray across a large block is not cut with every line it crosses (its first hit is
+    # what counts). The candidates' crossings are placed along the ray in closed form, and
+    # GEOS cuts the ray only with those at its first crossing (and with pieces parallel to
+    # it): the hits kept are GEOS's, the first the same as with every line
+    tree = shapely.STRtree(lines)
+    ends = np.stack(rays)
+    dirs = np.array([w[2] for w in where])
+    base = np.array([segments[k][i] for k, i, _ in where])
+    rays = shapely.linestrings(ends)
+    seg_xy = shapely.get_coordinates(lines).reshape(-1, 2, 2)
+    todo = np.arange(len(rays))
+    reach = _FIRST_REACH
+    while len(todo):
+        last = reach >= max_ext
+        if last:
+            lo, hi = np.minimum(ends[todo, 0], ends[todo, 1]), np.maximum(ends[todo, 0], ends[todo, 1])
+        else:
+            near = base[todo] + dirs[todo] * reach
+            lo, hi = np.minimum(ends[todo, 0], near), np.maximum(ends[todo, 0], near)
+        ir, il = tree.query(shapely.box(*(lo - _REACH_PAD).T, *(hi + _REACH_PAD).T))
+        order = np.lexsort((il, ir))
+        ir, il = todo[ir[order]], il[order]
+        keep = _first_crossings(ir, il, base, dirs, seg_xy, max_ext)
+        done = _cut_first(rays, lines, ir[keep], il[keep], where, segments, out, eps,
+                          None if last else reach)
+        left = ~np.isin(todo, done)
+        if last:
+            # a first crossing GEOS did not confirm (a near miss): every piece then
+            rest = np.isin(ir, todo[left]) & ~keep
+            if rest.any():
+                _cut_first(rays, lines, ir[rest | (keep & np.isin(ir, todo[left]))],
+                           il[rest | (keep & np.isin(ir, todo[left]))], where, segments, out,
+                           eps, None)
+            break
+        todo = todo[left]
+        reach *= 4
+    return out
+
+
+#: the first length (m) of the rays of :func:`extend_to_hits` tested, and the margin (m) of
+#: their boxes (a hit computed on the whole ray lies off it by rounding only)
+_FIRST_REACH = 2.0
+_REACH_PAD = 1e-6
+#: how far (m) along a ray a crossing placed in closed form may lie from GEOS's
+_CROSS_TOL = 1e-7
+
+
+def _first_crossings(ray, piece, base, dirs, seg_xy, max_ext):
+    """Mask of the (ray, piece) pairs (ray ids sorted) worth cutting: the pieces crossing
+    the ray within :data:`_CROSS_TOL` of its first crossing in closed form, pieces
+    parallel to it, and every piece of a ray with no crossing found (GEOS decides)."""
+    p, d = base[ray], dirs[ray]
+    a, e = seg_xy[piece, 0], seg_xy[piece, 1] - seg_xy[piece, 0]
+    den = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
+    w = a - p
+    scale = np.hypot(e[:, 0], e[:, 1])
+    par = np.abs(den) <= 1e-9 * np.maximum(scale, 1e-300)
+    safe = np.where(par, 1.0, den)
+    t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / safe
+    u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / safe
+    tol_u = _CROSS_TOL / np.maximum(scale, 1e-300)
+    # the ray starts 1e-6 m past its polyline's end (the piece ending there is no hit)
+    cross = ~par & (u >= -tol_u) & (u <= 1 + tol_u) & (t >= 1e-6 - _CROSS_TOL) \
+        & (t <= max_ext + _CROSS_TOL)
+    first = np.full(int(ray.max()) + 1 if len(ray) else 0, np.inf)
+    np.minimum.at(first, ray[cross], t[cross])
+    # the first crossing's pieces; a ray with none keeps every candidate
+    return par | (cross & (t <= first[ray] + 2 * _CROSS_TOL)) | ~np.isfinite(first[ray])
+
+
+def _cut_first(rays, lines, ir, il, where, segments, out, eps, reach):
+    """GEOS's hits of rays ``ir`` with pieces ``il`` (sorted by ray); each ray's end moved to
+    its first hit (plus ``eps``) unless that lies beyond ``reach``; returns the rays done."""
+    import shapely
+
     hits = shapely.intersection(rays[ir], lines[il])
     coords, counts = shapely.get_coordinates(hits), shapely.get_num_coordinates(hits)
-    owner = np.repeat(ir, counts)  # sorted: the query returns the rays in order
+    owner = np.repeat(ir, counts)
+    done = []
     if not len(owner):
-        return out
+        return np.zeros(0, dtype=np.int64)
     starts = np.concatenate(([0], np.flatnonzero(np.diff(owner)) + 1))
     for a, b in zip(starts, np.concatenate((starts[1:], [len(owner)])), strict=True):
         k, i, d = where[owner[a]]
         t = (coords[a:b] - segments[k][i]) @ d
+        if reach is not None and t.min() > reach:
+            continue  # a hit beyond the box: a nearer one may lie outside it
         out[k][i] = segments[k][i] + d * (t.min() + eps)
-    return out
+        done.append(owner[a])
+    return np.asarray(done, dtype=np.int64)
 
 
 def _cell_points(cells, xyz):

@@ -380,7 +380,15 @@ def _held_faces(faces, face_labels, planes, xyz, sorted_x, zmin, *, spacing, t_s
     t_r, tol_r = top[rest], tol[rest]
     inbox = (y[cand] >= box[js, 1]) & (y[cand] <= box[js, 3]) & (t_r[js] <= xyz[cand, 2] + tol_r[js])
     js, cand = js[inbox], cand[inbox]
-    inside = shapely.contains_xy(arr[rest][js], x[cand], y[cand])
+    # each face prepared once for its many points (the same answers, an index per face
+    # instead of a pass over its ring per point); released after
+    tested = arr[rest]
+    fresh = tested[~shapely.is_prepared(tested)]
+    shapely.prepare(fresh)
+    try:
+        inside = shapely.contains_xy(tested[js], x[cand], y[cand])
+    finally:
+        shapely.destroy_prepared(fresh)
     held[rest[np.unique(js[inside])]] = True
     return held
 

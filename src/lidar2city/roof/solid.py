@@ -35,17 +35,35 @@ def on_grid(solid, precision):
 _NUDGES = ((1, 0), (0, 1), (-1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
 
 
-def nudge_on_grid(solid, issues, precision, *, max_checks=12):
-    """Repair a solid on the output grid whose only error is two faces crossing (306).
+def _crossing_pairs(issues):
+    """``(count, (a, b))``: how many face pairs the lone 306 issue of ``issues`` reports
+    and the first of them; None for anything else."""
+    if len(issues) != 1 or issues[0].code != 306:
+        return None
+    # "N intersecting face pair(s): a-b, ..."
+    try:
+        head, pairs = issues[0].detail.split(": ", 1)
+        a, b = (int(s) for s in pairs.split(",")[0].split("-"))
+        return int(head.split()[0]), (a, b)
+    except (IndexError, ValueError):
+        return None
+
+
+def nudge_on_grid(solid, issues, precision, *, max_checks=12, max_pairs=8):
+    """Repair a solid on the output grid whose only error is faces crossing (306).
 
     Rounding to ``precision`` moves a vertex inserted where two roof planes
     cross (:func:`split_crossings`) off the straight edge the two faces share, by
     a fraction of a grid step; the face bent inward can then be triangulated
     across the bend and cut the other face in a sliver. Moving a vertex the two
     faces share by one grid step (in a fixed order: the 4 axis steps, then the
-    diagonals, each tried on every shared vertex) bends that edge the other way; the
-    first move after which :func:`~lidar2city.validate.solid.check_solid` finds
-    nothing is kept. The move is one grid step, far below the planarity tolerance.
+    diagonals, each tried on every shared vertex) bends that edge the other way.
+    The crossing pairs are taken one at a time, the first one reported first: a
+    move is kept when :func:`~lidar2city.validate.solid.check_solid` then finds
+    nothing, or only crossings, fewer pairs of them (a large roof can have a
+    crossing vertex rounded off its edge in several places); the next pair is then
+    nudged on the moved solid. Each move is one grid step, far below the planarity
+    tolerance.
 
     Parameters
     ----------
@@ -56,7 +74,9 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=12):
     precision : float
         The grid step (m).
     max_checks : int
-        Most full checks tried.
+        Most full checks tried per crossing pair.
+    max_pairs : int
+        Most crossing pairs repaired: a solid reporting more is left as it is.
 
     Returns
     -------
@@ -65,30 +85,31 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=12):
     """
     from ..validate.solid import check_solid
 
-    if not precision or len(issues) != 1 or issues[0].code != 306:
+    found = _crossing_pairs(issues) if precision else None
+    if found is None or found[0] > max_pairs:
         return solid, issues
-    # the first pair reported: "N intersecting face pair(s): a-b, ..."
-    try:
-        a, b = (int(s) for s in issues[0].detail.split(": ", 1)[1].split(",")[0].split("-"))
-    except (IndexError, ValueError):
-        return solid, issues
-    if max(a, b) >= len(solid.surfaces):
-        return solid, issues
-    ids = [np.concatenate([np.asarray(r, dtype=np.int64).ravel() for r in solid.surfaces[f].rings])
-           for f in (a, b)]
-    shared = np.intersect1d(ids[0], ids[1])
-    checks = 0
-    for dx, dy in _NUDGES:  # each step tried on every shared vertex before the next step
-        for v in shared.tolist():
-            if checks >= max_checks:
-                return solid, issues
-            moved = np.array(solid.vertices, copy=True)
+    out, left = solid, issues
+    while found is not None:
+        count, (a, b) = found
+        if max(a, b) >= len(out.surfaces):
+            break
+        ids = [np.concatenate([np.asarray(r, dtype=np.int64).ravel() for r in out.surfaces[f].rings])
+               for f in (a, b)]
+        shared = np.intersect1d(ids[0], ids[1]).tolist()
+        moves = [(dx, dy, v) for dx, dy in _NUDGES for v in shared][:max_checks]
+        for dx, dy, v in moves:  # each step tried on every shared vertex before the next step
+            moved = np.array(out.vertices, copy=True)
             moved[v, 0] = np.round(moved[v, 0] / precision + dx) * precision
             moved[v, 1] = np.round(moved[v, 1] / precision + dy) * precision
-            out = Solid(moved, solid.surfaces)
-            checks += 1
-            if not check_solid(out):
-                return out, []
+            now = check_solid(Solid(moved, out.surfaces))
+            if not now:
+                return Solid(moved, out.surfaces), []
+            fewer = _crossing_pairs(now)
+            if fewer is not None and fewer[0] < count:
+                out, left, found = Solid(moved, out.surfaces), now, fewer
+                break
+        else:
+            break
     return solid, issues
 
 
