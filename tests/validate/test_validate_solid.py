@@ -251,3 +251,25 @@ def test_one_pass_face_checks_give_the_per_count_issues(seed):
     got = []
     _simple_faces_checks(verts, rings, faces, got, 0.01)
     assert [str(i) for i in got] == [str(i) for i in _faces_checks_by_count(verts, rings, faces, 0.01)]
+
+
+@pytest.mark.parametrize("width", [0.05, 0.7, 3.0, 1000.0])
+def test_strip_pairs_are_every_pair_of_meeting_boxes_once(width):
+    """Strips of any width (boxes across many strips, ends on strip borders, equal lower
+    corners, degenerate boxes) give exactly the pairs of boxes meeting within tol."""
+    from lidar2city.validate.solid import _strip_pairs
+
+    rng = np.random.default_rng(5)
+    n = 400
+    lo = rng.uniform(0, 20, (n, 3)).round(1)
+    size = rng.uniform(0, 2, (n, 3)).round(1)
+    size[::7, 0] = 20.0  # long along x
+    size[::11] = 0.0  # points
+    lo[::13] = lo[0]  # the same lower corner
+    hi = lo + size
+    tol = 0.1
+    i, j = _strip_pairs(lo, hi, tol, width)
+    got = sorted(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist(), strict=True))
+    meet = np.all((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol), axis=2)
+    want = [(int(a), int(b)) for a, b in zip(*np.nonzero(np.triu(meet, 1)), strict=True)]
+    assert got == want and len(got) > 0
