@@ -29,6 +29,7 @@ international standards. Open Geospatial Data, Software and Standards 3:1.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -588,7 +589,37 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     >>> check_solid(prism_solid(box(0, 0, 1, 1), 0.0, 1.0))
     []
     """
-    verts_in = np.asarray(solid.vertices, dtype=np.float64)
+    verts_in = np.ascontiguousarray(solid.vertices, dtype=np.float64)
+    raw = [s.rings if hasattr(s, "rings") else s for s in solid.surfaces]
+    flat, lens = _flat_rings(raw)
+    # the verdict is a function of the vertices, the rings and the options: a solid checked
+    # a moment ago (the same one rounded on the output grid twice) is not checked again
+    key = hashlib.blake2b(verts_in.tobytes(), digest_size=16)
+    for part in (np.array(verts_in.shape), flat, lens,
+                 np.fromiter(map(len, raw), dtype=np.int64, count=len(raw))):
+        key.update(part.tobytes())
+        key.update(b"|")
+    key.update(repr((planarity_tolerance, snap_tolerance, overlap_tolerance, shell)).encode())
+    key = key.digest()
+    if key in _CHECKED:
+        return list(_CHECKED[key])
+    issues = _check_solid(solid, verts_in, raw, flat, lens, planarity_tolerance,
+                          snap_tolerance, overlap_tolerance, shell)
+    _CHECKED[key] = tuple(issues)
+    while len(_CHECKED) > _CHECKED_SIZE:
+        del _CHECKED[next(iter(_CHECKED))]
+    return issues
+
+
+#: the verdicts of the last solids checked, by a digest of what they depend on
+_CHECKED: dict = {}
+_CHECKED_SIZE = 8
+
+
+def _check_solid(solid, verts_in, raw, flat, lens, planarity_tolerance, snap_tolerance,
+                 overlap_tolerance, shell):
+    """:func:`check_solid` of ``solid``, its vertices ``verts_in`` (float64), its surfaces'
+    rings ``raw`` and their :func:`_flat_rings` ``flat, lens``."""
     issues: list[Issue] = []
     if len(solid.surfaces) == 0 or len(verts_in) == 0:
         return [Issue(301, None, "no surface")]
@@ -601,8 +632,6 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     # the verdict must not depend on where the solid lies (a local origin 1000 km off)
     verts_in = verts_in - np.round(verts_in.min(axis=0) / snap_tolerance) * snap_tolerance
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
-    raw = [s.rings if hasattr(s, "rings") else s for s in solid.surfaces]
-    flat, lens = _flat_rings(raw)
     if len(flat) and (flat.min() < 0 or flat.max() >= len(verts_in)):  # then find the faces
         for i, rings in enumerate(raw):
             rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
