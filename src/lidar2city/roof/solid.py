@@ -167,32 +167,28 @@ def _insert_at(rings_per_face, inserts: dict):
     if not inserts:
         return [list(rs) for rs in rings_per_face]
     at = np.array(sorted(inserts), dtype=np.int64)
-    sizes = np.fromiter((len(r) for rs in rings_per_face for r in rs), dtype=np.int64)
+    flat = list(map(np.asarray, (r for rs in rings_per_face for r in rs)))
+    sizes = np.fromiter(map(len, flat), dtype=np.int64, count=len(flat))
     ends = np.cumsum(sizes)
-    # the insertions of each ring that gets any: at[lo[ring]:hi[ring]]
+    # the insertions of each ring that gets any: at[lo:hi]; only those rings are rebuilt
     ring_of = np.searchsorted(ends, at, side="right")
     hit, lo = np.unique(ring_of, return_index=True)
-    span = dict(zip(hit.tolist(), zip(lo.tolist(), [*lo[1:].tolist(), len(at)], strict=True)))
-    out = []
-    i = ring = 0
+    first_edge = (ends - sizes)[hit].tolist()
+    for ring, i, a, b in zip(hit.tolist(), first_edge, lo.tolist(), [*lo[1:].tolist(), len(at)],
+                             strict=True):
+        r = flat[ring]
+        seq, k0 = [], 0
+        for e in at[a:b].tolist():
+            k = e - i
+            seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
+            seq.append(np.asarray(inserts[e]).reshape(-1, 2))
+            k0 = k + 1
+        seq.append(np.asarray(r[k0:]).reshape(-1, 2))
+        flat[ring] = np.concatenate(seq)
+    out, start = [], 0
     for rs in rings_per_face:
-        new_rs = []
-        for r in rs:
-            n = len(r)
-            if ring not in span:  # nothing inserted in this ring
-                new_rs.append(np.asarray(r))
-            else:
-                seq, k0 = [], 0
-                for e in at[slice(*span[ring])].tolist():
-                    k = e - i
-                    seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
-                    seq.append(np.asarray(inserts[e]).reshape(-1, 2))
-                    k0 = k + 1
-                seq.append(np.asarray(r[k0:]).reshape(-1, 2))
-                new_rs.append(np.concatenate(seq))
-            i += n
-            ring += 1
-        out.append(new_rs)
+        out.append(flat[start:start + len(rs)])
+        start += len(rs)
     return out
 
 
