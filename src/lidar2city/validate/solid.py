@@ -103,9 +103,13 @@ def _flat_rings(faces):
     lens = np.zeros(len(rings), dtype=np.int64)
     if not rings:
         return np.zeros(0, dtype=np.int64), lens
-    if all(isinstance(r, np.ndarray) and r.ndim == 1 for r in rings):
+    try:  # rings of integers, each flat (the usual case): concatenated as they are
         lens = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
-        return np.concatenate(rings).astype(np.int64, copy=False), lens
+        flat = np.concatenate(rings)
+        if flat.ndim == 1 and flat.dtype.kind in "iu" and len(flat) == lens.sum():
+            return flat.astype(np.int64, copy=False), lens
+    except (TypeError, ValueError):  # a ring of another shape
+        pass
     rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
     lens = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
     return np.concatenate(rings), lens
