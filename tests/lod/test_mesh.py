@@ -55,3 +55,53 @@ def test_vertex_ids_exact_last_match_then_nearest():
     q = np.array([[0.0, 0.0], [1.0, 1.0], [0.9, 0.1], [0.5, 1.0], [0.0, 1.0]])
     # (0, 0) twice (as 0.0 and -0.0): the later one; (0.5, 1) is as near 12 as 14: the first
     assert _vertex_ids(p2, ids, q).tolist() == [13, 12, 11, 12, 14]
+
+
+def test_solid_mesh_of_a_moved_vertex_is_the_mesh_anew():
+    """A solid sharing its surfaces with one meshed before, a few vertices moved (as
+    nudge_on_grid moves one): only the surfaces using them are triangulated again, and the
+    mesh is the one of the whole solid triangulated anew; rings changed in place, many
+    vertices moved or other surfaces: the whole solid is triangulated."""
+    from lidar2city.datamodel import Solid, Surface
+    from lidar2city.lod import mesh
+    from lidar2city.lod.mesh import solid_mesh
+
+    rng = np.random.default_rng(11)
+    verts, faces = _faces(rng)
+    surfaces = [Surface([np.asarray(r, dtype=np.int64) for r in rings], "RoofSurface")
+                for rings in faces]
+    first = Solid(verts, surfaces)
+    assert all(np.array_equal(a, b) for a, b in zip(
+        solid_mesh(first), triangulate_surfaces(verts, surfaces), strict=True))
+    calls = []
+    real = mesh.triangulate_surfaces
+
+    def counting(v, s):
+        calls.append(len(s))
+        return real(v, s)
+
+    mesh.triangulate_surfaces = counting
+    try:
+        for moved_rows in ([5], [5, 6], [len(verts) - 3], [0, 40, 100]):
+            moved = verts.copy()
+            moved[moved_rows, :2] += rng.normal(size=(len(moved_rows), 2)) * 0.3
+            s = Solid(moved, surfaces)
+            got = solid_mesh(s)
+            want = real(moved, surfaces)
+            assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
+            # the surfaces of the vertices moved since the last solid meshed only
+            assert calls[-1] <= 4 < len(surfaces)
+        same = solid_mesh(Solid(verts.copy(), surfaces))  # nothing moved: the mesh kept
+        assert all(np.array_equal(a, b) for a, b in zip(same, real(verts, surfaces), strict=True))
+        n = len(calls)
+        solid_mesh(Solid(verts + 0.5, surfaces))  # every vertex moved: all again
+        assert calls[n:] == [len(surfaces)]
+        # a ring reversed in place (the list is the same object): not reused
+        surfaces[3].rings[0] = surfaces[3].rings[0][::-1].copy()
+        moved = verts.copy()
+        moved[1] += 0.1
+        got = solid_mesh(Solid(moved, surfaces))
+        assert calls[-1] == len(surfaces)
+        assert all(np.array_equal(a, b) for a, b in zip(got, real(moved, surfaces), strict=True))
+    finally:
+        mesh.triangulate_surfaces = real

@@ -241,3 +241,28 @@ def test_several_crossing_vertices_off_their_edges_are_nudged_one_pair_at_a_time
     assert nudge_on_grid(written, issues, 0.001, max_pairs=1) == (written, issues)
     one = nudge_on_grid(written, issues, 0.001, max_checks=1)
     assert one[1] == issues or one[1] == []
+
+
+def test_directed_edges_are_the_edge_dict_in_array_form():
+    """The directed edges of rings of vertex ids, each once in the order of its first
+    use, with the last face running it and the last one running its twin (-1: none):
+    a dict filled ring after ring, in arrays."""
+    from lidar2city.roof.solid import _directed_edges
+
+    rng = np.random.default_rng(4)
+    nk = 12
+    for _ in range(30):
+        sizes = rng.integers(1, 7, size=int(rng.integers(1, 9)))
+        kid = rng.integers(0, nk, size=int(sizes.sum()))  # repeats, self-edges, shared edges
+        face = np.repeat(rng.integers(0, 5, size=len(sizes)), sizes)
+        owner = {}
+        start = 0
+        for n in sizes.tolist():
+            k = kid[start:start + n].tolist()
+            f = int(face[start])
+            owner.update(zip(zip(k, k[1:] + k[:1]), [f] * n))
+            start += n
+        p, q, f, other = _directed_edges(kid, sizes, face, nk)
+        assert list(zip(p.tolist(), q.tolist())) == list(owner)
+        assert f.tolist() == list(owner.values())
+        assert other.tolist() == [owner.get((b, a), -1) for a, b in owner]

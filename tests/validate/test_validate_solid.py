@@ -251,3 +251,53 @@ def test_one_pass_face_checks_give_the_per_count_issues(seed):
     got = []
     _simple_faces_checks(verts, rings, faces, got, 0.01)
     assert [str(i) for i in got] == [str(i) for i in _faces_checks_by_count(verts, rings, faces, 0.01)]
+
+
+@pytest.mark.parametrize("width", [0.05, 0.7, 3.0, 1000.0])
+def test_strip_pairs_are_every_pair_of_meeting_boxes_once(width):
+    """Strips of any width (boxes across many strips, ends on strip borders, equal lower
+    corners, degenerate boxes) give exactly the pairs of boxes meeting within tol."""
+    from lidar2city.validate.solid import _strip_pairs
+
+    rng = np.random.default_rng(5)
+    n = 400
+    lo = rng.uniform(0, 20, (n, 3)).round(1)
+    size = rng.uniform(0, 2, (n, 3)).round(1)
+    size[::7, 0] = 20.0  # long along x
+    size[::11] = 0.0  # points
+    lo[::13] = lo[0]  # the same lower corner
+    hi = lo + size
+    tol = 0.1
+    i, j = _strip_pairs(lo, hi, tol, width)
+    got = sorted(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist(), strict=True))
+    meet = np.all((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol), axis=2)
+    want = [(int(a), int(b)) for a, b in zip(*np.nonzero(np.triu(meet, 1)), strict=True)]
+    assert got == want and len(got) > 0
+
+
+def test_a_solid_checked_again_gets_the_same_verdict_without_the_work(monkeypatch):
+    """The verdict of a solid with the same vertices, rings and options as one checked a
+    moment ago is that one's; another vertex, ring or option is checked anew."""
+    from lidar2city.validate import solid as validate
+
+    s = prism_solid(box(0, 0, 4, 3), 0.0, 2.0)
+    calls = []
+    real = validate._check_solid
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(validate, "_check_solid", counted)
+    validate._CHECKED.clear()
+    assert check_solid(s) == [] and len(calls) == 1
+    assert check_solid(Solid(s.vertices.copy(), list(s.surfaces))) == [] and len(calls) == 1
+    bent = s.vertices.copy()
+    bent[0, 2] += 0.5  # a floor corner lifted: faces no longer planar
+    got = check_solid(Solid(bent, s.surfaces))
+    assert got and got == check_solid(Solid(bent.copy(), s.surfaces)) and len(calls) == 2
+    assert check_solid(Solid(bent, s.surfaces), planarity_tolerance=1.0) != got
+    assert len(calls) == 3
+    flipped = [Surface([f.rings[0][::-1].copy()], f.semantic) if i == 0 else f
+               for i, f in enumerate(s.surfaces)]
+    assert check_solid(Solid(s.vertices, flipped)) and len(calls) == 4

@@ -376,23 +376,91 @@ def _clear_fans(vertices, idx, lens):
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
+#: the last solids meshed, newest last: ``[surfaces, vertices, ring indices, ring lengths,
+#: rings per surface, mesh]``; a solid with the same surfaces list and a few vertices moved
+#: (a vertex nudged on the output grid) re-triangulates only the surfaces using them
+_RECENT: list = []
+_RECENT_SIZE = 4
+#: the largest share of vertices moved for which the surfaces are re-triangulated alone
+_REMESH_SHARE = 0.25
+
 
 def solid_mesh(solid) -> tuple[np.ndarray, np.ndarray]:
     """:func:`triangulate_surfaces` of a solid, computed once per solid object.
 
     Solids are treated as immutable (their dataclass is frozen): the cache is
-    keyed by the object and dropped with it.
+    keyed by the object and dropped with it. A solid sharing its surfaces list (and
+    rings) with one of the last solids meshed, with a few vertices moved, reuses that
+    mesh: only the surfaces using a moved vertex are triangulated again. Each surface's
+    triangles depend on its own vertices only, so the mesh is the one of the whole
+    solid triangulated anew.
     """
     try:
         return _CACHE[solid]
     except (KeyError, TypeError):
         pass
-    out = triangulate_surfaces(solid.vertices, solid.surfaces)
+    out, layout = _remesh(solid)
+    if out is None:
+        out = triangulate_surfaces(solid.vertices, solid.surfaces)
     try:
         _CACHE[solid] = out
     except TypeError:
         pass
+    if isinstance(solid.surfaces, list):
+        _RECENT.append([solid.surfaces, np.array(solid.vertices, dtype=np.float64), layout, out])
+        del _RECENT[:-_RECENT_SIZE]
     return out
+
+
+def _surface_layout(surfaces):
+    """The rings of ``surfaces`` as ``(indices, ring lengths, rings per surface)``, or None
+    when a ring is not a flat integer array (then no mesh is reused)."""
+    all_rings = [s.rings if hasattr(s, "rings") else s for s in surfaces]
+    rings = [r for rs in all_rings for r in rs]
+    if not rings or not all(isinstance(r, np.ndarray) and r.ndim == 1 and r.dtype.kind in "iu"
+                            for r in rings):
+        return None
+    return (np.concatenate(rings).astype(np.int64, copy=False),
+            np.fromiter(map(len, rings), dtype=np.int64, count=len(rings)),
+            np.fromiter(map(len, all_rings), dtype=np.int64, count=len(all_rings)))
+
+
+def _remesh(solid):
+    """``(mesh, layout)``: the mesh of ``solid`` from a recent one with the same surfaces
+    (None when there is none or too many vertices moved) and its surfaces' layout
+    (:func:`_surface_layout`, None when not taken)."""
+    verts = np.asarray(solid.vertices, dtype=np.float64)
+    for entry in reversed(_RECENT):
+        surfaces, old, layout, mesh = entry
+        if surfaces is not solid.surfaces or old.shape != verts.shape or not len(verts):
+            continue
+        # bit-wise comparison: a vertex is moved unless its bytes are the same
+        moved = np.flatnonzero(np.any(verts.view(np.int64) != old.view(np.int64), axis=1))
+        if len(moved) > _REMESH_SHARE * len(verts):
+            return None, None
+        if layout is None:
+            layout = entry[2] = _surface_layout(surfaces)
+        now = _surface_layout(solid.surfaces)  # the rings as they are (lists are mutable)
+        if layout is None or now is None or any(
+                not np.array_equal(a, b) for a, b in zip(layout, now, strict=True)):
+            return None, now
+        idx, lens, n_rings = layout
+        if not len(moved):
+            return mesh, layout
+        if idx.max() >= len(verts):
+            return None, layout
+        ring_face = np.repeat(np.arange(len(n_rings)), n_rings)
+        hit = np.zeros(len(verts), dtype=bool)
+        hit[moved] = True
+        touched = np.unique(ring_face[np.repeat(np.arange(len(lens)), lens)[hit[idx]]])
+        tris, face = mesh
+        keep = ~np.isin(face, touched)
+        new_t, new_f = triangulate_surfaces(verts, [solid.surfaces[f] for f in touched.tolist()])
+        tris = np.concatenate([tris[keep], new_t])
+        face = np.concatenate([face[keep], touched[new_f]])
+        order = np.argsort(face, kind="stable")  # by face, each face's triangles in their order
+        return (tris[order], face[order]), layout
+    return None, None
 
 
 def solid_triangles(solids) -> np.ndarray:

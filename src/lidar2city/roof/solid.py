@@ -144,17 +144,6 @@ def _z(plane, p):
     return plane[0] * p[0] + plane[1] * p[1] + plane[2]
 
 
-def _edge_owner(rings_per_face, keys_per_face=None) -> dict:
-    """Directed edge ``(key(p), key(q))`` -> index of the face whose ring runs p -> q."""
-    if keys_per_face is None:
-        keys_per_face = [[_ring_keys(r) for r in rs] for rs in rings_per_face]
-    owner = {}
-    for fi, ks in enumerate(keys_per_face):
-        for k in ks:
-            owner.update(zip(zip(k, k[1:] + k[:1]), [fi] * len(k)))
-    return owner
-
-
 def conform(rings_per_face, *, tol=1e-3):
     """Insert every partition vertex lying on another face's edge into that edge (no T-junctions).
 
@@ -199,33 +188,55 @@ def _insert_at(rings_per_face, inserts: dict):
     if not inserts:
         return [list(rs) for rs in rings_per_face]
     at = np.array(sorted(inserts), dtype=np.int64)
-    sizes = np.fromiter((len(r) for rs in rings_per_face for r in rs), dtype=np.int64)
+    flat = list(map(np.asarray, (r for rs in rings_per_face for r in rs)))
+    sizes = np.fromiter(map(len, flat), dtype=np.int64, count=len(flat))
     ends = np.cumsum(sizes)
-    # the insertions of each ring that gets any: at[lo[ring]:hi[ring]]
+    # the insertions of each ring that gets any: at[lo:hi]; only those rings are rebuilt
     ring_of = np.searchsorted(ends, at, side="right")
     hit, lo = np.unique(ring_of, return_index=True)
-    span = dict(zip(hit.tolist(), zip(lo.tolist(), [*lo[1:].tolist(), len(at)], strict=True)))
-    out = []
-    i = ring = 0
+    first_edge = (ends - sizes)[hit].tolist()
+    for ring, i, a, b in zip(hit.tolist(), first_edge, lo.tolist(), [*lo[1:].tolist(), len(at)],
+                             strict=True):
+        r = flat[ring]
+        seq, k0 = [], 0
+        for e in at[a:b].tolist():
+            k = e - i
+            seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
+            seq.append(np.asarray(inserts[e]).reshape(-1, 2))
+            k0 = k + 1
+        seq.append(np.asarray(r[k0:]).reshape(-1, 2))
+        flat[ring] = np.concatenate(seq)
+    out, start = [], 0
     for rs in rings_per_face:
-        new_rs = []
-        for r in rs:
-            n = len(r)
-            if ring not in span:  # nothing inserted in this ring
-                new_rs.append(np.asarray(r))
-            else:
-                seq, k0 = [], 0
-                for e in at[slice(*span[ring])].tolist():
-                    k = e - i
-                    seq.append(np.asarray(r[k0:k + 1]).reshape(-1, 2))
-                    seq.append(np.asarray(inserts[e]).reshape(-1, 2))
-                    k0 = k + 1
-                seq.append(np.asarray(r[k0:]).reshape(-1, 2))
-                new_rs.append(np.concatenate(seq))
-            i += n
-            ring += 1
-        out.append(new_rs)
+        out.append(flat[start:start + len(rs)])
+        start += len(rs)
     return out
+
+
+def _directed_edges(kid, sizes, face, nk):
+    """The directed edges p -> q of rings given as vertex ids ``kid`` (one ring after the
+    other, ``sizes`` their lengths, ``face`` each vertex's face, ``nk`` the number of ids),
+    each once, in the order they first occur: ``(p, q, face, other)``, ``face`` the last
+    face running it, ``other`` the last one running q -> p (-1: none). As a dict
+    ``{(p, q): face}`` filled ring after ring would hold them (its keys in order, their
+    values, each key's twin's value), in array form."""
+    ends = np.cumsum(sizes)
+    nxt = np.arange(1, len(kid) + 1)
+    nxt[ends - 1] = ends - sizes  # a ring's last vertex -> its first
+    code = kid * nk + kid[nxt]
+    uc, first, inv = np.unique(code, return_index=True, return_inverse=True)
+    last = np.full(len(uc), -1, dtype=np.int64)
+    np.maximum.at(last, inv.ravel(), np.arange(len(code)))
+    order = np.argsort(first, kind="stable")
+    uc, last = uc[order], last[order]
+    p, q = uc // nk, uc % nk
+    # the twin's place among the sorted codes
+    srt = np.argsort(uc)
+    twin = q * nk + p
+    pos = np.minimum(np.searchsorted(uc[srt], twin), len(uc) - 1)
+    has = uc[srt][pos] == twin
+    other = np.where(has, face[last[srt][pos]], -1)
+    return p, q, face[last], other
 
 
 def _key_groups(key):
@@ -424,15 +435,8 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
     sizes = np.array([len(r) for r in flat_rings], dtype=np.int64)
     ring_face = np.repeat(np.arange(len(rings)), [len(rs) for rs in rings])
     xy = np.concatenate(flat_rings)[:, :2]
-    # every vertex's key (:func:`_ring_keys` of all rings at once), as rows and as tuples
+    # every vertex's key (:func:`_ring_keys` of all rings at once), as rows
     key_rows = np.rint(xy * _KEY).astype(np.int64)
-    flat_keys = list(map(tuple, key_rows.tolist()))
-    ends = np.cumsum(sizes).tolist()
-    starts = [0, *ends[:-1]]
-    keys, ri = [], 0
-    for rs in rings:
-        keys.append([flat_keys[starts[ri + j]:ends[ri + j]] for j in range(len(rs))])
-        ri += len(rs)
     vface = np.repeat(ring_face, sizes)
     # heights of every face at its vertices
     z = planes[vface, 0] * xy[:, 0] + planes[vface, 1] * xy[:, 1] + planes[vface, 2]
@@ -452,15 +456,15 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
     rank = np.empty(len(first), dtype=np.int64)
     rank[by_first] = np.arange(len(first))
     kid = rank[inverse]
-    kid_of = dict(zip([flat_keys[i] for i in first[by_first].tolist()], range(len(first))))
+    kid_of = dict(zip(map(tuple, key_rows[first[by_first]].tolist()), range(len(first))))
     nk = len(kid_of)
     last = np.full(nk, -1, dtype=np.int64)
     np.maximum.at(last, kid, np.arange(len(kid)))
     kxy = xy[last]
     # directed edges and which face uses them
-    owner = _edge_owner(rings, keys)
-    outer_edges = [e for e in owner if (e[1], e[0]) not in owner]
-    outer_kids = np.array([kid_of[k] for e in outer_edges for k in e], dtype=np.int64)
+    e_kp, e_kq, e_f, e_o = _directed_edges(kid, sizes, vface, nk)
+    outer_edges = e_o < 0  # no face runs the edge the other way
+    outer_kids = np.column_stack([e_kp[outer_edges], e_kq[outer_edges]]).ravel()
     # unify levels per vertex: sorted heights split where they step by more than level_tol
     lev_k = np.concatenate([kid, outer_kids])
     lev_z = np.concatenate([z, np.full(len(outer_kids), float(ground_z))])
@@ -493,10 +497,6 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
     roof_lev = level_index(kid, z)
     requests = [kid * table.shape[1] + roof_lev]
     # walls: each directed edge (p -> q) of face f whose other side is lower (or outside)
-    e_kp = np.array([kid_of[e[0]] for e in owner], dtype=np.int64)
-    e_kq = np.array([kid_of[e[1]] for e in owner], dtype=np.int64)
-    e_f = np.fromiter(owner.values(), dtype=np.int64, count=len(owner))
-    e_o = np.array([owner.get((e[1], e[0]), -1) for e in owner], dtype=np.int64)
     p, q = kxy[e_kp], kxy[e_kq]
 
     def plane_z(f, pts):
@@ -539,7 +539,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
     from shapely.geometry.polygon import orient
 
     lines = shapely.linestrings(np.stack([kxy[outer_kids[0::2]], kxy[outer_kids[1::2]]], axis=1)) \
-        if outer_edges else []
+        if outer_edges.any() else []
     face_array = np.asarray(faces, dtype=object)
     floor_rings = []
     for poly in shapely.get_parts(shapely.polygonize(lines)):
@@ -549,7 +549,7 @@ def partition_solid(faces, planes, ground_z, *, min_height=0.2, level_tol=5e-3,
         poly = orient(poly, -1.0)  # clockwise from above: the normal points down
         rs = []
         for r in [poly.exterior, *poly.interiors]:
-            k = np.array([kid_of[_key(c)] for c in np.asarray(r.coords)[:-1]], dtype=np.int64)
+            k = np.array([kid_of[c] for c in _ring_keys(np.asarray(r.coords)[:-1])], dtype=np.int64)
             rs.append(k * width + level_index(k, np.full(len(k), float(ground_z))))
         floor_rings.append(rs)
     requests += [r for rs in floor_rings for r in rs]

@@ -29,6 +29,7 @@ international standards. Open Geospatial Data, Software and Standards 3:1.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,6 +95,26 @@ def _merge_vertices(vertices, tol):
     return vertices[order[new]], inverse
 
 
+def _flat_rings(faces):
+    """All rings of all ``faces`` (lists of rings of vertex indices) one after the other:
+    ``(indices (n,) int64, ring lengths (R,))``, each ring flattened as
+    ``np.asarray(ring, dtype=np.int64).reshape(-1)`` flattens it."""
+    rings = [r for rs in faces for r in rs]
+    lens = np.zeros(len(rings), dtype=np.int64)
+    if not rings:
+        return np.zeros(0, dtype=np.int64), lens
+    try:  # rings of integers, each flat (the usual case): concatenated as they are
+        lens = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
+        flat = np.concatenate(rings)
+        if flat.ndim == 1 and flat.dtype.kind in "iu" and len(flat) == lens.sum():
+            return flat.astype(np.int64, copy=False), lens
+    except (TypeError, ValueError):  # a ring of another shape
+        pass
+    rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
+    lens = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
+    return np.concatenate(rings), lens
+
+
 def _all_rings_clean(rings, layout=None) -> bool:
     """True when no ring (of all faces) repeats a consecutive vertex or has < 3 distinct ones.
     ``layout``: :func:`_ring_layout` of ``rings`` when already taken."""
@@ -112,11 +133,16 @@ def _all_rings_clean(rings, layout=None) -> bool:
 
 def _ring_layout(rings):
     """Concatenated ring indices, the position of each one's next vertex, ring starts and lengths."""
-    lens = np.array([len(r) for r in rings], dtype=np.int64)
+    lens = np.fromiter(map(len, rings), dtype=np.int64, count=len(rings))
     if len(lens) == 0:
         z = np.zeros(0, dtype=np.int64)
         return z, z, z, lens
-    idx = np.concatenate([np.asarray(r, dtype=np.int64) for r in rings])
+    return _flat_layout(np.concatenate(rings).astype(np.int64, copy=False), lens)
+
+
+def _flat_layout(idx, lens):
+    """:func:`_ring_layout` of rings given as their concatenated indices ``idx`` (int64)
+    and lengths ``lens``."""
     starts = np.cumsum(lens) - lens
     nxt = np.arange(len(idx)) + 1
     nxt[(starts + lens - 1)[lens > 0]] = starts[lens > 0]
@@ -373,8 +399,9 @@ def _candidate_pairs(lo, hi, tol):
     """Index pairs of boxes overlapping on all axes (within ``tol``), each pair once.
 
     A sweep along x; when the boxes' x ranges overlap a lot (the long cap triangles of a
-    hall's prism: every one against hundreds), an R-tree on their plan boxes instead. The
-    same pairs either way (their order differs; the callers do not depend on it).
+    hall's prism: every one against hundreds; a block of row houses, wide in x and y),
+    :func:`_strip_pairs` instead. The same pairs either way (their order differs; the
+    callers do not depend on it).
     """
     order = np.argsort(lo[:, 0], kind="stable")
     xs = lo[order, 0]
@@ -382,19 +409,57 @@ def _candidate_pairs(lo, hi, tol):
     start = np.arange(len(order)) + 1
     cnt = np.maximum(stop - start, 0)
     if cnt.sum() > 64 * len(lo) + 4096:
-        import shapely
-
-        grown = shapely.box(lo[:, 0] - tol, lo[:, 1] - tol, hi[:, 0] + tol, hi[:, 1] + tol)
-        i, j = shapely.STRtree(grown).query(grown)  # plan boxes meeting (a superset)
-        i, j = i[i < j], j[i < j]
-        keep = np.all((lo[i] <= hi[j] + tol) & (lo[j] <= hi[i] + tol), axis=1)
-        return i[keep], j[keep]
+        # strips a few boxes wide (at most 256 of them over the x range)
+        span = float(hi[:, 0].max() - lo[:, 0].min()) + tol
+        width = max(3.0 * float(np.median(hi[:, 0] - lo[:, 0])), span / 256, 1e-6)
+        return _strip_pairs(lo, hi, tol, width)
     i = np.repeat(np.arange(len(order)), cnt)
     j = np.repeat(start, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
     i, j = order[i], order[j]
     # the sweep already has them overlapping along x (j starts after i, before i's end):
     # the other axes one at a time, each on the pairs still in
     for axis in range(1, lo.shape[1]):
+        lo_a, hi_a = lo[:, axis], hi[:, axis]
+        keep = (lo_a[i] <= hi_a[j] + tol) & (lo_a[j] <= hi_a[i] + tol)
+        i, j = i[keep], j[keep]
+    return i, j
+
+
+def _strip_pairs(lo, hi, tol, width):
+    """:func:`_candidate_pairs` by strips: x cut into strips ``width`` wide, each box in
+    every strip its x range (grown by ``tol``) meets, a sweep along y in each strip.
+
+    A pair is kept in one strip only, the one holding the larger of the two boxes' lower
+    x (both boxes are in it when they overlap along x), then tested on every axis as the
+    x sweep tests it. The sweep's keys put each strip's lower y after the previous
+    strip's (``y + c * strip``): rounding them is monotone, so they find every pair
+    meeting along y, and the exact test drops any extra one.
+    """
+    n = len(lo)
+    if n < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    x0 = float(lo[:, 0].min())
+    s0 = np.floor((lo[:, 0] - x0) / width).astype(np.int64)
+    s1 = np.floor((hi[:, 0] + tol - x0) / width).astype(np.int64)
+    cnt = s1 - s0 + 1
+    box = np.repeat(np.arange(n), cnt)
+    strip = np.repeat(s0, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    ly, hy = lo[box, 1], hi[box, 1] + tol
+    order = np.lexsort((ly, strip))
+    box, strip, ly, hy = box[order], strip[order], ly[order], hy[order]
+    y0 = float(lo[:, 1].min())
+    c = 2.0 * (float(hi[:, 1].max()) + tol - y0) + 1.0
+    stop = np.searchsorted((ly - y0) + c * strip, (hy - y0) + c * strip, side="right")
+    stop = np.minimum(stop, np.searchsorted(strip, strip, side="right"))  # within its strip
+    start = np.arange(len(box)) + 1
+    k = np.maximum(stop - start, 0)
+    p = np.repeat(np.arange(len(box)), k)
+    q = np.repeat(start, k) + (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k))
+    i, j = box[p], box[q]
+    keep = np.floor((np.maximum(lo[i, 0], lo[j, 0]) - x0) / width).astype(np.int64) == strip[p]
+    i, j = i[keep], j[keep]
+    for axis in range(lo.shape[1]):
         lo_a, hi_a = lo[:, axis], hi[:, axis]
         keep = (lo_a[i] <= hi_a[j] + tol) & (lo_a[j] <= hi_a[i] + tol)
         i, j = i[keep], j[keep]
@@ -528,7 +593,37 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     >>> check_solid(prism_solid(box(0, 0, 1, 1), 0.0, 1.0))
     []
     """
-    verts_in = np.asarray(solid.vertices, dtype=np.float64)
+    verts_in = np.ascontiguousarray(solid.vertices, dtype=np.float64)
+    raw = [s.rings if hasattr(s, "rings") else s for s in solid.surfaces]
+    flat, lens = _flat_rings(raw)
+    # the verdict is a function of the vertices, the rings and the options: a solid checked
+    # a moment ago (the same one rounded on the output grid twice) is not checked again
+    key = hashlib.blake2b(verts_in.tobytes(), digest_size=16)
+    for part in (np.array(verts_in.shape), flat, lens,
+                 np.fromiter(map(len, raw), dtype=np.int64, count=len(raw))):
+        key.update(part.tobytes())
+        key.update(b"|")
+    key.update(repr((planarity_tolerance, snap_tolerance, overlap_tolerance, shell)).encode())
+    key = key.digest()
+    if key in _CHECKED:
+        return list(_CHECKED[key])
+    issues = _check_solid(solid, verts_in, raw, flat, lens, planarity_tolerance,
+                          snap_tolerance, overlap_tolerance, shell)
+    _CHECKED[key] = tuple(issues)
+    while len(_CHECKED) > _CHECKED_SIZE:
+        del _CHECKED[next(iter(_CHECKED))]
+    return issues
+
+
+#: the verdicts of the last solids checked, by a digest of what they depend on
+_CHECKED: dict = {}
+_CHECKED_SIZE = 8
+
+
+def _check_solid(solid, verts_in, raw, flat, lens, planarity_tolerance, snap_tolerance,
+                 overlap_tolerance, shell):
+    """:func:`check_solid` of ``solid``, its vertices ``verts_in`` (float64), its surfaces'
+    rings ``raw`` and their :func:`_flat_rings` ``flat, lens``."""
     issues: list[Issue] = []
     if len(solid.surfaces) == 0 or len(verts_in) == 0:
         return [Issue(301, None, "no surface")]
@@ -541,20 +636,20 @@ def check_solid(solid, *, planarity_tolerance: float = 0.01, snap_tolerance: flo
     # the verdict must not depend on where the solid lies (a local origin 1000 km off)
     verts_in = verts_in - np.round(verts_in.min(axis=0) / snap_tolerance) * snap_tolerance
     verts, remap = _merge_vertices(verts_in, snap_tolerance)
-    raw = [[np.asarray(r, dtype=np.int64).reshape(-1) for r in (s.rings if hasattr(s, "rings") else s)]
-           for s in solid.surfaces]
-    flat = np.concatenate([r for rings in raw for r in rings]) if any(raw) else np.zeros(0, int)
     if len(flat) and (flat.min() < 0 or flat.max() >= len(verts_in)):  # then find the faces
         for i, rings in enumerate(raw):
+            rings = [np.asarray(r, dtype=np.int64).reshape(-1) for r in rings]
             if any(len(r) and (r.min() < 0 or r.max() >= len(verts_in)) for r in rings):
                 issues.append(Issue(901, i, "vertex index out of range"))
     if issues:
         return issues
-    n_rings = [len(rings) for rings in raw]
-    flat_rings = np.split(remap[flat], np.cumsum([len(r) for rings in raw for r in rings])[:-1])
-    ends = np.cumsum(n_rings).tolist()
+    flat = remap[flat]
+    ends = np.cumsum(lens)
+    # each ring a view of the remapped indices (what np.split gives, without its overhead)
+    flat_rings = [flat[a:b] for a, b in zip((ends - lens).tolist(), ends.tolist(), strict=True)]
+    ends = np.cumsum([len(rings) for rings in raw]).tolist()
     faces = [flat_rings[i:j] for i, j in zip([0, *ends[:-1]], ends, strict=True)]
-    layout = _ring_layout(flat_rings)
+    layout = _flat_layout(flat, lens) if len(lens) else _ring_layout(flat_rings)
     if _all_rings_clean(flat_rings, layout):
         rings_per_face = faces
     else:
