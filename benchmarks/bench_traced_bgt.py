@@ -4,7 +4,8 @@ Usage: python benchmarks/bench_traced_bgt.py [DATA_DIR] [--lod 1.2 ...] [--confi
 [--src SRC]
 (default data $LIDAR2CITY_DATA or ../shared/data; LoDs default 1.2 only: the footprints
 do not depend on the LoDs asked for; SRC the ``src`` folder whose lidar2city is measured,
-default this checkout's)
+default this checkout's; RUN.toml a run file, e.g. a ``[footprints]`` section with
+``regularize = "snake"`` (reconstruct's default when tracing) and the options tried)
 
 Runs ``reconstruct`` of the Delft tile without ``--footprints`` once in this process and
 records the footprints every block traces (``lidar2city.tools.task._traced_footprints``,
@@ -17,7 +18,11 @@ per-area completeness / correctness / quality, one-to-one matches at IoU >= 0.5
 buildings each traced footprint holds (a reference is held by the prediction covering
 most of it, at least half of its area): the merged blocks of row houses are the
 predictions holding several. Also the largest traced areas (LoD2.2's cost grows faster
-than the roof's area) and the output's MD5 and wall / CPU time.
+than the roof's area) and the output's MD5 and wall / CPU time. With ``--lod 2.2`` (or
+1.3) among the LoDs, the models' RMSE to the tile's building points per LoD asked for
+(``evaluate_model``: median and mean over the buildings, and pooled over all their
+points, which does not move when a block is cut into more buildings) and how many solids
+are valid.
 
 The BGT draws walls and splits row houses by cadastral parcel; the points show roof
 edges (0.2-0.3 m outside the walls) and only the party walls where the roof changes.
@@ -89,6 +94,7 @@ def main():
             task._traced_footprints = inner
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         md5 = hashlib.md5(out.read_bytes()).hexdigest()
+        quality = _model_quality(out, laz, lods)
 
     hdr = read_las(laz, crs="EPSG:7415").data.header
     refs, _ = read_footprints(ref_path)
@@ -128,6 +134,28 @@ def main():
     print("largest traced areas (m2): " + ", ".join(f"{x:.0f}" for x in areas[:10]))
     print(f"tracing CPU {spent[0]:.3f} s; run (LoD {' + '.join(lods)}) {wall:.2f} s wall, "
           f"{cpu:.2f} CPU s; output MD5 {md5}; load {os.getloadavg()[0]:.2f}")
+    for line in quality:
+        print(line)
+
+
+def _model_quality(out, laz, lods):
+    """Per LoD asked for: the RMSE of the models to the building points (median, mean,
+    pooled over the points) and the valid solids."""
+    import numpy as np
+
+    from lidar2city.tools.evaluate_model import evaluate_model
+
+    lines = []
+    for lod in lods:
+        rows, s = evaluate_model(out, [laz], crs="EPSG:7415", lod=lod)
+        n = np.array([r["points"] or 0 for r in rows], dtype=np.float64)
+        e = np.array([np.nan if r["rmse"] is None else r["rmse"] for r in rows])
+        ok = np.isfinite(e) & (n > 0)
+        pooled = float(np.sqrt((n[ok] * e[ok] ** 2).sum() / n[ok].sum())) if ok.any() else np.nan
+        lines.append(f"LoD{lod}: {s['buildings']} buildings, RMSE median {s['rmse_median']:.3f} m, "
+                     f"mean {s['rmse_mean']:.3f} m, pooled over {int(n[ok].sum())} points "
+                     f"{pooled:.3f} m; valid {s['valid']}/{s['buildings']}")
+    return lines
 
 
 if __name__ == "__main__":
