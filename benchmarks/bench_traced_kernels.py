@@ -1,7 +1,8 @@
 """CPU of kernels of the no-footprints reconstruct on the Delft tile (issue 13), replayed:
 the LoD1.2 / 1.3 RMSE's point-to-prism distances, the arrangement's cell labels, and
 (``--all``) the LoD2.2 plane segmentation, boundary lines, edge refinement, short-edge
-collapse and the LoD1.3 height parts.
+collapse and the LoD1.3 height parts, and the traced outlines' direction search
+(``dominant_direction``, called by the footprint snake).
 
 Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC] [--all]
 [--footprints] [--only NAME,...]
@@ -52,6 +53,7 @@ def main():
 
     import lidar2city.lod.lod1 as lod1
     import lidar2city.roof.arrangement as arr
+    import lidar2city.regularize.snake as rsnake
     import lidar2city.roof.building as bld
     from lidar2city.cli.main import cli
 
@@ -60,7 +62,8 @@ def main():
     where = {"_layout_distance": lod1, "_layout_inside_distance": lod1, "_cell_labels": arr}
     if args.all or args.only:
         where.update(segment_planes=bld, roof_lines=bld, arrangement_partition=bld,
-                     refine_partition=bld, collapse_short_edges=bld, height_parts=lod1)
+                     refine_partition=bld, collapse_short_edges=bld, height_parts=lod1,
+                     dominant_direction=rsnake)
     if args.only:
         where = {name: where[name] for name in args.only.split(",")}
     calls = {name: [] for name in where}

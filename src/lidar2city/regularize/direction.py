@@ -202,15 +202,23 @@ def _profile_score(pts, w, angles, binw):
         return np.concatenate([_profile_score(pts, w, angles[i : i + chunk], binw)
                                for i in range(0, len(angles), chunk)])
     fine = binw / 4
-    c, s = np.cos(angles), np.sin(angles)
-    out = np.zeros(len(angles))
-    for proj in (pts[:, :1] * c + pts[:, 1:] * s, pts[:, 1:] * c - pts[:, :1] * s):
-        b = np.floor(proj / fine).astype(np.int64)
-        b -= b.min(axis=0) - 8
-        nb = int(b.max()) + 9
-        flat = (b + np.arange(len(angles)) * nb).ravel()
-        h = np.bincount(flat, weights=np.repeat(w, len(angles)), minlength=nb * len(angles))
-        h = ndimage.gaussian_filter1d(h.reshape(len(angles), nb), 2.0, axis=1, mode="constant")
+    na = len(angles)
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    x, y = pts[:, 0], pts[:, 1]
+    # one row per angle, the points in their order along it: each histogram bin sums its
+    # points in the order they come (as a points-major layout would), and a row's bins
+    # are filled close together
+    weights = np.tile(w, na)
+    out = np.zeros(na)
+    for proj in (x * c + y * s, y * c - x * s):
+        np.divide(proj, fine, out=proj)
+        np.floor(proj, out=proj)
+        lo = proj.min(axis=1)
+        nb = int((proj.max(axis=1) - lo).max()) + 17
+        # bin 8 of a row is its lowest projection's, rows nb bins apart (integers, exact)
+        proj += (np.arange(na) * nb + 8 - lo)[:, None]
+        h = np.bincount(proj.astype(np.int64).ravel(), weights=weights, minlength=nb * na)
+        h = ndimage.gaussian_filter1d(h.reshape(na, nb), 2.0, axis=1, mode="constant")
         out += (h**2).sum(axis=1)
     return out
 
