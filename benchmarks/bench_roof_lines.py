@@ -2,7 +2,7 @@
 against another, on the same inputs (issue 13).
 
 Usage: PYTHONPATH=src python benchmarks/bench_roof_lines.py BASE_SRC [DATA_DIR] [--pairs N]
-       [--repeat R]
+       [--repeat R] [--traced] [--keep FILE]
 (default data $LIDAR2CITY_DATA or ../shared/data, N = 5, R = 2)
 
 ``reconstruct`` (LoD 1.2 + 1.3 + 2.2, the 132 BGT footprints of the Delft tile) runs
@@ -16,6 +16,10 @@ each replay every call R times (with that tree's ``[lod22]`` defaults of
 with the work of the two trees interleaved on a shared machine. Printed: each pair,
 the median of the per-pair ratios (this tree / other) and the roof lines' agreement
 (how many calls give the same segments and kinds, to the bit).
+
+``--traced``: the same without footprints (footprints traced from the points, issue
+13's no-footprints target; the roofs are larger merged blocks). ``--keep FILE``:
+also write the recorded calls to FILE (a pickle, for profiling one stage alone).
 """
 
 from __future__ import annotations
@@ -61,7 +65,7 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _capture(data: Path, path: Path) -> int:
+def _capture(data: Path, path: Path, traced: bool = False) -> int:
     import lidar2city.roof.arrangement as arrangement
     from lidar2city.cli.main import cli
 
@@ -74,7 +78,8 @@ def _capture(data: Path, path: Path) -> int:
     tile, fp = data / "delft" / "ahn3_cropped_1.laz", data / "delft" / "footprints_bgt.gpkg"
     arrangement.roof_lines = recording
     try:
-        cli.main(["-q", "reconstruct", str(tile), "--footprints", str(fp), "--lod", "1.2",
+        given = [] if traced else ["--footprints", str(fp)]
+        cli.main(["-q", "reconstruct", str(tile), *given, "--lod", "1.2",
                   "--lod", "1.3", "--lod", "2.2", "-o", str(path.with_suffix(".city.json"))],
                  standalone_mode=False)
     except SystemExit:
@@ -95,6 +100,13 @@ def _replay(src: str, calls: Path, repeat: int, out: Path) -> float:
 
 def main(argv: list[str]) -> int:
     pairs, repeat = 5, 2
+    traced = "--traced" in argv
+    argv = [a for a in argv if a != "--traced"]
+    keep = None
+    if "--keep" in argv:
+        i = argv.index("--keep")
+        keep = argv[i + 1]
+        argv = argv[:i] + argv[i + 2:]
     for name in ("--pairs", "--repeat"):
         if name in argv:
             i = argv.index(name)
@@ -109,8 +121,11 @@ def main(argv: list[str]) -> int:
     ours = str(Path(__file__).resolve().parent.parent / "src")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        n = _capture(data, tmp / "calls.pkl")
-        print(f"Delft, 132 BGT footprints: {n} roof_lines calls; {pairs} pairs of fresh processes, "
+        n = _capture(data, tmp / "calls.pkl", traced)
+        if keep:
+            Path(keep).write_bytes((tmp / "calls.pkl").read_bytes())
+        what = "traced footprints" if traced else "132 BGT footprints"
+        print(f"Delft, {what}: {n} roof_lines calls; {pairs} pairs of fresh processes, "
               f"least of {repeat} replays each; load {os.getloadavg()[0]:.1f}")
         ratios = []
         for k in range(pairs):

@@ -718,7 +718,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         The snake's polyline per chain (closed ones repeat their first vertex), or
         None where it gave none (too few vertices, collapsed, or the solve skipped).
     """
-    from ..regularize.snake import adjust_planar_graph
+    from ..regularize.snake import _grid_pivot, adjust_planar_graph
     from ..snake.solver import reduction_work
 
     tol = 1.5 * cell if tol is None else tol
@@ -766,11 +766,20 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     simple = np.bincount(e.ravel(), minlength=len(xy)).max() <= 2 and len(xy) * d ** 3 <= max_work
     if not simple and reduction_work(np.full(len(xy), d), e) > max_work:
         return out
-    new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
-                                 window=window, direction=direction,
-                                 t_adjust=2 * cell if t_adjust is None else t_adjust,
-                                 c_short=tol * tol if c_short is None else c_short, short_length=tol,
-                                 subdivide=subdivide, sample_step=sample_step)
+    # The chains' ends merged into another vertex are on no edge: they are left out of
+    # the solve (a vertex of no edge is minimised alone, its state unused), on the grid
+    # of the whole vertex set (its pivot), so the others' minimum is unchanged.
+    used = np.unique(e)
+    index = np.full(len(xy), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    moved, _ = adjust_planar_graph(xy[used], index[e], original_segments=np.concatenate(segs), cell=h,
+                                   window=window, direction=direction,
+                                   t_adjust=2 * cell if t_adjust is None else t_adjust,
+                                   c_short=tol * tol if c_short is None else c_short, short_length=tol,
+                                   subdivide=subdivide, sample_step=sample_step,
+                                   pivot=_grid_pivot(xy, h))
+    new = xy.copy()
+    new[used] = moved
     for i, row in enumerate(ids):
         if row is None:
             continue
