@@ -469,7 +469,7 @@ def _cov2(x):
     """``np.cov(x.T)`` of points (k, 2), k >= 2: the same operations in the same order
     (and so the same doubles), without its argument handling (called per piece)."""
     x = np.array(x.T, ndmin=2, dtype=np.float64)
-    x -= x.mean(axis=1)[:, None]
+    x -= (np.add.reduce(x, axis=1) / x.shape[1])[:, None]  # x.mean(axis=1), without its set-up
     c = np.dot(x, x.T.conj())
     c *= np.true_divide(1, x.shape[1] - 1)
     return c
@@ -478,7 +478,7 @@ def _cov2(x):
 def _fit_line(sub, direction, snap_angle):
     """Total-least-squares line (point, unit direction from the first to the last point) of
     points (m, 2), its direction snapped to the building axes; and the largest distance to it."""
-    m = sub.mean(axis=0)
+    m = np.add.reduce(sub, axis=0) / len(sub)  # sub.mean(axis=0): the same sum and division
     if len(sub) < 3:
         d = sub[-1] - sub[0]
     else:
