@@ -2,7 +2,7 @@
 against another, on the same inputs (issue 13).
 
 Usage: PYTHONPATH=src python benchmarks/bench_roof_lines.py BASE_SRC [DATA_DIR] [--pairs N]
-       [--repeat R]
+       [--repeat R] [--traced] [--keep FILE]
 (default data $LIDAR2CITY_DATA or ../shared/data, N = 5, R = 2)
 
 ``reconstruct`` (LoD 1.2 + 1.3 + 2.2, the 132 BGT footprints of the Delft tile) runs
@@ -15,7 +15,14 @@ each replay every call R times (with that tree's ``[lod22]`` defaults of
 ``resource.getrusage``) of one pass over them all: the stage's cost per Delft run,
 with the work of the two trees interleaved on a shared machine. Printed: each pair,
 the median of the per-pair ratios (this tree / other) and the roof lines' agreement
-(how many calls give the same segments and kinds, to the bit).
+(how many calls give the same segments and kinds, to the bit); and, of the same
+passes, the CPU of the step snake's distance rasters, energy tables and solves
+(``regularize.snake``'s calls of ``distance_raster``, ``edge_energy_tables`` and
+``minimize_energy``) in each tree, with the medians of their ratios.
+
+``--traced``: the same without footprints (footprints traced from the points, issue
+13's no-footprints target; the roofs are larger merged blocks). ``--keep FILE``:
+also write the recorded calls to FILE (a pickle, for profiling one stage alone).
 """
 
 from __future__ import annotations
@@ -40,20 +47,45 @@ def cpu():
 
 from lidar2city.roof.building import Lod22Config
 
+import time
+import lidar2city.regularize.snake as snake
+
+# the snake's parts (the step snake's distance raster, energy tables and solver), timed
+# where regularize.snake calls them
+parts = {}
+
+def timed(name):
+    func = getattr(snake, name)
+
+    def run(*a, **k):
+        t = time.process_time()
+        try:
+            return func(*a, **k)
+        finally:
+            parts[name] = parts.get(name, 0.0) + time.process_time() - t
+    setattr(snake, name, run)
+
+for name in ("distance_raster", "edge_energy_tables", "minimize_energy"):
+    timed(name)
 calls = pickle.load(open(sys.argv[1], "rb"))
 repeat = int(sys.argv[2])
 cfg = Lod22Config()  # this tree's defaults: the snake's window and grid step are options
 for _, kw in calls:
     kw.update(snake_window=cfg.snake_window, snake_cell=cfg.snake_cell)
-best = float("inf")
+best = (float("inf"),)
 for _ in range(repeat):
+    parts.clear()
     t = cpu()
     outs = [arrangement.roof_lines(*a, **kw) for a, kw in calls]
-    best = min(best, cpu() - t)
+    best = min(best, (cpu() - t, *(parts.get(n, 0.0) for n in ("distance_raster", "edge_energy_tables",
+                                                                  "minimize_energy"))))
 with open(sys.argv[3], "wb") as f:
     pickle.dump([([np.asarray(s).tobytes() for s in segs], kinds) for segs, kinds in outs], f)
-print(best)
+print(*best)
 """
+
+#: The parts of the stage timed in each replay (process CPU of the calls, summed).
+_PARTS = ("distance raster", "energy tables", "solver")
 
 
 def _cpu() -> float:
@@ -61,7 +93,7 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _capture(data: Path, path: Path) -> int:
+def _capture(data: Path, path: Path, traced: bool = False) -> int:
     import lidar2city.roof.arrangement as arrangement
     from lidar2city.cli.main import cli
 
@@ -74,7 +106,8 @@ def _capture(data: Path, path: Path) -> int:
     tile, fp = data / "delft" / "ahn3_cropped_1.laz", data / "delft" / "footprints_bgt.gpkg"
     arrangement.roof_lines = recording
     try:
-        cli.main(["-q", "reconstruct", str(tile), "--footprints", str(fp), "--lod", "1.2",
+        given = [] if traced else ["--footprints", str(fp)]
+        cli.main(["-q", "reconstruct", str(tile), *given, "--lod", "1.2",
                   "--lod", "1.3", "--lod", "2.2", "-o", str(path.with_suffix(".city.json"))],
                  standalone_mode=False)
     except SystemExit:
@@ -90,11 +123,18 @@ def _replay(src: str, calls: Path, repeat: int, out: Path) -> float:
     env = dict(os.environ, PYTHONPATH=src)
     res = subprocess.run([sys.executable, "-c", _REPLAY, str(calls), str(repeat), str(out)],
                          env=env, capture_output=True, text=True, check=True)
-    return float(res.stdout.split()[-1])
+    return tuple(float(x) for x in res.stdout.split("\n")[-2].split())
 
 
 def main(argv: list[str]) -> int:
     pairs, repeat = 5, 2
+    traced = "--traced" in argv
+    argv = [a for a in argv if a != "--traced"]
+    keep = None
+    if "--keep" in argv:
+        i = argv.index("--keep")
+        keep = argv[i + 1]
+        argv = argv[:i] + argv[i + 2:]
     for name in ("--pairs", "--repeat"):
         if name in argv:
             i = argv.index(name)
@@ -109,23 +149,32 @@ def main(argv: list[str]) -> int:
     ours = str(Path(__file__).resolve().parent.parent / "src")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        n = _capture(data, tmp / "calls.pkl")
-        print(f"Delft, 132 BGT footprints: {n} roof_lines calls; {pairs} pairs of fresh processes, "
+        n = _capture(data, tmp / "calls.pkl", traced)
+        if keep:
+            Path(keep).write_bytes((tmp / "calls.pkl").read_bytes())
+        what = "traced footprints" if traced else "132 BGT footprints"
+        print(f"Delft, {what}: {n} roof_lines calls; {pairs} pairs of fresh processes, "
               f"least of {repeat} replays each; load {os.getloadavg()[0]:.1f}")
-        ratios = []
+        ratios, part_ratios = [], []
         for k in range(pairs):
             order = [("base", base), ("this", ours)]
             if k % 2:
                 order.reverse()
             got = {name: _replay(src, tmp / "calls.pkl", repeat, tmp / f"{name}.pkl") for name, src in order}
-            ratios.append(got["this"] / got["base"])
-            print(f"  pair {k + 1}: base {got['base']:.3f} CPU s, this {got['this']:.3f} CPU s, "
-                  f"ratio {ratios[-1]:.3f}")
+            ratios.append(got["this"][0] / got["base"][0])
+            part_ratios.append([t / b if b > 0 else float("nan")
+                                for t, b in zip(got["this"][1:], got["base"][1:], strict=True)])
+            print(f"  pair {k + 1}: base {got['base'][0]:.3f} CPU s, this {got['this'][0]:.3f} CPU s, "
+                  f"ratio {ratios[-1]:.3f}; " + ", ".join(
+                      f"{p} {b:.3f} / {t:.3f}" for p, b, t in zip(_PARTS, got["base"][1:], got["this"][1:],
+                                                                 strict=True)))
         a = pickle.load(open(tmp / "base.pkl", "rb"))
         b = pickle.load(open(tmp / "this.pkl", "rb"))
         same = sum(x == y for x, y in zip(a, b, strict=True))
     print(f"roof_lines CPU this / base: median of pairs {statistics.median(ratios):.3f}; "
           f"calls with the same lines (bits): {same} / {n}; load {os.getloadavg()[0]:.1f}")
+    print("  the step snake's parts, this / base (median of pairs): " + ", ".join(
+        f"{p} {statistics.median(r[i] for r in part_ratios):.3f}" for i, p in enumerate(_PARTS)))
     return 0
 
 

@@ -147,6 +147,33 @@ def test_adjust_planar_graph_hip_roof_with_fixed_outline():
     assert info["reductions"]["IV"] + info["reductions"].get("VE", 0) >= 1
 
 
+def test_connected_part_solved_alone_on_the_whole_graphs_grid():
+    """Two separate parts (an oblique frame, so the grid depends on the pivot) and a
+    vertex on no edge: each part solved alone with the whole graph's pivot gets exactly
+    the positions of the whole solve (the minimum of a connected part does not depend
+    on the rest), and a pivot other than the default gives another grid."""
+    from lidar2city.regularize.snake import _grid_pivot
+
+    rng = np.random.default_rng(7)
+    a = np.array([[0, 0], [6.2, 0.3], [6.1, 4.2], [0.2, 3.9]]) + rng.normal(0, 0.2, (4, 2))
+    b = np.array([[10.0, 1.0], [13.3, 1.2], [13.1, 6.4]]) + rng.normal(0, 0.2, (3, 2))
+    xy = np.vstack([a, b, [[30.0, 30.0]]])
+    edges = np.array([(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6)])
+    opts = dict(direction=0.3, cell=0.5, window=2, c_short=0.5)
+    whole, _ = adjust_planar_graph(xy, edges, **opts)
+    pivot = _grid_pivot(xy, 0.5)
+    ring, _ = adjust_planar_graph(xy[:4], edges[:4], pivot=pivot, original_segments=xy[edges[:4]], **opts)
+    path, _ = adjust_planar_graph(xy[4:7], edges[4:] - 4, pivot=pivot, original_segments=xy[edges[4:]],
+                                  **opts)
+    # the deviation energy is measured against every original segment: give each part
+    # only its own when the parts are far apart (here 4 m, beyond the windows' reach)
+    np.testing.assert_array_equal(np.vstack([ring, path]), whole[:7])
+    shifted, _ = adjust_planar_graph(xy[:4], edges[:4], pivot=pivot + 0.2, **opts)
+    assert not np.array_equal(shifted, ring)
+    with pytest.raises(InputError, match="pivot"):
+        adjust_planar_graph(xy[:4], edges[:4], pivot=[0.0, np.nan], **opts)
+
+
 def test_adjust_planar_graph_validates():
     xy = np.zeros((3, 2))
     with pytest.raises(InputError, match="edges"):

@@ -271,7 +271,7 @@ def test_reduction_work_estimates_before_any_table():
     assert reduction_work([49] * 64, grid) == float("inf")
 
 
-def _reference_min_over(arrays, axis, shape):
+def _reference_min_over(arrays, axis, shape, buffer=None):
     """The plain broadcast sum, argmin and take along the eliminated axis."""
     total = arrays[0]
     for a in arrays[1:]:
@@ -295,11 +295,15 @@ def test_min_over_bitwise_equals_the_plain_broadcast(seed):
         sub = tuple(s if k else 1 for s, k in zip(shape, keep, strict=True))
         vals = rng.integers(0, 4, sub).astype(float) * (0.1 if seed % 2 else 1.0)
         arrays.append(vals)
+    from lidar2city.snake.solver import _Buffer
+
+    buffer = _Buffer()  # one buffer reused by every call, as in a solve
     for axis in range(ndim):
-        best, arg = _min_over(arrays, axis, shape)
-        ref_best, ref_arg = _reference_min_over(arrays, axis, shape)
-        assert best.shape == ref_best.shape and arg.shape == ref_arg.shape
-        assert best.tobytes() == ref_best.tobytes() and np.array_equal(arg, ref_arg)
+        for buf in (None, buffer):
+            best, arg = _min_over(arrays, axis, shape, buf)
+            ref_best, ref_arg = _reference_min_over(arrays, axis, shape)
+            assert best.shape == ref_best.shape and arg.shape == ref_arg.shape
+            assert best.tobytes() == ref_best.tobytes() and np.array_equal(arg, ref_arg)
 
 
 @pytest.mark.parametrize("seed", range(5))

@@ -84,11 +84,17 @@ def _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolera
             raise error(f"{prefix}{name} must be >= 0, got {val}")
 
 
+def _grid_pivot(xy, cell):
+    """The building frame's origin: the vertices' mean on a grid node (so that with
+    direction 0 the snake's grid is the world grid)."""
+    return np.round(xy.mean(axis=0) / cell) * cell if len(xy) else np.zeros(2)
+
+
 def _frame_solve(xy, edges, segs, *, cell, window, direction, t_adjust, c_dir, c_dis, c_move,
-                 fixed, strategy, c_short=0.0, short_length=0.0, subdivide=4, sample_step=1.0):
+                 fixed, strategy, c_short=0.0, short_length=0.0, subdivide=4, sample_step=1.0,
+                 pivot=None):
     """Solve the snake in the building frame; return grid positions and details."""
-    # Pivot on a grid node, so that with direction 0 the grid is the world grid.
-    pivot = np.round(xy.mean(axis=0) / cell) * cell if len(xy) else np.zeros(2)
+    pivot = _grid_pivot(xy, cell) if pivot is None else np.asarray(pivot, dtype=np.float64)
     q = to_frame(xy, direction, pivot) / cell
     seg_q = to_frame(segs, direction, pivot) / cell
     cands = candidate_positions(q, window, fixed=fixed)
@@ -132,6 +138,7 @@ def adjust_planar_graph(
     strategy: str = "auto",
     subdivide: int = 4,
     sample_step: float = 1.0,
+    pivot=None,
 ) -> tuple[np.ndarray, dict]:
     """Move the vertices of a planar topology graph to the snake's global minimum.
 
@@ -170,6 +177,12 @@ def adjust_planar_graph(
     sample_step : float
         Spacing (raster cells) of the deviation's samples along each candidate
         edge (:func:`~lidar2city.snake.energies.edge_energy_tables`).
+    pivot : array (2,), optional
+        Origin (m) of the building frame, whose grid the free vertices snap to;
+        default the vertices' mean rounded to a multiple of ``cell``. A part of a
+        graph solved again on its own keeps the whole graph's grid by passing the
+        whole graph's pivot (``_grid_pivot``): the minimum of a connected part does
+        not depend on the rest.
 
     Returns
     -------
@@ -222,10 +235,14 @@ def adjust_planar_graph(
         direction = dominant_direction(segs)
     t, c = _defaults(cell, t_adjust, c_dir)
     cs, ls = _short_defaults(cell, c_short, short_length)
+    if pivot is not None:
+        pivot = np.asarray(pivot, dtype=np.float64)
+        if pivot.shape != (2,) or not np.all(np.isfinite(pivot)):
+            raise InputError(f"pivot must be a finite (x, y), got {pivot!r}")
     grid, pivot, sol = _frame_solve(xy, e, segs, cell=cell, window=window, direction=direction,
                                     t_adjust=t, c_dir=c, c_dis=c_dis, c_move=c_move,
                                     fixed=fixed_arr, strategy=strategy, c_short=cs, short_length=ls,
-                                    subdivide=subdivide, sample_step=sample_step)
+                                    subdivide=subdivide, sample_step=sample_step, pivot=pivot)
     new = from_frame(grid * cell, direction, pivot)
     new[fixed_arr] = xy[fixed_arr]
     info = {

@@ -469,7 +469,7 @@ def _cov2(x):
     """``np.cov(x.T)`` of points (k, 2), k >= 2: the same operations in the same order
     (and so the same doubles), without its argument handling (called per piece)."""
     x = np.array(x.T, ndmin=2, dtype=np.float64)
-    x -= x.mean(axis=1)[:, None]
+    x -= (np.add.reduce(x, axis=1) / x.shape[1])[:, None]  # x.mean(axis=1), without its set-up
     c = np.dot(x, x.T.conj())
     c *= np.true_divide(1, x.shape[1] - 1)
     return c
@@ -478,7 +478,7 @@ def _cov2(x):
 def _fit_line(sub, direction, snap_angle):
     """Total-least-squares line (point, unit direction from the first to the last point) of
     points (m, 2), its direction snapped to the building axes; and the largest distance to it."""
-    m = sub.mean(axis=0)
+    m = np.add.reduce(sub, axis=0) / len(sub)  # sub.mean(axis=0): the same sum and division
     if len(sub) < 3:
         d = sub[-1] - sub[0]
     else:
@@ -718,7 +718,7 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
         The snake's polyline per chain (closed ones repeat their first vertex), or
         None where it gave none (too few vertices, collapsed, or the solve skipped).
     """
-    from ..regularize.snake import adjust_planar_graph
+    from ..regularize.snake import _grid_pivot, adjust_planar_graph
     from ..snake.solver import reduction_work
 
     tol = 1.5 * cell if tol is None else tol
@@ -766,11 +766,20 @@ def snake_steps(chains, closed, *, cell, direction, window=3, snake_cell=0.5, to
     simple = np.bincount(e.ravel(), minlength=len(xy)).max() <= 2 and len(xy) * d ** 3 <= max_work
     if not simple and reduction_work(np.full(len(xy), d), e) > max_work:
         return out
-    new, _ = adjust_planar_graph(xy, e, original_segments=np.concatenate(segs), cell=h,
-                                 window=window, direction=direction,
-                                 t_adjust=2 * cell if t_adjust is None else t_adjust,
-                                 c_short=tol * tol if c_short is None else c_short, short_length=tol,
-                                 subdivide=subdivide, sample_step=sample_step)
+    # The chains' ends merged into another vertex are on no edge: they are left out of
+    # the solve (a vertex of no edge is minimised alone, its state unused), on the grid
+    # of the whole vertex set (its pivot), so the others' minimum is unchanged.
+    used = np.unique(e)
+    index = np.full(len(xy), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    moved, _ = adjust_planar_graph(xy[used], index[e], original_segments=np.concatenate(segs), cell=h,
+                                   window=window, direction=direction,
+                                   t_adjust=2 * cell if t_adjust is None else t_adjust,
+                                   c_short=tol * tol if c_short is None else c_short, short_length=tol,
+                                   subdivide=subdivide, sample_step=sample_step,
+                                   pivot=_grid_pivot(xy, h))
+    new = xy.copy()
+    new[used] = moved
     for i, row in enumerate(ids):
         if row is None:
             continue

@@ -350,18 +350,41 @@ class _Structure:
         return work
 
 
-def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
-    """Minimum (and argmin) over ``axis`` of the broadcast sum of ``arrays``."""
+class _Buffer:
+    """One float64 work buffer reused by the eliminations of a solve: a fresh
+    megabyte for every sum costs the kernel more (pages mapped and zeroed) than the
+    additions. Dropped with its solve."""
+
+    def __init__(self):
+        self.buf = np.empty(0)
+
+    def __call__(self, shape: tuple[int, ...]) -> np.ndarray:
+        size = _prod(shape, range(len(shape))) if shape else 1
+        if self.buf.size < size:
+            self.buf = np.empty(size)
+        return self.buf[:size].reshape(shape)
+
+
+def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...], buffer: _Buffer | None = None):
+    """Minimum (and argmin) over ``axis`` of the broadcast sum of ``arrays``.
+
+    ``buffer``: where the sum is formed (the results are new arrays); default a new one.
+    """
     size = int(np.prod(shape, dtype=np.int64))
     if size <= _BROADCAST_LIMIT:
-        # The eliminated axis last, each (small) table made contiguous that way: every
-        # element is the same sum in the same order, and the argmin runs along
-        # contiguous memory instead of a transposed copy.
+        # The eliminated axis last: every element is the same sum in the same order
+        # (the first two tables, then each next one added), formed in one reused
+        # buffer, and the argmin runs along contiguous memory.
         out_shape = shape[:axis] + shape[axis + 1:]
         last = tuple(i for i in range(len(shape)) if i != axis) + (axis,)  # np.moveaxis(a, axis, -1)
-        total = np.ascontiguousarray(arrays[0].transpose(last))
-        for a in arrays[1:]:
-            total = total + np.ascontiguousarray(a.transpose(last))
+        parts = [a.transpose(last) for a in arrays]
+        if len(parts) == 1:
+            total = np.ascontiguousarray(parts[0])
+        else:
+            total = (buffer or _Buffer())(np.broadcast_shapes(*(a.shape for a in parts)))
+            np.add(parts[0], parts[1], out=total)
+            for a in parts[2:]:
+                np.add(total, a, out=total)
         flat = np.broadcast_to(total, out_shape + (shape[axis],)).reshape(-1, shape[axis])
         arg = flat.argmin(axis=1)
         best = flat[np.arange(len(flat)), arg]
@@ -373,9 +396,10 @@ def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...]):
     arg = np.zeros(out_shape, dtype=np.int64)
     cand = np.empty(out_shape)
     better = np.empty(out_shape, dtype=bool)
+    lead = (slice(None),) * axis
     for j in range(shape[axis]):
         for k, a in enumerate(arrays):
-            part = np.take(a, j if a.shape[axis] > 1 else 0, axis=axis)
+            part = a[lead + (j if a.shape[axis] > 1 else 0,)]  # a view: np.take(a, j, axis) without its copy
             if k == 0:
                 np.copyto(cand, part)
             else:
@@ -404,6 +428,7 @@ class _Reducer:
         self.ops: list = []
         self.conditioned: list[int] = []
         self.counts = {"I": 0, "II": 0, "III": 0, "IV": 0, "VE": 0}
+        self.buffer = _Buffer()
         for v, u in enumerate(unary):
             self._add((v,), u)
         for (u, v), t in zip(edges, tables, strict=True):
@@ -438,7 +463,7 @@ class _Reducer:
             arr = self.tables.pop(s)
             arrays.append(arr.reshape(tuple(int(self.dims[x]) if x in s else 1 for x in union)))
         axis = union.index(v)
-        best, arg = _min_over(arrays, axis, shape)
+        best, arg = _min_over(arrays, axis, shape, self.buffer)
         scope = tuple(x for x in union if x != v)
         self.ops.append((v, scope, arg))
         if scope:
