@@ -433,13 +433,13 @@ def uphill_steps(xyz, features, cell=None, jump=UPHILL_JUMP, rise=UPHILL_RISE, l
     return med[point_label] + over, lowq[point_label] + over
 
 
-def ring_cue(xyz, features):
+def ring_cue(xyz, features, neighbourhood="box"):
     """Each point's ratio to the plane of the ground around its object patch
-    (:func:`~lidar2city.ground.ring_plane.ring_ratios`), the ground being the points within
-    tolerance of all four surfaces of ``features`` (N, 5)."""
+    (:func:`~lidar2city.ground.ring_plane.ring_ratios`, its ``neighbourhood``), the ground
+    being the points within tolerance of all four surfaces of ``features`` (N, 5)."""
     out = ~np.isfinite(features[:, 0])
     agreed = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
-    return ring_ratios(xyz, agreed, exclude=out)
+    return ring_ratios(xyz, agreed, exclude=out, neighbourhood=neighbourhood)
 
 
 def ring_cue_exact(xyz, features, cell=None, jump=UPHILL_JUMP, reaches=(3.0, 6.0, 12.0, 24.0),
@@ -543,7 +543,8 @@ def ring_loo(samples, scenes, feats, syn):
     giveback_loo(samples, scenes, feats, syn, RING_GIVE, "", {
         "ring plane": (ring_cue, False),
         "ring + lenient": (ring_cue, True),
-        "exact + lenient": (ring_cue_exact, True)},
+        "exact + lenient": (ring_cue_exact, True),
+        "dilation + lenient": (lambda xyz, f: ring_cue(xyz, f, "dilation"), True)},
         "object-patch points given back when their ratio to the plane of the ground around "
         "the patch is <= t")
 
