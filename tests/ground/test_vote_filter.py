@@ -362,3 +362,26 @@ def test_ring_neighbourhood_option():
     assert GroundConfig(method="smrf_vote").method_params()["ring_neighbourhood"] == "box"
     with pytest.raises(ConfigError, match="ground.ring_neighbourhood"):
         GroundConfig(ring_neighbourhood="disk")
+
+
+@pytest.mark.parametrize("neighbourhood", ["box", "dilation"])
+def test_ring_wanted_points_keep_their_ratios(neighbourhood):
+    """``wanted`` only skips patches: a wanted point's ratio is the one computed for every
+    point, and smrf_vote's ring (which asks only for the points it may give back) equals the
+    rule on the full ratios."""
+    scene = make_terrain("steep_town", spacing=2.5, seed=1)
+    f, out = vote_features(scene.xyz, fourth=0.4)
+    agreed = (f[:, :3] <= 1).all(axis=1) & (f[:, 4] <= 1)
+    full = ring_ratios(scene.xyz, agreed, exclude=out, neighbourhood=neighbourhood)
+    rule = vote_rule(f, **VOTE_RULE, veto=VOTE_VETO) & ~out
+    wanted = (f[:, 1] <= 1.0) & ~rule & ~out
+    assert 0 < wanted.sum() < np.isfinite(full).sum()
+    part = ring_ratios(scene.xyz, agreed, exclude=out, neighbourhood=neighbourhood,
+                       wanted=wanted)
+    np.testing.assert_array_equal(part[wanted], full[wanted])
+    assert np.isfinite(part).sum() < np.isfinite(full).sum()
+    expected = rule | ((full <= 1.25) & (f[:, 1] <= 1.0) & ~out)
+    got = smrf_vote(scene.xyz, ring=1.25, ring_neighbourhood=neighbourhood)
+    np.testing.assert_array_equal(got, expected)
+    with pytest.raises(InputError, match="wanted"):
+        ring_ratios(scene.xyz, agreed, wanted=wanted[:-1])

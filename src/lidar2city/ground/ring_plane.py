@@ -39,7 +39,7 @@ def _box_sums(table, r0, r1, c0, c1):
 def ring_ratios(xyz, ground_like, *, exclude=None, cell: float | None = None,
                 jump: float = RING_JUMP, reaches=RING_REACH, rms: float = RING_RMS,
                 threshold: float = 0.5, scalar: float = 1.25,
-                neighbourhood: str = "box") -> np.ndarray:
+                neighbourhood: str = "box", wanted=None) -> np.ndarray:
     """Each point's tolerance ratio to the plane of the ground around its object patch.
 
     The surface is cut into smooth patches
@@ -88,11 +88,16 @@ def ring_ratios(xyz, ground_like, *, exclude=None, cell: float | None = None,
         stacked by box size, a summed-area table of the patch's cells telling
         which ground cells lie within the reach).
 
+    wanted : ndarray of bool, shape (N,), optional
+        The points whose ratio is needed: patches holding none of them are
+        skipped (their points' ratio is inf). Default: every point.
+
     Returns
     -------
     ndarray, shape (N,)
         The ratio; inf for points outside object patches, of patches without a
-        plane (too few ground cells around), and excluded points.
+        plane (too few ground cells around), of patches without a ``wanted``
+        point, and excluded points.
 
     Raises
     ------
@@ -148,7 +153,13 @@ def ring_ratios(xyz, ground_like, *, exclude=None, cell: float | None = None,
     is_ground = ground_like[p["lowest"]]
     n_cells = np.bincount(lab, minlength=n_lab)
     n_ground = np.bincount(lab[is_ground], minlength=n_lab)
-    objects = np.flatnonzero((n_cells >= RING_PATCH) & (2 * n_ground < n_cells))
+    candidate = (n_cells >= RING_PATCH) & (2 * n_ground < n_cells)
+    if wanted is not None:
+        wanted = np.asarray(wanted, dtype=bool)
+        if wanted.shape != (len(xyz),):
+            raise InputError(f"wanted must have shape ({len(xyz)},), got {wanted.shape}")
+        candidate &= np.bincount(label[p["flat"][wanted & ~out]], minlength=n_lab) > 0
+    objects = np.flatnonzero(candidate)
     if len(objects) == 0 or not is_ground.any():
         return ratio
     rows, cols = cells // w, cells % w

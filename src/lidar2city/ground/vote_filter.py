@@ -342,9 +342,11 @@ outlier_depth
     if ring is not None:
         surfaces = features[:, :3] if veto is None else features[:, [0, 1, 2, 4]]
         agreed = (surfaces <= 1.0).all(axis=1)
+        lenient = (features[:, 1] <= 1.0) & ~out
         near_plane = ring_ratios(xyz, agreed, exclude=out, cell=None, threshold=threshold,
-                                 scalar=scalar, neighbourhood=ring_neighbourhood) <= ring
-        ground |= near_plane & (features[:, 1] <= 1.0) & ~out
+                                 scalar=scalar, neighbourhood=ring_neighbourhood,
+                                 wanted=lenient & ~ground) <= ring
+        ground |= near_plane & lenient
     if connect:
         ground = connect_ground(xyz, ground, exclude=out, rounds=connect)
     logger.debug("smrf_vote: %d of %d points ground", int(ground.sum()), len(ground))
