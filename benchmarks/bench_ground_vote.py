@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--anatomy [PNG_DIR]]
+        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain] [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
@@ -79,7 +79,9 @@ script:
    ``ring`` option, alone or also near the lenient surface; the slow
    exact-ring form, :func:`ring_cue_exact`, and the library's form of it,
    ``ring_ratios(..., neighbourhood="dilation")``; with the CPU seconds of
-   each cue per sample);
+   each cue per sample); with ``--terrain``, the same for session 14's
+   terrain-structure give-backs (:func:`terrain_loo`: between agreed ground
+   above and below, or near the surface inpainted from it);
 10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
@@ -113,7 +115,17 @@ from lidar2city.ground import (  # noqa: E402
     smrf_vote,
     vote_features,
 )
-from lidar2city.ground._grid import dilate_square, grid_spec, inpaint  # noqa: E402
+from lidar2city.ground._grid import (  # noqa: E402
+    bilinear_weights,
+    cell_of,
+    dilate_square,
+    gradient_magnitude,
+    grid_spec,
+    inpaint,
+    running_extreme,
+    sample_bilinear,
+)
+from lidar2city.ground.vote_filter import _distance_to  # noqa: E402
 from lidar2city.ground.connect_filter import surface_patches  # noqa: E402
 from lidar2city.ground.ring_plane import ring_ratios  # noqa: E402
 from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
@@ -554,6 +566,73 @@ def ring_loo(samples, scenes, feats, syn):
         "the patch is <= t")
 
 
+def _agreed_grid(xyz, features, cell=1.0):
+    """The lowest and highest agreed-ground point (all four surfaces of ``features`` (N, 5)
+    within tolerance) per ``cell`` (inf / -inf where none), the grid and each point's cell."""
+    agreed = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
+    spec = grid_spec(xyz[:, :2], cell=cell)
+    r, c = cell_of(xyz[:, :2], spec)
+    lo = np.full(spec.shape, np.inf)
+    hi = np.full(spec.shape, -np.inf)
+    np.minimum.at(lo, (r[agreed], c[agreed]), xyz[agreed, 2])
+    np.maximum.at(hi, (r[agreed], c[agreed]), xyz[agreed, 2])
+    return lo, hi, spec, r, c
+
+
+def sandwich_cue(xyz, features, reach=3.0, cell=1.0):
+    """Minus how far (m) a point lies both below the highest and above the lowest agreed
+    ground within a ``reach`` square (``-min(up, down)``; a point between ground above and
+    below it is on a slope or bench, a roof stands over the ground around it): a point is
+    given back when at most ``t``, i.e. ground rises more than ``-t`` over it and falls more
+    than ``-t`` below it."""
+    lo, hi, spec, r, c = _agreed_grid(xyz, features, cell)
+    k = 2 * int(round(reach / cell)) + 1
+    lo = running_extreme(running_extreme(lo, k, 0), k, 1)
+    hi = running_extreme(running_extreme(hi, k, 0, maximum=True), k, 1, maximum=True)
+    up, down = hi[r, c] - xyz[:, 2], xyz[:, 2] - lo[r, c]
+    return np.nan_to_num(-np.minimum(up, down), nan=np.inf, posinf=np.inf, neginf=np.inf)
+
+
+def surface_cue(xyz, features, cell=1.0, base=0.2, scalar=1.25, per_metre=0.1):
+    """A point's height off the surface inpainted from the agreed ground (lowest agreed point
+    per ``cell``), over a tolerance ``base + scalar |grad| + per_metre * d`` (``d`` the
+    distance, m, to the nearest cell with agreed ground: the surface is less sure away from
+    it)."""
+    lo, _, spec, r, c = _agreed_grid(xyz, features, cell)
+    known = np.isfinite(lo)
+    if not known.any():
+        return np.full(len(xyz), np.inf)
+    surface = inpaint(np.where(known, lo, np.nan))
+    weights = bilinear_weights(spec, xyz[:, :2])
+    ref = sample_bilinear(surface, spec, weights=weights)
+    grad = sample_bilinear(gradient_magnitude(surface, cell), spec, weights=weights)
+    dist = _distance_to(known, int(np.ceil(40.0 / cell)))[r, c] * cell
+    return np.abs(xyz[:, 2] - ref) / (base + scalar * grad + per_metre * dist)
+
+
+#: heights (m, negated) :func:`terrain_loo`'s sandwich cue gives a point back at or below
+#: (-inf: off; inf: every point near the lenient surface).
+SANDWICH_GIVE = (-np.inf, -3.0, -2.0, -1.0, -0.5, -0.3, 0.0, np.inf)
+
+
+def terrain_loo(samples, scenes, feats, syn):
+    """Print the leave-one-out of the two terrain-structure give-backs of session 14
+    (``--terrain``): a point near the lenient surface lying between agreed ground above and
+    below it within 3 or 5 m (:func:`sandwich_cue`), or within ``t`` slope- and
+    distance-scaled tolerances of the surface inpainted from the agreed ground
+    (:func:`surface_cue`), ``t`` chosen per fold."""
+    giveback_loo(samples, scenes, feats, syn, SANDWICH_GIVE, "m", {
+        "between 3 m": (sandwich_cue, True),
+        "between 5 m": (lambda xyz, f: sandwich_cue(xyz, f, reach=5.0), True)},
+        "points within tolerance of the lenient surface given back when agreed ground "
+        "within the reach rises and falls more than -t m around them")
+    giveback_loo(samples, scenes, feats, syn, RING_GIVE, "", {
+        "agreed surface": (surface_cue, False),
+        "agreed surface + lenient": (surface_cue, True)},
+        "object points given back when within t tolerances (0.2 m + 1.25 x slope + 0.1 per "
+        "metre from agreed ground) of the surface inpainted from the agreed ground")
+
+
 def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
     """The leave-one-out of :func:`uphill_loo` and :func:`ring_loo`: for each variant
     ``name: (cue(xyz, features) -> (N,), near_lenient)``, the rule and veto fitted per fold,
@@ -786,6 +865,8 @@ def main():
                     help="leave-one-out of the rule with the uphill-step give-back")
     ap.add_argument("--ring", action="store_true",
                     help="leave-one-out of the rule with the ground-ring-plane give-back")
+    ap.add_argument("--terrain", action="store_true",
+                    help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
                     help="with --cues: only these cues (comma-separated names of CUES)")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
@@ -888,6 +969,8 @@ def main():
         uphill_loo(samples, scenes, feats, syn)
     if args.ring:
         ring_loo(samples, scenes, feats, syn)
+    if args.terrain:
+        terrain_loo(samples, scenes, feats, syn)
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:

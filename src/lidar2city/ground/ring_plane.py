@@ -8,7 +8,8 @@ from ..errors import InputError
 from ._grid import grid_spec
 from .connect_filter import surface_patches
 
-__all__ = ["RING_FIT", "RING_JUMP", "RING_NEIGHBOURHOODS", "RING_PATCH", "RING_REACH", "RING_RMS", "ring_ratios"]
+__all__ = ["RING_FIT", "RING_JUMP", "RING_NEIGHBOURHOODS", "RING_PATCH", "RING_REACH", "RING_RMS",
+           "ring_ratios"]
 
 #: Widths (m) of the neighbourhoods around an object patch whose ground a plane is fitted to.
 RING_REACH = (3.0, 6.0, 12.0, 24.0)
