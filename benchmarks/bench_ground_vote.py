@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain] [--anatomy [PNG_DIR]]
+        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain]
+        [--wall-slopes 1,1.5,2,3] [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
@@ -81,7 +82,9 @@ script:
    ``ring_ratios(..., neighbourhood="dilation")``; with the CPU seconds of
    each cue per sample); with ``--terrain``, the same for session 14's
    terrain-structure give-backs (:func:`terrain_loo`: between agreed ground
-   above and below, or near the surface inpainted from it);
+   above and below, or near the surface inpainted from it); with
+   ``--wall-slopes``, the leave-one-out with the wall-marking slope chosen
+   per fold too (:func:`wall_slope_loo`);
 10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
@@ -633,6 +636,68 @@ def terrain_loo(samples, scenes, feats, syn):
         "metre from agreed ground) of the surface inpainted from the agreed ground")
 
 
+def wall_slope_loo(samples, scenes, slopes):
+    """Print the leave-one-out of ``smrf_vote``'s rule and veto with
+    :data:`~lidar2city.ground.vote_filter.WALL_SLOPE` (the opening step that marks a wall,
+    whose distance ``clear`` tests) chosen per fold too among ``slopes`` (the one whose
+    fitted rule has the lowest objective on the six other samples + synthetic terrains),
+    then each slope fitted on all seven: the seven, the synthetic terrains and the held-out
+    kinds (``--wall-slopes``; session 14: a steep embankment is marked as a wall at 1.0)."""
+    import lidar2city.ground.vote_filter as vote_module
+
+    kinds = {f"{k}@{s:g}m": make_terrain(k, spacing=s, seed=1)
+             for k in HELD_OUT_KINDS for s in (1.0, 2.5)}
+    feats = {}
+    saved = vote_module.WALL_SLOPE
+    try:
+        for wall in slopes:
+            vote_module.WALL_SLOPE = wall
+            feats[wall] = ({n: vote_features(xyz, fourth=VETO_SLOPE)[0]
+                            for n, (xyz, _) in samples.items()},
+                           [(vote_features(sc.xyz, fourth=VETO_SLOPE)[0], sc.ground,
+                             1.0 / len(scenes)) for sc in scenes.values()],
+                           [vote_features(sc.xyz, fourth=VETO_SLOPE)[0] for sc in kinds.values()])
+    finally:
+        vote_module.WALL_SLOPE = saved
+
+    def fitted(wall, names):
+        real, syn, _ = feats[wall]
+        sets = [(real[n], samples[n][1], 1.0) for n in names] + syn
+        rule, _ = fit_rule(sets)
+        if rule is None:
+            return np.inf, None, None
+        veto, objective = fit_veto(sets, rule)
+        return objective, rule, veto
+
+    print(f"\nleave-one-out with the wall slope chosen per fold among "
+          f"{', '.join(f'{v:g}' for v in slopes)} (rule and veto per fold too)")
+    held, line = [], []
+    for name, (_, ref) in samples.items():
+        others = [n for n in samples if n != name]
+        (_, rule, veto), wall = min(((fitted(w, others), w) for w in slopes),
+                                    key=lambda t: t[0][0])
+        held.append(ground_errors(vote_rule(feats[wall][0][name], **rule, veto=veto),
+                                  ref)["total"])
+        line.append(f"{name} {100 * held[-1]:.2f} ({wall:g})")
+    print(f"leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %: "
+          f"{'; '.join(line)}")
+    for wall in slopes:
+        objective, rule, veto = fitted(wall, list(samples))
+        if rule is None:
+            print(f"wall slope {wall:g}: the tree has not the rule's shape")
+            continue
+        real, syn, kind_feats = feats[wall]
+        seven = [ground_errors(vote_rule(real[n], **rule, veto=veto), ref)["total"]
+                 for n, (_, ref) in samples.items()]
+        synth = np.mean([np.mean(vote_rule(f, **rule, veto=veto) != g) for f, g, _ in syn])
+        kind_line = " ".join(
+            f"{k} {100 * ground_errors(vote_rule(f, **rule, veto=veto), sc.ground)['total']:.2f}"
+            for (k, sc), f in zip(kinds.items(), kind_feats))
+        print(f"wall slope {wall:g} fitted on all seven ({show_rule(rule)}, veto {veto:g}): "
+              f"seven {100 * np.mean(seven):.2f} % ({' '.join(f'{100 * v:.2f}' for v in seven)}),"
+              f" synthetic terrains {100 * synth:.2f} %; held-out kinds (total %) {kind_line}")
+
+
 def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
     """The leave-one-out of :func:`uphill_loo` and :func:`ring_loo`: for each variant
     ``name: (cue(xyz, features) -> (N,), near_lenient)``, the rule and veto fitted per fold,
@@ -865,6 +930,9 @@ def main():
                     help="leave-one-out of the rule with the uphill-step give-back")
     ap.add_argument("--ring", action="store_true",
                     help="leave-one-out of the rule with the ground-ring-plane give-back")
+    ap.add_argument("--wall-slopes", default=None, metavar="SLOPES",
+                    help="leave-one-out with WALL_SLOPE chosen per fold among these "
+                         "(comma-separated, e.g. 1,1.5,2,2.5,3,4,6)")
     ap.add_argument("--terrain", action="store_true",
                     help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
@@ -971,6 +1039,8 @@ def main():
         ring_loo(samples, scenes, feats, syn)
     if args.terrain:
         terrain_loo(samples, scenes, feats, syn)
+    if args.wall_slopes:
+        wall_slope_loo(samples, scenes, [float(v) for v in args.wall_slopes.split(",")])
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:
