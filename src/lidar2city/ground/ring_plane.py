@@ -88,7 +88,6 @@ def ring_ratios(xyz, ground_like, *, exclude=None, cell: float | None = None,
         the patches: each reach is summed only for the patches still widening,
         stacked by box size, a summed-area table of the patch's cells telling
         which ground cells lie within the reach).
-
     wanted : ndarray of bool, shape (N,), optional
         The points whose ratio is needed: patches holding none of them are
         skipped (their points' ratio is inf). Default: every point.
