@@ -195,7 +195,9 @@ def best_times(cmd, env, repeat):
 SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf"),
                   "smrf_vote, above 3": ("smrf_vote", "above = 3.0"),
                   "smrf_vote, connect 3": ("smrf_vote", "connect = 3"),
-                  "smrf_vote, ring 1.25": ("smrf_vote", "ring = 1.25")}
+                  "smrf_vote, ring 1.25": ("smrf_vote", "ring = 1.25"),
+                  "smrf_vote, ring 1.25 dilation": ("smrf_vote", 'ring = 1.25\n'
+                                                    'ring_neighbourhood = "dilation"')}
 
 
 def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),

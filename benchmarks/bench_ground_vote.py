@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
-        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--anatomy [PNG_DIR]]
+        [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain]
+        [--wall-slopes 1,1.5,2,3] [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
@@ -76,8 +77,14 @@ script:
    with ``--ring``, the same with a point of an object patch given back
    when within ``t`` tolerances of the plane of the ground around the
    patch (:func:`~lidar2city.ground.ring_plane.ring_ratios`, ``smrf_vote``'s
-   ``ring`` option, alone or also near the lenient surface; and the slow
-   exact-ring form, :func:`ring_cue_exact`);
+   ``ring`` option, alone or also near the lenient surface; the slow
+   exact-ring form, :func:`ring_cue_exact`, and the library's form of it,
+   ``ring_ratios(..., neighbourhood="dilation")``; with the CPU seconds of
+   each cue per sample); with ``--terrain``, the same for session 14's
+   terrain-structure give-backs (:func:`terrain_loo`: between agreed ground
+   above and below, or near the surface inpainted from it); with
+   ``--wall-slopes``, the leave-one-out with the wall-marking slope chosen
+   per fold too (:func:`wall_slope_loo`);
 10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
@@ -88,7 +95,9 @@ About a minute plus the speed runs.
 
 from __future__ import annotations
 
+import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -109,7 +118,17 @@ from lidar2city.ground import (  # noqa: E402
     smrf_vote,
     vote_features,
 )
-from lidar2city.ground._grid import dilate_square, grid_spec, inpaint  # noqa: E402
+from lidar2city.ground._grid import (  # noqa: E402
+    bilinear_weights,
+    cell_of,
+    dilate_square,
+    gradient_magnitude,
+    grid_spec,
+    inpaint,
+    running_extreme,
+    sample_bilinear,
+)
+from lidar2city.ground.vote_filter import _distance_to  # noqa: E402
 from lidar2city.ground.connect_filter import surface_patches  # noqa: E402
 from lidar2city.ground.ring_plane import ring_ratios  # noqa: E402
 from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
@@ -433,21 +452,22 @@ def uphill_steps(xyz, features, cell=None, jump=UPHILL_JUMP, rise=UPHILL_RISE, l
     return med[point_label] + over, lowq[point_label] + over
 
 
-def ring_cue(xyz, features):
+def ring_cue(xyz, features, neighbourhood="box"):
     """Each point's ratio to the plane of the ground around its object patch
-    (:func:`~lidar2city.ground.ring_plane.ring_ratios`), the ground being the points within
-    tolerance of all four surfaces of ``features`` (N, 5)."""
+    (:func:`~lidar2city.ground.ring_plane.ring_ratios`, its ``neighbourhood``), the ground
+    being the points within tolerance of all four surfaces of ``features`` (N, 5)."""
     out = ~np.isfinite(features[:, 0])
     agreed = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
-    return ring_ratios(xyz, agreed, exclude=out)
+    return ring_ratios(xyz, agreed, exclude=out, neighbourhood=neighbourhood)
 
 
 def ring_cue_exact(xyz, features, cell=None, jump=UPHILL_JUMP, reaches=(3.0, 6.0, 12.0, 24.0),
                    rms=0.3, threshold=0.5, scalar=1.25):
     """:func:`ring_cue` with each neighbourhood the ring of agreed-ground cells within a
     Chebyshev distance of the patch's own cells (not its grown bounding box), found patch by
-    patch (a Python loop: ~1.4 CPU s on samp11's 38k points, too slow for the library), and
-    the plane fitted to the cell centres."""
+    patch (a Python loop: ~1.4 CPU s on samp11's 38k points), and the plane fitted to the
+    cell centres: the reference the library's ``ring_ratios(..., neighbourhood="dilation")``
+    (no loop over patches) reproduces."""
     out = ~np.isfinite(features[:, 0])
     ratio = np.full(len(xyz), np.inf)
     p = surface_patches(xyz, exclude=out, cell=cell, jump=jump)
@@ -543,9 +563,139 @@ def ring_loo(samples, scenes, feats, syn):
     giveback_loo(samples, scenes, feats, syn, RING_GIVE, "", {
         "ring plane": (ring_cue, False),
         "ring + lenient": (ring_cue, True),
-        "exact + lenient": (ring_cue_exact, True)},
+        "exact + lenient": (ring_cue_exact, True),
+        "dilation + lenient": (lambda xyz, f: ring_cue(xyz, f, "dilation"), True)},
         "object-patch points given back when their ratio to the plane of the ground around "
         "the patch is <= t")
+
+
+def _agreed_grid(xyz, features, cell=1.0):
+    """The lowest and highest agreed-ground point (all four surfaces of ``features`` (N, 5)
+    within tolerance) per ``cell`` (inf / -inf where none), the grid and each point's cell."""
+    agreed = (features[:, :3] <= 1).all(axis=1) & (features[:, 4] <= 1)
+    spec = grid_spec(xyz[:, :2], cell=cell)
+    r, c = cell_of(xyz[:, :2], spec)
+    lo = np.full(spec.shape, np.inf)
+    hi = np.full(spec.shape, -np.inf)
+    np.minimum.at(lo, (r[agreed], c[agreed]), xyz[agreed, 2])
+    np.maximum.at(hi, (r[agreed], c[agreed]), xyz[agreed, 2])
+    return lo, hi, spec, r, c
+
+
+def sandwich_cue(xyz, features, reach=3.0, cell=1.0):
+    """Minus how far (m) a point lies both below the highest and above the lowest agreed
+    ground within a ``reach`` square (``-min(up, down)``; a point between ground above and
+    below it is on a slope or bench, a roof stands over the ground around it): a point is
+    given back when at most ``t``, i.e. ground rises more than ``-t`` over it and falls more
+    than ``-t`` below it."""
+    lo, hi, spec, r, c = _agreed_grid(xyz, features, cell)
+    k = 2 * int(round(reach / cell)) + 1
+    lo = running_extreme(running_extreme(lo, k, 0), k, 1)
+    hi = running_extreme(running_extreme(hi, k, 0, maximum=True), k, 1, maximum=True)
+    up, down = hi[r, c] - xyz[:, 2], xyz[:, 2] - lo[r, c]
+    return np.nan_to_num(-np.minimum(up, down), nan=np.inf, posinf=np.inf, neginf=np.inf)
+
+
+def surface_cue(xyz, features, cell=1.0, base=0.2, scalar=1.25, per_metre=0.1):
+    """A point's height off the surface inpainted from the agreed ground (lowest agreed point
+    per ``cell``), over a tolerance ``base + scalar |grad| + per_metre * d`` (``d`` the
+    distance, m, to the nearest cell with agreed ground: the surface is less sure away from
+    it)."""
+    lo, _, spec, r, c = _agreed_grid(xyz, features, cell)
+    known = np.isfinite(lo)
+    if not known.any():
+        return np.full(len(xyz), np.inf)
+    surface = inpaint(np.where(known, lo, np.nan))
+    weights = bilinear_weights(spec, xyz[:, :2])
+    ref = sample_bilinear(surface, spec, weights=weights)
+    grad = sample_bilinear(gradient_magnitude(surface, cell), spec, weights=weights)
+    dist = _distance_to(known, int(np.ceil(40.0 / cell)))[r, c] * cell
+    return np.abs(xyz[:, 2] - ref) / (base + scalar * grad + per_metre * dist)
+
+
+#: heights (m, negated) :func:`terrain_loo`'s sandwich cue gives a point back at or below
+#: (-inf: off; inf: every point near the lenient surface).
+SANDWICH_GIVE = (-np.inf, -3.0, -2.0, -1.0, -0.5, -0.3, 0.0, np.inf)
+
+
+def terrain_loo(samples, scenes, feats, syn):
+    """Print the leave-one-out of the two terrain-structure give-backs of session 14
+    (``--terrain``): a point near the lenient surface lying between agreed ground above and
+    below it within 3 or 5 m (:func:`sandwich_cue`), or within ``t`` slope- and
+    distance-scaled tolerances of the surface inpainted from the agreed ground
+    (:func:`surface_cue`), ``t`` chosen per fold."""
+    giveback_loo(samples, scenes, feats, syn, SANDWICH_GIVE, "m", {
+        "between 3 m": (sandwich_cue, True),
+        "between 5 m": (lambda xyz, f: sandwich_cue(xyz, f, reach=5.0), True)},
+        "points within tolerance of the lenient surface given back when agreed ground "
+        "within the reach rises and falls more than -t m around them")
+    giveback_loo(samples, scenes, feats, syn, RING_GIVE, "", {
+        "agreed surface": (surface_cue, False),
+        "agreed surface + lenient": (surface_cue, True)},
+        "object points given back when within t tolerances (0.2 m + 1.25 x slope + 0.1 per "
+        "metre from agreed ground) of the surface inpainted from the agreed ground")
+
+
+def wall_slope_loo(samples, scenes, slopes):
+    """Print the leave-one-out of ``smrf_vote``'s rule and veto with
+    :data:`~lidar2city.ground.vote_filter.WALL_SLOPE` (the opening step that marks a wall,
+    whose distance ``clear`` tests) chosen per fold too among ``slopes`` (the one whose
+    fitted rule has the lowest objective on the six other samples + synthetic terrains),
+    then each slope fitted on all seven: the seven, the synthetic terrains and the held-out
+    kinds (``--wall-slopes``; session 14: a steep embankment is marked as a wall at 1.0)."""
+    import lidar2city.ground.vote_filter as vote_module
+
+    kinds = {f"{k}@{s:g}m": make_terrain(k, spacing=s, seed=1)
+             for k in HELD_OUT_KINDS for s in (1.0, 2.5)}
+    feats = {}
+    saved = vote_module.WALL_SLOPE
+    try:
+        for wall in slopes:
+            vote_module.WALL_SLOPE = wall
+            feats[wall] = ({n: vote_features(xyz, fourth=VETO_SLOPE)[0]
+                            for n, (xyz, _) in samples.items()},
+                           [(vote_features(sc.xyz, fourth=VETO_SLOPE)[0], sc.ground,
+                             1.0 / len(scenes)) for sc in scenes.values()],
+                           [vote_features(sc.xyz, fourth=VETO_SLOPE)[0] for sc in kinds.values()])
+    finally:
+        vote_module.WALL_SLOPE = saved
+
+    def fitted(wall, names):
+        real, syn, _ = feats[wall]
+        sets = [(real[n], samples[n][1], 1.0) for n in names] + syn
+        rule, _ = fit_rule(sets)
+        if rule is None:
+            return np.inf, None, None
+        veto, objective = fit_veto(sets, rule)
+        return objective, rule, veto
+
+    print(f"\nleave-one-out with the wall slope chosen per fold among "
+          f"{', '.join(f'{v:g}' for v in slopes)} (rule and veto per fold too)")
+    held, line = [], []
+    for name, (_, ref) in samples.items():
+        others = [n for n in samples if n != name]
+        (_, rule, veto), wall = min(((fitted(w, others), w) for w in slopes),
+                                    key=lambda t: t[0][0])
+        held.append(ground_errors(vote_rule(feats[wall][0][name], **rule, veto=veto),
+                                  ref)["total"])
+        line.append(f"{name} {100 * held[-1]:.2f} ({wall:g})")
+    print(f"leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %: "
+          f"{'; '.join(line)}")
+    for wall in slopes:
+        objective, rule, veto = fitted(wall, list(samples))
+        if rule is None:
+            print(f"wall slope {wall:g}: the tree has not the rule's shape")
+            continue
+        real, syn, kind_feats = feats[wall]
+        seven = [ground_errors(vote_rule(real[n], **rule, veto=veto), ref)["total"]
+                 for n, (_, ref) in samples.items()]
+        synth = np.mean([np.mean(vote_rule(f, **rule, veto=veto) != g) for f, g, _ in syn])
+        kind_line = " ".join(
+            f"{k} {100 * ground_errors(vote_rule(f, **rule, veto=veto), sc.ground)['total']:.2f}"
+            for (k, sc), f in zip(kinds.items(), kind_feats))
+        print(f"wall slope {wall:g} fitted on all seven ({show_rule(rule)}, veto {veto:g}): "
+              f"seven {100 * np.mean(seven):.2f} % ({' '.join(f'{100 * v:.2f}' for v in seven)}),"
+              f" synthetic terrains {100 * synth:.2f} %; held-out kinds (total %) {kind_line}")
 
 
 def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
@@ -557,7 +707,12 @@ def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
           f"{', '.join(f'{v:g}' for v in grid)}{' ' + unit if unit else ''}, per fold)")
     syn_set = [(f, g, 1.0 / len(syn)) for f, g in syn]
     for key, (cue_of, near_lenient) in variants.items():
-        real = {n: cue_of(xyz, feats[n]) for n, (xyz, _) in samples.items()}
+        cpu = {}
+        real = {}
+        for n, (xyz, _) in samples.items():
+            start = time.process_time()
+            real[n] = cue_of(xyz, feats[n])
+            cpu[n] = time.process_time() - start
         fake = [cue_of(sc.xyz, f) for sc, (f, _) in zip(scenes.values(), syn)]
 
         def fitted(names):
@@ -585,6 +740,9 @@ def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
             line.append(f"{name} {100 * held[-1]:.2f} (t {t:g})")
         print(f"{key:<16} leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} "
               f"% against {100 * np.mean(base):.2f} %: {'; '.join(line)}")
+        print(f"{'':<16} the cue's CPU s (load {os.getloadavg()[0]:.1f}): "
+              + ", ".join(f"{n} {v:.3f}" for n, v in cpu.items())
+              + f"; all seven {sum(cpu.values()):.2f}")
         give, t, _, _ = fitted(list(samples))
         seven = [ground_errors(give(feats[n], real[n], t), ref)["total"]
                  for n, (_, ref) in samples.items()]
@@ -772,6 +930,11 @@ def main():
                     help="leave-one-out of the rule with the uphill-step give-back")
     ap.add_argument("--ring", action="store_true",
                     help="leave-one-out of the rule with the ground-ring-plane give-back")
+    ap.add_argument("--wall-slopes", default=None, metavar="SLOPES",
+                    help="leave-one-out with WALL_SLOPE chosen per fold among these "
+                         "(comma-separated, e.g. 1,1.5,2,2.5,3,4,6)")
+    ap.add_argument("--terrain", action="store_true",
+                    help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
                     help="with --cues: only these cues (comma-separated names of CUES)")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
@@ -874,6 +1037,10 @@ def main():
         uphill_loo(samples, scenes, feats, syn)
     if args.ring:
         ring_loo(samples, scenes, feats, syn)
+    if args.terrain:
+        terrain_loo(samples, scenes, feats, syn)
+    if args.wall_slopes:
+        wall_slope_loo(samples, scenes, [float(v) for v in args.wall_slopes.split(",")])
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:

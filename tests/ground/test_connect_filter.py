@@ -139,3 +139,21 @@ def test_bad_shapes():
         surface_patches(xyz[:, :2])
     with pytest.raises(InputError, match="connect"):
         smrf_vote(xyz, connect=-2)
+
+
+def test_lowest_point_of_a_cell_is_the_first_of_the_equally_low():
+    """Each filled cell's lowest point, ties to the lowest index (as a stable sort by cell and
+    height gives), the cells in increasing order, and excluded points never chosen."""
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 20, (4000, 2))
+    z = np.round(rng.uniform(0, 3, 4000), 1)  # many equal heights per cell
+    xyz = np.column_stack([xy, z])
+    out = rng.random(4000) < 0.2
+    p = surface_patches(xyz, exclude=out, cell=1.0)
+    kept = np.flatnonzero(~out)
+    order = kept[np.lexsort((z[kept], p["flat"][kept]))]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = p["flat"][order[1:]] != p["flat"][order[:-1]]
+    np.testing.assert_array_equal(p["lowest"], order[first])
+    np.testing.assert_array_equal(p["cells"], p["flat"][order[first]])
+    assert not out[p["lowest"]].any()

@@ -261,3 +261,127 @@ def test_ring_in_the_ground_config():
     assert "ring" not in GroundConfig(method="smrf_segments", ring=1.25).method_params()
     with pytest.raises(ConfigError, match="ground.ring"):
         GroundConfig(ring=0.0)
+
+
+def _ring_by_loop(xyz, ground_like, exclude, reaches=(3.0, 6.0, 12.0, 24.0), rms=0.3):
+    """``ring_ratios(..., neighbourhood="dilation")`` the slow way: patch by patch, the ground
+    cells within each reach (Chebyshev distance to the nearest cell of the patch, by brute
+    force), a least-squares plane through their centres."""
+    from lidar2city.ground._grid import grid_spec
+    from lidar2city.ground.connect_filter import surface_patches
+
+    p = surface_patches(xyz, exclude=exclude, cell=None, jump=0.6)
+    h, w = p["shape"]
+    cell = p["cell"]
+    spec = grid_spec(xyz[:, :2], cell=cell)
+    label, cells = p["label"], p["cells"]
+    is_ground = ground_like[p["lowest"]]
+    ratio = np.full(len(xyz), np.inf)
+    point_label = np.where(exclude, -1, label[p["flat"]])
+    for lab in np.unique(label[cells]):
+        own = cells[label[cells] == lab]
+        if len(own) < 4 or 2 * is_ground[label[cells] == lab].sum() >= len(own):
+            continue
+        ground = cells[is_ground & (label[cells] != lab)]
+        dist = np.max(np.abs(np.stack([ground // w, ground % w])[:, :, None]
+                             - np.stack([own // w, own % w])[:, None, :]), axis=0).min(axis=1)
+        chosen = None
+        for reach in reaches:
+            ring = ground[dist <= np.ceil(reach / cell)]
+            if len(ring) < 6:
+                continue
+            a = np.column_stack([(ring % w + 0.5) * cell, -(ring // w + 0.5) * cell,
+                                 np.ones(len(ring))])
+            coef, _, rank, _ = np.linalg.lstsq(a, p["zmin"][ring], rcond=None)
+            if rank < 3:
+                continue
+            fit = np.sqrt(np.mean((a @ coef - p["zmin"][ring]) ** 2))
+            if chosen is None or fit <= rms:
+                chosen = coef
+            if fit > rms:
+                break
+        if chosen is not None:
+            pts = point_label == lab
+            plane = (chosen[0] * (xyz[pts, 0] - spec.x0) + chosen[1] * (xyz[pts, 1] - spec.y_top)
+                     + chosen[2])
+            ratio[pts] = np.abs(xyz[pts, 2] - plane) / (0.5 + 1.25 * np.hypot(*chosen[:2]))
+    return ratio
+
+
+@pytest.mark.parametrize("kind,spacing", [("steep_town", 2.5), ("terraced_slope", 1.0),
+                                          ("town_on_slope", 1.0)])
+def test_ring_dilation_equals_the_loop_over_patches(kind, spacing):
+    """The stacked, summed-area form of the ring (no loop over patches) gives the ratios of
+    fitting each patch's ring of ground cells one by one."""
+    scene = make_terrain(kind, spacing=spacing, seed=1)
+    f, out = vote_features(scene.xyz, fourth=0.4)
+    agreed = (f[:, :3] <= 1).all(axis=1) & (f[:, 4] <= 1)
+    fast = ring_ratios(scene.xyz, agreed, exclude=out, neighbourhood="dilation")
+    slow = _ring_by_loop(scene.xyz, agreed, out)
+    assert np.isfinite(slow).sum() > 0
+    np.testing.assert_array_equal(np.isfinite(fast), np.isfinite(slow))
+    finite = np.isfinite(slow)
+    np.testing.assert_allclose(fast[finite], slow[finite], rtol=1e-9, atol=1e-9)
+
+
+def test_ring_dilation_keeps_the_plane_of_its_own_ground():
+    """An L-shaped roof on a 20 % hillside with a terrace 3 m up beside its inner corner: the
+    box grown around the L takes in the terrace (so its plane is off), the cells within
+    reach of the L do not; the roof stays off the plane by its height either way."""
+    g = np.stack(np.meshgrid(np.arange(60.0), np.arange(60.0)), -1).reshape(-1, 2)
+    ell = (((g[:, 0] >= 20) & (g[:, 0] < 40) & (g[:, 1] >= 20) & (g[:, 1] < 26))
+           | ((g[:, 0] >= 20) & (g[:, 0] < 26) & (g[:, 1] >= 20) & (g[:, 1] < 40)))
+    terrace = (g[:, 0] >= 30) & (g[:, 1] >= 30)
+    z = 0.2 * g[:, 1] + np.where(terrace, 3.0, 0.0) + np.where(ell, 6.0, 0.0)
+    xyz = np.column_stack([g, z])
+    box = ring_ratios(xyz, ~ell, cell=1.0, reaches=(3.0,))
+    dil = ring_ratios(xyz, ~ell, cell=1.0, reaches=(3.0,), neighbourhood="dilation")
+    # the roof is 6 m over the hillside: 6 / 0.75 = 8 tolerances off its plane
+    assert np.allclose(dil[ell], 8.0 - 0.1 / 0.75, atol=1e-6)
+    assert np.isfinite(box[ell]).all() and np.abs(box[ell] - 8.0).max() > 0.5
+
+
+def test_ring_neighbourhood_option():
+    from lidar2city.errors import ConfigError
+
+    scene = make_terrain("steep_town", spacing=2.5, seed=1)
+    default = smrf_vote(scene.xyz)
+    ring = smrf_vote(scene.xyz, ring=1.25, ring_neighbourhood="dilation")
+    added = ring & ~default
+    assert added.any() and not (default & ~ring).any()
+    f, _ = vote_features(scene.xyz)
+    assert (f[added, 1] <= 1.0).all()
+    assert ground_errors(ring, scene.ground)["total"] < ground_errors(default,
+                                                                      scene.ground)["total"]
+    with pytest.raises(InputError, match="ring_neighbourhood"):
+        smrf_vote(scene.xyz, ring=1.25, ring_neighbourhood="disk")
+    with pytest.raises(InputError, match="neighbourhood"):
+        ring_ratios(scene.xyz, scene.ground, neighbourhood="disk")
+    config = GroundConfig(method="smrf_vote", ring=1.25, ring_neighbourhood="dilation")
+    assert config.method_params()["ring_neighbourhood"] == "dilation"
+    assert GroundConfig(method="smrf_vote").method_params()["ring_neighbourhood"] == "box"
+    with pytest.raises(ConfigError, match="ground.ring_neighbourhood"):
+        GroundConfig(ring_neighbourhood="disk")
+
+
+@pytest.mark.parametrize("neighbourhood", ["box", "dilation"])
+def test_ring_wanted_points_keep_their_ratios(neighbourhood):
+    """``wanted`` only skips patches: a wanted point's ratio is the one computed for every
+    point, and smrf_vote's ring (which asks only for the points it may give back) equals the
+    rule on the full ratios."""
+    scene = make_terrain("steep_town", spacing=2.5, seed=1)
+    f, out = vote_features(scene.xyz, fourth=0.4)
+    agreed = (f[:, :3] <= 1).all(axis=1) & (f[:, 4] <= 1)
+    full = ring_ratios(scene.xyz, agreed, exclude=out, neighbourhood=neighbourhood)
+    rule = vote_rule(f, **VOTE_RULE, veto=VOTE_VETO) & ~out
+    wanted = (f[:, 1] <= 1.0) & ~rule & ~out
+    assert 0 < wanted.sum() < np.isfinite(full).sum()
+    part = ring_ratios(scene.xyz, agreed, exclude=out, neighbourhood=neighbourhood,
+                       wanted=wanted)
+    np.testing.assert_array_equal(part[wanted], full[wanted])
+    assert np.isfinite(part).sum() < np.isfinite(full).sum()
+    expected = rule | ((full <= 1.25) & (f[:, 1] <= 1.0) & ~out)
+    got = smrf_vote(scene.xyz, ring=1.25, ring_neighbourhood=neighbourhood)
+    np.testing.assert_array_equal(got, expected)
+    with pytest.raises(InputError, match="wanted"):
+        ring_ratios(scene.xyz, agreed, wanted=wanted[:-1])

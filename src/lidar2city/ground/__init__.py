@@ -35,7 +35,7 @@ from .dtm import Dtm, dtm_from_ground, height_above_ground
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
-from .ring_plane import ring_ratios
+from .ring_plane import RING_NEIGHBOURHOODS, ring_ratios
 from .segment_filter import anchored_objects, smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
 from .tin_filter import ptd
@@ -151,6 +151,10 @@ class GroundConfig:
                                      "the lenient surface is ground when within this many "
                                      "tolerances of the plane of the ground around its surface "
                                      "patch (e.g. 1.25); default none")
+    ring_neighbourhood: Literal["box", "dilation"] = field(
+        "box", "smrf_vote with ring: the ground around a patch its plane is fitted to, the "
+        "patch's bounding box grown by 3, 6, 12, 24 m (box) or the cells within that reach of "
+        "its own cells (dilation)")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -194,6 +198,9 @@ class GroundConfig:
             raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
         if self.ring is not None and not self.ring > 0:
             raise ConfigError(f"ground.ring: must be > 0, got {self.ring!r}")
+        if self.ring_neighbourhood not in RING_NEIGHBOURHOODS:
+            raise ConfigError(f"ground.ring_neighbourhood: {self.ring_neighbourhood!r} is not one "
+                              f"of {', '.join(RING_NEIGHBOURHOODS)}")
         if self.connect is not None and not (isinstance(self.connect, int) and self.connect >= 0):
             raise ConfigError(f"ground.connect: must be an integer >= 0, got {self.connect!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):

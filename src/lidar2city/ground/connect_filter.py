@@ -95,11 +95,16 @@ def surface_patches(xyz, *, exclude=None, cell: float | None = None, jump: float
     r, c = cell_of(xyz[:, :2], spec)
     flat = r * w + c
     kept = np.flatnonzero(keep)
-    order = kept[np.lexsort((xyz[kept, 2], flat[kept]))]
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = flat[order[1:]] != flat[order[:-1]]
-    lowest = order[first]
-    cells = flat[lowest]
+    # each cell's lowest point (the first in index order among equally low ones), without
+    # sorting the points: the least height per cell, then the least index at that height
+    fk, zk = flat[kept], xyz[kept, 2]
+    zmin = np.full(h * w, np.inf)
+    np.minimum.at(zmin, fk, zk)
+    low = kept[zk == zmin[fk]]
+    first = np.full(h * w, len(xyz))
+    np.minimum.at(first, flat[low], low)
+    cells = np.flatnonzero(first < len(xyz))
+    lowest = first[cells]
     zmin = np.full(h * w, np.nan)
     zmin[cells] = xyz[lowest, 2]
     idx = np.arange(h * w).reshape(h, w)
@@ -124,7 +129,8 @@ def _spacing(xyz):
     """Point spacing (m): ``1 / sqrt(density)`` over the occupied cells of a 5 m grid."""
     spec = grid_spec(xyz[:, :2], cell=_SPACING_GRID)
     r, c = cell_of(xyz[:, :2], spec)
-    occupied = np.unique(r * spec.shape[1] + c).size
+    occupied = int(np.count_nonzero(np.bincount(r * spec.shape[1] + c,
+                                                minlength=spec.shape[0] * spec.shape[1])))
     return float(np.sqrt(occupied * _SPACING_GRID ** 2 / len(xyz)))
 
 
