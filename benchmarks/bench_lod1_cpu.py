@@ -17,7 +17,8 @@ and their median are printed with the load average before and after.
 ``--profile``: instead, per round and tree, the issue's command (``reconstruct`` of the
 tile with its footprints, LoD 1.2 + 1.3 + 2.2, one process) runs under cProfile timed
 in process CPU seconds, and the cumulative CPU of the LoD1 stage's functions and of
-the run's serial start is printed (the profiler inflates them, ~2x: compare trees).
+the run's serial start is printed (the profiler inflates them, ~2x: compare trees), with
+the number of modules the run imported and whether it loaded GDAL (pyogrio).
 ``--imports``: instead, per tree, the least CPU of ``--rounds`` fresh processes importing
 what a run with footprints imports before its first building (``lidar2city.tools.reconstruct``
 and ``lidar2city.lod.lod1``; numpy, shapely and scipy imported first, as a run has them
@@ -97,14 +98,16 @@ cum = {}
 for (f, _, name), v in st.stats.items():
     key = f.replace("\\", "/").split("lidar2city/")[-1] + ":" + name
     cum[key] = cum.get(key, 0.0) + v[3]
-print(json.dumps({"total": st.total_tt, "cum": cum}))
+print(json.dumps({"total": st.total_tt, "cum": cum, "modules": len(sys.modules),
+                  "gdal": "pyogrio" in sys.modules}))
 '''
 
 #: the functions whose cumulative CPU ``--profile`` prints (module path: name)
 STAGE = ("lod/lod1.py:reconstruct_building", "lod/lod1.py:_lod13", "lod/lod13.py:height_parts",
          "lod/lod13.py:_height_labels", "lod/lod1.py:_rmse", "lod/lod1.py:_codes",
          "roof/building.py:part_floor", "tools/reconstruct.py:plan_reconstruct",
-         "io/las.py:scan_tiles", "io/las.py:read_tile")
+         "io/las.py:scan_tiles", "io/vector.py:vector_crs", "io/vector.py:read_footprints",
+         "io/las.py:read_tile")
 
 
 def profiled(src, d) -> dict:
@@ -184,6 +187,9 @@ def main():
                 v = [g["total"] if key == "total" else g["cum"].get(key, 0.0) for g in got[name]]
                 cells.append(f"{name} {statistics.median(v):7.3f}")
             print(f"{key:40s} " + "  ".join(cells) + "  (CPU s under cProfile, median)")
+        print("modules imported by the run: " + "  ".join(
+            f"{name} {got[name][0]['modules']} (GDAL / pyogrio "
+            f"{'loaded' if got[name][0]['gdal'] else 'not loaded'})" for name, _ in trees))
         print(f"load average after: {_load()}")
         return
     ratios = []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import shapely
 
-from lidar2city.io.gpkg import read_gpkg_raw
+from lidar2city.io.gpkg import gpkg_crs, read_gpkg_raw
 from lidar2city.io.vector import read_footprints, write_polygons
 
 pyogrio_raw = pytest.importorskip("pyogrio.raw")
@@ -99,3 +99,63 @@ def test_missing_footprint_ids_take_the_feature_id(tmp_path, suffix, caplog):
     want = ["12", "1", "14", "3"] if suffix == ".geojson" else ["a", "2", "3", "4"]
     assert fps.ids == want
     assert "have no 'id'" in caplog.text
+
+
+def _gdal_crs(path, layer=None):
+    import pyogrio
+
+    return pyogrio.read_info(str(path), layer=layer)["crs"]
+
+
+@pytest.mark.parametrize("name", ["delft/footprints_bgt.gpkg", "alexandria/footprints_west.gpkg"])
+def test_plain_crs_as_gdal_reads_it(data, name):
+    path = data / name
+    assert gpkg_crs(path) == _gdal_crs(path)
+    table = pyogrio_raw.read(str(path), max_features=1)[0]  # (the layer GDAL reads first)
+    layer = __import__("pyogrio").list_layers(str(path))[0][0]
+    assert table["crs"] == gpkg_crs(path, layer=layer)
+    assert gpkg_crs(path, layer="nope") is None
+
+
+def test_crs_steps_aside_for_several_layers_or_another_authority(data, tmp_path):
+    from pyproj import CRS
+
+    assert gpkg_crs(data / "delft" / "bgt_terrain.gpkg") is None  # several layers
+    assert gpkg_crs(tmp_path / "x.geojson") is None
+    bad = tmp_path / "x.gpkg"
+    bad.write_bytes(b"not sqlite")
+    assert gpkg_crs(bad) is None
+    path = tmp_path / "fp.gpkg"
+    write_polygons(path, [shapely.box(0, 0, 10, 8)], {"id": ["a"]}, origin=(100.0, 200.0),
+                   crs=CRS.from_epsg(28992))
+    assert gpkg_crs(path) == "EPSG:28992" == _gdal_crs(path)
+    with sqlite3.connect(path) as con:  # an SRS of another organisation: GDAL's business
+        con.execute("UPDATE gpkg_spatial_ref_sys SET organization = 'ACME' "
+                    "WHERE organization_coordsys_id = 28992")
+    con.close()
+    assert gpkg_crs(path) is None
+
+
+def test_vector_crs_of_a_plain_geopackage_without_gdal(data, tmp_path):
+    """A run with a plain GeoPackage's footprints never loads GDAL (pyogrio): its CRS
+    and its features are read with sqlite3, the same CRS as GDAL's."""
+    import subprocess
+    import sys
+
+    from pyproj import CRS
+
+    from lidar2city.io.vector import vector_crs
+
+    path = data / "delft" / "footprints_bgt.gpkg"
+    assert vector_crs(path) == CRS.from_user_input(_gdal_crs(path))
+    code = ("import sys; from lidar2city.io.vector import vector_crs, read_footprints; "
+            f"c = vector_crs({str(path)!r}); f, _ = read_footprints({str(path)!r}); "
+            "print(c.to_epsg(), len(f), 'pyogrio' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["28992", "132", "False"]
+    # geographic: GDAL is asked (its bounds tell degrees from projected coordinates)
+    geo = tmp_path / "geo.gpkg"
+    write_polygons(geo, [shapely.box(4.0, 52.0, 4.001, 52.001)], {"id": ["a"]},
+                   origin=(0.0, 0.0), crs=CRS.from_epsg(4326))
+    assert gpkg_crs(geo) == "EPSG:4326"
+    assert vector_crs(geo) == CRS.from_user_input(_gdal_crs(geo))

@@ -64,6 +64,34 @@ def test_children_see_what_this_process_held_when_it_handed_the_items_out():
     assert got == {i: int(state["big"][i::7].sum()) + 5 for i in range(7)}
 
 
+def test_this_process_objects_are_frozen_while_its_children_run_then_let_go():
+    """Its collections during the map neither walk nor write to (copy) what the
+    children share; after it, the objects are the collector's again, and a freeze
+    made by someone else is left as it was."""
+    import gc
+
+    me = os.getpid()
+    assert gc.get_freeze_count() == 0
+
+    def frozen_here(i):
+        return os.getpid(), gc.get_freeze_count()
+
+    with ForkExecutor(2) as ex:
+        got = dict(ex.map(frozen_here, range(8), costs=[1.0] * 8))
+    mine = [n for pid, n in got.values() if pid == me]
+    assert mine and all(n > 0 for n in mine)
+    assert len({pid for pid, _ in got.values()}) == 2
+    assert gc.get_freeze_count() == 0
+    gc.freeze()
+    try:
+        before = gc.get_freeze_count()
+        with ForkExecutor(2) as ex:
+            assert len(dict(ex.map(frozen_here, range(4), costs=[1.0] * 4))) == 4
+        assert gc.get_freeze_count() > before // 2  # (not let go: a frozen object may die)
+    finally:
+        gc.unfreeze()
+
+
 def test_a_dead_childs_run_is_run_again_here(caplog):
     me = os.getpid()
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_gpkg_raw"]
+__all__ = ["gpkg_crs", "read_gpkg_raw"]
 
 #: declared column type -> numpy dtype, as GDAL maps it (anything else: read with GDAL)
 _TYPES = {"TEXT": object, "INTEGER": np.int64, "REAL": np.float64, "DOUBLE": np.float64}
@@ -83,6 +83,54 @@ def read_gpkg_raw(path, *, layer=None, fids=None, skip_features=0, max_features=
         return None
     finally:
         con.close()
+
+
+def gpkg_crs(path, *, layer=None):
+    """The CRS (``"EPSG:n"``) of a plain GeoPackage's one feature table, or None.
+
+    Plain: the file's ``gpkg_contents`` registers one table, of features, with one
+    geometry column (its layer is then the one GDAL reads, the only one that can
+    hold polygons), whose spatial reference system is an EPSG code (the string
+    ``pyogrio.read_info`` gives as its ``crs``). ``layer``: None or that table's
+    name. None for anything else: the caller asks GDAL.
+    """
+    p = Path(path)
+    if p.suffix.lower() != ".gpkg" or (layer is not None and not isinstance(layer, str)):
+        return None
+    try:
+        con = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return None
+    try:
+        table = _plain_table(con, layer)
+        return None if table is None else _epsg(con, table[1])
+    except (sqlite3.Error, ValueError, TypeError):
+        return None
+    finally:
+        con.close()
+
+
+def _plain_table(con, layer):
+    """``(geometry column, srs_id)`` of the table ``layer`` (default the only one), or None
+    when the file registers anything but one feature table with one geometry column."""
+    contents = con.execute("SELECT table_name, data_type FROM gpkg_contents").fetchall()
+    cols = con.execute("SELECT table_name, column_name, srs_id FROM gpkg_geometry_columns"
+                       ).fetchall()
+    if len(contents) != 1 or len(cols) != 1 or str(contents[0][1]).lower() != "features":
+        return None
+    table, column, srs_id = cols[0]
+    if contents[0][0] != table or (layer is not None and layer != table):
+        return None
+    return column, srs_id
+
+
+def _epsg(con, srs_id):
+    """``"EPSG:n"`` of the spatial reference system ``srs_id``, or None (another authority)."""
+    srs = con.execute("SELECT organization, organization_coordsys_id FROM gpkg_spatial_ref_sys "
+                      "WHERE srs_id = ?", (srs_id,)).fetchall()
+    if len(srs) != 1 or str(srs[0][0]).upper() != "EPSG" or int(srs[0][1]) <= 0:
+        return None
+    return f"EPSG:{int(srs[0][1])}"
 
 
 def _read(con, layer, fids, skip_features, max_features):

@@ -151,6 +151,16 @@ class ForkExecutor:
                     return r, list(mine)[:AHEAD_RUNS]
                 return mine.pop(), []
 
+        # what this process holds at the fork is moved out of its collector's reach
+        # while the children share it (:func:`_frozen`): its collections during the map
+        # neither walk those objects nor write to, and so copy, the pages they share
+        frozen = _frozen()
+        # and the heap's free pages given back to the system: a page the two sides
+        # share and one of them allocates into is copied, and the other keeps its
+        # stale copy; given back, it is one fresh page of the side that uses it
+        from .task import give_back_memory
+
+        give_back_memory()
         procs, conns = _fork_children(children, fn, items, args, runs, run_hook)
         threads = []
 
@@ -242,6 +252,26 @@ class ForkExecutor:
                     after(-1)
         finally:
             _end_children(procs, conns, threads)
+            frozen()
+
+
+def _frozen():
+    """Move every object this process's collector tracks to its permanent generation
+    (:func:`gc.freeze`), as Python's documentation advises before a fork; returns the
+    function that moves them back (:func:`gc.unfreeze`), for when the children are gone.
+
+    A collection in this process while its children run (every ``gc`` threshold's
+    allocations of its own share of the items) walks every object it tracks and writes
+    to each one's header: each page of the parent's objects written so is copied,
+    though neither side needed a copy. Frozen, they are not walked: a cycle made
+    before the fork is collected only after the map (at most what the map leaves).
+    Objects already frozen (a caller's own freeze) stay frozen: only the ones moved
+    here are let go.
+    """
+    if gc.get_freeze_count():  # someone else's freeze: leave the permanent generation alone
+        return lambda: None
+    gc.freeze()
+    return gc.unfreeze
 
 
 def _fork_children(count, fn, items, args, runs, run_hook):
