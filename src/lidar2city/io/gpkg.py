@@ -70,19 +70,7 @@ def read_gpkg_raw(path, *, layer=None, fids=None, skip_features=0, max_features=
         ``field_data`` one array per field (int64, float64 or object of str), as
         ``pyogrio.raw.read`` gives them; None: read the file with GDAL.
     """
-    p = Path(path)
-    if p.suffix.lower() != ".gpkg" or (layer is not None and not isinstance(layer, str)):
-        return None
-    try:
-        con = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True)
-    except sqlite3.Error:
-        return None
-    try:
-        return _read(con, layer, fids, skip_features, max_features)
-    except (sqlite3.Error, struct.error, ValueError, TypeError):
-        return None
-    finally:
-        con.close()
+    return _opened(path, layer, lambda con: _read(con, layer, fids, skip_features, max_features))
 
 
 def gpkg_crs(path, *, layer=None):
@@ -94,6 +82,17 @@ def gpkg_crs(path, *, layer=None):
     ``pyogrio.read_info`` gives as its ``crs``). ``layer``: None or that table's
     name. None for anything else: the caller asks GDAL.
     """
+    def crs(con):
+        table = _plain_table(con, layer)
+        return None if table is None else _epsg(con, table[1])
+
+    return _opened(path, layer, crs)
+
+
+def _opened(path, layer, query):
+    """``query(connection)`` on the GeoPackage ``path`` opened read-only, or None when
+    it is not a ``*.gpkg``, ``layer`` is not None or a name, or SQLite, the WKB or
+    the values fail (the caller then reads the file with GDAL)."""
     p = Path(path)
     if p.suffix.lower() != ".gpkg" or (layer is not None and not isinstance(layer, str)):
         return None
@@ -102,9 +101,8 @@ def gpkg_crs(path, *, layer=None):
     except sqlite3.Error:
         return None
     try:
-        table = _plain_table(con, layer)
-        return None if table is None else _epsg(con, table[1])
-    except (sqlite3.Error, ValueError, TypeError):
+        return query(con)
+    except (sqlite3.Error, struct.error, ValueError, TypeError):
         return None
     finally:
         con.close()
