@@ -1082,11 +1082,9 @@ def extend_to_hits(segments, footprint, *, max_ext, eps=1e-3):
         left = ~np.isin(todo, done)
         if last:
             # a first crossing GEOS did not confirm (a near miss): every piece then
-            rest = np.isin(ir, todo[left]) & ~keep
-            if rest.any():
-                _cut_first(rays, lines, ir[rest | (keep & np.isin(ir, todo[left]))],
-                           il[rest | (keep & np.isin(ir, todo[left]))], where, segments, out,
-                           eps, None)
+            again = np.isin(ir, todo[left])
+            if (again & ~keep).any():
+                _cut_first(rays, lines, ir[again], il[again], where, segments, out, eps, None)
             break
         todo = todo[left]
         reach *= 4

@@ -88,7 +88,7 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=12, max_pairs=8):
     found = _crossing_pairs(issues) if precision else None
     if found is None or found[0] > max_pairs:
         return solid, issues
-    out, left = solid, issues
+    out = solid  # the solid with the pairs mended so far (kept only once all are)
     while found is not None:
         count, (a, b) = found
         if max(a, b) >= len(out.surfaces):
@@ -106,7 +106,7 @@ def nudge_on_grid(solid, issues, precision, *, max_checks=12, max_pairs=8):
                 return Solid(moved, out.surfaces), []
             fewer = _crossing_pairs(now)
             if fewer is not None and fewer[0] < count:
-                out, left, found = Solid(moved, out.surfaces), now, fewer
+                out, found = Solid(moved, out.surfaces), fewer
                 break
         else:
             break
