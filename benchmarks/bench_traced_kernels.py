@@ -1,8 +1,9 @@
 """CPU of kernels of the no-footprints reconstruct on the Delft tile (issue 13), replayed:
 the LoD1.2 / 1.3 RMSE's point-to-prism distances, the arrangement's cell labels, and
 (``--all``) the LoD2.2 plane segmentation, boundary lines, edge refinement, short-edge
-collapse and the LoD1.3 height parts, and the traced outlines' direction search
-(``dominant_direction``, called by the footprint snake).
+collapse and the LoD1.3 height parts, the chain ends lengthened to their first hit
+(``extend_to_hits``), and the traced outlines' direction search (``dominant_direction``,
+called by the footprint snake).
 
 Usage: python benchmarks/bench_traced_kernels.py [DATA_DIR] [--repeat N] [--src SRC] [--all]
 [--footprints] [--only NAME,...]
@@ -63,7 +64,7 @@ def main():
     if args.all or args.only:
         where.update(segment_planes=bld, roof_lines=bld, arrangement_partition=bld,
                      refine_partition=bld, collapse_short_edges=bld, height_parts=lod1,
-                     dominant_direction=rsnake)
+                     extend_to_hits=arr, dominant_direction=rsnake)
     if args.only:
         where = {name: where[name] for name in args.only.split(",")}
     calls = {name: [] for name in where}

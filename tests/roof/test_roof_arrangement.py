@@ -56,8 +56,9 @@ def _first_hits_by_every_line(segments, footprint, max_ext, eps=1e-3):
     return out
 
 
+@pytest.mark.parametrize("max_ext", [75.0, 30.0])  # rays found in rounds; in one round
 @pytest.mark.parametrize("seed", range(6))
-def test_extend_to_hits_first_hit_as_by_every_line(seed):
+def test_extend_to_hits_first_hit_as_by_every_line(seed, max_ext):
     # random chains in a 60 m block (most rays cross many lines; some meet none, some
     # run along a line): the first hit of each ray as when cut with every whole line
     rng = np.random.default_rng(seed)
@@ -71,8 +72,8 @@ def test_extend_to_hits_first_hit_as_by_every_line(seed):
         segs.append(np.vstack([a, a + np.cumsum(steps, axis=0)]))
     segs.append(np.array([[10.0, 10.0], [20.0, 10.0]]))
     segs.append(np.array([[22.0, 10.0], [30.0, 10.0]]))  # on the line of the one before
-    got = extend_to_hits(segs, block, max_ext=75.0)
-    want = _first_hits_by_every_line(segs, block, 75.0)
+    got = extend_to_hits(segs, block, max_ext=max_ext)
+    want = _first_hits_by_every_line(segs, block, max_ext)
     assert len(got) == len(want)
     for g, w in zip(got, want, strict=True):
         np.testing.assert_allclose(g, w, rtol=0, atol=1e-9)
