@@ -92,6 +92,22 @@ def test_this_process_objects_are_frozen_while_its_children_run_then_let_go():
         gc.unfreeze()
 
 
+
+def test_a_fork_that_fails_lets_the_objects_go(monkeypatch):
+    """A map whose children cannot be forked raises, and leaves nothing frozen."""
+    import gc
+
+    from lidar2city.tools import forked
+
+    def no_fork(*a, **k):
+        raise OSError("Resource temporarily unavailable")
+
+    monkeypatch.setattr(forked, "_fork_children", no_fork)
+    assert gc.get_freeze_count() == 0
+    with pytest.raises(OSError, match="unavailable"), ForkExecutor(2) as ex:
+        list(ex.map(abs, range(8), costs=[1.0] * 8))
+    assert gc.get_freeze_count() == 0
+
 def test_a_dead_childs_run_is_run_again_here(caplog):
     me = os.getpid()
 

@@ -161,7 +161,11 @@ class ForkExecutor:
         from .task import give_back_memory
 
         give_back_memory()
-        procs, conns = _fork_children(children, fn, items, args, runs, run_hook)
+        try:
+            procs, conns = _fork_children(children, fn, items, args, runs, run_hook)
+        except BaseException:
+            frozen()  # no child to share with: the objects go back to the collector
+            raise
         threads = []
 
         def feed(k):
