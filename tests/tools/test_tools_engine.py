@@ -1061,3 +1061,34 @@ os._exit(0)
                           timeout=120)
     assert done.returncode == 0, done.stderr
     assert "leaked" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("balance", [False, True])
+def test_run_dealer_hands_every_run_out_once(balance):
+    """Whatever order the sides ask in, each run goes out once; this process starts on
+    the last share (the front of the queue with ``balance``), a worker on its own, and
+    a run given back is this process's next."""
+    import random
+
+    from lidar2city.tools.engine import RunDealer
+
+    for seed in range(20):
+        rng = random.Random(seed)
+        dealer = RunDealer(11, 2, balance=balance)
+        first = dealer.mine()[0]
+        assert first == (0 if balance else 7)  # shares (0, 3), (3, 7), (7, 11)
+        if not balance:
+            assert dealer.theirs(0)[0] == 0 and dealer.theirs(1)[0] == 3
+        got = [first] + ([] if balance else [0, 3])
+        while True:  # a worker with none left stops; this process takes from every share
+            here = rng.random() < 0.5
+            r, ahead = dealer.mine() if here else dealer.theirs(rng.randrange(2))
+            if r is None:
+                if here:
+                    break
+                continue
+            assert len(ahead) <= 3 and r not in ahead
+            got.append(r)
+        assert sorted(got) == list(range(11))
+        dealer.rerun.append(5)
+        assert dealer.mine() == (5, []) and dealer.mine() == (None, [])

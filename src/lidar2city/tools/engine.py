@@ -34,6 +34,7 @@ import os
 import sys
 import threading
 import time
+from collections import deque
 
 from ..errors import DependencyError, InputError
 
@@ -359,45 +360,25 @@ class DaskExecutor:
         front by both sides. Results and retries as :meth:`map`.
         """
         import queue
-        from collections import deque
 
         from distributed import as_completed
 
         n = len(items)
         runs = [(i, i + 1) for i in range(n)] if balance else runs_of(n, self.workers, costs)
-        shares = shares_of(len(runs), self.workers)
-        if balance:
-            mine, theirs = deque(range(len(runs))), [deque() for _ in shares[:-1]]
-        else:
-            mine = deque(range(*shares[-1]))
-            theirs = [deque(range(a, b)) for a, b in shares[:-1]]
-        lock, results, stop = threading.Lock(), queue.SimpleQueue(), threading.Event()
+        dealer = RunDealer(len(runs), self.workers - 1, balance=balance)
+        lock, results, stop = dealer.lock, queue.SimpleQueue(), threading.Event()
         futures, end, finished = {}, object(), []
 
         def items_of(rs):
             return [x for r in rs for x in items[slice(*runs[r])]]
 
         def take_mine():
-            with lock:
-                if mine:
-                    r = mine.popleft()
-                    return r, items_of(list(mine)[:AHEAD_RUNS])
-                left = max(theirs, key=len, default=None)
-                return (left.pop(), []) if left else (None, [])
+            r, ahead = dealer.mine()
+            return r, items_of(ahead)
 
         def take_theirs(k):
-            """The next run of worker ``k``'s share, else the last of mine."""
-            with lock:
-                share = theirs[k] if k < len(theirs) else None
-                if share:
-                    r = share.popleft()
-                    return r, items_of(list(share)[:AHEAD_RUNS])
-                if not mine:
-                    return None, []
-                if balance:
-                    r = mine.popleft()
-                    return r, items_of(list(mine)[:AHEAD_RUNS])
-                return mine.pop(), []
+            r, ahead = dealer.theirs(k)
+            return r, items_of(ahead)
 
         def feed():
             try:
@@ -844,6 +825,55 @@ def shares_of(runs: int, workers: int) -> list:
     contiguous shares of (nearly) equal numbers of runs."""
     cuts = [runs * k // workers for k in range(workers + 1)]
     return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+class RunDealer:
+    """The runs of a map dealt between this process and ``others`` workers, as
+    :meth:`DaskExecutor._map_shared` and :class:`lidar2city.tools.forked.ForkExecutor`
+    deal them: the workers get the first contiguous shares (:func:`shares_of`), this
+    process the last; ``balance``: one queue of single runs in order, taken from its
+    front by every side. A side whose share is done takes the last run of another's:
+    this process the largest share's not yet handed out, a worker this process's.
+    Runs given back (:attr:`rerun`: a worker died with them) go to this process first.
+    Safe to call from several threads (:attr:`lock`)."""
+
+    def __init__(self, runs: int, others: int, *, balance: bool = False):
+        if balance:
+            self._mine, self._theirs = deque(range(runs)), [deque() for _ in range(others)]
+        else:
+            shares = shares_of(runs, others + 1)
+            self._mine = deque(range(*shares[-1]))
+            self._theirs = [deque(range(a, b)) for a, b in shares[:-1]]
+        self._balance = balance
+        self.rerun = deque()
+        self.lock = threading.Lock()
+
+    def mine(self):
+        """``(run, runs after it in this process's share, at most AHEAD_RUNS)``;
+        ``(None, [])`` when none is left."""
+        with self.lock:
+            if self.rerun:
+                return self.rerun.popleft(), []
+            if self._mine:
+                r = self._mine.popleft()
+                return r, list(self._mine)[:AHEAD_RUNS]
+            left = max(self._theirs, key=len, default=None)
+            return (left.pop(), []) if left else (None, [])
+
+    def theirs(self, k: int):
+        """The next run of worker ``k``'s share, else the last of this process's (the
+        front, with ``balance``), with the runs after it as :meth:`mine`."""
+        with self.lock:
+            share = self._theirs[k] if k < len(self._theirs) else None
+            if share:
+                r = share.popleft()
+                return r, list(share)[:AHEAD_RUNS]
+            if not self._mine:
+                return None, []
+            if self._balance:
+                r = self._mine.popleft()
+                return r, list(self._mine)[:AHEAD_RUNS]
+            return self._mine.pop(), []
 
 
 def _dealt(shares) -> list:

@@ -40,7 +40,6 @@ import queue
 import signal
 import sys
 import threading
-from collections import deque
 
 logger = logging.getLogger(__name__)
 
@@ -104,7 +103,7 @@ class ForkExecutor:
         :func:`~lidar2city.tools.engine.shares_of`; ``balance``: one queue of
         single items in order, taken from its front by every side); a single
         run, or a single worker, runs here without a fork."""
-        from .engine import AHEAD_RUNS, InProcess, runs_of, shares_of
+        from .engine import InProcess, RunDealer, runs_of
 
         items = list(items)
         if not items:
@@ -115,41 +114,15 @@ class ForkExecutor:
         if children < 1:
             yield from InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead)
             return
-        shares = shares_of(len(runs), children + 1)
-        if balance:
-            mine, theirs = deque(range(len(runs))), [deque() for _ in range(children)]
-        else:
-            mine = deque(range(*shares[-1]))
-            theirs = [deque(range(a, b)) for a, b in shares[:-1]]
-        rerun: deque = deque()  # runs of children that died: run here
-        lock, results = threading.Lock(), queue.SimpleQueue()
-
-        def items_of(rs):
-            return [x for r in rs for x in items[slice(*runs[r])]]
+        dealer = RunDealer(len(runs), children, balance=balance)
+        # runs of children that died go back to the dealer's rerun: run here
+        lock, rerun, results = dealer.lock, dealer.rerun, queue.SimpleQueue()
 
         def take_mine():
-            with lock:
-                if rerun:
-                    return rerun.popleft(), []
-                if mine:
-                    r = mine.popleft()
-                    return r, items_of(list(mine)[:AHEAD_RUNS])
-                left = max(theirs, key=len, default=None)
-                return (left.pop(), []) if left else (None, [])
+            r, ahead = dealer.mine()
+            return r, [x for q in ahead for x in items[slice(*runs[q])]]
 
-        def take_theirs(k):
-            """The next run of child ``k``'s share, else the last of mine."""
-            with lock:
-                share = theirs[k]
-                if share:
-                    r = share.popleft()
-                    return r, list(share)[:AHEAD_RUNS]
-                if not mine:
-                    return None, []
-                if balance:
-                    r = mine.popleft()
-                    return r, list(mine)[:AHEAD_RUNS]
-                return mine.pop(), []
+        take_theirs = dealer.theirs  # a child is sent run indices: it holds the items
 
         # what this process holds at the fork is moved out of its collector's reach
         # while the children share it (:func:`_frozen`): its collections during the map
