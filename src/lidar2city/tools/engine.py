@@ -675,6 +675,9 @@ _SEMAPHORE_LOCK = threading.RLock()
 #: set by :func:`close_semaphores` when an interrupted run stops: no semaphore made
 #: after it is left to the resource tracker
 _SEMAPHORES_CLOSED = [False]
+#: names :func:`release_semaphores` unlinked and unregistered itself: a finalizer
+#: that unlinked one of them concurrently does not tell the tracker a second time
+_RELEASED: set = set()
 
 
 def _track_semaphores() -> None:
@@ -703,9 +706,20 @@ def _track_semaphores() -> None:
             return register(name, rtype)
 
     def tracked_unregister(name, rtype):
-        if rtype == "semaphore":
+        if rtype != "semaphore":
+            return unregister(name, rtype)
+        # the tracker is told and the name forgotten under the lock: a finalizer in a
+        # cluster's thread that had unlinked its semaphore when the interrupt came
+        # either finishes telling the tracker before release_semaphores looks, or
+        # finds it told already; it is never cut off between forgetting and telling
+        # (the tracker then warned of a leaked semaphore it could not unlink) nor
+        # tells twice (the tracker then printed a KeyError's traceback)
+        with _SEMAPHORE_LOCK:
+            if name in _RELEASED:
+                return None
+            done = unregister(name, rtype)
             _SEMAPHORES.discard(name)
-        return unregister(name, rtype)
+            return done
 
     tracked_register._lidar2city = True
     resource_tracker.register, resource_tracker.unregister = tracked_register, tracked_unregister
@@ -742,24 +756,34 @@ def release_semaphores() -> None:
     sync = sys.modules.get("multiprocessing.synchronize")
     if util is None or sync is None:
         return
-    finalizers = []
-    for _ in range(10):  # another thread may be adding one: take a stable snapshot
-        try:
-            finalizers = list(util._finalizer_registry.values())
-            break
-        except RuntimeError:
-            continue
-    for finalizer in finalizers:
-        if getattr(finalizer, "_callback", None) is sync.SemLock._cleanup:
-            with contextlib.suppress(Exception):
-                finalizer()
-    # registered, but their finalizer not made yet when the run was stopped
     from multiprocessing import resource_tracker
 
-    for name in list(_SEMAPHORES):
-        _unlink_semaphore(name)
-        with contextlib.suppress(Exception):
-            resource_tracker.unregister(name, "semaphore")
+    # a finalizer another thread is running tells the tracker before this looks, or
+    # after it, finding the name released (tracked_unregister)
+    got = _SEMAPHORE_LOCK.acquire(timeout=1.0)
+    try:
+        finalizers = []
+        for _ in range(10):  # another thread may be adding one: take a stable snapshot
+            try:
+                finalizers = list(util._finalizer_registry.values())
+                break
+            except RuntimeError:
+                continue
+        for finalizer in finalizers:
+            if getattr(finalizer, "_callback", None) is sync.SemLock._cleanup:
+                with contextlib.suppress(Exception):
+                    finalizer()
+        # registered, but their finalizer not made yet when the run was stopped, or
+        # being run by another thread that has unlinked the semaphore, not yet told
+        for name in list(_SEMAPHORES):
+            _unlink_semaphore(name)
+            with contextlib.suppress(Exception):
+                resource_tracker.unregister(name, "semaphore")
+            _SEMAPHORES.discard(name)
+            _RELEASED.add(name)
+    finally:
+        if got:
+            _SEMAPHORE_LOCK.release()
 
 
 def kill_forkserver():
