@@ -801,6 +801,20 @@ def setting_loo(samples, scenes, settings, what):
         held.append(ground_errors(vote_rule(feats[label][0][name], **rule, veto=veto),
                                   ref)["total"])
         line.append(f"{name} {100 * held[-1]:.2f} ({label})")
+        # how near a tie the fold's wall distance was: each clear's objective on the others
+        # and its held-out error, the rest of the fold's rule kept
+        real, syn, _ = feats[label]
+        sets = [(real[n], samples[n][1], 1.0) for n in others] + syn
+        total = sum(w for _, _, w in sets)
+        ties = []
+        for clear in CLEAR:
+            r = dict(rule, clear=clear)
+            objective = sum(w * np.mean(vote_rule(f, **r, veto=veto) != g)
+                            for f, g, w in sets) / total
+            e = ground_errors(vote_rule(real[name], **r, veto=veto), ref)["total"]
+            ties.append(f"{clear:g} {100 * objective:.3f}/{100 * e:.2f}")
+        print(f"  {name} fold ({label}, clear {rule['clear']:g}): clear objective/held-out % "
+              f"{', '.join(ties)}")
     print(f"leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %: "
           f"{'; '.join(line)}")
     for label in settings:
