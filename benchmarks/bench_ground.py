@@ -197,7 +197,9 @@ SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf"),
                   "smrf_vote, connect 3": ("smrf_vote", "connect = 3"),
                   "smrf_vote, ring 1.25": ("smrf_vote", "ring = 1.25"),
                   "smrf_vote, ring 1.25 dilation": ("smrf_vote", 'ring = 1.25\n'
-                                                    'ring_neighbourhood = "dilation"')}
+                                                    'ring_neighbourhood = "dilation"'),
+                  "smrf_vote, wall_anchor 2": ("smrf_vote", "wall_anchor = 2.0"),
+                  "smrf_vote, wall_anchor 3": ("smrf_vote", "wall_anchor = 3.0")}
 
 
 def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),

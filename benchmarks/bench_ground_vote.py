@@ -4,7 +4,8 @@ Usage::
 
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
         [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain]
-        [--wall-slopes 1,1.5,2,3] [--anatomy [PNG_DIR]]
+        [--wall-slopes 1,1.5,2,3] [--wall-anchors 1.5,2,2.5,3] [--walls]
+        [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
@@ -84,7 +85,15 @@ script:
    terrain-structure give-backs (:func:`terrain_loo`: between agreed ground
    above and below, or near the surface inpainted from it); with
    ``--wall-slopes``, the leave-one-out with the wall-marking slope chosen
-   per fold too (:func:`wall_slope_loo`);
+   per fold too (:func:`wall_slope_loo`); with ``--wall-anchors``, the same
+   with ``smrf_vote``'s ``wall_anchor`` (a wall region counts only when the
+   opening also cuts one of its cells at that slope: a building's step, not
+   an embankment) chosen per fold among off and the slopes given, and each
+   fixed (:func:`wall_anchor_loo`); with ``--walls``, what the wall mark
+   holds on each sample and held-out kind (cells mostly reference ground,
+   regions, what the anchor leaves out) and the default rule's error with
+   the walls as marked, with every wall cell holding reference ground taken
+   out (an oracle), and anchored (:func:`wall_anatomy`);
 10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
@@ -645,23 +654,136 @@ def wall_slope_loo(samples, scenes, slopes):
     kinds (``--wall-slopes``; session 14: a steep embankment is marked as a wall at 1.0)."""
     import lidar2city.ground.vote_filter as vote_module
 
+    def features_at(wall):
+        def features(xyz):
+            saved = vote_module.WALL_SLOPE
+            vote_module.WALL_SLOPE = wall
+            try:
+                return vote_features(xyz, fourth=VETO_SLOPE)[0]
+            finally:
+                vote_module.WALL_SLOPE = saved
+        return features
+
+    return setting_loo(samples, scenes, {f"wall slope {w:g}": features_at(w) for w in slopes},
+                       "the wall slope")
+
+
+def wall_anchor_loo(samples, scenes, anchors):
+    """Print the leave-one-out of ``smrf_vote``'s rule and veto with its ``wall_anchor``
+    (a wall region counts only when the opening cuts one of its cells at that slope too:
+    :func:`~lidar2city.ground.vote_features`' ``anchor``) chosen per fold too among off and
+    ``anchors``, then each fitted on all seven (``--wall-anchors``; session 15)."""
+    fns = {"wall anchor off": lambda xyz: vote_features(xyz, fourth=VETO_SLOPE)[0]}
+    for a in anchors:
+        fns[f"wall anchor {a:g}"] = (
+            lambda a: lambda xyz: vote_features(xyz, fourth=VETO_SLOPE, anchor=a)[0])(a)
+    return setting_loo(samples, scenes, fns, "the wall anchor")
+
+
+#: anchor slopes of :func:`wall_anatomy`, and the wall distances (m) it scores the rule at.
+ANATOMY_ANCHORS = (2.0, 3.0)
+ANATOMY_CLEARS = (15.0, 30.0)
+
+
+def wall_grids(xyz, anchors=ANATOMY_ANCHORS):
+    """The grid of ``vote_features(xyz)`` at its defaults (the same opening), its cells
+    marked at :data:`~lidar2city.ground.vote_filter.WALL_SLOPE` and at each of ``anchors``,
+    the cell of every point and the low outliers."""
+    from lidar2city.ground.segment_filter import _segment_surfaces
+    from lidar2city.ground.smrf_filter import _checked_outliers
+    from lidar2city.ground.vote_filter import VOTE_SLOPES, WALL_SLOPE
+
+    xyz, out = _checked_outliers(xyz, cell=1.0, slope=VOTE_SLOPES[0], window=24.0, scalar=1.25,
+                                 threshold=0.5, outlier_radius=5.0, outlier_depth=1.5, jump=0.6,
+                                 lenient=VOTE_SLOPES[1])
+    _, spec, marked, _ = _segment_surfaces(
+        xyz, out, cell=1.0, slope=VOTE_SLOPES[0], window=24.0, extend=10.0, jump=0.6,
+        raised=0.6, min_cells=4, also=(VOTE_SLOPES[1],), marks=(WALL_SLOPE, *anchors))
+    r, c = cell_of(xyz[:, :2], spec)
+    return marked[0], dict(zip(anchors, marked[1:])), (r, c), out
+
+
+def wall_anatomy(samples):
+    """Print, per ISPRS sample and scene of HELD_OUT_KINDS, what the wall mark of
+    ``smrf_vote`` holds and what the ``wall_anchor`` option takes out of it (``--walls``):
+    the cells marked (with points), those whose points are mostly reference ground, the
+    4-connected wall regions, those anchored at each of :data:`ANATOMY_ANCHORS` and the
+    share of the cells of the regions left out that are mostly reference object; then the
+    total error of the vote's rule and veto at their defaults (fitted on all seven) with
+    the walls as marked, with every wall cell holding a reference-ground point taken out
+    (an oracle that frees every embankment), and anchored, at the ``clear`` of
+    :data:`ANATOMY_CLEARS`."""
+    from lidar2city.ground.segment_filter import _grid_labels, anchored_objects
+
+    scenes = dict(samples)
+    for kind in HELD_OUT_KINDS:
+        for spacing in (1.0, 2.5):
+            sc = make_terrain(kind, spacing=spacing, seed=1)
+            scenes[f"{kind}@{spacing:g}m"] = (sc.xyz, sc.ground)
+    heads = ["marked", "oracle"] + [f"anchor {a:g}" for a in ANATOMY_ANCHORS]
+    print(f"\nwall anatomy: cells marked at WALL_SLOPE (with points: mostly reference ground), "
+          f"regions (anchored at {', '.join(f'{a:g}' for a in ANATOMY_ANCHORS)}; cells of the "
+          f"regions left out mostly object); total error % of the default rule with the walls "
+          f"{', '.join(heads)} at clear {' / '.join(f'{c:g}' for c in ANATOMY_CLEARS)} m")
+    sums = {}
+    for name, (xyz, ref) in scenes.items():
+        features, _ = vote_features(xyz, fourth=VETO_SLOPE)
+        walls, steps, (r, c), out = wall_grids(xyz)
+        flat = r * walls.shape[1] + c
+        count = np.bincount(flat, minlength=walls.size).reshape(walls.shape)
+        grounds = np.bincount(flat, weights=ref, minlength=walls.size).reshape(walls.shape)
+        holds = walls & (count > 0)
+        mostly_ground = holds & (2 * grounds > count)
+        label = _grid_labels(walls[:, :-1] & walls[:, 1:], walls[:-1, :] & walls[1:, :])
+        regions = np.unique(label.ravel()[walls.ravel()])
+        line = (f"{name:<20} cells {int(holds.sum()):6d} ({int(mostly_ground.sum()):5d} ground) "
+                f"regions {len(regions):5d}")
+        masks = {"marked": walls, "oracle": walls & ~(grounds > 0)}
+        for a in ANATOMY_ANCHORS:
+            kept = anchored_objects(walls, steps[a])
+            left = holds & ~kept
+            kept_regions = len(np.unique(label.ravel()[kept.ravel()]))
+            share = (left & ~mostly_ground).sum() / max(int(left.sum()), 1)
+            line += f"; at {a:g}: {kept_regions:5d}, left out {100 * share:5.1f} % object"
+            masks[f"anchor {a:g}"] = kept
+        dist = {k: _distance_to(m, int(np.ceil(40.0 / 1.0)))[r, c] for k, m in masks.items()}
+        assert np.array_equal(np.minimum(dist["marked"], 41), np.minimum(features[:, 3], 41))
+        errs = []
+        for k in heads:
+            f = features.copy()
+            f[:, 3] = dist[k]
+            for clear in ANATOMY_CLEARS:
+                e = ground_errors(vote_rule(f, **dict(VOTE_RULE, clear=clear), veto=VOTE_VETO)
+                                  & ~out, ref)["total"]
+                errs.append(e)
+                if name in samples:
+                    sums.setdefault((k, clear), []).append(e)
+        print(line)
+        print(f"{'':<20} " + "; ".join(
+            f"{k} {' / '.join(f'{100 * v:.2f}' for v in errs[2 * i:2 * i + 2])}"
+            for i, k in enumerate(heads)))
+    print(f"{'mean of the seven':<20} " + "; ".join(
+        f"{k} {' / '.join(f'{100 * np.mean(sums[k, c]):.2f}' for c in ANATOMY_CLEARS)}"
+        for k in heads))
+
+
+def setting_loo(samples, scenes, settings, what):
+    """The leave-one-out of ``smrf_vote``'s rule and veto with one more setting chosen per
+    fold among ``settings`` (``label: features(xyz) -> (N, 5)``; the one whose fitted rule
+    has the lowest objective on the six other samples + synthetic terrains), then each
+    setting fitted on all seven: the seven, the synthetic terrains of TERRAIN_KINDS and the
+    scenes of HELD_OUT_KINDS (total error %); also the leave-one-out of each setting
+    fixed (only the rule and veto fitted per fold). Returns the held-out totals of the
+    per-fold choice."""
     kinds = {f"{k}@{s:g}m": make_terrain(k, spacing=s, seed=1)
              for k in HELD_OUT_KINDS for s in (1.0, 2.5)}
-    feats = {}
-    saved = vote_module.WALL_SLOPE
-    try:
-        for wall in slopes:
-            vote_module.WALL_SLOPE = wall
-            feats[wall] = ({n: vote_features(xyz, fourth=VETO_SLOPE)[0]
-                            for n, (xyz, _) in samples.items()},
-                           [(vote_features(sc.xyz, fourth=VETO_SLOPE)[0], sc.ground,
-                             1.0 / len(scenes)) for sc in scenes.values()],
-                           [vote_features(sc.xyz, fourth=VETO_SLOPE)[0] for sc in kinds.values()])
-    finally:
-        vote_module.WALL_SLOPE = saved
+    feats = {label: ({n: fn(xyz) for n, (xyz, _) in samples.items()},
+                     [(fn(sc.xyz), sc.ground, 1.0 / len(scenes)) for sc in scenes.values()],
+                     [fn(sc.xyz) for sc in kinds.values()])
+             for label, fn in settings.items()}
 
-    def fitted(wall, names):
-        real, syn, _ = feats[wall]
+    def fitted(label, names):
+        real, syn, _ = feats[label]
         sets = [(real[n], samples[n][1], 1.0) for n in names] + syn
         rule, _ = fit_rule(sets)
         if rule is None:
@@ -669,33 +791,59 @@ def wall_slope_loo(samples, scenes, slopes):
         veto, objective = fit_veto(sets, rule)
         return objective, rule, veto
 
-    print(f"\nleave-one-out with the wall slope chosen per fold among "
-          f"{', '.join(f'{v:g}' for v in slopes)} (rule and veto per fold too)")
+    print(f"\nleave-one-out with {what} chosen per fold among "
+          f"{', '.join(settings)} (rule and veto per fold too)")
     held, line = [], []
     for name, (_, ref) in samples.items():
         others = [n for n in samples if n != name]
-        (_, rule, veto), wall = min(((fitted(w, others), w) for w in slopes),
-                                    key=lambda t: t[0][0])
-        held.append(ground_errors(vote_rule(feats[wall][0][name], **rule, veto=veto),
+        (_, rule, veto), label = min(((fitted(k, others), k) for k in settings),
+                                     key=lambda t: t[0][0])
+        held.append(ground_errors(vote_rule(feats[label][0][name], **rule, veto=veto),
                                   ref)["total"])
-        line.append(f"{name} {100 * held[-1]:.2f} ({wall:g})")
+        line.append(f"{name} {100 * held[-1]:.2f} ({label})")
+        # how near a tie the fold's wall distance was: each clear's objective on the others
+        # and its held-out error, the rest of the fold's rule kept
+        real, syn, _ = feats[label]
+        sets = [(real[n], samples[n][1], 1.0) for n in others] + syn
+        total = sum(w for _, _, w in sets)
+        ties = []
+        for clear in CLEAR:
+            r = dict(rule, clear=clear)
+            objective = sum(w * np.mean(vote_rule(f, **r, veto=veto) != g)
+                            for f, g, w in sets) / total
+            e = ground_errors(vote_rule(real[name], **r, veto=veto), ref)["total"]
+            ties.append(f"{clear:g} {100 * objective:.3f}/{100 * e:.2f}")
+        print(f"  {name} fold ({label}, clear {rule['clear']:g}): clear objective/held-out % "
+              f"{', '.join(ties)}")
     print(f"leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} %: "
           f"{'; '.join(line)}")
-    for wall in slopes:
-        objective, rule, veto = fitted(wall, list(samples))
+    for label in settings:
+        fixed = []
+        for name, (_, ref) in samples.items():
+            _, rule, veto = fitted(label, [n for n in samples if n != name])
+            fixed.append(np.inf if rule is None else ground_errors(
+                vote_rule(feats[label][0][name], **rule, veto=veto), ref)["total"])
+        print(f"{label} fixed: leave-one-out {100 * np.mean(fixed):.2f} %, max "
+              f"{100 * np.max(fixed):.2f} % ({' '.join(f'{100 * v:.2f}' for v in fixed)})")
+    for label in settings:
+        objective, rule, veto = fitted(label, list(samples))
         if rule is None:
-            print(f"wall slope {wall:g}: the tree has not the rule's shape")
+            print(f"{label}: the tree has not the rule's shape")
             continue
-        real, syn, kind_feats = feats[wall]
+        real, syn, kind_feats = feats[label]
         seven = [ground_errors(vote_rule(real[n], **rule, veto=veto), ref)["total"]
                  for n, (_, ref) in samples.items()]
-        synth = np.mean([np.mean(vote_rule(f, **rule, veto=veto) != g) for f, g, _ in syn])
+        synth = [np.mean(vote_rule(f, **rule, veto=veto) != g)
+                 for (k, sc), (f, g, _) in zip(scenes.items(), syn)
+                 if k.split("@")[0] in TERRAIN_KINDS]
         kind_line = " ".join(
             f"{k} {100 * ground_errors(vote_rule(f, **rule, veto=veto), sc.ground)['total']:.2f}"
             for (k, sc), f in zip(kinds.items(), kind_feats))
-        print(f"wall slope {wall:g} fitted on all seven ({show_rule(rule)}, veto {veto:g}): "
+        print(f"{label} fitted on all seven ({show_rule(rule)}, veto {veto:g}): "
               f"seven {100 * np.mean(seven):.2f} % ({' '.join(f'{100 * v:.2f}' for v in seven)}),"
-              f" synthetic terrains {100 * synth:.2f} %; held-out kinds (total %) {kind_line}")
+              f" synthetic terrains {100 * np.mean(synth):.2f} %; held-out kinds (total %) "
+              f"{kind_line}")
+    return held
 
 
 def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
@@ -933,6 +1081,11 @@ def main():
     ap.add_argument("--wall-slopes", default=None, metavar="SLOPES",
                     help="leave-one-out with WALL_SLOPE chosen per fold among these "
                          "(comma-separated, e.g. 1,1.5,2,2.5,3,4,6)")
+    ap.add_argument("--wall-anchors", default=None, metavar="SLOPES",
+                    help="leave-one-out with smrf_vote's wall_anchor chosen per fold among off "
+                         "and these (comma-separated, e.g. 1.5,2,2.5,3)")
+    ap.add_argument("--walls", action="store_true",
+                    help="what the wall mark holds and what wall_anchor takes out of it")
     ap.add_argument("--terrain", action="store_true",
                     help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
@@ -1041,6 +1194,10 @@ def main():
         terrain_loo(samples, scenes, feats, syn)
     if args.wall_slopes:
         wall_slope_loo(samples, scenes, [float(v) for v in args.wall_slopes.split(",")])
+    if args.walls:
+        wall_anatomy(samples)
+    if args.wall_anchors:
+        wall_anchor_loo(samples, scenes, [float(v) for v in args.wall_anchors.split(",")])
     if args.pairs:
         nested_pairs(samples, scenes)
     if not args.no_speed:

@@ -155,6 +155,11 @@ class GroundConfig:
         "box", "smrf_vote with ring: the ground around a patch its plane is fitted to, the "
         "patch's bounding box grown by 3, 6, 12, 24 m (box) or the cells within that reach of "
         "its own cells (dilation)")
+    wall_anchor: float | None = field(None, "smrf_vote: a region the opening cuts steeper than "
+                                            "45 degrees counts as a wall only when one of its "
+                                            "cells is cut at this slope too (rise/run, e.g. 2: "
+                                            "a building's step, not an embankment); default "
+                                            "none: every such region")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -198,6 +203,8 @@ class GroundConfig:
             raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
         if self.ring is not None and not self.ring > 0:
             raise ConfigError(f"ground.ring: must be > 0, got {self.ring!r}")
+        if self.wall_anchor is not None and not self.wall_anchor > 0:
+            raise ConfigError(f"ground.wall_anchor: must be > 0, got {self.wall_anchor!r}")
         if self.ring_neighbourhood not in RING_NEIGHBOURHOODS:
             raise ConfigError(f"ground.ring_neighbourhood: {self.ring_neighbourhood!r} is not one "
                               f"of {', '.join(RING_NEIGHBOURHOODS)}")
