@@ -3,7 +3,7 @@ refinement) and of its parts, replayed on the Delft tile's recorded calls: this 
 other trees (issue 13).
 
 Usage: python benchmarks/bench_roof_frontend.py [OTHER_SRC ...] [--data DIR] [--traced]
-[--repeat N] [--rounds R] [--cache FILE]
+[--repeat N] [--rounds R] [--cache FILE] [--set STAGE:NAME=VALUE ...]
 (OTHER_SRC: the ``src`` folder of another checkout, e.g. /work/wt/base/src; DIR default
 $LIDAR2CITY_DATA or ../shared/data)
 
@@ -19,7 +19,10 @@ times: a part calling another counts it too, e.g. ``snake_steps`` holds
 ``adjust_planar_graph``; a part missing from a tree is left out). Prints per tree and
 stage the least CPU over the rounds and the parts' CPU of that pass, this tree's CPU
 over each other tree's per stage, and a digest of the stages' outputs per tree (the same digest: the
-same answers to the bit).
+same answers to the bit). ``--set`` replays a stage's calls in this tree ([0]) only with
+one keyword argument changed (e.g. ``--set segment_planes:k=8``, VALUE read as a Python
+literal): with this tree's own ``src`` as OTHER_SRC, a paired probe of what an option
+costs and whether it changes the answers.
 
 Wall-clock timers are not used: on a shared machine only CPU seconds compare. The
 wrappers cost ~1 us per wrapped call (a few thousand calls): the parts' sum is not
@@ -100,7 +103,7 @@ def _digest(out, h):
         h.update(repr(out).encode())
 
 
-def timed(cache: Path, repeat: int, result: Path):
+def timed(cache: Path, repeat: int, result: Path, overrides=()):
     """Least CPU per stage and its parts' CPU in that pass, and the outputs' digests (child)."""
     import collections
     import hashlib
@@ -140,14 +143,21 @@ def timed(cache: Path, repeat: int, result: Path):
         for m in mods:  # every module that calls it by this name
             if getattr(m, fname, None) is f:
                 setattr(m, fname, g)
+    import ast
+
     with open(cache, "rb") as fh:
         raw = pickle.load(fh)
+    changed: dict = {}
+    for item in overrides:
+        stage, assign = item.split(":", 1)
+        key, value = assign.split("=", 1)
+        changed.setdefault(stage, {})[key] = ast.literal_eval(value)
     out = {}
     for name in STAGES:
         f = getattr(building, name)
         best, parts, digest = float("inf"), {}, None
         for _ in range(repeat):
-            calls = [pickle.loads(c) for c in raw[name]]
+            calls = [(a, {**k, **changed.get(name, {})}) for a, k in map(pickle.loads, raw[name])]
             acc.clear()
             t = time.process_time()
             res = [f(*a, **k) for a, k in calls]
@@ -171,6 +181,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--cache")
+    ap.add_argument("--set", action="append", default=[], metavar="STAGE:NAME=VALUE",
+                    help="replay STAGE's calls in this tree with keyword NAME set to VALUE")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -178,7 +190,7 @@ def main():
         if mode == "capture":
             capture(Path(a), Path(b), args.traced)
         else:
-            timed(Path(a), args.repeat, Path(b))
+            timed(Path(a), args.repeat, Path(b), args.set)
         return
     data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
     kind = "traced" if args.traced else "footprints"
@@ -189,15 +201,18 @@ def main():
     def child(src, *argv):
         env = dict(os.environ, PYTHONPATH=src)
         subprocess.run([sys.executable, me, *(["--traced"] if args.traced else []),
+                        *(f"--set={s}" for s in (args.set if src == trees[0] and first[0] else [])),
                         "--repeat", str(args.repeat), "--child", *argv], env=env, check=True,
                        stdout=subprocess.DEVNULL)
 
+    first = [False]  # the tree being run is [0] (the one --set applies to)
     if not cache.exists():
         child(trees[0], "capture", str(data), str(cache))
     best: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.rounds):
             for i, src in enumerate(trees):
+                first[0] = i == 0
                 res = Path(tmp) / f"{i}_{r}.pkl"
                 child(src, "timed", str(cache), str(res))
                 with open(res, "rb") as fh:
@@ -207,7 +222,8 @@ def main():
                     if old is None or cpu < old[0]:
                         best[(i, name)] = (cpu, parts, digest, n)
     print(f"Delft, {kind}: roof front end replayed, least CPU s of {args.repeat} passes x "
-          f"{args.rounds} rounds per tree; load {os.getloadavg()[0]:.1f}")
+          f"{args.rounds} rounds per tree; load {os.getloadavg()[0]:.1f}"
+          + (f"; [0] replayed with {', '.join(args.set)}" if args.set else ""))
     for i, src in enumerate(trees):
         total = sum(best[(i, s)][0] for s in STAGES)
         print(f"[{i}] {src}: stages {total:.3f} CPU s"
