@@ -14,7 +14,6 @@ from lidar2city.roof.arrangement import (
     arrangement_cells,
 )
 from lidar2city.roof.refine import _remove_spikes
-from lidar2city.roof.topology import _cross_dilation
 
 coord = st.floats(-1e4, 1e4, allow_nan=False)
 
@@ -41,13 +40,6 @@ def test_nearest_is_the_trees(seed, n, q, grid):
     if grid:  # millimetre coordinates on a coarse lattice: many equal distances
         pts, qs = np.round(pts) / 2, np.round(qs) / 2
     np.testing.assert_array_equal(_nearest(pts, qs, cKDTree), cKDTree(pts).query(qs)[1])
-
-
-@settings(max_examples=200, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), h=st.integers(1, 9), w=st.integers(1, 9))
-def test_cross_dilation_is_binary_dilation(seed, h, w):
-    m = np.random.default_rng(seed).random((h, w)) < 0.3
-    np.testing.assert_array_equal(_cross_dilation(m), ndimage.binary_dilation(m))
 
 
 def _fit_plane_numpy(xyz):

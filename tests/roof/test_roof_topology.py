@@ -35,3 +35,22 @@ def test_merge_small_regions_window_equals_whole_grid():
         g = np.where(inside, g, -1)
         k = int(rng.integers(1, 8))
         assert np.array_equal(_merge_small_regions(g, inside, k), whole_grid(g, inside, k))
+    # label grids as roofs make them: large regions (blocks of one label) with speckle,
+    # holes in the footprint, ties between a small region's neighbour labels, several
+    # passes (a region that took a small neighbour's label is small again)
+    changed = 0
+    for _ in range(60):
+        h, w = (int(v) for v in rng.integers(8, 60, 2))
+        n_lab = int(rng.integers(2, 9))
+        blocks = rng.integers(0, n_lab, (h // 4 + 1, w // 4 + 1))
+        g = np.kron(blocks, np.ones((4, 4), dtype=np.int64))[:h, :w]
+        speckle = rng.random((h, w)) < float(rng.uniform(0.02, 0.3))
+        g = np.where(speckle, rng.integers(0, n_lab, (h, w)), g)
+        inside = rng.random((h, w)) < 0.95
+        inside[: int(rng.integers(0, h // 3 + 1)), : int(rng.integers(0, w // 3 + 1))] = False
+        g = np.where(inside, g, -1)
+        k = int(rng.integers(2, 10))
+        got = _merge_small_regions(g, inside, k)
+        assert np.array_equal(got, whole_grid(g, inside, k))
+        changed += not np.array_equal(got, g)
+    assert changed >= 50
