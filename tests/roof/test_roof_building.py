@@ -390,3 +390,48 @@ def test_saddle_repair_takes_a_plane_that_does_not_rise_over_the_face():
     planes[2] = [0.5, 0.0, 4.9]  # both rise (2.5 and 5 m): the one rising least
     planes[1] = [-0.5, 0.0, 10.5]
     assert _plane_donor(faces, labels, planes, 0, [(10.0, 1), (5.0, 2)], 0.25) == 2
+
+
+def _gable_points():
+    g = np.mgrid[0.25:10:0.5, 0.25:10:0.5].reshape(2, -1).T
+    return np.column_stack([g, 10.0 + 0.8 * (5 - np.abs(g[:, 0] - 5))])  # ridge at x = 5
+
+
+def test_an_open_last_variant_gives_way_to_the_first_one_repaired(monkeypatch):
+    """When the partition left as refined (the last variant) gives an open shell whatever its
+    saddle repair does, the short-edge-collapsed partition (the first variant) is repaired
+    and kept when its shell closes and validates: the caller then needs no other partition
+    (traced Delft's 1049 and 1293 m2 blocks built theirs twice). When the first variant's
+    repaired shell is not valid either, the last variant's solid is returned as before."""
+    from shapely.geometry import box
+
+    import lidar2city.roof.building as B
+    from lidar2city.datamodel import Solid
+
+    poly = box(0, 0, 10, 10)
+    faces = [box(0, 0, 5, 10), box(5, 0, 10, 10)]
+    planes = np.array([[0.8, 0.0, 10.0], [-0.8, 0.0, 18.0]])
+    collapsed = [box(0, 0, 5, 10), box(5, 0, 10, 5), box(5, 5, 10, 10)]  # another partition
+    monkeypatch.setattr(B, "collapse_short_edges", lambda f, p, **kw: (collapsed, np.array([0, 1, 1])))
+    real = B._variant_solid
+    calls = []
+
+    def opened(variants, planes, **kw):  # the first variant refused, the last one's shell open
+        calls.append(len(variants))
+        out = real(variants[-1:], planes, **kw)
+        if len(variants) > 1 or fail_first[0]:
+            out = (Solid(out[0].vertices, out[0].surfaces[1:]),) + out[1:]
+        return out
+
+    monkeypatch.setattr(B, "_variant_solid", opened)
+    fail_first = [False]
+    cfg = B.Lod22Config()
+    solid, faces2, labels2, _, _ = B._finish_solid("arrangement", poly, _gable_points(), faces, np.array([0, 1]),
+                                                   planes, 0.0, cell=0.5, cfg=cfg, info={})
+    assert calls == [2, 1]
+    assert B._closed_shell(solid) and not _closed_shell_errors(solid)
+    assert len(faces2) == 3 and labels2.tolist() == [0, 1, 1]  # the collapsed partition's faces
+    fail_first[0], calls[:] = True, []
+    solid, faces2, _, _, _ = B._finish_solid("arrangement", poly, _gable_points(), faces, np.array([0, 1]),
+                                             planes, 0.0, cell=0.5, cfg=cfg, info={})
+    assert calls == [2, 1] and not B._closed_shell(solid) and len(faces2) == 2  # the last variant, open

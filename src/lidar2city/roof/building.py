@@ -583,7 +583,7 @@ def _nonmanifold_points(solid):
 
 
 def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds=8,
-                    repair=True):
+                    repair=True, first=None):
     """The partition's solid; at a saddle vertex (alternating heights around it, where four
     walls would share a vertical edge) the face at the intermediate height takes its
     longest-shared neighbour's plane, until the shell is 2-manifold. When that does not
@@ -592,7 +592,10 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
 
     Returns ``(solid, relabelled)``, the number of faces that took another plane. With
     ``repair=False`` a shell with a saddle is returned at once with ``relabelled = 1``
-    (the caller has another partition to try: each repair round rebuilds the solid)."""
+    (the caller has another partition to try: each repair round rebuilds the solid).
+
+    ``first``: a dict holding the faces' edges and first solid from an earlier call on the
+    same partition (filled here when empty), so that repairing it later rebuilds nothing."""
     import shapely
 
     labels0 = face_labels
@@ -609,10 +612,15 @@ def _manifold_solid(faces, face_labels, planes, ground_z, min_height, max_rounds
             i = seen[key]
             solid = solids[i + (max_rounds - i) % (r - i)]
             break
-        if r == 0:
-            edges = partition_edges(faces)  # the faces stay: each round only relabels
-        solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height,
-                                edges=edges)
+        if r == 0 and first:
+            edges, solid = first["edges"], first["solid"]
+        else:
+            if r == 0:
+                edges = partition_edges(faces)  # the faces stay: each round only relabels
+            solid = partition_solid(faces, planes[face_labels], ground_z, min_height=min_height,
+                                    edges=edges)
+            if r == 0 and first is not None:
+                first.update(edges=edges, solid=solid)
         if r == max_rounds:
             break
         seen[key] = r
@@ -1110,24 +1118,53 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
         if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
+    kw = dict(ground_z=ground_z, pts=pts, spacing=spacing, cfg=cfg, memo={})
+    solid, faces, face_labels, planes_f = _variant_solid(variants, planes, **kw)
+    if len(variants) > 1 and not _closed_shell(solid):
+        # the last variant's shell stays open (its saddle repair did not converge, or a floor
+        # sliver): the first variant's saddles repaired instead (from its fixes and solids
+        # already built), kept when that closes and validates, rather than the caller
+        # building another partition: traced Delft's 1049 and 1293 m2 blocks built theirs twice
+        alt = _variant_solid(variants[:1], planes, **kw)
+        if _closed_shell(alt[0]) and not check_solid(alt[0]) and float(
+                alt[0].vertices[:, 2].max()) <= _top(*alt[1:]) + 2 * cfg.elevation_error:
+            solid, faces, face_labels, planes_f = alt
+    return solid, faces, face_labels, planes_f, info
+
+
+def _variant_solid(variants, planes, *, ground_z, pts, spacing, cfg, memo):
+    """``(solid, faces, face_labels, planes)`` of the first of ``variants`` (``(faces,
+    face_labels)`` of one refined partition each, preferred first) whose solid closes
+    without a face taking a neighbour's plane; the last one's saddles repaired.
+
+    ``memo``: a dict kept across calls on the same variants (a call on the first of them
+    alone repairs it): each variant's cleaned faces, fixes and first solids, keyed by its
+    faces list (alive as long as ``variants``)."""
     pinched = None  # the first variant's solid with its spike left, when the fix pinched a saddle
-    for k, (faces, face_labels) in enumerate(variants):
+    for i, (faces, face_labels) in enumerate(variants):
         # collapsing short edges can pinch faces at different heights into a saddle; the
         # uncollapsed partition is used then rather than a face taking a neighbour's plane
         # (so only the last variant's saddles are repaired)
-        last = k == len(variants) - 1
-        faces, face_labels = _clean_faces(faces, face_labels)
-        face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+        last = i == len(variants) - 1
+        k = id(faces)
+        if (k, "clean") not in memo:
+            faces, face_labels = _clean_faces(faces, face_labels)
+            face_labels, planes_f = _fix_low_faces(faces, face_labels, planes, ground_z, cfg.min_height, pts)
+            memo[k, "clean"] = faces, face_labels, planes_f
+        faces, face_labels, planes_f = memo[k, "clean"]
         # spikes capped, else levelled, else the roof as partitioned (a spike left is refused
         # with the whole roof by add_lod22's check)
         tried = None  # the capped roof's partition
         for cap in (True, False):
-            fixed = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
-                                    t_step=2 * cfg.elevation_error, cap=cap)
+            if (k, cap) not in memo:
+                memo[k, cap] = _fix_high_faces(faces, face_labels, planes_f, pts, spacing=spacing,
+                                               t_step=2 * cfg.elevation_error, cap=cap)
+            fixed = memo[k, cap]
             if tried is not None and fixed[0] is not faces and _same_partition(tried, fixed):
                 # levelling gave the very partition capping gave: the same solid, refused again
                 continue
-            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2, repair=last)
+            solid, relabelled = _manifold_solid(*fixed, ground_z, cfg.min_height / 2, repair=last,
+                                                first=memo.setdefault((k, cap, "solid"), {}))
             tried = fixed
             # a fix is kept when its solid is valid and its saddle repair did not raise a new
             # spike (faces taking their neighbours' planes: ISPRS samp11 b54, +3.4 m)
@@ -1137,7 +1174,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
                 break
         else:
             solid, relabelled = _manifold_solid(faces, face_labels, planes_f, ground_z, cfg.min_height / 2,
-                                                repair=last)
+                                                repair=last, first=memo.setdefault((k, "solid"), {}))
             if pinched is not None:  # no variant takes the fix: the first one's solid, as before
                 solid, faces, face_labels, planes_f = pinched
                 break
@@ -1148,8 +1185,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
                 continue
         if not relabelled:
             break
-    return solid, faces, face_labels, planes_f, info
-
+    return solid, faces, face_labels, planes_f
 
 #: the largest exact roof snake solve (table elements, about 1 CPU second per 1e8): the
 #: roof graph of a block of many houses is too wide for it and keeps its simplified faces
