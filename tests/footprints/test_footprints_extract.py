@@ -271,8 +271,8 @@ def test_snake_results_and_failures_are_recorded_per_building(monkeypatch):
 
     calls = []
 
-    def fake(polygon, *, cell, window, simplify_tolerance=None, t_adjust=None):
-        calls.append((cell, window, simplify_tolerance, t_adjust))
+    def fake(polygon, *, cell, window, simplify_tolerance=None, t_adjust=None, sample_step=None):
+        calls.append((cell, window, simplify_tolerance, t_adjust, sample_step))
         if polygon.centroid.x < 20:
             raise FitError("degenerate outline")
         if polygon.centroid.y < 20:
@@ -289,6 +289,11 @@ def test_snake_results_and_failures_are_recorded_per_building(monkeypatch):
     assert len(fps) == 3 and len(calls) == 3
     cell = calls[0][0]
     assert calls[0][1] == 3 and calls[0][3] == pytest.approx(2 * 3 * cell)
+    # the deviation's samples every other raster cell unless asked otherwise
+    assert {c[4] for c in calls} == {2.0}
+    calls.clear()
+    extract_footprints(xyz, cls, regularize="snake", snake_window=3, snake_sample_step=1.0)
+    assert len(calls) == 3 and {c[4] for c in calls} == {1.0}
     by_x = sorted(fps, key=lambda f: (f.polygon.centroid.x, f.polygon.centroid.y))
     failed, fallback, ok = by_x
     assert failed.status == "unregularised" and "degenerate" in failed.reason

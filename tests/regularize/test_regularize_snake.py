@@ -350,3 +350,80 @@ def test_window_wider_than_the_building_does_not_collapse():
     out, info = regularize_polygon(small, cell=0.5, window=4, direction=0.0)
     assert info["status"] == "regularized", info["reason"]
     assert out.is_valid and out.area > 0.5 * small.area
+
+
+@pytest.mark.parametrize("deg", [0.0, 17.0, 38.0])
+def test_deviation_sampled_every_other_raster_cell_gives_the_same_outline(deg):
+    """``sample_step=2`` halves the deviation's look-ups; on a noisy L-shape it finds the
+    same walls as every raster cell (the same vertices to a few centimetres)."""
+    rng = np.random.default_rng(int(deg))
+    ell = shapely.Polygon([(0, 0), (24, 0), (24, 9), (11, 9), (11, 17), (0, 17)])
+    truth = shapely.affinity.rotate(ell, deg, origin=(0, 0))
+    noisy = jitter(truth, 0.12, rng, spacing=0.4)
+    one, i1 = regularize_polygon(noisy, cell=0.5, window=3)
+    two, i2 = regularize_polygon(noisy, cell=0.5, window=3, sample_step=2.0)
+    assert i1["status"] == i2["status"] == "regularized"
+    assert i1["energy"] != i2["energy"]  # the option reaches the energy tables
+    assert len(two.exterior.coords) == len(one.exterior.coords) == 7
+    assert iou(one, two) > 0.99 and iou(two, truth) > 0.97
+    assert two.hausdorff_distance(one) < 0.2
+    assert np.all(np.minimum(edge_angles_deg(two, deg), 90 - edge_angles_deg(two, deg)) < 0.5)
+
+
+def test_sample_step_must_be_positive():
+    square = shapely.box(0, 0, 10, 10)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="sample_step"):
+            regularize_polygon(square, sample_step=bad)
+
+
+def _profile_samples(poly, binw):
+    """The samples and weights ``dominant_direction(method="profile")`` scores."""
+    from lidar2city.regularize.direction import segments_of
+
+    segs = segments_of(poly)
+    d = segs[:, 1] - segs[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    counts = np.maximum(np.ceil(length / (binw / 2)).astype(np.int64), 1)
+    which = np.repeat(np.arange(len(segs)), counts)
+    first = np.cumsum(counts) - counts
+    t = (np.arange(counts.sum()) - first[which] + 0.5) / counts[which]
+    pts = segs[which, 0] + t[:, None] * d[which]
+    w = (length / counts)[which]
+    return pts - np.average(pts, axis=0, weights=w), w
+
+
+@pytest.mark.parametrize("noise", [0.02, 0.1, 0.3])
+def test_coarse_direction_search_finds_the_whole_grids_best_angle(noise):
+    """The coarse search scores most angles on thinned samples: on noisy, rotated
+    outlines of unions of boxes, some with an oblique cut, it picks the angle the
+    whole grid scored on every sample picks."""
+    from lidar2city.regularize.direction import _coarse_peak, _profile_score
+
+    rng = np.random.default_rng(int(noise * 100))
+    coarse = np.radians(np.arange(0.0, 90.0, 0.5))
+    checked = 0
+    for _ in range(25):
+        boxes = [shapely.box(0, 0, rng.uniform(6, 40), rng.uniform(5, 20))]
+        for _ in range(int(rng.integers(0, 4))):
+            x, y = rng.uniform(0, 30), rng.uniform(0, 15)
+            boxes.append(shapely.box(x, y, x + rng.uniform(3, 15), y + rng.uniform(3, 12)))
+        g = shapely.union_all(boxes)
+        if rng.random() < 0.3:
+            g = g.difference(shapely.affinity.rotate(shapely.box(-5, -5, 10, 3), rng.uniform(20, 70),
+                                                     origin=(0, 0)))
+        g = shapely.affinity.rotate(g, rng.uniform(0, 90), origin=(0, 0))
+        g = max(getattr(g, "geoms", [g]), key=lambda p: p.area)
+        ring = shapely.get_coordinates(shapely.segmentize(g.exterior, 0.3))
+        ring = ring + rng.normal(0, noise, ring.shape)
+        ring[-1] = ring[0]
+        poly = shapely.make_valid(shapely.Polygon(ring))  # noise can cross the outline
+        poly = max((p for p in getattr(poly, "geoms", [poly]) if p.geom_type == "Polygon"),
+                   key=lambda p: p.area, default=None)
+        if poly is None or poly.area < 10:
+            continue
+        pts, w = _profile_samples(poly, 0.25)
+        whole = int(np.argmax(_profile_score(pts, w, coarse, 0.25)))
+        assert _coarse_peak(pts, w, coarse, 0.25) == whole
+        checked += 1
+    assert checked >= 15

@@ -83,9 +83,13 @@ class FootprintsConfig:
         None, "Snake threshold T (m): an edge whose smaller x/y extent (building frame) is within "
         "T is pulled onto the building axes, others stay oblique; default 2 x snake_window x "
         "snake_cell, the largest misalignment the search window can correct.")
+    snake_sample_step: float = cfield(
+        2.0, "Spacing of the snake's deviation samples along a candidate edge, in cells of "
+        "its distance raster (a quarter of snake_cell): 1 reads every cell, 2 every other one.")
 
     def __post_init__(self):
-        for name in ("cell", "sigma", "void_distance", "snake_cell", "snake_threshold"):
+        for name in ("cell", "sigma", "void_distance", "snake_cell", "snake_threshold",
+                     "snake_sample_step"):
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise ConfigError(f"footprints.{name}: must be > 0, got {v}")
@@ -149,7 +153,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        split_min_area: float = 10.0, edge_offset: float = 0.0,
                        simplify: float | None = None, regularize: str = "none",
                        snake_cell: float | None = None, snake_window: int = 3,
-                       snake_threshold: float | None = None, within=None,
+                       snake_threshold: float | None = None, snake_sample_step: float = 2.0,
+                       within=None,
                        callback=None) -> list[Footprint]:
     """Building footprints (one polygon per building block, with courtyards) from classified points.
 
@@ -184,6 +189,9 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
         default ``2 * snake_window * snake_cell``: moving both ends of an edge by
         at most the window, the snake can straighten an edge whose smaller
         extent is up to that, not more.
+    snake_sample_step : float
+        Spacing (cells of the snake's distance raster, ``snake_cell / 4``) of the
+        deviation energy's samples along a candidate edge.
     within : (xmin, ymin, xmax, ymax), optional
         Local box: only the footprints whose bounding box may have its centre
         in it are wanted (a block keeps those centred in its cell). The
@@ -224,7 +232,7 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                      min_hole_area=min_hole_area, split_step=split_step,
                      split_min_area=split_min_area, edge_offset=edge_offset, simplify=simplify,
                      regularize=regularize, snake_cell=snake_cell, snake_window=snake_window,
-                     snake_threshold=snake_threshold)
+                     snake_threshold=snake_threshold, snake_sample_step=snake_sample_step)
     if not np.isfinite(xyz).all():
         raise InputError("point coordinates contain NaN or infinite values")
     xy = xyz[:, :2]
@@ -287,7 +295,8 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
             # each regulariser simplifies the outline if it uses the simplified one
             try:
                 reg, info = regularizer(part, cell=L["snake_cell"], window=snake_window,
-                                        tolerance=L["simplify"], t_adjust=threshold)
+                                        tolerance=L["simplify"], t_adjust=threshold,
+                                        sample_step=snake_sample_step)
                 if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
                     raise AlgorithmError("the regulariser returned no valid polygon")
             except AlgorithmError as exc:

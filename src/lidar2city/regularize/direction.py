@@ -110,8 +110,9 @@ def dominant_direction(
         outline, sampled every ``profile_bin / 2`` metres, is projected on the
         rotated x and y axes, the length-weighted, Gaussian-smoothed
         histograms (scale ``profile_bin`` m) are squared and summed, and the
-        angle maximising this is searched on a 0.5 degree grid, then refined
-        (0.05 degree grid and a parabolic peak fit).
+        angle maximising this is searched on a 0.5 degree grid (first scored
+        on a quarter of the samples, the best angles then on all of them),
+        then refined (0.05 degree grid and a parabolic peak fit).
         Walls parallel to an axis pile up in single bins, so it is robust to
         the zig-zag noise of raw traced outlines, where edge directions are
         mostly noise.
@@ -223,6 +224,35 @@ def _profile_score(pts, w, angles, binw):
     return out
 
 
+#: The coarse search scores every angle on every ``_THIN``-th sample first, then
+#: on all samples the ``_PEAKS`` best angles of that and their grid neighbours.
+_THIN = 4
+_PEAKS = 12
+
+
+def _coarse_peak(pts, w, coarse, binw):
+    """Index of the best-scored angle of the grid ``coarse`` (as ``np.argmax`` of
+    :func:`_profile_score` over the whole grid), with most angles scored on a
+    quarter of the samples only.
+
+    Thinned samples (weights scaled to the same total) keep the walls' peaks where
+    they are: a wall's samples fall in one bin of the projection across it at its
+    angle, however many they are. The ``_PEAKS`` best angles of the thinned
+    scores and their neighbours on the grid are then scored on every sample
+    (on Delft's 80 traced outlines and on noisy synthetic ones, the same angle
+    as the whole grid scored on every sample; not a guarantee: a flat top of
+    near-equal scores may be ordered otherwise by the thinned samples).
+    """
+    n = len(coarse)
+    if len(pts) < 8 * _THIN:
+        return int(np.argmax(_profile_score(pts, w, coarse, binw)))
+    thin = _profile_score(pts[::_THIN], w[::_THIN] * _THIN, coarse, binw)
+    top = np.argsort(-thin, kind="stable")[:_PEAKS]
+    near = np.unique((top[:, None] + np.arange(-1, 2)[None, :]) % n)
+    score = _profile_score(pts, w, coarse[near], binw)
+    return int(near[np.argmax(score)])
+
+
 def _profile_direction(segs, length, binw):
     # Sample every edge at <= binw / 2 and weight each piece by its length.
     step = binw / 2
@@ -235,7 +265,7 @@ def _profile_direction(segs, length, binw):
     w = (length / counts)[which]
     pts = pts - np.average(pts, axis=0, weights=w)
     coarse = np.radians(np.arange(0.0, 90.0, 0.5))
-    best = coarse[np.argmax(_profile_score(pts, w, coarse, binw))]
+    best = coarse[_coarse_peak(pts, w, coarse, binw)]
     fine = best + np.radians(np.arange(-0.6, 0.6001, 0.05))
     sc = _profile_score(pts, w, fine, binw)
     k = int(np.argmax(sc))

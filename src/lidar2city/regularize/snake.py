@@ -372,6 +372,7 @@ def regularize_polygon(
     c_short: float | None = None,
     short_length: float | None = None,
     strategy: str = "auto",
+    sample_step: float = 1.0,
 ):
     """Regularise a building footprint with the 2-D snake.
 
@@ -398,6 +399,11 @@ def regularize_polygon(
         After the snake, move each edge along its normal to the median of the
         input outline near it (directions unchanged): removes the grid's
         quantisation of wall positions (beyond the paper).
+    sample_step : float
+        Spacing (cells of the distance raster, a quarter of ``cell``) of the
+        deviation energy's samples along a candidate edge
+        (:func:`lidar2city.snake.energies.deviation_energy`); 1 reads every
+        raster cell the edge crosses, 2 every other one (half the look-ups).
 
     Returns
     -------
@@ -436,6 +442,8 @@ def regularize_polygon(
         raise EmptyInputError("polygon is empty")
     _check_options(cell, window, t_adjust, c_dir, c_dis, c_move, simplify_tolerance,
                    c_short=c_short, short_length=short_length)
+    if not (np.isfinite(sample_step) and sample_step > 0):
+        raise InputError(f"sample_step must be a positive number of raster cells, got {sample_step}")
     tol = cell if simplify_tolerance is None else float(simplify_tolerance)
     info: dict = {"status": "fallback", "reason": "", "direction_deg": None,
                   "n_vertices": len(polygon.exterior.coords) - 1,
@@ -472,7 +480,7 @@ def regularize_polygon(
         grid, pivot, sol = _frame_solve(xy, edges, segments_of(polygon), cell=cell, window=window,
                                         direction=direction, t_adjust=t, c_dir=c, c_dis=c_dis,
                                         c_move=c_move, fixed=None, strategy=strategy,
-                                        c_short=cs, short_length=ls)
+                                        c_short=cs, short_length=ls, sample_step=sample_step)
     except AlgorithmError as exc:  # pragma: no cover - rings always reduce by I-III
         info["reason"] = f"snake failed: {exc}"
         return done(polygon)
@@ -486,7 +494,7 @@ def regularize_polygon(
                 polygon, cell=cell, window=window - 1, t_adjust=t_adjust, c_dir=c_dir,
                 c_dis=c_dis, c_move=c_move, direction=direction,
                 simplify_tolerance=simplify_tolerance, refine=refine, c_short=c_short,
-                short_length=short_length, strategy=strategy)
+                short_length=short_length, strategy=strategy, sample_step=sample_step)
         info["reason"] = "outline collapsed"
         return done(polygon)
     holes = [h for h in cleaned[1:] if len(h) >= 3]

@@ -381,10 +381,22 @@ def _min_over(arrays: list[np.ndarray], axis: int, shape: tuple[int, ...], buffe
         if len(parts) == 1:
             total = np.ascontiguousarray(parts[0])
         else:
-            total = (buffer or _Buffer())(np.broadcast_shapes(*(a.shape for a in parts)))
-            np.add(parts[0], parts[1], out=total)
-            for a in parts[2:]:
-                np.add(total, a, out=total)
+            # The sums formed on the broadcast shape of the tables summed so far, the
+            # whole table only from the first table that needs it: a vertex energy
+            # added to an edge table costs d_u x d_v additions, not d_u x d_v x d_w
+            # (each element is still the same sums in the same order)
+            full = np.broadcast_shapes(*(a.shape for a in parts))
+            total = parts[0]
+            for k, a in enumerate(parts[1:]):
+                shape_k = np.broadcast_shapes(total.shape, a.shape)
+                if shape_k == full:
+                    out = (buffer or _Buffer())(full)
+                    np.add(total, a, out=out)
+                    for b in parts[k + 2:]:
+                        np.add(out, b, out=out)
+                    total = out
+                    break
+                total = total + a
         flat = np.broadcast_to(total, out_shape + (shape[axis],)).reshape(-1, shape[axis])
         arg = flat.argmin(axis=1)
         best = flat[np.arange(len(flat)), arg]
