@@ -21,8 +21,8 @@ rounds, measured from outside as ``bench_engine_tile.py`` measures (wall, CPU of
 the process tree, largest process, PSS of all processes at one moment). Printed:
 each setting's median wall and CPU, the wall and CPU ratios of every setting to
 the first one (median of the rounds), whether every setting wrote the same bytes,
-the points the tile headers declare (what ``auto`` decides from) and the CPU per
-point of the first setting.
+the points the tile headers declare and what ``--workers auto`` takes for them
+(on a fork and on a Dask cluster), and the CPU per point of the first setting.
 
 ``--busy 0,1,2,4``: the cases again with that many busy loops
 (``python -c 'while 1: pass'``, started before the case's rounds, killed after)
@@ -53,6 +53,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_engine_tile import run  # noqa: E402
 from bench_speed import ROOT, data_dir  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "src"))  # this tree's lidar2city for the inputs and auto's choice
 
 LODS = ("1.2", "1.3", "2.2")
 
@@ -140,6 +142,13 @@ for name, make in (("fork, 2 workers", lambda: ForkExecutor(2)), ("in process", 
     subprocess.run([sys.executable, "-c", code], env=env, check=True)
 
 
+def auto_choice(laz, fps, executor="fork") -> int:
+    """What ``--workers auto`` takes for the case on this machine (the issue's LoDs)."""
+    from lidar2city.tools.reconstruct import auto_workers
+
+    return auto_workers([laz], footprints=fps, lods=LODS, executor=executor)
+
+
 def runnable() -> str:
     with open("/proc/loadavg") as f:
         v = f.read().split()
@@ -195,10 +204,11 @@ def main():
         try:
             time.sleep(1.0 if busy else 0.0)
             for case in cases:
-                laz = inputs[case][0]
+                laz, fps = inputs[case]
                 points = count(laz)
-                print(f"[{busy} busy loop(s)] {case}: {points:,} points; {runnable()}",
-                      flush=True)
+                print(f"[{busy} busy loop(s)] {case}: {points:,} points, --workers auto takes "
+                      f"{auto_choice(laz, fps)} on a fork, {auto_choice(laz, fps, 'dask')} on a "
+                      f"Dask cluster; {runnable()}", flush=True)
                 for w in workers:  # warm the file cache and the bytecode
                     run(command(case, w)[1], env)
                 rows, md5 = {w: [] for w in workers}, {}

@@ -1039,6 +1039,8 @@ def test_workers_auto_gives_each_worker_enough_work(area, monkeypatch):
     from lidar2city.tools import reconstruct as R
 
     laz = area / "town.laz"
+    # the threads earlier tests may have left in this process set aside (their own test)
+    monkeypatch.setattr(R, "fork_hazard", lambda: None)
     kw = dict(footprints=area / "fp.gpkg", lods=("1.2",))
     for executor in ("fork", "dask"):
         assert R.auto_workers([laz], cores=2, executor=executor, **kw) == 1  # a small town
@@ -1079,6 +1081,7 @@ def test_workers_auto_opens_headers_only_until_the_cores_are_covered(area, monke
     assert las.count_points([laz] * 5, at_least=n + 1) == 2 * n and len(opened) == 2
     assert R.usable_cores() >= 1
     # two workers need the points of half the tile: its header alone is read
+    monkeypatch.setattr(R, "fork_hazard", lambda: None)
     monkeypatch.setattr(R, "AUTO_LEAST_SECONDS",
                         {"fork": n / 4 * R.AUTO_SECONDS_PER_POINT["lod22"], "dask": 1.0})
     opened.clear()
