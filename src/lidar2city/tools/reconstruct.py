@@ -870,7 +870,7 @@ AUTO_SECONDS_PER_POINT = {"lod1": 1.6e-6, "lod22": 5.5e-6, "traced": 18e-6}
 #: per worker for ``workers="auto"`` to run one more, by local executor
 #: (:func:`lidar2city.tools.engine.local_executor`). ``"fork"``: the children are
 #: forked in ~6 ms (3 CPU ms) from the planned run, but a run on 2 workers costs
-#: 15-28 % more CPU (its block cut into parts, each reading and levelling its own
+#: 12-28 % more CPU (its block cut into parts, each reading and levelling its own
 #: points; pages copied on write): at load 5-7 Delft clips of 10 and 30 buildings
 #: (expected 1.1 and 1.9 s) end 1.31x and 1.23x later on 2 workers, the whole tile
 #: (3.5 s) about as soon and sooner on a quiet machine
@@ -940,9 +940,10 @@ def auto_workers(inputs, *, footprints=None, lods=None, method="roof", cores=Non
     workers). Only the headers needed to reach the most workers the cores allow
     are opened.
 
-    The machine's load is not looked at: on two cores kept busy by 1, 2 or 4
-    busy loops 2 forked workers still end sooner than one process, and
-    elsewhere as soon (``benchmarks/bench_workers_auto.py --busy``); and the
+    The machine's load is not looked at: beside 1, 2 or 4 busy loops on two
+    cores (and load 6-13 of other sessions) 2 forked workers ended Delft as soon
+    as one process or sooner (wall 0.99, 0.68, 0.75x;
+    ``benchmarks/bench_workers_auto.py --busy``); and the
     same command then always runs on the same number of workers, so that
     ``--resume`` finds the plan (the blocks cut for that many) its journal
     was made with. A 1-minute load average, as before, also counted the
