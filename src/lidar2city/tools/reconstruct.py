@@ -940,14 +940,17 @@ def auto_workers(inputs, *, footprints=None, lods=None, method="roof", cores=Non
     workers). Only the headers needed to reach the most workers the cores allow
     are opened.
 
-    The machine's load is not looked at: beside 1, 2 or 4 busy loops on two
-    cores (and load 6-13 of other sessions) 2 forked workers ended Delft as soon
-    as one process or sooner (wall 0.99, 0.68, 0.75x;
-    ``benchmarks/bench_workers_auto.py --busy``); and the
-    same command then always runs on the same number of workers, so that
-    ``--resume`` finds the plan (the blocks cut for that many) its journal
-    was made with. A 1-minute load average, as before, also counted the
-    command's own previous run when commands run back to back."""
+    The machine's load is not looked at. With no cluster to start, 2 forked
+    workers cost 12-17 % more CPU on Delft and end it in 0.68-0.99x the wall
+    time of one process beside 0, 1, 2 or 4 busy loops of the same session
+    (``benchmarks/bench_workers_auto.py --busy``), but in 0.71-1.28x (speed-ups
+    0.78-1.41) when other sessions load the machine (the scheduler shares the
+    cores between sessions first: a second worker gets little more). A load
+    rule would have to tell those apart; and without one the same command
+    always runs on the same number of workers, so that ``--resume`` finds the
+    plan (the blocks cut for that many) its journal was made with. A 1-minute
+    load average, as before, also counted the command's own previous run when
+    commands run back to back."""
     from ..io.las import count_points
     from ..io.tiles import tile_paths
 
