@@ -1,11 +1,13 @@
 """One large tile on 1 and 2 workers: the Delft tile's 132 buildings, against the laspy floor.
 
-Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2,auto,2:dask] [--traced] [--lod 1.2,1.3,2.2]``
+Usage: ``python benchmarks/bench_engine_tile.py [DATA_DIR] [--runs 3] [--workers 1,2,auto,default,2:dask] [--traced] [--lod 1.2,1.3,2.2]``
 (default $LIDAR2CITY_DATA or ../shared/data)
 
 A count followed by ``:fork`` or ``:dask`` (``2:dask``) runs with that local
 executor (``LIDAR2CITY_LOCAL_EXECUTOR``, :func:`lidar2city.tools.engine.local_executor`):
 workers forked from the run's process (the default) or a Dask ``LocalCluster``.
+``default``: the command without ``--workers`` (what a user types: ``auto`` since
+session 15).
 
 ``--traced``: the same without ``--footprints`` (footprints traced from the
 points, 80 buildings): with ``--workers 2`` the tile's one block is traced
@@ -132,13 +134,15 @@ def main():
     ap.add_argument("data", nargs="?")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--workers", default="1,2",
-                    help="comma-separated counts, or auto; N:dask / N:fork for that executor")
+                    help="comma-separated counts, auto, or default (no --workers option); "
+                         "N:dask / N:fork for that executor")
     ap.add_argument("--lod", default="1.2,1.3,2.2",
                     help="the LoDs built, comma-separated (less work: where a cluster stops paying)")
     ap.add_argument("--traced", action="store_true",
                     help="no footprint file: footprints traced from the points")
     args = ap.parse_args()
-    workers = [v if v == "auto" or ":" in v else int(v) for v in args.workers.split(",")]
+    workers = [v if v in ("auto", "default") or ":" in v else int(v)
+               for v in args.workers.split(",")]
     d = data_dir(args.data) / "delft"
     laz, fps = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
@@ -152,7 +156,7 @@ def main():
         given = [] if args.traced else ["--footprints", str(fps)]
         return out, [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), *given,
                      *(a for lod in args.lod.split(",") for a in ("--lod", lod)), "-o", str(out),
-                     "--workers", str(w).split(":")[0]]
+                     *([] if w == "default" else ["--workers", str(w).split(":")[0]])]
 
     def env_of(w):
         if ":" not in str(w):

@@ -625,7 +625,9 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path, execut
     """SIGINT to ``reconstruct --workers 2`` (CityJSONSeq, streamed through a spool): exit 130
     in one line; the output, its temporary name and the spool are gone, the journal (meant
     for --resume) is kept, and no worker process outlives the run; with the workers
-    forked from the run's process (the default here) and on a Dask cluster."""
+    forked from the run's process (the default here), run as the command's default
+    (``--workers auto``, its threshold lowered so that it forks 2), and on a Dask cluster
+    of ``--workers 2``."""
     from lidar2city.tools.engine import LOCAL_EXECUTOR_ENV
 
     env = {**os.environ, LOCAL_EXECUTOR_ENV: executor}
@@ -652,10 +654,18 @@ def test_interrupt_with_dask_workers_leaves_journal_only(block, tmp_path, execut
     args = [sys.executable, "-m", "lidar2city.cli.main", "reconstruct", str(src), "--footprints",
             str(tmp_path / "fp.gpkg"), "--workers", "2", "--block-size", "50",
             "-o", str(out / "x.city.jsonl")]
+    if executor == "fork":  # the default command, which forks 2 workers here
+        code = ("import sys; import lidar2city.tools.reconstruct as R; "
+                "R.AUTO_LEAST_SECONDS.update(fork=1e-6); R.usable_cores = lambda: 2; "
+                "from lidar2city.cli.main import main; sys.exit(main())")
+        args = [sys.executable, "-c", code, "-v", *args[3:]]
+        args[args.index("--workers"):args.index("--workers") + 2] = []
     t0 = time.perf_counter()
-    subprocess.run(args, check=True, capture_output=True, timeout=600, env=env)
+    first = subprocess.run(args, check=True, capture_output=True, text=True, timeout=600,
+                           env=env)
     full = time.perf_counter() - t0
     assert _left(out) == ["x.city.jsonl"]
+    assert executor != "fork" or "--workers auto: 2 " in first.stderr, first.stderr
     (out / "x.city.jsonl").unlink()
     interrupted = 0
     # the first timing can be slower than the runs after it on a busy machine (both then end

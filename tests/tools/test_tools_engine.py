@@ -1,6 +1,7 @@
 """reconstruct on executors: same bytes on 1 / 2 workers and an external Dask cluster,
 resume from the journal, failing blocks and dead workers."""
 
+import inspect
 import json
 import os
 import signal
@@ -128,6 +129,41 @@ def test_resume_after_a_crash_gives_the_same_bytes_and_reruns_only_what_is_missi
     summary = _run(area, out, resume=True)
     assert out.read_bytes() == reference[0]
     assert summary.resumed == 2 and sorted(ran + first) == list(range(summary.blocks))
+    assert not journal_path(out).exists()
+
+
+def test_a_run_on_auto_workers_resumes_on_the_workers_it_was_planned_for(
+        area, reference, tmp_path, monkeypatch):
+    """``workers="auto"`` forking workers, crashed half-way, is resumed by the same call:
+    the count (hence the plan its journal is keyed on) does not depend on the machine's
+    load, and the output is the bytes of one process."""
+    import threading
+
+    from lidar2city.tools import reconstruct as R
+
+    if engine.local_executor() != "fork":
+        pytest.skip("this platform does not fork")
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", {"fork": 1e-6, "dask": 1e-6})
+    monkeypatch.setattr(R, "usable_cores", lambda: 2)
+    # the threads earlier tests may have left in this process set aside
+    monkeypatch.setattr(threading, "enumerate", lambda: [threading.current_thread()])
+    made, make = [], engine.make_executor
+
+    def recorded(workers, *a, **k):
+        made.append(workers)
+        return make(workers, *a, **k)
+
+    monkeypatch.setattr(engine, "make_executor", recorded)
+    real, ran = task.run_block, []
+    out = tmp_path / "a.city.json"
+    monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
+    with pytest.raises(Crash):
+        _run(area, out, workers="auto")
+    assert not out.exists() and list(journal_path(out).glob("block-*"))
+    monkeypatch.setattr(task, "run_block", real)
+    summary = _run(area, out, workers="auto", resume=True)
+    assert out.read_bytes() == reference[0]
+    assert summary.resumed >= 2 and made == [2, 2]
     assert not journal_path(out).exists()
 
 
@@ -994,29 +1030,46 @@ def test_only_blocks_cut_for_the_workers_have_their_tiles_decoded_ahead(area, tm
     assert not task._cache.held
 
 
-def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, monkeypatch):
-    """``workers="auto"``: 1 on one core, on a machine whose cores are busy, or for an
-    input whose expected work (header points x the cost of what is built) is under
-    the threshold; the cores above it, the headers opened only until the threshold
-    is reached."""
+def test_workers_auto_gives_each_worker_enough_work(area, monkeypatch):
+    """``workers="auto"``: one worker per ``AUTO_LEAST_SECONDS`` of expected work (header
+    points x the cost of what is built), at most the cores, at least 1; a Dask cluster
+    (no fork) needs more work a worker than forked workers; the machine's load is not
+    looked at (the same command, the same plan: ``--resume`` finds its journal)."""
     from lidar2city.io import las
     from lidar2city.tools import reconstruct as R
 
     laz = area / "town.laz"
-    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",), load=0.0)
-    assert R.auto_workers([laz], cores=2, **kw) == 1  # a small synthetic town
-    assert R.auto_workers([laz], cores=1, **kw) == 1
+    # the threads earlier tests may have left in this process set aside (their own test)
+    monkeypatch.setattr(R, "fork_hazard", lambda: None)
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",))
+    for executor in ("fork", "dask"):
+        assert R.auto_workers([laz], cores=2, executor=executor, **kw) == 1  # a small town
+        assert R.auto_workers([laz], cores=1, executor=executor, **kw) == 1
     n = las.count_points([laz])
     # LoD2.2 and traced footprints cost more per point than LoD1 alone
     rates = R.AUTO_SECONDS_PER_POINT
     assert rates["lod1"] < rates["lod22"] < rates["traced"]
-    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", n * rates["lod22"] * 0.99)
-    assert R.auto_workers([laz], cores=3, **kw) == 1
+    assert R.AUTO_LEAST_SECONDS["fork"] < R.AUTO_LEAST_SECONDS["dask"]
+    # the town's LoD2.2 worth 2.5 workers on a fork, 1.25 on a cluster
+    least = n * rates["lod22"] / 2.5
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", {"fork": least, "dask": 2 * least})
     lod22 = dict(footprints=kw["footprints"], lods=("1.2", "2.2"))
-    assert R.auto_workers([laz], cores=3, load=0.0, **lod22) == 3
-    assert R.auto_workers([laz], cores=3, load=2.0, **lod22) == 3  # one core idle
-    assert R.auto_workers([laz], cores=3, load=2.5, **lod22) == 1  # the cores busy
-    assert R.auto_workers([laz], cores=3, load=0.5) == 3  # traced
+    assert R.auto_workers([laz], cores=3, executor="fork", **kw) == 1  # LoD1: too little
+    assert R.auto_workers([laz], cores=3, executor="fork", **lod22) == 2
+    assert R.auto_workers([laz], cores=2, executor="fork", **lod22) == 2
+    assert R.auto_workers([laz], cores=1, executor="fork", **lod22) == 1
+    assert R.auto_workers([laz], cores=3, executor="dask", **lod22) == 1
+    assert R.auto_workers([laz], cores=8, executor="fork") == 8  # traced: 8 x 2.5 x 5.5 / 18
+    assert R.auto_workers([laz], cores=3, executor="dask") == 3
+    assert "load" not in inspect.signature(R.auto_workers).parameters
+
+
+def test_workers_auto_opens_headers_only_until_the_cores_are_covered(area, monkeypatch):
+    from lidar2city.io import las
+    from lidar2city.tools import reconstruct as R
+
+    laz = area / "town.laz"
+    n = las.count_points([laz])
     opened = []
     real = las.check_input_file
 
@@ -1027,6 +1080,79 @@ def test_workers_auto_takes_the_cores_only_for_an_input_worth_a_cluster(area, mo
     monkeypatch.setattr(las, "check_input_file", counted)
     assert las.count_points([laz] * 5, at_least=n + 1) == 2 * n and len(opened) == 2
     assert R.usable_cores() >= 1
+    # two workers need the points of half the tile: its header alone is read
+    monkeypatch.setattr(R, "fork_hazard", lambda: None)
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS",
+                        {"fork": n / 4 * R.AUTO_SECONDS_PER_POINT["lod22"], "dask": 1.0})
+    opened.clear()
+    assert R.auto_workers([laz] * 5, cores=2, executor="fork", footprints=area / "fp.gpkg",
+                          lods=("2.2",)) == 2
+    assert len(opened) == 1
+
+
+def test_workers_auto_does_not_fork_beside_other_threads_or_off_the_main_thread(area,
+                                                                               monkeypatch):
+    """A fork copies only the forking thread: another thread's locks stay held in the
+    child. ``auto`` forks no worker while another Python thread is alive (a test
+    runner's, a Dask client's) or when called from a thread other than the main one;
+    a Dask cluster (no fork) is not concerned."""
+    import threading
+
+    from lidar2city.io import las
+    from lidar2city.tools import reconstruct as R
+
+    laz = area / "town.laz"
+    n = las.count_points([laz])
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", {"fork": 1e-9, "dask": 1e-9})
+    alive = threading.enumerate
+    # the threads earlier tests may have left in this process (a cluster's) set aside
+    monkeypatch.setattr(threading, "enumerate", lambda: [threading.current_thread()])
+    assert R.fork_hazard() is None
+    assert R.auto_workers([laz], cores=2, executor="fork") == 2
+    monkeypatch.setattr(threading, "enumerate", lambda: [threading.current_thread(), *(
+        t for t in alive() if t.name == "someone-elses")])
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, name="someone-elses", daemon=True)
+    other.start()
+    try:
+        assert "someone-elses" in R.fork_hazard()
+        assert R.auto_workers([laz], cores=2, executor="fork") == 1
+        assert R.auto_workers([laz], cores=2, executor="dask") == 2
+    finally:
+        stop.set()
+        other.join()
+    got = []
+    t = threading.Thread(target=lambda: got.append((R.fork_hazard(), R.auto_workers(
+        [laz], cores=2, executor="fork"))))
+    t.start()
+    t.join()
+    assert "not the main one" in got[0][0] and got[0][1] == 1
+    assert n > 0
+
+
+def test_workers_auto_runs_in_one_process_under_a_profiler_or_tracer(area, monkeypatch):
+    """``python -m cProfile``, a debugger or coverage watch this process only: ``auto``
+    then runs in it, whichever executor, so that their figures hold the run's work."""
+    import sys
+
+    from lidar2city.tools import reconstruct as R
+
+    laz = area / "town.laz"
+    monkeypatch.setattr(R, "AUTO_LEAST_SECONDS", {"fork": 1e-9, "dask": 1e-9})
+    monkeypatch.setattr(R, "fork_hazard", lambda: None)
+    before = (sys.getprofile(), sys.gettrace())
+    if any(before):
+        pytest.skip("this test process is already profiled or traced")
+    assert R.observer() is None
+    assert R.auto_workers([laz], cores=2, executor="fork") == 2
+    for hook in (sys.setprofile, sys.settrace):
+        hook(lambda *a: None)
+        try:
+            watched = R.observer()
+            workers = [R.auto_workers([laz], cores=2, executor=e) for e in ("fork", "dask")]
+        finally:
+            hook(None)
+        assert watched is not None and workers == [1, 1]
 
 
 def test_semaphores_made_after_an_interrupt_closed_them_are_never_left_to_the_tracker():

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import logging
+
 import click
 
 from ._options import (EngineProgress, check_not_input, crs_option, engine_options, output_option,
                        progress, progress_callback)
+
+logger = logging.getLogger(__name__)
 
 
 @click.command("reconstruct")
@@ -116,6 +120,16 @@ def command(inputs, output, dsm, dtm, ortho, footprints, lods, crs, config, fmt,
 
     from ..tools.reconstruct import reconstruct
 
+    if (workers == "auto" and not _STANDALONE
+            and click.get_current_context().get_parameter_source("workers")
+            == click.core.ParameterSource.DEFAULT):
+        # the command run inside another program (click's CliRunner in a test, a script
+        # calling cli() around its own timers): its threads, its outputs and what it
+        # measures are its own, so the default runs in its process; an explicit
+        # --workers auto there is auto_workers' choice
+        logger.info("--workers auto: 1 (the command runs inside another program; give "
+                    "--workers to fork)")
+        workers = 1
     if workers not in (1, "auto") and scheduler is not None:
         raise InputError("give either --workers (a local cluster) or --scheduler, not both")
     # bars over blocks and buildings on a terminal (buildings without a total when traced)

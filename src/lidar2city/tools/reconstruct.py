@@ -803,8 +803,12 @@ def reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, config=
         workers share are decoded (:class:`lidar2city.tools.forked.ForkExecutor`;
         a Dask ``LocalCluster`` of N worker processes where the system does not
         fork, or with ``LIDAR2CITY_LOCAL_EXECUTOR=dask``). The output is the same bytes.
-        ``"auto"``: the machine's cores when the run is large enough to gain
-        from them, else 1 (:func:`auto_workers`).
+        ``"auto"`` (the command line's default): one per ~1.5 CPU seconds of
+        the run's expected work, at most the usable cores, 1 for a small run or
+        where this process cannot safely fork (:func:`auto_workers`). The
+        default here stays 1: a library call runs in the caller's process,
+        whose threads and children are the caller's; the command line is a
+        process of its own.
     scheduler : str, optional
         Address of a running Dask scheduler (``tcp://host:8786``) to run the
         blocks on instead; its workers read the tiles and footprints by path.
@@ -857,15 +861,25 @@ CLIENT_COMPUTES = True
 #: expected CPU seconds of one process per input point (tile headers), by what the
 #: run builds; measured on the Delft tile (640,510 points, 132 footprints, 1
 #: process, session 9): LoD1.2 0.45 s, LoD1.2 + 1.3 1.0 s, LoD2.2 3.6 s
-#: (imports excluded), without footprints 11.7 s
+#: (imports excluded), without footprints 11.7 s. The units of :data:`AUTO_LEAST_SECONDS`
+#: (on session 15's machine a run takes ~1.4x these, imports excluded: the threshold
+#: below was measured in these units)
 AUTO_SECONDS_PER_POINT = {"lod1": 1.6e-6, "lod22": 5.5e-6, "traced": 18e-6}
 
-#: the least expected work (CPU seconds in one process) for which
-#: ``workers="auto"`` runs the blocks on a local cluster: starting one costs
-#: ~0.9 s of wall time and ~1.1 CPU-second, and 2 workers end a run of W seconds
-#: in about 0.9 + 0.55 W, which is shorter than W from W ~ 2 s (Delft LoD2.2,
-#: W ~ 3.5 s: 2.66 s against 3.46 s); 3 s leaves room for a busier machine
-AUTO_LEAST_SECONDS = 3.0
+#: the least expected work (CPU seconds of one process, :data:`AUTO_SECONDS_PER_POINT`)
+#: per worker for ``workers="auto"`` to run one more, by local executor
+#: (:func:`lidar2city.tools.engine.local_executor`). ``"fork"``: the children are
+#: forked in ~6 ms (3 CPU ms) from the planned run, but a run on 2 workers costs
+#: 12-28 % more CPU (its block cut into parts, each reading and levelling its own
+#: points; pages copied on write): at load 5-7 Delft clips of 10 and 30 buildings
+#: (expected 1.1 and 1.9 s) end 1.31x and 1.23x later on 2 workers, the whole tile
+#: (3.5 s) about as soon and sooner on a quiet machine
+#: (``benchmarks/bench_workers_auto.py``); 1.5 s a worker takes 2 workers from 3 s,
+#: and never 1 worker per core for a run that would leave each a second or less.
+#: ``"dask"`` (no fork on this system, or ``LIDAR2CITY_LOCAL_EXECUTOR=dask``): a
+#: ``LocalCluster`` costs ~0.9 s of wall time and ~1.1 CPU-second to start, its 2
+#: workers end a run of W seconds in about 0.9 + 0.55 W: a worker must get 3 s
+AUTO_LEAST_SECONDS = {"fork": 1.5, "dask": 3.0}
 
 
 def usable_cores() -> int:
@@ -876,38 +890,97 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def fork_hazard() -> str | None:
+    """Why forking this process now is not safe, or None.
+
+    A forked child has only the thread that forked; a lock another thread held
+    at that moment (a library's, a logging handler's) stays held in the child
+    for ever. The fork executor knows the native pools of the run's own
+    libraries (lazrs, OpenBLAS: :mod:`lidar2city.tools.forked`), not the Python
+    threads of whoever called it: a call from another thread than the main one
+    (whose signal handlers a run installs and whose Ctrl-C it handles), or while
+    any other Python thread is alive (a test runner's, a notebook's, a Dask
+    client's left by an earlier run), is not forked by ``workers="auto"``."""
+    import threading
+
+    here = threading.current_thread()
+    if here is not threading.main_thread():
+        return f"called from the thread {here.name!r}, not the main one"
+    others = sorted(t.name for t in threading.enumerate() if t is not here and t.is_alive())
+    if others:
+        return (f"{len(others)} other thread(s) alive ({', '.join(others[:3])}"
+                f"{', ...' if len(others) > 3 else ''})")
+    return None
+
+
+def observer() -> str | None:
+    """What watches this process from inside (a profiler, a tracer: cProfile, a
+    debugger, coverage), or None: its figures would miss the work of other worker
+    processes, so ``workers="auto"`` then runs in one."""
+    import sys
+
+    if sys.getprofile() is not None:
+        return "a profiler is attached"
+    if sys.gettrace() is not None:
+        return "a tracer (debugger, coverage) is attached"
+    return None
+
+
 def auto_workers(inputs, *, footprints=None, lods=None, method="roof", cores=None,
-                 load=None) -> int:
-    """The worker processes of ``workers="auto"``: the usable cores (``cores``,
-    default :func:`usable_cores`) when the run's expected work in one process
-    (the points the tiles' headers declare x :data:`AUTO_SECONDS_PER_POINT`)
-    reaches :data:`AUTO_LEAST_SECONDS` and at least one core is idle (the
-    machine's load, ``load``: default its 1-minute load average, at most
-    cores - 1), else 1: a small run ends sooner in one process than a cluster
-    starts, and on a machine whose cores are already busy two workers share
-    them with the others and end later than one process (Delft LoD2.2 at load
-    5-8: 0.55-0.88 times the speed of one process; at load ~1: 1.3 times).
-    Only the headers needed to reach the threshold are opened."""
+                 executor=None) -> int:
+    """The worker processes of ``workers="auto"``.
+
+    One per :data:`AUTO_LEAST_SECONDS` of the run's expected work in one
+    process (the points the tiles' headers declare x :data:`AUTO_SECONDS_PER_POINT`),
+    at most the usable cores (``cores``, default :func:`usable_cores`), at least 1.
+    ``executor``: the local executor the workers would run on (default
+    :func:`lidar2city.tools.engine.local_executor`): for ``"fork"``, 1 when
+    forking here is not safe (:func:`fork_hazard`). 1 as well under a profiler
+    or tracer (:func:`observer`: ``python -m cProfile``'s figures would miss the
+    workers). Only the headers needed to reach the most workers the cores allow
+    are opened.
+
+    The machine's load is not looked at. With no cluster to start, 2 forked
+    workers cost 12-17 % more CPU on Delft and end it in 0.68-0.99x the wall
+    time of one process beside 0, 1, 2 or 4 busy loops of the same session
+    (``benchmarks/bench_workers_auto.py --busy``), but in 0.71-1.28x (speed-ups
+    0.78-1.41) when other sessions load the machine (the scheduler shares the
+    cores between sessions first: a second worker gets little more). A load
+    rule would have to tell those apart; and without one the same command
+    always runs on the same number of workers, so that ``--resume`` finds the
+    plan (the blocks cut for that many) its journal was made with. A 1-minute
+    load average, as before, also counted the command's own previous run when
+    commands run back to back."""
     from ..io.las import count_points
     from ..io.tiles import tile_paths
 
     cores = usable_cores() if cores is None else int(cores)
-    if load is None:
-        try:
-            load = os.getloadavg()[0]
-        except (AttributeError, OSError):  # not a Unix
-            load = 0.0
-    if cores < 2 or load > cores - 1:
-        logger.info("--workers auto: 1 (%d cores, load %.1f)", cores, load)
+    if cores < 2:
+        logger.info("--workers auto: 1 (1 usable core)")
         return 1
+    watched = observer()
+    if watched is not None:
+        logger.info("--workers auto: 1 (%s)", watched)
+        return 1
+    if executor is None:
+        from .engine import local_executor
+
+        executor = local_executor()
+    if executor == "fork":
+        hazard = fork_hazard()
+        if hazard is not None:
+            logger.info("--workers auto: 1 (no fork: %s)", hazard)
+            return 1
     kind = ("traced" if footprints is None
             else "lod22" if "2.2" in (lods or ()) else "lod1")
     rate = AUTO_SECONDS_PER_POINT[kind]
-    least = int(np.ceil(AUTO_LEAST_SECONDS / rate))
-    points = count_points(tile_paths(inputs), at_least=least)
-    workers = cores if points >= least else 1
-    logger.info("--workers auto: %d (%d points, ~%.1f CPU s expected in one process; %d cores, "
-                "load %.1f)", workers, points, points * rate, cores, load)
+    least = AUTO_LEAST_SECONDS[executor]
+    per_worker = int(np.ceil(least / rate))
+    points = count_points(tile_paths(inputs), at_least=per_worker * cores)
+    workers = max(1, min(cores, points // per_worker))
+    logger.info("--workers auto: %d (%d points, ~%.1f CPU s expected in one process, %.1f s "
+                "a worker at least; %d cores, %s)", workers, points, points * rate, least,
+                cores, executor)
     return workers
 
 
