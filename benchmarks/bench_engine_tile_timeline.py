@@ -1,6 +1,6 @@
 """Where the wall time of ``reconstruct`` on the Delft tile goes: a timeline of the client, the server workers are forked from, and each worker.
 
-Usage: ``python benchmarks/bench_engine_tile_timeline.py [DATA_DIR] [--workers 2] [--traced] [--log]``
+Usage: ``python benchmarks/bench_engine_tile_timeline.py [DATA_DIR] [--workers 2] [--traced] [--log] [--src OTHER_SRC]``
 (default $LIDAR2CITY_DATA or ../shared/data; ``LIDAR2CITY_LOCAL_EXECUTOR=dask`` in the
 environment: the Dask cluster instead of workers forked from the client)
 
@@ -228,7 +228,7 @@ class Child:
     """One instrumented run of the command, started now (:data:`CHILD`); ``result()``
     waits for it: ``(wall seconds, the child's report, the server's marks)``."""
 
-    def __init__(self, d, *, workers="2", traced=False, log=False, one_process=False):
+    def __init__(self, d, *, workers="2", traced=False, log=False, one_process=False, src=None):
         self.dir = tempfile.TemporaryDirectory()
         tmp = Path(self.dir.name)
         (tmp / "child.py").write_text(CHILD)
@@ -236,7 +236,7 @@ class Child:
             (tmp / f"bench_mark_{name}.py").write_text(
                 MARK.replace("{NAME}", f"server preload {'begun' if name == 'first' else 'done'}"))
         self.marks = tmp / "marks.txt"
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(src or ROOT / "src"), str(tmp)]),
                    BENCH_MARKS=str(self.marks))
         env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
         if log:
@@ -336,20 +336,55 @@ def summary(m, t0=0.0) -> dict:
     return out
 
 
+def pairs(d, a) -> None:
+    """``--pairs N --src OTHER_SRC``: the phases of OTHER_SRC's run and this tree's, in
+    turn, N rounds; medians of the idle-machine estimate, the tail and the run's CPU."""
+    import statistics
+
+    got = {"other": [], "this": []}
+    for k in range(a.pairs):
+        for name, src in (("other", a.src), ("this", None)):
+            child = Child(d, workers=a.workers, traced=a.traced, src=src)
+            wall, m, _, _ = child.result()
+            print(f"round {k + 1}, {name} ({src or 'this tree'}), {wall:.2f} s at load "
+                  f"{os.getloadavg()[0]:.2f}:")
+            got[name].append(summary(m, child.t0))
+    for name, rows in got.items():
+        print(f"{name}: idle-machine estimate median "
+              f"{statistics.median(r['estimate'] for r in rows):.2f} s "
+              f"({', '.join(format(r['estimate'], '.2f') for r in rows)}); parts' CPU imbalance "
+              f"median {statistics.median(max(r['cpu'].values()) - min(r['cpu'].values()) for r in rows):.2f} s; "
+              f"the run's CPU median {statistics.median(r['run cpu'] for r in rows):.2f} s")
+    ratio = [t["estimate"] / o["estimate"] for o, t in zip(got["other"], got["this"], strict=True)]
+    print(f"estimate this / other: median {statistics.median(ratio):.3f} "
+          f"({', '.join(format(v, '.3f') for v in ratio)})")
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", nargs="?")
     ap.add_argument("--workers", default="2")
     ap.add_argument("--traced", action="store_true", help="no footprint file")
     ap.add_argument("--log", action="store_true", help="Dask's and lidar2city's log lines too")
+    ap.add_argument("--src", help="run another tree's source (its src folder, e.g. main's, "
+                                  "to compare the phases), not this tree's")
     ap.add_argument("--one-process", action="store_true",
                     help="the plan of --workers N (its parts), no cluster: every part in the "
                          "client, one after the other (each part's CPU without a second process)")
+    ap.add_argument("--pairs", type=int, default=0,
+                    help="with --src: N rounds of OTHER_SRC then this tree, only the phases "
+                         "printed per run and their medians (the idle-machine estimate from "
+                         "CPU seconds compares the two under load)")
     a = ap.parse_args()
     d = data_dir(a.data) / "delft"
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
           f"({os.cpu_count()} cores)")
-    child = Child(d, workers=a.workers, traced=a.traced, log=a.log, one_process=a.one_process)
+    if a.pairs:
+        pairs(d, a)
+        return
+    child = Child(d, workers=a.workers, traced=a.traced, log=a.log, one_process=a.one_process,
+                  src=a.src)
     t0 = child.t0
     wall, m, server, lines = child.result()
     events = [(t, f"client: {n} (client CPU {c:.2f} s, its thread {th:.2f})")
