@@ -1395,27 +1395,19 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
 
 
 #: parts of a traced block per executor run (:func:`trace_then_split`): parts of
-#: decreasing expected work (:data:`lidar2city.tools.blocks.RAMP`; session 14: of
-#: equal work), handed heaviest first to the free worker. On Delft (2 workers, 3 rounds at
+#: about equal expected work (a building's work taken to grow with its area),
+#: handed heaviest first to the free worker. On Delft (2 workers, 3 rounds at
 #: load ~2) 1 gave 8 parts and 8.5-10.2 s, 2 gave 10 parts and 8.7-10.8 s, 3
 #: 8.9-9.4 s: each part reads and sorts its box again, the dynamic hand-out
 #: already evens the workers out
 PARTS_PER_RUN = 1
 
 
-#: a traced building's expected work grows as its area to this power (the parts of a
-#: traced block are cut and handed out by it, :func:`trace_then_split`): on Delft's 8
-#: traced parts (one process, session 15) their CPU seconds correlate with the sum
-#: of their buildings' areas to the power 1 / 1.25 / 1.5 / 2 as 0.80 / 0.88 / 0.89 /
-#: 0.86 (the large traced blocks of row houses retry their roofs more)
-TRACED_WORK_POWER = 1.5
-
-
 def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     """The plan of a traced run whose blocks are traced first on ``executor``
     (:func:`lidar2city.tools.task.trace_footprints`), then cut into parts of
-    their footprints of decreasing expected work (the footprints' areas to the
-    power :data:`TRACED_WORK_POWER`, :data:`PARTS_PER_RUN` parts per executor run,
+    their footprints of about equal expected work (the footprints' areas,
+    :data:`PARTS_PER_RUN` parts per executor run,
     :func:`lidar2city.tools.blocks.traced_parts`) that the workers share,
     heaviest first, each handed to whichever worker is free (``balance``).
 
@@ -1444,10 +1436,10 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     if first is not None:
         first.update(cpu=cpu, mb=mb)
     total = sum(len(f) for f in traced if f is not None)
-    # a building's work grows faster than its area (TRACED_WORK_POWER), counted in
-    # buildings (the executor's runs of equal work)
-    areas = [np.array([g.area for g in f.geometries], dtype=np.float64) ** TRACED_WORK_POWER
-             if f else None for f in traced]
+    # a building's work grows with its points, hence its area: parts of equal
+    # areas, their work counted in buildings (the executor's runs of equal work)
+    areas = [np.array([g.area for g in f.geometries], dtype=np.float64) if f else None
+             for f in traced]
     whole = sum(float(a.sum()) for a in areas if a is not None)
     scale = total / whole if whole > 0 else 0.0
     runs = RUNS_PER_WORKER * int(executor.workers or 1)
@@ -1528,8 +1520,9 @@ def dealt_one_by_one(plan, specs) -> bool:
     for the workers (traced parts, :attr:`ReconstructPlan.parts`, or parts of given
     footprints, :attr:`ReconstructPlan.split`), whose tiles every worker holds
     already (:func:`shared_tiles`), so that no run has tiles of its own to pass on.
-    The parts come largest first (:data:`lidar2city.tools.blocks.RAMP`): the last
-    ones, the smallest, even out the workers' ends."""
+    Parts of given footprints come largest first (:data:`lidar2city.tools.blocks.RAMP`):
+    the last ones, the smallest, even out the workers' ends; traced parts are
+    handed out heaviest first (:func:`trace_then_split`)."""
     if plan.parts:
         return True
     if plan.split is None or not specs:
