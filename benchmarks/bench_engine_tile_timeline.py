@@ -1,6 +1,6 @@
 """Where the wall time of ``reconstruct`` on the Delft tile goes: a timeline of the client, the server workers are forked from, and each worker.
 
-Usage: ``python benchmarks/bench_engine_tile_timeline.py [DATA_DIR] [--workers 2] [--traced] [--log]``
+Usage: ``python benchmarks/bench_engine_tile_timeline.py [DATA_DIR] [--workers 2] [--traced] [--log] [--src OTHER_SRC]``
 (default $LIDAR2CITY_DATA or ../shared/data; ``LIDAR2CITY_LOCAL_EXECUTOR=dask`` in the
 environment: the Dask cluster instead of workers forked from the client)
 
@@ -100,11 +100,24 @@ def main():
         return out
     engine.DaskExecutor.ready = ready
 
+    from lidar2city.tools import forked
+    real_fork = forked._fork_children
+
+    def fork_children(*a, **k):
+        mark("fork: children being forked")
+        try:
+            return real_fork(*a, **k)
+        finally:
+            mark("fork: children forked")
+    forked._fork_children = fork_children
+
     def timed(fn):
         def run(spec, options):
             import time as t_
             import resource as r_
             import gc as g_
+            import pickle as p_
+            mods0 = len(sys.modules)
             gcs0 = sum(st["collections"] for st in g_.get_stats())
             start, cpu0, dec0 = t_.time(), t_.process_time(), task._cache.decoded
 
@@ -121,8 +134,15 @@ def main():
                 fields = f.read().rsplit(")", 1)[1].split()
             age = (t_.clock_gettime(t_.CLOCK_BOOTTIME)
                    - int(fields[19]) / os.sysconf("SC_CLK_TCK"))
-            out.bench = (start, t_.time(), os.getpid(), t_.time() - age,
-                         t_.process_time() - cpu0, cpu0, task._cache.decoded - dec0, th, spec.index)
+            end, cpu1 = t_.time(), t_.process_time()
+            # what sending the output back costs a forked worker (pickling; measured
+            # after the task's own times were taken, so not counted in them)
+            p0 = t_.process_time()
+            size = len(p_.dumps([(0, out)], protocol=p_.HIGHEST_PROTOCOL))
+            pick = t_.process_time() - p0
+            out.bench = (start, end, os.getpid(), end - age, cpu1 - cpu0, cpu0,
+                         task._cache.decoded - dec0, th + (len(sys.modules) - mods0, pick, size),
+                         spec.index)
             return out
         return run
 
@@ -153,6 +173,29 @@ def main():
                 rows.append(list(out.bench) + [len(out.footprints or ()), "trace"])
             yield i, out
     engine.DaskExecutor.map = traced_map
+    real_fmap = forked.ForkExecutor.map
+
+    def traced_fmap(self, fn, *a, **k):
+        for i, out in real_fmap(self, fn, *a, **k):
+            if getattr(out, "bench", None) and not out.results and fn is task.trace_footprints:
+                rows.append(list(out.bench) + [len(out.footprints or ()), "trace"])
+            yield i, out
+    forked.ForkExecutor.map = traced_fmap
+    real_loads, loads_cpu = forked.pickle.loads, [0.0, 0]
+
+    class TimedPickle:  # the results unpickled by this process's feeder threads
+        dumps = staticmethod(forked.pickle.dumps)
+        HIGHEST_PROTOCOL = forked.pickle.HIGHEST_PROTOCOL
+
+        @staticmethod
+        def loads(data):
+            t = time.thread_time()
+            try:
+                return real_loads(data)
+            finally:
+                loads_cpu[0] += time.thread_time() - t
+                loads_cpu[1] += len(data)
+    forked.pickle = TimedPickle
     wrap(R._Collect, "close", "output being written", "output written")
     wrap(R._Stream, "close", "output being written", "output written")
     wrap(engine.DaskExecutor, "process_cpu", None, "workers' CPU asked")
@@ -165,7 +208,8 @@ def main():
         import resource
         ch = resource.getrusage(resource.RUSAGE_CHILDREN)
         print("BENCH " + json.dumps({"marks": marks, "rows": rows, "client": os.getpid(),
-                                     "children_cpu": ch.ru_utime + ch.ru_stime}),
+                                     "children_cpu": ch.ru_utime + ch.ru_stime,
+                                     "loads": loads_cpu}),
               file=sys.stderr)
 
 
@@ -184,7 +228,7 @@ class Child:
     """One instrumented run of the command, started now (:data:`CHILD`); ``result()``
     waits for it: ``(wall seconds, the child's report, the server's marks)``."""
 
-    def __init__(self, d, *, workers="2", traced=False, log=False, one_process=False):
+    def __init__(self, d, *, workers="2", traced=False, log=False, one_process=False, src=None):
         self.dir = tempfile.TemporaryDirectory()
         tmp = Path(self.dir.name)
         (tmp / "child.py").write_text(CHILD)
@@ -192,7 +236,7 @@ class Child:
             (tmp / f"bench_mark_{name}.py").write_text(
                 MARK.replace("{NAME}", f"server preload {'begun' if name == 'first' else 'done'}"))
         self.marks = tmp / "marks.txt"
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(tmp)]),
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(src or ROOT / "src"), str(tmp)]),
                    BENCH_MARKS=str(self.marks))
         env.pop("PYTHONDONTWRITEBYTECODE", None)  # as bench_engine_tile.py: bytecode cached
         if log:
@@ -235,8 +279,86 @@ def tasks(m, t0=0.0) -> list:
                     "end": end - t0, "born": born - t0, "cpu": cpu, "user": th[0],
                     "sys": th[1], "faults": th[2], "collections": th[3], "wait": th[4],
                     "blocked": wall - th[0] - th[1] - th[4], "buildings": n, "decoded": dec,
-                    "before": before})
+                    "before": before, "modules": th[5], "pickle": th[6], "bytes": th[7]})
     return out
+
+
+def summary(m, t0=0.0) -> dict:
+    """The run's phases, from a child's report: the serial part before the parts
+    start (the fork), each process's parts (CPU and wall), the tail (how long the
+    process that ended its parts first waited for the other's), the serial part
+    after the last part (the output written, the command's end), what moving the
+    results cost (pickling in the child, unpickling here), and the modules the
+    processes imported while running parts (imports made by both, after the fork,
+    are paid twice). Under load, CPU seconds say more than wall seconds: an
+    idle-machine estimate of the wall time is printed from them (serial wall,
+    then the busier process's CPU seconds of parts, then the serial end)."""
+    marks = {n: (t, c) for n, t, c, _ in m["marks"]}
+    ts = tasks(m, t0)
+    builds = [t for t in ts if t["kind"] == "build"]
+    if not builds:
+        return {}
+    start = min(t["start"] for t in builds)
+    who = sorted({t["who"] for t in builds})
+    ends = {w: max(t["end"] for t in builds if t["who"] == w) for w in who}
+    cpu = {w: sum(t["cpu"] for t in builds if t["who"] == w) for w in who}
+    first_mods = {w: min(builds, key=lambda t, w=w: (t["who"] != w, t["start"]))["modules"]
+                  for w in who}
+    last = max(ends.values())
+    done = marks.get("command done", (last, 0))[0]
+    fork = marks.get("fork: children forked", marks.get("fork: children being forked"))
+    trace = [t for t in ts if t["kind"] == "trace"]
+    # CPU seconds of this process before the parts (its decoding runs on two threads:
+    # an upper bound of the wall time an idle machine takes) and for the output
+    before = (fork or marks.get("client decoded 1 tile(s) held for the workers it forks",
+                                (start, 0.0)))[1]
+    writing = marks.get("output being written")
+    after_cpu = (marks["command done"][1] - writing[1]) if writing and "command done" in marks \
+        else done - last
+    out = {"parts start": start, "tail": last - min(ends.values()), "after": done - last,
+           "cpu": cpu, "estimate": before + max(cpu.values()) + after_cpu,
+           "run cpu": marks.get("command done", (0, 0.0))[1] + m["children_cpu"]}
+    print(f"phases: parts start at {start:.2f} s (fork at "
+          f"{'-' if fork is None else f'{fork[0]:.2f} s'}"
+          f"{', after a traced first pass of ' + format(sum(t['cpu'] for t in trace), '.2f') + ' CPU s' if trace else ''}); "
+          f"parts' CPU s by process: " + ", ".join(f"{w} {cpu[w]:.2f}" for w in who)
+          + f" (imbalance {max(cpu.values()) - min(cpu.values()):.2f} CPU s); "
+          f"last part ends {last:.2f} s, the first process to finish waited {out['tail']:.2f} s "
+          f"for it; after it {out['after']:.2f} s (output, end)")
+    print("results moved: pickled " + f"{sum(t['bytes'] for t in builds) / 1024:.0f} KB in "
+          f"{sum(t['pickle'] for t in builds):.3f} CPU s (all parts), unpickled here "
+          f"{m.get('loads', [0, 0])[1] / 1024:.0f} KB in {m.get('loads', [0.0])[0]:.3f} CPU s; "
+          "modules imported by each process's first part: "
+          + ", ".join(f"{w} {first_mods[w]}" for w in who))
+    print(f"idle-machine estimate: {out['estimate']:.2f} s (this process's CPU s before the "
+          f"parts {before:.2f} + the busier process's parts {max(cpu.values()):.2f} + the "
+          f"output's {after_cpu:.2f}); the run's CPU s {out['run cpu']:.2f} (all processes)")
+    return out
+
+
+def pairs(d, a) -> None:
+    """``--pairs N --src OTHER_SRC``: the phases of OTHER_SRC's run and this tree's, in
+    turn, N rounds; medians of the idle-machine estimate, the tail and the run's CPU."""
+    import statistics
+
+    got = {"other": [], "this": []}
+    for k in range(a.pairs):
+        for name, src in (("other", a.src), ("this", None)):
+            child = Child(d, workers=a.workers, traced=a.traced, src=src)
+            wall, m, _, _ = child.result()
+            print(f"round {k + 1}, {name} ({src or 'this tree'}), {wall:.2f} s at load "
+                  f"{os.getloadavg()[0]:.2f}:")
+            got[name].append(summary(m, child.t0))
+    for name, rows in got.items():
+        print(f"{name}: idle-machine estimate median "
+              f"{statistics.median(r['estimate'] for r in rows):.2f} s "
+              f"({', '.join(format(r['estimate'], '.2f') for r in rows)}); parts' CPU imbalance "
+              f"median {statistics.median(max(r['cpu'].values()) - min(r['cpu'].values()) for r in rows):.2f} s; "
+              f"the run's CPU median {statistics.median(r['run cpu'] for r in rows):.2f} s")
+    ratio = [t["estimate"] / o["estimate"] for o, t in zip(got["other"], got["this"], strict=True)]
+    print(f"estimate this / other: median {statistics.median(ratio):.3f} "
+          f"({', '.join(format(v, '.3f') for v in ratio)})")
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
 def main():
@@ -245,14 +367,24 @@ def main():
     ap.add_argument("--workers", default="2")
     ap.add_argument("--traced", action="store_true", help="no footprint file")
     ap.add_argument("--log", action="store_true", help="Dask's and lidar2city's log lines too")
+    ap.add_argument("--src", help="run another tree's source (its src folder, e.g. main's, "
+                                  "to compare the phases), not this tree's")
     ap.add_argument("--one-process", action="store_true",
                     help="the plan of --workers N (its parts), no cluster: every part in the "
                          "client, one after the other (each part's CPU without a second process)")
+    ap.add_argument("--pairs", type=int, default=0,
+                    help="with --src: N rounds of OTHER_SRC then this tree, only the phases "
+                         "printed per run and their medians (the idle-machine estimate from "
+                         "CPU seconds compares the two under load)")
     a = ap.parse_args()
     d = data_dir(a.data) / "delft"
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
           f"({os.cpu_count()} cores)")
-    child = Child(d, workers=a.workers, traced=a.traced, log=a.log, one_process=a.one_process)
+    if a.pairs:
+        pairs(d, a)
+        return
+    child = Child(d, workers=a.workers, traced=a.traced, log=a.log, one_process=a.one_process,
+                  src=a.src)
     t0 = child.t0
     wall, m, server, lines = child.result()
     events = [(t, f"client: {n} (client CPU {c:.2f} s, its thread {th:.2f})")
@@ -276,12 +408,14 @@ def main():
               f"{t['cpu']:4.2f} CPU s; its thread {t['user']:4.2f} user {t['sys']:4.2f} sys, "
               f"{t['faults']} page faults, {t['collections']} collections, waited for a core {t['wait']:4.2f} s, blocked "
               f"{t['blocked']:4.2f} s), {t['buildings']} buildings, {t['decoded']} tile(s) "
-              f"decoded itself, worker CPU before {t['before']:.2f} s")
+              f"decoded itself, worker CPU before {t['before']:.2f} s, {t['modules']} modules "
+              f"imported, its output pickled {t['bytes'] / 1024:.0f} KB in {t['pickle']:.3f} CPU s")
     for who, s in sums.items():
         print(f"{who}: {s['n']} task(s), {s['wall']:.2f} s, {s['cpu']:.2f} CPU s of the process, "
               f"{s['thread']:.2f} CPU s of the task's thread ({s['sys']:.2f} in the kernel, "
               f"{s['faults']} page faults), waited for a core {s['wait']:.2f} s, blocked (not "
               f"runnable: the interpreter lock, I/O) {s['blocked']:.2f} s")
+    summary(m, t0)
     if a.log:
         for line in lines:
             if line[:8].strip().split(" ")[0].isdigit():

@@ -756,19 +756,56 @@ def test_one_block_cut_into_parts_for_two_workers_gives_the_same_bytes(area, tmp
 
 
 @pytest.mark.parametrize("n,split", [(5, 8), (9, 8), (17, 8), (132, 17)])
-def test_a_split_block_gives_parts_covering_its_footprints_once(n, split):
-    from lidar2city.tools.blocks import _split_parts
+@pytest.mark.parametrize("weighted", [False, True])
+def test_a_split_block_gives_parts_covering_its_footprints_once(n, split, weighted):
+    """Strips of decreasing work, the first about RAMP times the last: handed out in
+    order, the small last ones even out the workers' ends."""
+    from lidar2city.tools.blocks import RAMP, _split_parts, footprint_work
 
     rng = np.random.default_rng(n)
     centre = rng.uniform(0, 200, (n, 2))
     empty = np.zeros(n, dtype=bool)
     empty[::7] = True
+    size = rng.uniform(5, 40, (n, 2))
+    bounds = np.column_stack([centre - size / 2, centre + size / 2])
+    bounds[empty] = np.nan
+    work = footprint_work(bounds) if weighted else None
+    assert weighted or np.allclose(footprint_work(np.ones((3, 4))), 1.0)
+    if weighted:
+        assert np.isclose(work.mean(), 1.0) and np.all(work[empty] == 0.5)
     block = np.arange(n)  # in footprint order, as footprint_blocks gives it
-    parts = _split_parts(block, centre, empty, split)
+    parts = _split_parts(block, centre, empty, split, work)
     assert sorted(i for p in parts for i in p) == list(range(n))
-    assert all(0 < len(p) <= split and p == sorted(p) for p in parts)
-    assert len(parts) == -(-n // split)
-    assert _split_parts(block, centre, empty, split) == parts  # deterministic
+    assert all(len(p) > 0 and p == sorted(p) for p in parts)
+    want = 1 if n <= split else -(-n // split)
+    assert want - 1 <= len(parts) <= want
+    w = np.ones(n) if work is None else work
+    totals = [float(w[p].sum()) for p in parts]
+    if len(parts) > 2:
+        # decreasing, up to one footprint's work at each cut
+        assert all(a >= b - 2 * w.max() for a, b in zip(totals, totals[1:], strict=False))
+        assert totals[0] > totals[-1] and totals[0] / totals[-1] <= 2 * RAMP
+    assert _split_parts(block, centre, empty, split, work) == parts  # deterministic
+
+
+def test_only_parts_of_blocks_cut_for_the_workers_are_dealt_one_by_one(area, tmp_path,
+                                                                       monkeypatch):
+    """Parts of a block cut for the workers (whose tiles every worker holds) go one by
+    one, largest first, to the free worker; whole blocks go in runs of neighbours."""
+    from lidar2city.tools import blocks
+    from lidar2city.tools.reconstruct import dealt_one_by_one, plan_reconstruct
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2",))
+    whole = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=BLOCK,
+                             workers=2, **kw)
+    cut = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=1000.0,
+                           workers=2, **kw)
+    assert not dealt_one_by_one(whole, whole.specs)
+    assert cut.split is not None and len(cut.specs) > 2 and dealt_one_by_one(cut, cut.specs)
+    assert not dealt_one_by_one(cut, [])
+    works = [s.work for s in cut.specs]
+    assert works[0] > works[-1] and np.isclose(sum(works), sum(s.size for s in cut.specs))
 
 
 def test_an_interrupted_run_releases_every_semaphore_it_registered():

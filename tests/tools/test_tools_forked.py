@@ -223,3 +223,31 @@ def test_workers_n_forks_here_unless_dask_is_asked_for(monkeypatch):
     monkeypatch.setenv(engine.LOCAL_EXECUTOR_ENV, "threads")
     with pytest.raises(InputError, match="LIDAR2CITY_LOCAL_EXECUTOR"):
         engine.make_executor(2)
+
+
+def test_the_tasks_modules_are_imported_here_once_before_the_fork(tmp_path, monkeypatch):
+    """``preload``: the modules the tasks import are imported by this process before
+    it forks, so that every child inherits them instead of importing them again in
+    its first run (each paid for them: ``bench_engine_tile_timeline.py``); one that
+    cannot be imported is left to the task, and a map without a fork imports none."""
+    import sys
+
+    (tmp_path / "l2c_preload_probe.py").write_text("LOADED = True\n")
+    (tmp_path / "l2c_preload_broken.py").write_text("raise ImportError('broken on purpose')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for name in ("l2c_preload_probe", "l2c_preload_broken"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+
+    def where(i):
+        time.sleep(0.01)
+        return os.getpid(), "l2c_preload_probe" in sys.modules
+
+    preload = ("l2c_preload_broken", "l2c_preload_probe")
+    with ForkExecutor(2, preload=preload) as ex:
+        assert dict(ex.map(where, [0]))[0] == (os.getpid(), False)  # no fork: nothing loaded
+        assert "l2c_preload_probe" not in sys.modules
+        got = dict(ex.map(where, range(16)))
+    assert "l2c_preload_probe" in sys.modules and "l2c_preload_broken" not in sys.modules
+    pids = {pid for pid, _ in got.values()}
+    assert len(pids) == 2 and all(seen for _, seen in got.values())
+    assert engine.make_executor(2, preload=preload).preload == preload

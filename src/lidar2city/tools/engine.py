@@ -593,9 +593,9 @@ FORKSERVER_PRELOAD = ("distributed", "numpy", "lidar2city.tools.task",
 
 #: what a block imports (besides :mod:`lidar2city.tools.task`), for a local cluster's
 #: workers to have it imported before they are forked (:func:`worker_modules`)
-WORKER_MODULES = ("laspy", "lazrs", "shapely", "pyproj", "lidar2city.io.las",
+WORKER_MODULES = ("laspy", "lazrs", "shapely", "shapely.ops", "pyproj", "lidar2city.io.las",
                   "lidar2city.io.vector", "lidar2city.lod.lod1", "lidar2city.metrics.model",
-                  "lidar2city.validate.solid")
+                  "lidar2city.validate.solid", "lidar2city._components")
 #: what LoD2.2 from the roof topology imports besides (scipy's ~0.25 CPU-second)
 LOD22_MODULES = ("scipy.ndimage", "scipy.spatial", "scipy.sparse", "lidar2city.roof.building",
                  "lidar2city.regularize.snake", "lidar2city.lod.roofcheck")
@@ -951,7 +951,8 @@ def make_executor(workers: int = 1, scheduler: str | None = None, preload=(),
                   client_computes: bool = False):
     """The executor for ``--workers N`` / ``--scheduler ADDRESS`` (use it as a context manager);
     ``preload``: modules a local cluster's workers import before they are forked
-    (:func:`_start_forkserver`); ``client_computes``: a local cluster of N - 1
+    (:func:`_start_forkserver`), or this process before it forks its workers
+    (:class:`~lidar2city.tools.forked.ForkExecutor`); ``client_computes``: a local cluster of N - 1
     processes, this one computing too (:meth:`DaskExecutor._map_shared`)."""
     if scheduler is not None:
         return DaskExecutor(scheduler=scheduler)
@@ -962,7 +963,7 @@ def make_executor(workers: int = 1, scheduler: str | None = None, preload=(),
     if local_executor() == "fork":
         from .forked import ForkExecutor
 
-        return ForkExecutor(int(workers))
+        return ForkExecutor(int(workers), preload=preload)
     return DaskExecutor(workers=int(workers), preload=preload, client_computes=client_computes)
 
 

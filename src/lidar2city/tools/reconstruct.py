@@ -1581,8 +1581,27 @@ def run_blocks(executor, plan, specs=None):
     # runs of equal numbers of buildings (traced blocks: of equal numbers of blocks)
     costs = [s.work for s in specs]
     for i, out in executor.map(task.run_block, specs, plan.options, run_hook=task.tile_keeper,
-                               costs=costs, **({"balance": True} if plan.parts else {})):
+                               costs=costs, **({"balance": True} if dealt_one_by_one(plan, specs)
+                                               else {})):
         yield _failed_block(specs[i], out) if isinstance(out, BaseException) else out
+
+
+def dealt_one_by_one(plan, specs) -> bool:
+    """Whether the blocks ``specs`` of ``plan`` are handed out one by one, in order, to
+    whichever worker is free (the executors' ``balance``), rather than in runs of
+    neighbouring blocks dealt in shares: when every one is a part of a block cut
+    for the workers (traced parts, :attr:`ReconstructPlan.parts`, or parts of given
+    footprints, :attr:`ReconstructPlan.split`), whose tiles every worker holds
+    already (:func:`shared_tiles`), so that no run has tiles of its own to pass on.
+    Parts of given footprints come largest first (:data:`lidar2city.tools.blocks.RAMP`):
+    the last ones, the smallest, even out the workers' ends; traced parts are
+    handed out heaviest first (:func:`trace_then_split`)."""
+    if plan.parts:
+        return True
+    if plan.split is None or not specs:
+        return False
+    cells = Counter(s.cell for s in plan.specs)
+    return all(cells[s.cell] > 1 for s in specs)
 
 
 def _failed_block(spec, exc):
