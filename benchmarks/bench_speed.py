@@ -1,7 +1,9 @@
 """Speed and memory of ``reconstruct`` on the Delft tile, against the laspy read floor.
 
 Usage: python benchmarks/bench_speed.py [DATA_DIR] [--runs N] [--no-traced | --traced-only] [--keep-env]
-(default $LIDAR2CITY_DATA or ../shared/data; 3 runs)
+[--workers W]
+(default $LIDAR2CITY_DATA or ../shared/data; 3 runs; the command's own --workers default,
+``auto``, unless ``--workers W`` is given: ``--workers 1`` measures one process)
 
 Every figure is a whole process as a user runs it, measured from outside
 (wall time with time.perf_counter; peak RSS and user + system CPU seconds from
@@ -73,6 +75,8 @@ def main():
     ap.add_argument("--keep-env", action="store_true",
                     help="run with the environment as it is (PYTHONDONTWRITEBYTECODE kept: "
                          "without a __pycache__, lidar2city compiles in every run)")
+    ap.add_argument("--workers", default=None,
+                    help="reconstruct's --workers (default: none given, the command's default)")
     args = ap.parse_args()
     d = data_dir(args.data) / "delft"
     laz, fps = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
@@ -87,6 +91,9 @@ def main():
     py = sys.executable
     floor = [py, "-c", f"import laspy; laspy.read({str(laz)!r})"]
     base = [py, "-m", "lidar2city.cli.main", "reconstruct", str(laz), "--crs", "EPSG:7415"]
+    if args.workers is not None:
+        base += ["--workers", args.workers]
+    print(f"reconstruct --workers {args.workers or '(default)'}")
     out = tmp / "delft.city.json"
     full = base + ["--footprints", str(fps), "--lod", "1.2", "--lod", "1.3", "--lod", "2.2",
                    "-o", str(out)]
