@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 
 __all__ = ["check_output", "check_not_input", "check_suffix", "POINTS_SUFFIXES", "RASTER_SUFFIXES",
@@ -207,6 +209,10 @@ class EngineProgress:
     ``total`` None while the number is not known (traced footprints).
     """
 
+    #: the least time between two drawings of the bars (seconds); the last count is
+    #: always drawn
+    EVERY = 0.1
+
     def __init__(self, tasks="blocks", items=None, *, quiet=False):
         import sys
 
@@ -221,10 +227,15 @@ class EngineProgress:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
 
+            # drawn when a count changes, not by rich's refresh thread: a process with
+            # no other thread can fork its workers (``--workers auto`` forks none beside
+            # another thread, whose locks a child would inherit held)
             self._bar = Progress(TextColumn("{task.description:>10}"), BarColumn(),
                                  MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                                 console=Console(stderr=True), transient=False)
+                                 console=Console(stderr=True), transient=False,
+                                 auto_refresh=False)
             self._bar.start()
+            self._drawn = 0.0
         return self
 
     def __exit__(self, *exc):
@@ -238,6 +249,10 @@ class EngineProgress:
         if which not in self._ids:
             self._ids[which] = self._bar.add_task(self.labels[which], total=total)
         self._bar.update(self._ids[which], completed=done, total=total)
+        now = time.monotonic()
+        if now - self._drawn >= self.EVERY or done == total:
+            self._drawn = now
+            self._bar.refresh()
 
     def blocks(self, done, total):
         self._set(0, done, total)
