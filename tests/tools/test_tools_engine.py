@@ -1277,6 +1277,47 @@ def test_an_interrupt_racing_a_semaphore_finalizer_leaves_the_tracker_nothing(wh
     assert "leaked" not in done.stderr and "Traceback" not in done.stderr, done.stderr
 
 
+_HELD_LOCK = """
+import multiprocessing, os, sys, threading, time
+from multiprocessing import resource_tracker, synchronize
+from lidar2city.tools import engine
+engine._track_semaphores()
+lock = multiprocessing.get_context("forkserver").Lock()
+name = lock._semlock.name
+held = threading.Event()
+def hold():  # a thread holding the registrations' lock while it waits on the tracker
+    with engine._SEMAPHORE_LOCK:
+        held.set()
+        time.sleep(4.0)
+threading.Thread(target=hold, daemon=True).start()
+held.wait()
+t0 = time.perf_counter()
+resource_tracker.unregister(name, "semaphore")
+waited = time.perf_counter() - t0
+synchronize.sem_unlink(name)
+print(f"{waited:.2f}")
+sys.stdout.flush()
+os._exit(0)
+"""
+
+
+def test_a_semaphore_finalizer_waits_for_the_registrations_lock_at_most_a_second():
+    """A finalizer the collector runs inside the tracker's own lock must not wait for
+    ever on a thread holding the registrations' lock (that thread may be waiting for
+    the tracker's): it goes on after a second, as CPython's would without the lock."""
+    import multiprocessing
+    import subprocess
+    import sys
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        pytest.skip("named semaphores are a forkserver / spawn platform's")
+    done = subprocess.run([sys.executable, "-c", _HELD_LOCK], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert 0.9 <= float(done.stdout) < 3.0, done.stdout
+    assert "leaked" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
 @pytest.mark.parametrize("balance", [False, True])
 def test_run_dealer_hands_every_run_out_once(balance):
     """Whatever order the sides ask in, each run goes out once; this process starts on

@@ -714,12 +714,19 @@ def _track_semaphores() -> None:
         # finds it told already; it is never cut off between forgetting and telling
         # (the tracker then warned of a leaked semaphore it could not unlink) nor
         # tells twice (the tracker then printed a KeyError's traceback)
-        with _SEMAPHORE_LOCK:
+        # waited for at most a second: a finalizer the collector runs in a thread that
+        # holds the tracker's own lock must not wait for ever on a thread that holds
+        # this one and waits for the tracker's (it then fails as CPython's would)
+        got = _SEMAPHORE_LOCK.acquire(timeout=1.0)
+        try:
             if name in _RELEASED:
                 return None
             done = unregister(name, rtype)
             _SEMAPHORES.discard(name)
             return done
+        finally:
+            if got:
+                _SEMAPHORE_LOCK.release()
 
     tracked_register._lidar2city = True
     resource_tracker.register, resource_tracker.unregister = tracked_register, tracked_unregister
