@@ -1187,6 +1187,7 @@ def _variant_solid(variants, planes, *, ground_z, pts, spacing, cfg, memo):
             break
     return solid, faces, face_labels, planes_f
 
+
 #: the largest exact roof snake solve (table elements, about 1 CPU second per 1e8): the
 #: roof graph of a block of many houses is too wide for it and keeps its simplified faces
 SNAKE_MAX_WORK = 1e8
