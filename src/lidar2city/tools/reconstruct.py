@@ -1495,7 +1495,10 @@ PARTS_PER_RUN = 1
 
 def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     """The plan of a traced run whose blocks are traced first on ``executor``
-    (:func:`lidar2city.tools.task.trace_footprints`), then cut into parts of
+    (:func:`lidar2city.tools.task.trace_outlines`: a block of many outlines has
+    them regularised in pieces by all the workers, :func:`_regularise_staged`,
+    the same footprints as :func:`lidar2city.tools.task.trace_footprints`
+    gives in one pass), then cut into parts of
     their footprints of about equal expected work (the footprints' areas,
     :data:`PARTS_PER_RUN` parts per executor run,
     :func:`lidar2city.tools.blocks.traced_parts`) that the workers share,

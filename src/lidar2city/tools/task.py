@@ -8,9 +8,11 @@ none were given, and builds every building of the block with
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
 in which blocks finish. With several workers and fewer traced blocks than
-their runs, :func:`trace_footprints` traces a block first and its buildings
-are built in parts (specs carrying the traced footprints inline, built as the
-block builds them). :func:`trace_block` is the task of ``footprints`` on a
+their runs, :func:`trace_outlines` traces a block first (its outlines
+regularised in pieces by all the workers, :func:`regularise_parts`, when they
+are many; the footprints :func:`trace_footprints` gives in one pass) and its
+buildings are built in parts (specs carrying the traced footprints inline,
+built as the block builds them). :func:`trace_block` is the task of ``footprints`` on a
 folder of tiles (the same blocks, traced). Decoded tiles are shared by the
 blocks a process runs in turn and kept only while its next blocks read them
 (:func:`tile_keeper`).
