@@ -358,7 +358,7 @@ def summary(m, t0=0.0) -> dict:
     print(f"phases: parts start at {start:.2f} s (fork at "
           f"{'-' if fork is None else f'{fork[0]:.2f} s'}"
           f"{', after a traced first pass of ' + format(sum(t['cpu'] for t in trace), '.2f') + ' CPU s' if trace else ''}"
-          f"{', its outlines regularised ' + str(_by_process(shared)) + ' from ' + format(min(t['start'] for t in shared), '.2f') + ' to ' + format(max(t['end'] for t in shared), '.2f') + ' s' if shared else ''}); "
+          f"{_shared_phase(shared)}); "
           f"parts' CPU s by process: " + ", ".join(f"{w} {cpu[w]:.2f}" for w in who)
           + f" (imbalance {max(cpu.values()) - min(cpu.values()):.2f} CPU s); "
           f"last part ends {last:.2f} s, the first process to finish waited {out['tail']:.2f} s "
@@ -369,17 +369,22 @@ def summary(m, t0=0.0) -> dict:
           "modules imported by each process's first part: "
           + ", ".join(f"{w} {first_mods[w]}" for w in who))
     print(f"idle-machine estimate: {out['estimate']:.2f} s (this process's CPU s before the "
-          f"parts {before:.2f}{' (its outlines: the busier process' + chr(39) + 's pieces)' if shared else ''}"
+          f"parts {before:.2f}{' (its outlines: the busier side)' if shared else ''}"
           f" + the busier process's parts {max(cpu.values()):.2f} + the "
           f"output's {after_cpu:.2f}); the run's CPU s {out['run cpu']:.2f} (all processes)")
     return out
 
 
-def _by_process(rows) -> str:
-    """``who CPU s (pieces)`` of some tasks, per process."""
+def _shared_phase(rows) -> str:
+    """The phase of a traced block's outlines regularised in pieces by the workers:
+    ``who CPU s (pieces)`` per process, from the first piece's start to the last's end."""
+    if not rows:
+        return ""
     who = sorted({t["who"] for t in rows})
-    return "; ".join(f"{w} {sum(t['cpu'] for t in rows if t['who'] == w):.2f} CPU s "
-                     f"({sum(t['who'] == w for t in rows)} pieces)" for w in who)
+    return (", its outlines regularised " + "; ".join(
+        f"{w} {sum(t['cpu'] for t in rows if t['who'] == w):.2f} CPU s "
+        f"({sum(t['who'] == w for t in rows)} pieces)" for w in who)
+        + f" from {min(t['start'] for t in rows):.2f} to {max(t['end'] for t in rows):.2f} s")
 
 
 def pairs(d, a) -> None:

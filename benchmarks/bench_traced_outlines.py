@@ -1,4 +1,4 @@
-"""A traced block's outlines regularised by all the workers, or in its first pass: wall and CPU in pairs.
+"""A traced block's outlines regularised by all the workers or in its first pass, in pairs.
 
 Usage: ``python benchmarks/bench_traced_outlines.py [DATA_DIR] [--areas tile,clip,copies]
 [--pairs 3] [--workers 2] [--src OTHER_SRC]``
@@ -148,8 +148,9 @@ def main():
             print(f"{area} staged / {other}: wall median {statistics.median(w):.3f} "
                   f"({', '.join(f'{v:.3f}' for v in w)}), CPU median {statistics.median(c):.3f} "
                   f"({', '.join(f'{v:.3f}' for v in c)})")
-        print(f"{area}: {'the same bytes in every run' if len(digests) == 1 else 'DIFFERENT BYTES: ' + ', '.join(sorted(digests))}",
-              flush=True)
+        same = len(digests) == 1
+        print(f"{area}: {'the same bytes in every run' if same else 'DIFFERENT BYTES: '}"
+              f"{'' if same else ', '.join(sorted(digests))}", flush=True)
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
