@@ -112,7 +112,7 @@ def main():
     forked._fork_children = fork_children
 
     def timed(fn):
-        def run(spec, options):
+        def run(spec, *args):
             import time as t_
             import resource as r_
             import gc as g_
@@ -125,7 +125,7 @@ def main():
                 with open("/proc/thread-self/schedstat") as f:
                     return [int(v) / 1e9 for v in f.read().split()[:2]]
             u0, s0 = r_.getrusage(r_.RUSAGE_THREAD), sched()
-            out = fn(spec, options)
+            out = fn(spec, *args)
             u1, s1 = r_.getrusage(r_.RUSAGE_THREAD), sched()
             th = (u1.ru_utime - u0.ru_utime, u1.ru_stime - u0.ru_stime,
                   u1.ru_minflt - u0.ru_minflt,
@@ -142,7 +142,7 @@ def main():
             pick = t_.process_time() - p0
             out.bench = (start, end, os.getpid(), end - age, cpu1 - cpu0, cpu0,
                          task._cache.decoded - dec0, th + (len(sys.modules) - mods0, pick, size),
-                         spec.index)
+                         getattr(spec, "index", getattr(spec, "block", 0)))
             return out
         return run
 
@@ -157,6 +157,31 @@ def main():
         return task._measured(task._trace_footprints, spec, options)
 
     task.run_block, task.trace_footprints = timed(run_block), timed(trace_footprints)
+    if hasattr(task, "trace_outlines"):  # a traced block's outlines shared by the workers
+        real_regularise = task.regularise_parts
+
+        def trace_outlines(spec, options, least=None):
+            task._cache.saved = dict(options.decoded)
+            return task._measured(task._trace_outlines, spec, options,
+                                  task.STAGED_LEAST if least is None else least)
+
+        def regularise_parts(item):
+            return real_regularise(item)
+
+        task.trace_outlines = timed(trace_outlines)
+        task.regularise_parts = timed(regularise_parts)
+
+    def first_pass(fn, out):  # the row of a traced block's first pass, or of its outlines
+        if not getattr(out, "bench", None):
+            return None
+        if fn is task.trace_footprints and not out.results:
+            return list(out.bench) + [len(out.footprints or ()), "trace"]
+        if fn is getattr(task, "trace_outlines", None):
+            n = len(out.staged.outlines) if out.staged is not None else len(out.footprints)
+            return list(out.bench) + [n, "trace"]
+        if fn is getattr(task, "regularise_parts", None):
+            return list(out.bench) + [len(out.footprints), "outlines"]
+        return None
     rows = []
     for owner, name in ((R.InOrder, "add"),):
         real_add = owner.add
@@ -169,16 +194,18 @@ def main():
 
     def traced_map(self, fn, *a, **k):
         for i, out in real_map(self, fn, *a, **k):
-            if getattr(out, "bench", None) and not out.results and fn is task.trace_footprints:
-                rows.append(list(out.bench) + [len(out.footprints or ()), "trace"])
+            row = first_pass(fn, out)
+            if row is not None:
+                rows.append(row)
             yield i, out
     engine.DaskExecutor.map = traced_map
     real_fmap = forked.ForkExecutor.map
 
     def traced_fmap(self, fn, *a, **k):
         for i, out in real_fmap(self, fn, *a, **k):
-            if getattr(out, "bench", None) and not out.results and fn is task.trace_footprints:
-                rows.append(list(out.bench) + [len(out.footprints or ()), "trace"])
+            row = first_pass(fn, out)
+            if row is not None:
+                rows.append(row)
             yield i, out
     forked.ForkExecutor.map = traced_fmap
     real_loads, loads_cpu = forked.pickle.loads, [0.0, 0]
@@ -306,12 +333,22 @@ def summary(m, t0=0.0) -> dict:
                   for w in who}
     last = max(ends.values())
     done = marks.get("command done", (last, 0))[0]
+    # the last fork: the parts' (a traced run's outlines may have forked before)
     fork = marks.get("fork: children forked", marks.get("fork: children being forked"))
     trace = [t for t in ts if t["kind"] == "trace"]
+    shared = [t for t in ts if t["kind"] == "outlines"]
     # CPU seconds of this process before the parts (its decoding runs on two threads:
     # an upper bound of the wall time an idle machine takes) and for the output
     before = (fork or marks.get("client decoded 1 tile(s) held for the workers it forks",
                                 (start, 0.0)))[1]
+    if shared:
+        # outlines shared by the workers between two forks: the client's CPU at the
+        # first, the busier process's pieces, then the client's assembly until the last
+        forks = [c for n, _, c, _ in m["marks"] if n == "fork: children forked"]
+        mine = sum(t["cpu"] for t in shared if t["who"] == "client")
+        busier = max(sum(t["cpu"] for t in shared if t["who"] == w)
+                     for w in {t["who"] for t in shared})
+        before = forks[0] + busier + max(0.0, forks[-1] - forks[0] - mine)
     writing = marks.get("output being written")
     after_cpu = (marks["command done"][1] - writing[1]) if writing and "command done" in marks \
         else done - last
@@ -320,7 +357,8 @@ def summary(m, t0=0.0) -> dict:
            "run cpu": marks.get("command done", (0, 0.0))[1] + m["children_cpu"]}
     print(f"phases: parts start at {start:.2f} s (fork at "
           f"{'-' if fork is None else f'{fork[0]:.2f} s'}"
-          f"{', after a traced first pass of ' + format(sum(t['cpu'] for t in trace), '.2f') + ' CPU s' if trace else ''}); "
+          f"{', after a traced first pass of ' + format(sum(t['cpu'] for t in trace), '.2f') + ' CPU s' if trace else ''}"
+          f"{_shared_phase(shared)}); "
           f"parts' CPU s by process: " + ", ".join(f"{w} {cpu[w]:.2f}" for w in who)
           + f" (imbalance {max(cpu.values()) - min(cpu.values()):.2f} CPU s); "
           f"last part ends {last:.2f} s, the first process to finish waited {out['tail']:.2f} s "
@@ -331,9 +369,22 @@ def summary(m, t0=0.0) -> dict:
           "modules imported by each process's first part: "
           + ", ".join(f"{w} {first_mods[w]}" for w in who))
     print(f"idle-machine estimate: {out['estimate']:.2f} s (this process's CPU s before the "
-          f"parts {before:.2f} + the busier process's parts {max(cpu.values()):.2f} + the "
+          f"parts {before:.2f}{' (its outlines: the busier side)' if shared else ''}"
+          f" + the busier process's parts {max(cpu.values()):.2f} + the "
           f"output's {after_cpu:.2f}); the run's CPU s {out['run cpu']:.2f} (all processes)")
     return out
+
+
+def _shared_phase(rows) -> str:
+    """The phase of a traced block's outlines regularised in pieces by the workers:
+    ``who CPU s (pieces)`` per process, from the first piece's start to the last's end."""
+    if not rows:
+        return ""
+    who = sorted({t["who"] for t in rows})
+    return (", its outlines regularised " + "; ".join(
+        f"{w} {sum(t['cpu'] for t in rows if t['who'] == w):.2f} CPU s "
+        f"({sum(t['who'] == w for t in rows)} pieces)" for w in who)
+        + f" from {min(t['start'] for t in rows):.2f} to {max(t['end'] for t in rows):.2f} s")
 
 
 def pairs(d, a) -> None:

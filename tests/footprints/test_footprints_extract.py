@@ -500,3 +500,89 @@ def test_point_spacing_with_the_distinct_count_given():
     xy = _jittered(1.0)
     pairs = np.vstack([xy, xy[:700]])
     assert point_spacing(pairs, distinct=len(xy)) == point_spacing(pairs)
+
+
+def _same_footprints(a, b):
+    """Whether two lists of footprints are the same to the bit (polygons, status,
+    reasons, attributes)."""
+    assert len(a) == len(b)
+    for f, g in zip(a, b, strict=True):
+        assert f.polygon.wkb == g.polygon.wkb
+        assert (f.status, f.reason, f.attributes) == (g.status, g.reason, g.attributes)
+
+
+def _staged(outlines, pieces, order):
+    """The footprints of ``outlines`` regularised piece by piece (``pieces``: the piece
+    of each part), the pieces in ``order``, each taken and sent as another process
+    would get it (pickled), then put back in the parts' order and assembled."""
+    import pickle
+
+    from lidar2city.footprints.extract import assemble_footprints, regularise_outlines
+
+    found = [None] * len(outlines)
+    for p in order:
+        idx = [k for k in range(len(outlines)) if pieces[k] == p]
+        if not idx:
+            continue
+        piece = pickle.loads(pickle.dumps(outlines.take(idx)))
+        assert [int(n) for n in piece.numbers] == idx
+        for k, f in zip(idx, pickle.loads(pickle.dumps(regularise_outlines(piece))), strict=True):
+            found[k] = f
+    return assemble_footprints(outlines, found)
+
+
+_STAGED_SCENE = {}
+
+
+def _staged_scene():
+    """Row houses of three heights (one region cut in three parts), an L shape and a
+    courtyard: their outlines (snake) and their footprints in one pass."""
+    if not _STAGED_SCENE:
+        from lidar2city.footprints.extract import trace_outlines
+
+        row = shapely.box(5, 5, 44, 15)
+        xyz, cls = scan([row, affinity.translate(L_SHAPE, 0, 12), shapely.box(47, 20, 58, 55)],
+                        seed=11)
+        xyz = _with_roof(xyz, cls, lambda x, y: np.where(y < 16, np.where(
+            (x >= 18) & (x < 31), 11.0, np.where(x >= 31, 14.5, 8.0)), 9.0))
+        kw = {"regularize": "snake"}
+        _STAGED_SCENE.update(outlines=trace_outlines(xyz, cls, **kw),
+                             whole=extract_footprints(xyz, cls, **kw))
+    return _STAGED_SCENE["outlines"], _STAGED_SCENE["whole"]
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.lists(st.integers(0, 3), min_size=8, max_size=8), st.permutations(range(4)))
+def test_outlines_regularised_in_any_pieces_give_the_footprints_of_one_pass(pieces, order):
+    """The stages of extract_footprints run apart (the outlines cut into any pieces,
+    regularised in any order, elsewhere) give its footprints to the bit, the parts
+    of a region made disjoint as one pass makes them."""
+    outlines, whole = _staged_scene()
+    assert len(outlines) >= 5 and len(set(outlines.regions.tolist())) < len(outlines)
+    assert len(whole) >= 5
+    got = _staged(outlines, [pieces[k % len(pieces)] for k in range(len(outlines))], order)
+    _same_footprints(got, whole)
+
+
+def test_outline_stages_check_their_inputs():
+    from lidar2city.footprints.extract import assemble_footprints, regularise_outlines
+
+    outlines, _ = _staged_scene()
+    with pytest.raises(InputError, match="footprints for"):
+        assemble_footprints(outlines, regularise_outlines(outlines, [0]))
+    assert outlines.work().shape == (len(outlines),) and (outlines.work() > 20).all()
+    assert len(outlines.take([])) == 0
+
+
+@pytest.mark.slow
+def test_delft_outlines_regularised_in_pieces_give_the_footprints_of_one_pass(data):
+    from lidar2city.footprints.extract import trace_outlines
+    from lidar2city.io.las import read_points
+
+    cloud = read_points(data / "delft" / "ahn3_cropped_1.laz")
+    cls = cloud.get("classification")
+    outlines = trace_outlines(cloud.xyz, cls, regularize="snake")
+    whole = extract_footprints(cloud.xyz, cls, regularize="snake")
+    assert len(outlines) >= 80
+    rng = np.random.default_rng(3)
+    _same_footprints(_staged(outlines, rng.integers(0, 3, len(outlines)), [2, 0, 1]), whole)

@@ -866,32 +866,118 @@ def _traced_in_parts(area, out, resume=False):
                         resume=resume, block_progress=None, edits=None)
 
 
+@pytest.mark.parametrize("staged", [False, True])
 def test_traced_blocks_built_in_parts_give_the_bytes_of_the_whole_block(area, traced_reference,
-                                                                        tmp_path, monkeypatch):
+                                                                        tmp_path, monkeypatch,
+                                                                        staged):
     """Without footprints, fewer blocks than the workers' runs: each block is traced
     first, then its buildings are built in parts (their boxes plus the margin, cut
-    to the block's box, nothing claimed): the bytes of the block building them."""
+    to the block's box, nothing claimed): the bytes of the block building them.
+    A block of few outlines regularises them in its first pass (no second round of
+    the executor); ``staged``: every block's outlines are regularised in pieces
+    shared by the workers, then assembled: the same bytes."""
     from lidar2city.tools import blocks
 
     monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    if staged:
+        monkeypatch.setattr(task, "STAGED_LEAST", 1)
     out = tmp_path / "parts.city.json"
-    calls = []
-    first = task.trace_footprints
-    monkeypatch.setattr(task, "trace_footprints", lambda *a: calls.append(1) or first(*a))
+    calls, pieces = [], []
+    first, regularise = task.trace_outlines, task.regularise_parts
+    monkeypatch.setattr(task, "trace_outlines", lambda *a: calls.append(1) or first(*a))
+    monkeypatch.setattr(task, "regularise_parts",
+                        lambda item: pieces.append(item.parts) or regularise(item))
     s = _traced_in_parts(area, out)
     # each block traced once, then built in parts
     assert len(calls) == traced_reference[1].blocks < s.blocks
     assert s.done == traced_reference[1].done
     assert out.read_bytes() == traced_reference[0]
+    if staged:  # several pieces
+        assert len(pieces) > 1
+    else:  # the town's blocks hold fewer outlines than STAGED_LEAST: one pass
+        assert not pieces
 
 
+def test_staged_outlines_are_cut_into_pieces_covering_each_once_heaviest_first(area):
+    """The outlines of several staged blocks: every one in one piece, the pieces of
+    about equal work (a piece holds at most its share plus one outline), the
+    heaviest outlines in the first pieces."""
+    from lidar2city.tools.reconstruct import plan_reconstruct
+
+    plan = plan_reconstruct([area / "town.laz"], area / "x.city.json", lods=("1.2",),
+                            block_size=BLOCK, workers=3)
+    staged = {}
+    for spec in plan.specs:
+        out = task.trace_outlines(spec, plan.options, least=1)
+        if out.staged is not None:
+            staged[spec.index] = out.staged
+    assert len(staged) >= 2
+    items = task.outline_parts(staged, 5)
+    seen = sorted((it.block, k) for it in items for k in it.parts)
+    assert seen == sorted((b, k) for b, st in staged.items() for k in range(len(st.outlines)))
+    work = {b: st.outlines.work() for b, st in staged.items()}
+    share = sum(float(w.sum()) for w in work.values()) / 5
+    heaviest = max(float(w.max()) for w in work.values())
+    # a piece's block parts, in the piece's order
+    totals = {}
+    for it in items:
+        totals[id(it)] = float(work[it.block][list(it.parts)].sum())
+        assert it.work == pytest.approx(totals[id(it)])
+        assert list(it.parts) == sorted(it.parts)
+        assert [int(n) for n in it.outlines.numbers] == list(it.parts)
+    assert max(totals.values()) <= share + heaviest + 1e-9
+    assert work[items[0].block][list(items[0].parts)].max() == heaviest
+
+
+def test_a_staged_block_whose_piece_fails_twice_gets_no_footprint_and_says_why(area, caplog,
+                                                                               monkeypatch):
+    """A piece of a block's outlines that fails twice: that block traced nothing (its
+    failure logged as a block whose tracing failed), the other blocks keep theirs,
+    as one pass gives them."""
+    import logging
+
+    from lidar2city.tools.reconstruct import _regularise_staged, plan_reconstruct
+
+    plan = plan_reconstruct([area / "town.laz"], area / "x.city.json", lods=("1.2",),
+                            block_size=BLOCK, workers=3)
+    staged, whole = {}, {}
+    for spec in plan.specs:
+        out = task.trace_outlines(spec, plan.options, least=1)
+        if out.staged is not None:
+            staged[spec.index] = out.staged
+            whole[spec.index] = task.trace_footprints(spec, plan.options).footprints
+    bad = sorted(staged)[0]
+    real = task.regularise_parts
+
+    def fails(item):
+        if item.block == bad:
+            raise RuntimeError("no outline here")
+        return real(item)
+
+    monkeypatch.setattr(task, "regularise_parts", fails)
+    with caplog.at_level(logging.WARNING):
+        got = dict(_regularise_staged(engine.InProcess(), plan, staged, lambda out: None))
+    assert got[bad] is None
+    assert any("block failed twice: RuntimeError: no outline here" in r.getMessage()
+               and "no footprint traced there" in r.getMessage() for r in caplog.records)
+    for b, fps in got.items():
+        if b != bad:
+            assert fps.ids == whole[b].ids
+            assert [g.wkb for g in fps.geometries] == [g.wkb for g in whole[b].geometries]
+            assert fps.attributes == whole[b].attributes
+
+
+@pytest.mark.parametrize("staged", [False, True])
 def test_traced_parts_resumed_after_a_crash_give_the_same_bytes(area, traced_reference, tmp_path,
-                                                                monkeypatch):
+                                                                monkeypatch, staged):
     """The journal of a traced run built in parts keeps the parts done; a resumed run
-    traces again (the same parts) and builds only the others."""
+    traces again (the same parts) and builds only the others (``staged``: the
+    outlines regularised in pieces shared by the workers, both times)."""
     from lidar2city.tools import blocks
 
     monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    if staged:
+        monkeypatch.setattr(task, "STAGED_LEAST", 1)
     real, ran = task.run_block, []
     out = tmp_path / "r.city.json"
     monkeypatch.setattr(task, "run_block", _crash_on_third(real, ran))
@@ -907,12 +993,20 @@ def test_traced_parts_resumed_after_a_crash_give_the_same_bytes(area, traced_ref
     assert out.read_bytes() == traced_reference[0]
 
 
+@pytest.mark.parametrize("staged,executor", [(False, None), (True, "fork"), (True, "dask")])
 def test_traced_block_shared_by_two_workers_gives_the_same_bytes(area, traced_reference,
-                                                                 tmp_path, monkeypatch):
-    """A real 2-worker cluster on a one-block traced area: parts, the same bytes."""
+                                                                 tmp_path, monkeypatch, staged,
+                                                                 executor):
+    """A real 2-worker cluster on a one-block traced area: parts, the same bytes
+    (``staged``: its outlines regularised by both workers too, forked or a Dask
+    cluster's)."""
     from lidar2city.tools import blocks
 
     monkeypatch.setattr(blocks, "SPLIT_LEAST", 2)
+    if staged:
+        monkeypatch.setattr(task, "STAGED_LEAST", 1)
+    if executor is not None:
+        monkeypatch.setenv(engine.LOCAL_EXECUTOR_ENV, executor)
     out = tmp_path / "w2.city.json"
     s = _traced(area, out, workers=2)
     assert s.blocks > traced_reference[1].blocks and s.done == traced_reference[1].done

@@ -49,8 +49,9 @@ from .trace import trace_regions
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FootprintsConfig", "Footprint", "extract_footprints", "grid_lengths",
-           "regularised_reach"]
+__all__ = ["FootprintsConfig", "Footprint", "TracedOutlines", "assemble_footprints",
+           "extract_footprints", "grid_lengths", "regularise_outlines", "regularised_reach",
+           "trace_outlines"]
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,12 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
                        callback=None) -> list[Footprint]:
     """Building footprints (one polygon per building block, with courtyards) from classified points.
 
+    The composition of three stages, each a pure function a caller may also run
+    apart (several workers sharing one block's outlines): :func:`trace_outlines`
+    (field, regions, split, outlines), :func:`regularise_outlines` (each outline,
+    independently) and :func:`assemble_footprints` (the parts of one region made
+    disjoint); the result is the same whichever way they are run.
+
     Parameters
     ----------
     xyz : ndarray, shape (N, 3) or (N, 2)
@@ -218,6 +225,99 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     --------
     >>> fps = extract_footprints(cloud.xyz, cloud.get("classification"))  # doctest: +SKIP
     >>> [f.attributes["area"] for f in fps]  # doctest: +SKIP
+    """
+    outlines = trace_outlines(
+        xyz, classification, building_class=building_class, cell=cell, sigma=sigma,
+        void_distance=void_distance, min_area=min_area, min_hole_area=min_hole_area,
+        split_step=split_step, split_min_area=split_min_area, edge_offset=edge_offset,
+        simplify=simplify, regularize=regularize, snake_cell=snake_cell,
+        snake_window=snake_window, snake_threshold=snake_threshold,
+        snake_sample_step=snake_sample_step, within=within)
+    found: list[Footprint] = []
+    ends = np.searchsorted(outlines.traced, np.arange(outlines.n_traced), side="right")
+    start = 0
+    for n_done, end in enumerate(ends, start=1):
+        # the parts of one traced region, then the callback
+        found += regularise_outlines(outlines, range(start, int(end)))
+        start = int(end)
+        if callback is not None:
+            callback(n_done, outlines.n_traced)
+    return assemble_footprints(outlines, found)
+
+
+@dataclass(frozen=True, eq=False)
+class TracedOutlines:
+    """The outlines :func:`trace_outlines` found, before regularisation (small, picklable).
+
+    Attributes
+    ----------
+    parts : list of shapely Polygon
+        The outlines to regularise (each traced region's outline, offset by
+        ``edge_offset``, in parts of at least ``min_area``), in the grid scan
+        order of their regions.
+    traced : ndarray of int, shape (P,)
+        Which traced region (0 .. ``n_traced - 1``) each part comes from (non-decreasing).
+    regions : ndarray of int, shape (P,)
+        The connected region of each part: parts of one region are made disjoint
+        (:func:`assemble_footprints`).
+    n_points : ndarray of int, shape (P,)
+        Building points inside each part's traced region (or part).
+    n_traced : int
+        How many traced regions (those without a part of ``min_area`` included).
+    settings : dict
+        The regulariser and its lengths (:func:`regularise_outlines`), ``min_area``.
+    numbers : ndarray of int, shape (P,), optional
+        The parts' positions among the outlines these were taken from
+        (:meth:`take`); None: their own.
+    """
+
+    parts: list
+    traced: np.ndarray
+    regions: np.ndarray
+    n_points: np.ndarray
+    n_traced: int
+    settings: dict
+    numbers: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.parts)
+
+    def take(self, parts) -> TracedOutlines:
+        """These outlines' ``parts`` (positions) only, each keeping its position
+        (``numbers``): to regularise them elsewhere (:func:`regularise_outlines`)."""
+        idx = np.asarray(parts, dtype=np.int64).reshape(-1)
+        numbers = idx if self.numbers is None else self.numbers[idx]
+        return TracedOutlines([self.parts[k] for k in idx], self.traced[idx], self.regions[idx],
+                              self.n_points[idx], self.n_traced, self.settings, numbers)
+
+    def work(self) -> np.ndarray:
+        """Expected regularisation work of each part (its outline's vertices, plus a
+        fixed share): what :func:`regularise_outlines` spends grows with them."""
+        import shapely
+
+        if not self.parts:
+            return np.zeros(0)
+        return shapely.get_num_coordinates(np.array(self.parts, dtype=object)) + 20.0
+
+
+def trace_outlines(xyz, classification, *, building_class: int = 6, cell: float | None = None,
+                   sigma: float | None = None, void_distance: float | None = None,
+                   min_area: float = 4.0, min_hole_area: float = 4.0, split_step: float = 2.0,
+                   split_min_area: float = 10.0, edge_offset: float = 0.0,
+                   simplify: float | None = None, regularize: str = "none",
+                   snake_cell: float | None = None, snake_window: int = 3,
+                   snake_threshold: float | None = None, snake_sample_step: float = 2.0,
+                   within=None) -> TracedOutlines:
+    """The first stage of :func:`extract_footprints`: the building field, its regions
+    (split at roof steps) and their outlines, to be regularised.
+
+    Parameters and Raises as :func:`extract_footprints` (without ``callback``).
+
+    Returns
+    -------
+    TracedOutlines
+        For :func:`regularise_outlines` (any subset of the parts, anywhere) and
+        :func:`assemble_footprints`.
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     cls = np.asarray(classification)
@@ -283,42 +383,81 @@ def extract_footprints(xyz, classification, *, building_class: int = 6, cell: fl
     bi, bj = grid.index(bxy)
     point_counts = np.bincount(labels[bi, bj], minlength=int(labels.max()) + 1)
 
-    regularizer = REGULARIZERS[regularize]
     threshold = (snake_threshold if snake_threshold is not None
                  else 2.0 * snake_window * L["snake_cell"])
-    out: list[Footprint] = []
-    regs: list[int] = []
-    for n_done, (label, poly) in enumerate(traced, start=1):
-        parts = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,
-                       min_area)
-        for part in parts:
-            # each regulariser simplifies the outline if it uses the simplified one
-            try:
-                reg, info = regularizer(part, cell=L["snake_cell"], window=snake_window,
-                                        tolerance=L["simplify"], t_adjust=threshold,
-                                        sample_step=snake_sample_step)
-                if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
-                    raise AlgorithmError("the regulariser returned no valid polygon")
-            except AlgorithmError as exc:
-                reg, info = REGULARIZERS["none"](part, tolerance=L["simplify"])
-                info.update(status="unregularised", reason=str(exc))
-            if info["status"] != "ok":
-                logger.info("footprint %d kept unregularised: %s", len(out), info["reason"])
-            attrs = {
-                "area": float(reg.area),
-                "direction": float(info["direction"]),
-                "n_vertices": int(info["n_vertices"]),
-                "mean_deviation": float(info["mean_deviation"]),
-                "n_points": int(point_counts[label]) if len(parts) == 1 else
-                int(np.count_nonzero(_contains(part, bxy))),
-                **{f"type_{t.lower()}": int(info["reductions"].get(t, 0))
-                   for t in ("I", "II", "III", "IV")},
-            }
-            out.append(Footprint(reg, info["status"], info["reason"], attrs))
-            regs.append(region_of[label])
-        if callback is not None:
-            callback(n_done, len(traced))
-    return _disjoint(out, regs, min_area)
+    parts, of_traced, n_points = [], [], []
+    for n, (label, poly) in enumerate(traced):
+        pieces = _parts(poly.buffer(edge_offset, join_style="mitre") if edge_offset else poly,
+                        min_area)
+        for part in pieces:
+            parts.append(part)
+            of_traced.append(n)
+            n_points.append(int(point_counts[label]) if len(pieces) == 1 else
+                            int(np.count_nonzero(_contains(part, bxy))))
+    labels_of = np.array([label for label, _ in traced], dtype=np.int64)
+    of_traced = np.array(of_traced, dtype=np.int64)
+    return TracedOutlines(
+        parts, of_traced, region_of[labels_of[of_traced]] if len(of_traced) else of_traced,
+        np.array(n_points, dtype=np.int64), len(traced),
+        {"regularize": regularize, "cell": L["snake_cell"], "window": snake_window,
+         "tolerance": L["simplify"], "t_adjust": threshold, "sample_step": snake_sample_step,
+         "min_area": min_area})
+
+
+def regularise_outlines(outlines: TracedOutlines, parts=None) -> list[Footprint]:
+    """The second stage of :func:`extract_footprints`: the outlines ``parts`` (indices
+    into ``outlines.parts``; default all) regularised, each on its own (a part's
+    footprint depends on no other part: any subset gives the same footprints).
+
+    A part whose regulariser fails keeps its simplified outline, with status
+    ``"unregularised"`` and the failure as its reason.
+
+    Returns
+    -------
+    list of Footprint
+        One per part, in the order of ``parts``.
+    """
+    st = outlines.settings
+    regularizer = REGULARIZERS[st["regularize"]]
+    out = []
+    for k in (range(len(outlines)) if parts is None else parts):
+        part = outlines.parts[k]
+        # each regulariser simplifies the outline if it uses the simplified one
+        try:
+            reg, info = regularizer(part, cell=st["cell"], window=st["window"],
+                                    tolerance=st["tolerance"], t_adjust=st["t_adjust"],
+                                    sample_step=st["sample_step"])
+            if reg is None or reg.is_empty or not reg.is_valid or reg.geom_type != "Polygon":
+                raise AlgorithmError("the regulariser returned no valid polygon")
+        except AlgorithmError as exc:
+            reg, info = REGULARIZERS["none"](part, tolerance=st["tolerance"])
+            info.update(status="unregularised", reason=str(exc))
+        if info["status"] != "ok":
+            logger.info("footprint %d kept unregularised: %s",
+                        k if outlines.numbers is None else int(outlines.numbers[k]),
+                        info["reason"])
+        attrs = {
+            "area": float(reg.area),
+            "direction": float(info["direction"]),
+            "n_vertices": int(info["n_vertices"]),
+            "mean_deviation": float(info["mean_deviation"]),
+            "n_points": int(outlines.n_points[k]),
+            **{f"type_{t.lower()}": int(info["reductions"].get(t, 0))
+               for t in ("I", "II", "III", "IV")},
+        }
+        out.append(Footprint(reg, info["status"], info["reason"], attrs))
+    return out
+
+
+def assemble_footprints(outlines: TracedOutlines, footprints) -> list[Footprint]:
+    """The last stage of :func:`extract_footprints`: ``footprints`` (one per part of
+    ``outlines``, in their order, from :func:`regularise_outlines`) with the
+    overlaps between parts of one region removed (the larger keeps the shared
+    edge; a part left under ``min_area`` is dropped)."""
+    footprints = list(footprints)
+    if len(footprints) != len(outlines):
+        raise InputError(f"{len(footprints)} footprints for {len(outlines)} outlines")
+    return _disjoint(footprints, outlines.regions, outlines.settings["min_area"])
 
 
 def regularised_reach(lengths: dict, *, window: int) -> float:

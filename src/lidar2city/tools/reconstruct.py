@@ -241,9 +241,10 @@ def footprints_from_points(cloud, classes, *, config=None, within=None):
     What ``reconstruct`` uses when no footprint file is given: one footprint per
     building block (:func:`lidar2city.footprints.extract_footprints`), ids
     ``b1``, ``b2``... in a deterministic order. ``config`` (a run file's
-    ``[footprints]`` section) replaces the default, which is the snake regulariser.
-    ``within`` (a local box): only the footprints that may be centred in it are
-    wanted (others may be left out; see ``extract_footprints``).
+    ``[footprints]`` section) replaces the default, which is the snake regulariser
+    (:func:`footprints_config`). ``within`` (a local box): only the footprints
+    that may be centred in it are wanted (others may be left out; see
+    ``extract_footprints``).
 
     Raises
     ------
@@ -252,14 +253,30 @@ def footprints_from_points(cloud, classes, *, config=None, within=None):
     """
     import dataclasses
 
-    from ..config import stage_config
-    from ..datamodel import Footprints
     from ..footprints import extract_footprints
 
-    cfg = config if config is not None else stage_config("footprints", None, regularize="snake")
+    cfg = footprints_config(config)
     found = extract_footprints(cloud.xyz, classes, within=within, **dataclasses.asdict(cfg))
     if not found:
         raise EmptyInputError("no building footprint found in the points")
+    return as_footprints(found)
+
+
+def footprints_config(config=None):
+    """The ``[footprints]`` stage traced footprints are made with: ``config``, or by
+    default the stage's defaults with the snake regulariser."""
+    from ..config import stage_config
+
+    return config if config is not None else stage_config("footprints", None, regularize="snake")
+
+
+def as_footprints(found):
+    """Traced footprints (a list of :class:`lidar2city.footprints.Footprint`) as the
+    :class:`~lidar2city.datamodel.Footprints` of a run: ids ``b1``, ``b2``... in their
+    order, their area, direction, vertex count and mean deviation, and their
+    reasons (``_note``)."""
+    from ..datamodel import Footprints
+
     keys = ("area", "direction", "n_vertices", "mean_deviation")
     return Footprints([f.polygon for f in found], [f"b{i + 1}" for i in range(len(found))],
                       {k: [f.attributes.get(k) for f in found] for k in keys}
@@ -1478,7 +1495,10 @@ PARTS_PER_RUN = 1
 
 def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     """The plan of a traced run whose blocks are traced first on ``executor``
-    (:func:`lidar2city.tools.task.trace_footprints`), then cut into parts of
+    (:func:`lidar2city.tools.task.trace_outlines`: a block of many outlines has
+    them regularised in pieces by all the workers, :func:`_regularise_staged`,
+    the same footprints as :func:`lidar2city.tools.task.trace_footprints`
+    gives in one pass), then cut into parts of
     their footprints of about equal expected work (the footprints' areas,
     :data:`PARTS_PER_RUN` parts per executor run,
     :func:`lidar2city.tools.blocks.traced_parts`) that the workers share,
@@ -1495,19 +1515,30 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
 
     from .blocks import SPLIT_LEAST, split_size, traced_parts
     from .engine import RUNS_PER_WORKER
-    from .task import tile_keeper, trace_footprints
+    from .task import tile_keeper, trace_outlines
 
     traced, points = [None] * len(plan.specs), False
-    cpu, mb = {}, 0.0
-    for i, out in executor.map(trace_footprints, plan.specs, plan.options, run_hook=tile_keeper):
+    cpu, mb, staged = {}, [0.0], {}
+
+    def note(out):
+        mb[0] = max(mb[0], out.worker_mb)
+        cpu[out.worker] = cpu.get(out.worker, 0.0) + out.cpu
+
+    # the blocks' outlines; a block with many has them regularised by all the workers
+    for i, out in executor.map(trace_outlines, plan.specs, plan.options, run_hook=tile_keeper):
         if isinstance(out, BaseException):
             _failed_block(plan.specs[i], out)  # logged: no footprint traced there
             continue
-        traced[i], points = out.footprints, points or out.points
-        mb = max(mb, out.worker_mb)
-        cpu[out.worker] = cpu.get(out.worker, 0.0) + out.cpu
+        points = points or out.points
+        note(out)
+        if out.staged is not None:
+            staged[i] = out.staged
+        else:
+            traced[i] = out.footprints
+    for i, fps in _regularise_staged(executor, plan, staged, note):
+        traced[i] = fps
     if first is not None:
-        first.update(cpu=cpu, mb=mb)
+        first.update(cpu=cpu, mb=mb[0])
     total = sum(len(f) for f in traced if f is not None)
     # a building's work grows with its points, hence its area: parts of equal
     # areas, their work counted in buildings (the executor's runs of equal work)
@@ -1538,6 +1569,52 @@ def trace_then_split(executor, plan, first=None) -> ReconstructPlan:
     logger.info("%d traced footprints in %d parts", total, len(specs))
     return dataclasses.replace(plan, specs=specs, trace_first=False, parts=True, points=points,
                                split=split)
+
+
+#: pieces of the traced blocks' outlines per executor run (:func:`_regularise_staged`):
+#: the pieces are of about equal expected work, handed out heaviest outlines first
+#: to whichever worker is free; more, smaller pieces end the workers closer together
+OUTLINE_PIECES = 2
+
+
+def _regularise_staged(executor, plan, staged, note):
+    """``(block position, its footprints or None)`` of the traced blocks ``staged``
+    (position -> :class:`~lidar2city.tools.task.TracedStage`), their outlines
+    regularised in pieces by all the workers of ``executor``
+    (:func:`lidar2city.tools.task.regularise_parts`), then made disjoint, kept
+    and numbered as one pass makes them (:func:`lidar2city.tools.task.staged_footprints`):
+    the same footprints. A block with a piece that failed twice gets no footprint,
+    the failure logged (as a block whose tracing failed). ``note(out)`` is called
+    with each piece's output (its process's CPU and memory)."""
+    if not staged:
+        return
+    from .engine import RUNS_PER_WORKER
+    from .task import outline_parts, regularise_parts, staged_footprints
+
+    items = outline_parts(staged, OUTLINE_PIECES * RUNS_PER_WORKER * int(executor.workers or 1))
+    logger.info("%d traced outlines of %d block(s) regularised in %d pieces",
+                sum(len(st.outlines) for st in staged.values()), len(staged), len(items))
+    found = {b: [None] * len(st.outlines) for b, st in staged.items()}
+    failed = {}
+    for j, out in executor.map(regularise_parts, items, costs=[it.work for it in items],
+                               balance=True):
+        item = items[j]
+        if isinstance(out, BaseException):
+            failed.setdefault(item.block, out)
+            continue
+        note(out)
+        for k, f in zip(item.parts, out.footprints, strict=True):
+            found[item.block][k] = f
+    for b, st in sorted(staged.items()):
+        fps = None
+        if b not in failed:
+            try:
+                fps = staged_footprints(plan.specs[b], plan.options, st, found[b])
+            except Exception as exc:  # noqa: BLE001 - as a block whose tracing failed
+                failed[b] = exc
+        if b in failed:
+            _failed_block(plan.specs[b], failed[b])  # logged: no footprint traced there
+        yield b, fps
 
 
 def shared_tiles(plan) -> list:

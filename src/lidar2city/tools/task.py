@@ -8,9 +8,11 @@ none were given, and builds every building of the block with
 give the same results in any process, so the output does not depend on the
 executor (:mod:`lidar2city.tools.engine`), the number of workers or the order
 in which blocks finish. With several workers and fewer traced blocks than
-their runs, :func:`trace_footprints` traces a block first and its buildings
-are built in parts (specs carrying the traced footprints inline, built as the
-block builds them). :func:`trace_block` is the task of ``footprints`` on a
+their runs, :func:`trace_outlines` traces a block first (its outlines
+regularised in pieces by all the workers, :func:`regularise_parts`, when they
+are many; the footprints :func:`trace_footprints` gives in one pass) and its
+buildings are built in parts (specs carrying the traced footprints inline,
+built as the block builds them). :func:`trace_block` is the task of ``footprints`` on a
 folder of tiles (the same blocks, traced). Decoded tiles are shared by the
 blocks a process runs in turn and kept only while its next blocks read them
 (:func:`tile_keeper`).
@@ -39,7 +41,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["BlockOptions", "BlockOutput", "block_footprints", "footprint_groups",
            "give_back_memory", "hold_tiles", "predecode", "run_block", "reconstruct_block", "splittable", "tile_keeper",
            "TracedBlock", "worker_modules", "trace_footprints",
-           "trace_block"]
+           "trace_block", "trace_outlines", "outline_parts", "regularise_parts",
+           "staged_footprints", "TracedStage", "OutlineParts", "RegularisedParts"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +119,9 @@ class BlockOutput:
     cpu: float = 0.0
     worker: str = ""
     encoded: list | None = None
+    #: a traced block's first stage when its outlines are regularised by all the
+    #: workers (:func:`trace_outlines`): ``footprints`` is then None
+    staged: object = None
 
 
 class _TileCache:
@@ -506,14 +512,28 @@ def _block_cloud(spec, options, read=None):
 
 def _traced_footprints(spec, options, cloud, classes):
     """The footprints traced in the block's box whose centre lies in its cell, or None."""
-    from .blocks import block_keys
-    from .reconstruct import _subset, footprints_from_points
+    from .reconstruct import footprints_from_points
 
     try:
         fps = footprints_from_points(cloud, classes, config=options.footprints_config,
                                      within=_cell_box(spec, options.block_size))
     except EmptyInputError:
         return None
+    return _in_cell(spec, options, fps, _building_xy(cloud, classes, options))
+
+
+def _building_xy(cloud, classes, options):
+    """The block's building points (x, y), (N, 2): those a traced footprint must hold."""
+    return np.ascontiguousarray(
+        cloud.xyz[np.isin(classes, options.config.building_classes), :2])
+
+
+def _in_cell(spec, options, fps, building_xy):
+    """Of the block's traced footprints ``fps``, those whose centre lies in its cell
+    and that hold at least ``lod1.min_points`` of the ``building_xy``; None if none."""
+    from .blocks import block_keys
+    from .reconstruct import _subset
+
     bounds = np.array([g.bounds for g in fps.geometries], dtype=np.float64).reshape(-1, 4)
     centre = np.column_stack([(bounds[:, 0] + bounds[:, 2]) / 2, (bounds[:, 1] + bounds[:, 3]) / 2])
     keys = block_keys(centre, spec.frame, options.block_size)
@@ -522,8 +542,7 @@ def _traced_footprints(spec, options, cloud, classes):
     # is no building found: at 1 pts/m2 the tracer's smallest regions (4 m2) hold a
     # handful, and each came out as a failed building ('too few points (1 < 10)')
     cfg = options.config
-    held = _points_inside(cloud.xyz[np.isin(classes, cfg.building_classes), :2],
-                          [fps.geometries[i] for i in idx])
+    held = _points_inside(building_xy, [fps.geometries[i] for i in idx])
     small = [i for i, n in zip(idx, held, strict=True) if n < cfg.min_points]
     if small:
         logger.info("%d traced region(s) with fewer than %d building points left out",
@@ -548,9 +567,13 @@ def _cell_box(spec, block_size: float) -> tuple:
 def _block_traced(spec, options, cloud, classes):
     """The block's traced footprints (:func:`_traced_footprints`), numbered ``b1``,
     ``b2``... in the block; none without building points."""
+    return _numbered(None if cloud is None else _traced_footprints(spec, options, cloud, classes))
+
+
+def _numbered(fps):
+    """``fps`` (or None: none) with the ids ``b1``, ``b2``... of a block's traced footprints."""
     from ..datamodel import Footprints
 
-    fps = None if cloud is None else _traced_footprints(spec, options, cloud, classes)
     if fps is None:
         return Footprints([], [])
     return Footprints(fps.geometries, [f"b{j + 1}" for j in range(len(fps))], fps.attributes)
@@ -569,6 +592,148 @@ def _trace_footprints(spec, options):
     cloud, classes = _block_cloud(spec, options)
     return BlockOutput(spec.index, [], _block_traced(spec, options, cloud, classes),
                        cloud is not None)
+
+
+#: a traced block whose first pass finds fewer outlines than this regularises them
+#: there (:func:`trace_outlines`): sharing so few among the workers would not pay
+#: for a second round of the executor. On Delft an outline's regularisation takes
+#: ~1.3 ms + 0.1 ms per vertex (~22 ms on average, 1.7 CPU s for 80); the second
+#: round (a fork, the pieces sent and returned) cost ~0.09 CPU s on a 75 m corner
+#: of the tile (``benchmarks/bench_traced_outlines.py --areas clip --least 1``)
+STAGED_LEAST = 24
+
+
+@dataclass(eq=False)
+class TracedStage:
+    """A traced block's first stage (:func:`trace_outlines`): its ``outlines``
+    (:class:`lidar2city.footprints.extract.TracedOutlines`), to be regularised by
+    all the workers (:func:`regularise_parts`), and what its last stage
+    (:func:`staged_footprints`) needs: the block's building points ``building_xy``."""
+
+    outlines: object
+    building_xy: np.ndarray
+
+
+@dataclass(eq=False)
+class OutlineParts:
+    """Some outlines of a traced block to regularise (:func:`regularise_parts`):
+    the block's position ``block`` in the run, the outlines' positions ``parts``
+    in the block's outlines, and ``outlines``, those outlines only."""
+
+    block: int
+    parts: tuple
+    outlines: object
+    work: float = 0.0
+
+
+@dataclass(eq=False)
+class RegularisedParts:
+    """The footprints of an :class:`OutlineParts`, in its order, and the measures of
+    the process that made them (as :class:`BlockOutput`'s)."""
+
+    block: int
+    parts: tuple
+    footprints: list
+    worker_mb: float = 0.0
+    cpu: float = 0.0
+    worker: str = ""
+
+
+def trace_outlines(spec, options: BlockOptions, least: int | None = None) -> BlockOutput:
+    """The first pass of a traced block whose outlines the workers share: its outlines
+    (:func:`lidar2city.footprints.extract.trace_outlines`, the block's own cloud
+    and classes, as :func:`run_block` traces them) in ``staged``
+    (a :class:`TracedStage`); with fewer than ``least`` (default
+    :data:`STAGED_LEAST`) outlines, its footprints as :func:`trace_footprints`
+    gives them (regularised here: one pass)."""
+    _cache.saved = dict(options.decoded)
+    return _measured(_trace_outlines, spec, options, STAGED_LEAST if least is None else least)
+
+
+def _trace_outlines(spec, options, least):
+    import dataclasses
+
+    from ..footprints.extract import regularise_outlines, trace_outlines
+    from .reconstruct import footprints_config
+
+    cloud, classes = _block_cloud(spec, options)
+    if cloud is None:
+        return BlockOutput(spec.index, [], _numbered(None), False)
+    cfg = dataclasses.asdict(footprints_config(options.footprints_config))
+    try:
+        outlines = trace_outlines(cloud.xyz, classes, within=_cell_box(spec, options.block_size),
+                                  **cfg)
+    except EmptyInputError:
+        return BlockOutput(spec.index, [], _numbered(None), True)
+    stage = TracedStage(outlines, _building_xy(cloud, classes, options))
+    if len(outlines) >= least:
+        return BlockOutput(spec.index, [], None, True, staged=stage)
+    return BlockOutput(spec.index, [], staged_footprints(spec, options, stage,
+                                                         regularise_outlines(outlines)), True)
+
+
+def outline_parts(staged: dict, pieces: int) -> list:
+    """The outlines of the traced blocks ``staged`` (position in the run -> its
+    :class:`TracedStage`) in about ``pieces`` :class:`OutlineParts` of equal expected
+    work (:meth:`~lidar2city.footprints.extract.TracedOutlines.work`), heaviest
+    outlines first: handed out in this order to whichever worker is free, the
+    last, lightest ones even out the workers' ends."""
+    work, block, part = [], [], []
+    for b in sorted(staged):
+        w = staged[b].outlines.work()
+        work.append(w)
+        block.append(np.full(len(w), b, dtype=np.int64))
+        part.append(np.arange(len(w), dtype=np.int64))
+    if not work:
+        return []
+    work, block, part = np.concatenate(work), np.concatenate(block), np.concatenate(part)
+    order = np.lexsort((part, block, -work))
+    share = float(work.sum()) / max(int(pieces), 1)
+    out, run, acc = [], [], 0.0
+
+    def close():
+        by = {}
+        for k in run:
+            by.setdefault(int(block[k]), []).append(int(part[k]))
+        for b, ks in sorted(by.items()):
+            ks = sorted(ks)
+            out.append(OutlineParts(b, tuple(ks), staged[b].outlines.take(ks),
+                                    float(work[(block == b) & np.isin(part, ks)].sum())))
+
+    for k in order:
+        run.append(k)
+        acc += work[k]
+        if acc >= share:
+            close()
+            run, acc = [], 0.0
+    if run:
+        close()
+    return out
+
+
+def regularise_parts(item: OutlineParts) -> RegularisedParts:
+    """The footprints of some outlines of a traced block
+    (:func:`lidar2city.footprints.extract.regularise_outlines`), the task that
+    shares a block's regularisation among the workers."""
+    from ..footprints.extract import regularise_outlines
+
+    t0 = time.process_time()
+    found = regularise_outlines(item.outlines)
+    return RegularisedParts(item.block, item.parts, found, _peak_mb(), time.process_time() - t0,
+                            f"{socket.gethostname()}:{os.getpid()}")
+
+
+def staged_footprints(spec, options, stage: TracedStage, found):
+    """A staged block's last stage: its footprints, ``found`` (one per outline of
+    ``stage``, in order) made disjoint, those centred in its cell and holding enough
+    building points, numbered (what :func:`trace_footprints` returns)."""
+    from ..footprints.extract import assemble_footprints
+    from .reconstruct import as_footprints
+
+    found = assemble_footprints(stage.outlines, found)
+    if not found:
+        return _numbered(None)
+    return _numbered(_in_cell(spec, options, as_footprints(found), stage.building_xy))
 
 
 def _points_inside(xy, geometries) -> list:
