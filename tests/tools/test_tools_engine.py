@@ -860,6 +860,7 @@ def test_only_parts_of_blocks_cut_for_the_workers_are_dealt_one_by_one(area, tmp
                            workers=2, **kw)
     assert not dealt_one_by_one(whole, whole.specs)
     assert cut.split is not None and len(cut.specs) > 2 and dealt_one_by_one(cut, cut.specs)
+    assert isinstance(cut.split, int)  # no block cut only where shares meet: the key as before
     assert not dealt_one_by_one(cut, [])
     works = [s.work for s in cut.specs]
     assert works[0] > works[-1] and np.isclose(sum(works), sum(s.size for s in cut.specs))

@@ -1465,8 +1465,14 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                                  split=split, meet=meet)
         if len({spec.cell for spec in specs}) == len(specs):
             split = None  # no block was cut: the plan of one process
-        elif meet is not None and meet > 1:
-            split = (split, meet)  # the blocks cut depend on both: the journal's key
+        else:
+            held = Counter()
+            for spec in specs:
+                held[spec.cell] += spec.size
+            parts = Counter(spec.cell for spec in specs)
+            if any(parts[c] > 1 and n <= split for c, n in held.items()):
+                # a block cut where shares meet: the blocks cut depend on both
+                split = (split, meet)  # (the journal's key)
         if options.edits:  # an unknown building id: an error before any block runs
             from .edit import check_edit_ids
 
