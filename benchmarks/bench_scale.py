@@ -1,7 +1,7 @@
 """reconstruct on an area 4 and 16 times the Delft tile: does it keep its ratio to the laspy floor?
 
 Usage: ``PYTHONPATH=src python benchmarks/bench_scale.py [DATA_DIR] [--sizes 1,2,4]
-[--workers 1,2] [--format cityjson,cityjsonseq] [--runs 1] [--keep DIR]``
+[--workers 1,2] [--format cityjson,cityjsonseq] [--keep DIR] [--other SRC] [--rounds N]``
 
 The larger area is n x n copies of the shared Delft AHN3 tile laid side by side,
 each shifted by a whole number of metres just over the tile's extent (192 m in
@@ -24,6 +24,13 @@ the processes it waited for; wall with time.perf_counter). Printed per run: buil
 CPU seconds, ratio to the floor run just before it (wall and CPU), CPU ms per
 building, peak RSS (the largest process: with 2 workers a Dask worker or the
 client) and the machine's load average.
+
+``--other SRC``: each run is made with another tree's source (e.g. main's
+``src``) and then with this tree's, in turn, ``--rounds`` times; every run
+prints its output's MD5 (the same bytes on 1 and 2 workers, and in both trees
+when neither changed the output), and each pair its ratios this / other (wall,
+CPU), with their medians over the rounds at the end. ``--keep DIR``: an area
+already built there is reused.
 
 Then the output is checked against the tile's own model: every building of
 every copy, moved back by its shift, must have the same geometry (to the
@@ -75,8 +82,12 @@ def run(cmd, env) -> tuple[float, float, float]:
     return wall, float(kb) / 1024.0, float(user) + float(system)
 
 
-def make_area(tile: Path, fp: Path, n: int, folder: Path) -> tuple[list, Path]:
-    """n x n shifted copies of ``tile`` (LAZ each) and of the footprints (one GPKG)."""
+def make_area(tile: Path, fp: Path, n: int, folder: Path, *, reuse: bool = False) -> tuple[list, Path]:
+    """n x n shifted copies of ``tile`` (LAZ each) and of the footprints (one GPKG);
+    ``reuse``: those already in ``folder`` (all of them) are taken as they are."""
+    names = [folder / f"delft_{i}_{j}.laz" for i in range(n) for j in range(n)]
+    if reuse and (folder / "footprints.gpkg").exists() and all(p.exists() for p in names):
+        return [str(p) for p in names], folder / "footprints.gpkg"
     import laspy
     from pyogrio.raw import read, write
 
@@ -200,7 +211,12 @@ def main():
     ap.add_argument("--format", default="cityjson,cityjsonseq",
                     help="output formats (cityjsonseq streams; cityjson holds every feature)")
     ap.add_argument("--no-check", action="store_true", help="skip the per-building comparison")
-    ap.add_argument("--keep", help="build the tiles in this folder and keep them")
+    ap.add_argument("--keep", help="build the tiles in this folder and keep them (reused when "
+                                   "there)")
+    ap.add_argument("--other", help="another tree's src folder: each run made with it, then "
+                                    "with this tree's, in turn")
+    ap.add_argument("--rounds", type=int, default=1, help="rounds of every run (pairs with "
+                                                          "--other)")
     args = ap.parse_args()
     d = data_dir(args.data) / "delft"
     tile, fp = d / "ahn3_cropped_1.laz", d / "footprints_bgt.gpkg"
@@ -209,6 +225,10 @@ def main():
     fmts = args.format.split(",")
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # bytecode cached as in an installed package
+    trees = [("this", env)]
+    if args.other:
+        trees = [("other", dict(env, PYTHONPATH=str(Path(args.other).resolve()))), *trees]
+    ratios = {}
     py = sys.executable
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_scale_"))
     tmp.mkdir(parents=True, exist_ok=True)
@@ -220,7 +240,7 @@ def main():
         else:
             folder = tmp / f"area{n}"
             folder.mkdir(exist_ok=True)
-            tiles, fps = make_area(tile, fp, n, folder)
+            tiles, fps = make_area(tile, fp, n, folder, reuse=bool(args.keep))
         bag_ids = {}
         if n > 1 and not args.no_check:
             from pyogrio.raw import read
@@ -232,36 +252,71 @@ def main():
             for w in workers:
                 if n not in sizes and w != workers[0]:
                     continue
-                out = tmp / f"out{n}_{w}{ext[fmt]}"
-                out.unlink(missing_ok=True)  # and an interrupted earlier run's journal
-                shutil.rmtree(out.with_name(out.name + ".journal"), ignore_errors=True)
-                cmd = [py, "-m", "lidar2city.cli.main", "reconstruct", *tiles, "--crs",
-                       "EPSG:7415", "--footprints", str(fps), "--lod", "1.2", "--lod", "1.3",
-                       "--lod", "2.2", "--workers", str(w), "-q", "-o", str(out)]
-                f_t, f_m, f_c = run(floor, env)
-                t, m, c = run(cmd, env)
-                got = _buildings(out, fmt) if not args.no_check else {}
-                nb = 132 * n * n
-                load = os.getloadavg()[0]
-                print(f"{n}x{n} ({len(tiles)} tiles, {nb} footprints) {fmt:11s} workers {w}: "
-                      f"{t:6.1f} s, {c:6.1f} CPU s; floor {f_t:.2f} s, {f_c:.2f} CPU s, "
-                      f"{f_m:.0f} MB; time / floor {t / f_t:4.1f}x, CPU / floor CPU "
-                      f"{c / f_c:4.1f}x; {1000 * c / nb:.1f} CPU ms per building; "
-                      f"peak RSS {m:.0f} MB; load {load:.1f}", flush=True)
-                if args.no_check:
-                    continue
-                if n == 1:
-                    ref.setdefault(fmt, got)
-                    continue
-                same, total, diffs = compare(ref[fmt], got, n, bag_ids)
-                print(f"    {same}/{total} buildings the tile's model moved by their copy's "
-                      f"shift ({nb} footprints)" + (":" if diffs else ""), flush=True)
-                if diffs:
-                    per = Counter(str(cp) for cp, _, _ in diffs)
-                    geo = sum("geometry" in w for _, _, w in diffs)
-                    print(f"      by copy {dict(sorted(per.items()))}; {geo} in their geometry")
-                for cp, bid, what in diffs[:3]:
-                    print(f"      copy {cp} {bid}: {what}")
+                for rnd in range(max(1, args.rounds)):
+                    pair = {}
+                    for tree, tenv in trees:
+                        got = one_run(args, py, tmp, ext, fmt, n, w, tiles, fps, floor, tenv,
+                                      tree if len(trees) > 1 else "")
+                        pair[tree] = got[:2]
+                        if tree == "this" and rnd == 0:
+                            check(args, ref, fmt, n, got[2], bag_ids)
+                    if len(trees) > 1:
+                        rw = pair["this"][0] / pair["other"][0]
+                        rc = pair["this"][1] / pair["other"][1]
+                        ratios.setdefault((n, fmt, w), []).append((rw, rc))
+                        print(f"    pair {rnd + 1}: this / other wall {rw:.3f}, CPU {rc:.3f}",
+                              flush=True)
+    for (n, fmt, w), rs in ratios.items():
+        import statistics
+
+        print(f"{n}x{n} {fmt} workers {w}: this / other over {len(rs)} pair(s): wall median "
+              f"{statistics.median(r[0] for r in rs):.3f} "
+              f"({', '.join(f'{r[0]:.3f}' for r in rs)}), CPU median "
+              f"{statistics.median(r[1] for r in rs):.3f} ({', '.join(f'{r[1]:.3f}' for r in rs)})")
+
+
+def one_run(args, py, tmp, ext, fmt, n, w, tiles, fps, floor, env, label) -> tuple:
+    """One run of the command after its floor: ``(wall s, CPU s, parsed buildings)``."""
+    import hashlib
+
+    out = tmp / f"out{n}_{w}{label}{ext[fmt]}"
+    out.unlink(missing_ok=True)  # and an interrupted earlier run's journal
+    shutil.rmtree(out.with_name(out.name + ".journal"), ignore_errors=True)
+    cmd = [py, "-m", "lidar2city.cli.main", "reconstruct", *tiles, "--crs",
+           "EPSG:7415", "--footprints", str(fps), "--lod", "1.2", "--lod", "1.3",
+           "--lod", "2.2", "--workers", str(w), "-q", "-o", str(out)]
+    f_t, f_m, f_c = run(floor, env)
+    t, m, c = run(cmd, env)
+    got = _buildings(out, fmt) if not args.no_check else {}
+    md5 = hashlib.md5(out.read_bytes()).hexdigest()
+    nb = 132 * n * n
+    load = os.getloadavg()[0]
+    print(f"{n}x{n} ({len(tiles)} tiles, {nb} footprints) {fmt:11s} workers {w}"
+          f"{' ' + label if label else ''}: "
+          f"{t:6.1f} s, {c:6.1f} CPU s; floor {f_t:.2f} s, {f_c:.2f} CPU s, "
+          f"{f_m:.0f} MB; time / floor {t / f_t:4.1f}x, CPU / floor CPU "
+          f"{c / f_c:4.1f}x; {1000 * c / nb:.1f} CPU ms per building; "
+          f"peak RSS {m:.0f} MB; load {load:.1f}; MD5 {md5}", flush=True)
+    return t, c, got
+
+
+def check(args, ref, fmt, n, got, bag_ids) -> None:
+    """The per-building comparison of an n x n output with the tile's own model."""
+    if args.no_check:
+        return
+    if n == 1:
+        ref.setdefault(fmt, got)
+        return
+    nb = 132 * n * n
+    same, total, diffs = compare(ref[fmt], got, n, bag_ids)
+    print(f"    {same}/{total} buildings the tile's model moved by their copy's "
+          f"shift ({nb} footprints)" + (":" if diffs else ""), flush=True)
+    if diffs:
+        per = Counter(str(cp) for cp, _, _ in diffs)
+        geo = sum("geometry" in w for _, _, w in diffs)
+        print(f"      by copy {dict(sorted(per.items()))}; {geo} in their geometry")
+    for cp, bid, what in diffs[:3]:
+        print(f"      copy {cp} {bid}: {what}")
 
 
 if __name__ == "__main__":

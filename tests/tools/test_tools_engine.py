@@ -788,6 +788,63 @@ def test_a_split_block_gives_parts_covering_its_footprints_once(n, split, weight
     assert _split_parts(block, centre, empty, split, work) == parts  # deterministic
 
 
+def test_blocks_where_the_workers_shares_meet_are_found_by_their_footprints():
+    from lidar2city.tools.blocks import MEET_SHARE, meet_blocks, meet_size
+
+    sizes = [10, 10, 10, 10, 10, 10, 10, 10, 10, 10]  # the middle at 50 +- 10
+    assert MEET_SHARE == 0.1 and meet_blocks(sizes, 2) == {4, 5}
+    assert meet_blocks(sizes, 1) == set() and meet_blocks([], 2) == set()
+    assert meet_blocks([0, 0, 0], 2) == set()
+    assert meet_blocks([200, 1, 1, 1], 2) == {0}  # one block holding the place
+    assert meet_blocks(sizes, 3) == {2, 3, 4, 5, 6, 7}  # 33.3 +- 10 and 66.7 +- 10
+    assert meet_size(2112, 2) == 66 and meet_size(10, 2) == 8
+
+
+def test_whole_blocks_where_the_shares_meet_are_cut_into_equal_parts():
+    """With several workers, whole blocks holding the place where two shares meet
+    are cut into parts of at most meet_size footprints; the other blocks stay whole."""
+    from lidar2city.tools.blocks import Frame, footprint_blocks, meet_size
+
+    # a row of 10 blocks of 100 m, 10 footprints of 10 m each
+    x = np.repeat(np.arange(10) * 100.0, 10) + np.tile(np.arange(10) * 9.0 + 2.0, 10)
+    bounds = np.column_stack([x, np.full(100, 5.0), x + 5.0, np.full(100, 15.0)])
+    frame = Frame(np.zeros(3), None, 1.0, 1.0)
+
+    def plan(**kw):
+        return footprint_blocks((), frame, bounds, 100.0, 10.0, lambda idx: list(idx), **kw)
+
+    whole, cut = plan(split=20), plan(split=20, meet=2)
+    assert len(whole) == 10 and all(len(s.footprints) == 10 for s in whole)
+    assert meet_size(100, 2) == 8
+    cells = Counter(s.cell for s in cut)
+    assert {c for c, k in cells.items() if k > 1} == {whole[4].cell, whole[5].cell}
+    assert all(k <= 2 for k in cells.values()) and len(cells) == 10
+    assert sorted(i for s in cut for i in s.footprints) == list(range(100))
+    parts = [s for s in cut if cells[s.cell] > 1]
+    assert all(len(s.footprints) <= 8 and s.cost is not None for s in parts)
+    assert [s.index for s in cut] == list(range(len(cut)))
+    assert len(plan(split=20, meet=1)) == 10  # one process: no place where shares meet
+
+
+def test_blocks_cut_where_the_shares_meet_give_the_same_bytes(area, tmp_path, monkeypatch):
+    """Blocks no larger than a part, cut where the two workers' shares meet: the
+    journal's key knows it, and the bytes are those of one process."""
+    from lidar2city.tools import blocks
+    from lidar2city.tools.reconstruct import plan_reconstruct
+
+    monkeypatch.setattr(blocks, "SPLIT_LEAST", 1)
+    monkeypatch.setattr(blocks, "split_size", lambda total, runs: 5)  # blocks of 4 stay whole
+    kw = dict(footprints=area / "fp.gpkg", lods=("1.2", "1.3"))
+    one = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=100.0, **kw)
+    two = plan_reconstruct([area / "town.laz"], tmp_path / "a.city.json", block_size=100.0,
+                           workers=2, **kw)
+    assert one.split is None and two.split == (5, 2) and len(two.specs) > len(one.specs)
+    out1, out2 = tmp_path / "w1.city.json", tmp_path / "w2.city.json"
+    _run(area, out1, block_size=100.0)
+    _run(area, out2, block_size=100.0, workers=2)
+    assert out2.read_bytes() == out1.read_bytes()
+
+
 def test_only_parts_of_blocks_cut_for_the_workers_are_dealt_one_by_one(area, tmp_path,
                                                                        monkeypatch):
     """Parts of a block cut for the workers (whose tiles every worker holds) go one by
@@ -803,6 +860,7 @@ def test_only_parts_of_blocks_cut_for_the_workers_are_dealt_one_by_one(area, tmp
                            workers=2, **kw)
     assert not dealt_one_by_one(whole, whole.specs)
     assert cut.split is not None and len(cut.specs) > 2 and dealt_one_by_one(cut, cut.specs)
+    assert isinstance(cut.split, int)  # no block cut only where shares meet: the key as before
     assert not dealt_one_by_one(cut, [])
     works = [s.work for s in cut.specs]
     assert works[0] > works[-1] and np.isclose(sum(works), sum(s.size for s in cut.specs))

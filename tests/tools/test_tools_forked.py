@@ -43,6 +43,56 @@ def test_every_item_comes_back_once_from_this_process_or_a_child(balance):
     assert not [pid for pid in pids - {me} if _alive(pid)]  # reaped
 
 
+def test_the_sides_meet_where_their_shares_meet_whatever_the_timing():
+    """Items of uneven cost are handed out one by one: the child runs a prefix of
+    them in order, this process the rest from the last one back, each taking over
+    the other's items next to its own; neither is left a whole run of several
+    items at the end."""
+    me = os.getpid()
+    costs = [1, 1, 1, 1, 9, 9, 9, 2, 9, 9, 9, 2, 1, 1, 1]
+
+    def where(i, pause):
+        time.sleep(pause * costs[i])
+        return os.getpid(), time.monotonic()
+
+    for pause in (0.004,):
+        with ForkExecutor(2) as ex:
+            got = dict(ex.map(where, range(len(costs)), pause, costs=costs))
+        assert sorted(got) == list(range(len(costs)))
+        mine = sorted(i for i, (pid, _) in got.items() if pid == me)
+        theirs = sorted(i for i, (pid, _) in got.items() if pid != me)
+        assert mine and theirs and mine == list(range(theirs[-1] + 1, len(costs)))
+        assert theirs == list(range(len(theirs)))
+        # this process went backward from the last item, the child forward
+        assert sorted(mine, key=lambda i: got[i][1]) == mine[::-1]
+        assert sorted(theirs, key=lambda i: got[i][1]) == theirs
+
+
+def test_shares_of_equal_costs_are_contiguous():
+    assert engine.shares_of(6, 2, [1, 1, 1, 1, 1, 1]) == [(0, 3), (3, 6)]
+    assert engine.shares_of(5, 2, [10, 1, 1, 1, 1]) == [(0, 1), (1, 5)]
+    assert engine.shares_of(4, 3, [0, 0, 0, 0]) == engine.shares_of(4, 3)
+    shares = engine.shares_of(20, 3, np.arange(20.0))
+    assert shares[0][0] == 0 and shares[-1][1] == 20
+    assert all(b == c for (_, b), (c, _) in zip(shares, shares[1:]))
+
+
+def test_a_backward_dealer_tells_each_side_the_items_it_takes_next():
+    """With ``backward`` this process takes its share from the end; ``groups``
+    bound the items told ahead; every item goes out once."""
+    dealer = engine.RunDealer(10, 1, costs=[1] * 10, groups=[0, 0, 1, 1, 2, 2, 3, 3, 4, 4],
+                              backward=True)
+    r, ahead = dealer.mine()
+    assert r == 9 and ahead == [8, 7, 6, 5]  # groups 4 back to 1 (AHEAD_RUNS 3)
+    r, ahead = dealer.theirs(0)
+    assert r == 0 and ahead == [1, 2, 3, 4]
+    got = [9, 0]
+    while (r := dealer.theirs(0)[0]) is not None:
+        got.append(r)
+    assert sorted(got) == list(range(10))
+    assert dealer.mine() == (None, [])
+
+
 def test_one_run_or_one_worker_runs_here_without_a_fork():
     me = os.getpid()
     with ForkExecutor(2) as ex:

@@ -28,6 +28,7 @@ another worker; a task that kills two workers comes back as ``KilledWorker``.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import multiprocessing
 import os
@@ -851,33 +852,68 @@ def _exit_now():
     os._exit(0)
 
 
-def shares_of(runs: int, workers: int) -> list:
+def shares_of(runs: int, workers: int, costs=None) -> list:
     """``(first run, stop)`` of each worker's share: ``runs`` cut into ``workers``
-    contiguous shares of (nearly) equal numbers of runs."""
-    cuts = [runs * k // workers for k in range(workers + 1)]
+    contiguous shares of (nearly) equal numbers of runs, or of about equal total
+    ``costs`` (one non-negative number per run) when given: each share ends with
+    the run that brings it past its part of the total (a share may then be empty
+    when one run costs more than a share)."""
+    if costs is None or runs == 0:
+        cuts = [runs * k // workers for k in range(workers + 1)]
+    else:
+        import numpy as np
+
+        total = np.cumsum(np.asarray(costs, dtype=np.float64).reshape(runs))
+        if not total[-1] > 0:
+            return shares_of(runs, workers)
+        at = np.searchsorted(total, total[-1] * np.arange(1, workers) / workers, side="left") + 1
+        cuts = [0, *np.clip(at, 0, runs).tolist(), runs]
     return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
 class RunDealer:
     """The runs of a map dealt between this process and ``others`` workers, as
     :meth:`DaskExecutor._map_shared` and :class:`lidar2city.tools.forked.ForkExecutor`
-    deal them: the workers get the first contiguous shares (:func:`shares_of`), this
-    process the last; ``balance``: one queue of single runs in order, taken from its
-    front by every side. A side whose share is done takes the last run of another's:
+    deal them: the workers get the first contiguous shares (:func:`shares_of`, of
+    equal numbers of runs, or of equal total ``costs`` when given), this process
+    the last; ``balance``: one queue of single runs in order, taken from its front
+    by every side. A side whose share is done takes the last run of another's:
     this process the largest share's not yet handed out, a worker this process's.
     Runs given back (:attr:`rerun`: a worker died with them) go to this process first.
+
+    ``backward``: this process runs its share from its last run to its first, so
+    that the sides meet where their shares meet: a worker whose share is done takes
+    the run of this process's next to the ones it ran last, and this process, its
+    share done, the last run of the share before its own, next to its own first
+    (neighbouring runs read the same tiles). ``groups``: the runs told as ahead of
+    a run (whose inputs it keeps) are the next ones of its share in the order they
+    are handed out whose group (one number per run, e.g. the run of
+    :func:`runs_of` a single item falls in) is at most :data:`AHEAD_RUNS` from
+    the run's own; default the next :data:`AHEAD_RUNS` runs.
     Safe to call from several threads (:attr:`lock`)."""
 
-    def __init__(self, runs: int, others: int, *, balance: bool = False):
+    def __init__(self, runs: int, others: int, *, balance: bool = False, costs=None,
+                 groups=None, backward: bool = False):
         if balance:
             self._mine, self._theirs = deque(range(runs)), [deque() for _ in range(others)]
         else:
-            shares = shares_of(runs, others + 1)
-            self._mine = deque(range(*shares[-1]))
+            shares = shares_of(runs, others + 1, costs)
+            mine = range(*shares[-1])
+            self._mine = deque(reversed(mine) if backward else mine)
             self._theirs = [deque(range(a, b)) for a, b in shares[:-1]]
         self._balance = balance
+        self._groups = None if groups is None else list(groups)
         self.rerun = deque()
         self.lock = threading.Lock()
+
+    def _ahead(self, r, order) -> list:
+        """The runs told as ahead of ``r``: the first of ``order`` (the runs its side
+        takes next, in turn) within :data:`AHEAD_RUNS` groups of it."""
+        if self._groups is None:
+            return list(itertools.islice(order, AHEAD_RUNS))
+        g = self._groups[r]
+        return list(itertools.takewhile(lambda q: abs(self._groups[q] - g) <= AHEAD_RUNS,
+                                        order))
 
     def mine(self):
         """``(run, runs after it in this process's share, at most AHEAD_RUNS)``;
@@ -887,9 +923,12 @@ class RunDealer:
                 return self.rerun.popleft(), []
             if self._mine:
                 r = self._mine.popleft()
-                return r, list(self._mine)[:AHEAD_RUNS]
+                return r, self._ahead(r, self._mine)
             left = max(self._theirs, key=len, default=None)
-            return (left.pop(), []) if left else (None, [])
+            if not left:
+                return None, []
+            r = left.pop()
+            return r, self._ahead(r, reversed(left)) if self._groups is not None else []
 
     def theirs(self, k: int):
         """The next run of worker ``k``'s share, else the last of this process's (the
@@ -898,13 +937,14 @@ class RunDealer:
             share = self._theirs[k] if k < len(self._theirs) else None
             if share:
                 r = share.popleft()
-                return r, list(share)[:AHEAD_RUNS]
+                return r, self._ahead(r, share)
             if not self._mine:
                 return None, []
             if self._balance:
                 r = self._mine.popleft()
-                return r, list(self._mine)[:AHEAD_RUNS]
-            return self._mine.pop(), []
+                return r, self._ahead(r, self._mine)
+            r = self._mine.pop()
+            return r, self._ahead(r, reversed(self._mine)) if self._groups is not None else []
 
 
 def _dealt(shares) -> list:

@@ -99,24 +99,26 @@ class ForkExecutor:
 
     def map(self, fn, items, *args, run_hook=None, costs=None, ahead=(), balance=False):
         """As :meth:`lidar2city.tools.engine.InProcess.map`: ``(index, result or
-        exception)`` as they finish. The runs are cut and dealt as
-        :meth:`~lidar2city.tools.engine.DaskExecutor._map_shared` cuts and deals
-        them (:func:`~lidar2city.tools.engine.runs_of`,
-        :func:`~lidar2city.tools.engine.shares_of`; ``balance``: one queue of
-        single items in order, taken from its front by every side); a single
-        run, or a single worker, runs here without a fork."""
-        from .engine import InProcess, RunDealer, runs_of
+        exception)`` as they finish. The items are handed out one by one: from
+        contiguous shares of equal ``costs``, this process's run backward, a side
+        whose share is done taking from the far end of another's (:func:`_dealing`);
+        ``balance``: one queue of single items in order, taken from its front by
+        every side. A single item, or a single worker, runs here without a fork."""
+        from .engine import InProcess, RunDealer
 
         items = list(items)
         if not items:
             return
         n = len(items)
-        runs = [(i, i + 1) for i in range(n)] if balance else runs_of(n, self.workers, costs)
-        children = min(self.workers - 1, len(runs) - 1)
+        runs = [(i, i + 1) for i in range(n)]
+        children = min(self.workers - 1, n - 1)
         if children < 1:
             yield from InProcess().map(fn, items, *args, run_hook=run_hook, ahead=ahead)
             return
-        dealer = RunDealer(len(runs), children, balance=balance)
+        if balance:
+            dealer = RunDealer(n, children, balance=True)
+        else:
+            dealer = RunDealer(n, children, **_dealing(n, self.workers, costs))
         # runs of children that died go back to the dealer's rerun: run here
         lock, rerun, results = dealer.lock, dealer.rerun, queue.SimpleQueue()
 
@@ -233,6 +235,35 @@ class ForkExecutor:
         finally:
             _end_children(procs, conns, threads)
             frozen()
+
+
+def _dealing(n: int, workers: int, costs=None) -> dict:
+    """How :meth:`ForkExecutor.map` deals ``n`` items of ``costs`` (not ``balance``):
+    the keywords of its :class:`~lidar2city.tools.engine.RunDealer` of single items.
+
+    Each side gets a contiguous share of the items of about equal total cost
+    (:func:`~lidar2city.tools.engine.shares_of`), runs them one by one, and, its
+    share done, takes single items from the far end of another's: a side waits
+    at the end for at most the one item the other is running. Runs of several
+    items dealt in shares of equal numbers of runs (as a cluster's tasks are,
+    :func:`~lidar2city.tools.engine.runs_of`) could leave it a whole run: on
+    4 x 4 copies of the Delft tile (20 blocks of 250 m, 15-226 buildings each) the
+    child's share of runs held 1,201 buildings and this process's 911, and the
+    child ran its last run of 2 blocks (15 CPU s) while this process waited
+    (``benchmarks/bench_scale_timeline.py``). This process runs its share
+    backward (:class:`RunDealer`'s ``backward``), so the two sides meet where
+    their shares meet and a side's next item neighbours its last; the items told
+    ahead of an item (whose tiles it keeps) reach as far as those of the runs
+    of :func:`runs_of` did (:data:`~lidar2city.tools.engine.AHEAD_RUNS` runs),
+    so that a tile a row of blocks leaves to the next row is still decoded once
+    a side."""
+    from .engine import runs_of
+
+    groups = [0] * n
+    for g, (a, b) in enumerate(runs_of(n, workers, costs)):
+        groups[a:b] = [g] * (b - a)
+    return {"costs": None if costs is None else list(costs), "groups": groups,
+            "backward": True}
 
 
 def _preload(modules) -> None:

@@ -1326,8 +1326,10 @@ class ReconstructPlan:
     resolved: dict
     traced: bool
     total: int | None
-    #: the most footprints of a block part (blocks cut for several workers), or None
-    split: int | None = None
+    #: the most footprints of a block part (blocks cut for several workers), or None;
+    #: ``(split, workers)`` when blocks where the workers' shares meet were cut too
+    #: (:func:`lidar2city.tools.blocks.meet_blocks`)
+    split: int | tuple | None = None
     #: traced blocks are too few for the workers: trace them first, then build
     #: their buildings in parts (:func:`trace_then_split`)
     trace_first: bool = False
@@ -1350,7 +1352,10 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
     share of the executor's runs (:func:`lidar2city.tools.blocks.split_size`)
     is cut into parts of its footprints when its buildings allow it
     (:func:`lidar2city.tools.task.splittable`): a single large tile is then
-    shared by the workers, with the same results.
+    shared by the workers, with the same results. So is a whole block where
+    the workers' contiguous shares of blocks meet (:func:`lidar2city.tools.blocks.meet_blocks`),
+    into small parts: the side that ends its share first takes those, not a
+    whole block, from the other's.
     """
     from ..io.las import TileReader, check_header_bounds, scan_tiles
     from .blocks import (BLOCK_POINTS, FootprintRef, Frame, footprint_block_size,
@@ -1471,10 +1476,20 @@ def plan_reconstruct(inputs, output, *, footprints=None, lods=None, crs=None, co
                 logger.info("blocks of %g m (%d points by the tile headers; at most ~%d a "
                             "block)", size, reader.count, BLOCK_POINTS)
             options = dataclasses.replace(options, block_size=size)
+        # blocks where the workers' shares meet cut too (small parts at the end)
+        meet = int(workers or 1) if split is not None else None
         specs = footprint_blocks(tiles, frame, bounds, options.block_size, margin, ref,
-                                 split=split)
+                                 split=split, meet=meet)
         if len({spec.cell for spec in specs}) == len(specs):
             split = None  # no block was cut: the plan of one process
+        else:
+            held = Counter()
+            for spec in specs:
+                held[spec.cell] += spec.size
+            parts = Counter(spec.cell for spec in specs)
+            if any(parts[c] > 1 and n <= split for c, n in held.items()):
+                # a block cut where shares meet: the blocks cut depend on both
+                split = (split, meet)  # (the journal's key)
         if options.edits:  # an unknown building id: an error before any block runs
             from .edit import check_edit_ids
 
@@ -1630,6 +1645,11 @@ def shared_tiles(plan) -> list:
     elif plan.split is not None:
         cells = Counter(s.cell for s in plan.specs)
         specs = [s for s in plan.specs if cells[s.cell] > 1]
+        if len(specs) < len(plan.specs):
+            # also whole blocks: the parts are those of blocks where the workers'
+            # shares meet (:func:`lidar2city.tools.blocks.meet_blocks`), reached by
+            # each side late in the run; decoding them here would hold the fork back
+            return []
     else:
         return []
     return [t for s in specs for t in s.tiles]
