@@ -655,12 +655,15 @@ class _PairPlan:
             if not fits[k]:
                 out.append(None)
                 continue
-            p0, q0 = np.flatnonzero(rows[k]), np.flatnonzero(cols[k])
+            p0 = np.flatnonzero(rows[k])
             blocks = [(p0, every_q)] if len(p0) else []
-            if len(q0):
-                blocks.append((np.flatnonzero(~rows[k]), q0))
-            if rr[k].any():
-                blocks.append((np.flatnonzero(rr[k]), np.flatnonzero(cc[k])))
+            if (rr[k] == ~rows[k]).all():  # the rest's x pairs are all the others: one block
+                blocks.append((np.flatnonzero(rr[k]), np.flatnonzero(cols[k] | cc[k])))
+            else:
+                if cols[k].any():
+                    blocks.append((np.flatnonzero(~rows[k]), np.flatnonzero(cols[k])))
+                if rr[k].any():
+                    blocks.append((np.flatnonzero(rr[k]), np.flatnonzero(cc[k])))
             out.append(blocks)
         return out
 
@@ -670,8 +673,10 @@ class _PairPlan:
         ns = len(wts)
         rx, cy = rx.reshape(-1, ns), cy.reshape(-1, ns)
         for p, q in blocks:
-            idx = rx[p][:, None, :] + cy[q][None, :, :]
-            out[self.row[p[:, None], q[None, :]]] = np.take(dt.ravel(), idx, mode="wrap") @ wts
+            every_p, every_q = len(p) == len(rx), len(q) == len(cy)  # (no gather of all rows)
+            idx = np.add((rx if every_p else rx[p])[:, None, :], (cy if every_q else cy[q])[None, :, :])
+            rows = self.row if every_p else self.row[p]
+            out[rows if every_q else rows[:, q]] = np.take(dt.ravel(), idx, mode="wrap") @ wts
 
 
 class _Scratch:
