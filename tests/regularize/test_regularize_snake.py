@@ -427,3 +427,54 @@ def test_coarse_direction_search_finds_the_whole_grids_best_angle(noise):
         assert _coarse_peak(pts, w, coarse, 0.25) == whole
         checked += 1
     assert checked >= 15
+
+
+def _solve_with_true_tables(xy, edges, *, cell, window, direction, t_adjust, c_short=0.0, short_length=1.0,
+                            sample_step=1.0):
+    """The snake's minimum from the whole energy tables (no bounded entry), for reference."""
+    from lidar2city.regularize.direction import to_frame
+    from lidar2city.regularize.snake import _grid_pivot
+    from lidar2city.snake.energies import (candidate_positions, distance_raster, edge_energy_tables,
+                                            vertex_energy_tables)
+    from lidar2city.snake.solver import minimize_energy
+
+    pivot = _grid_pivot(xy, cell)
+    q = to_frame(xy, direction, pivot) / cell
+    cands = candidate_positions(q, window)
+    r = distance_raster(to_frame(xy[edges], direction, pivot) / cell, margin=window + 2)
+    tables = edge_energy_tables(cands, edges, r, cell=cell, t_adjust=t_adjust, c_dir=t_adjust, c_dis=1.0,
+                                c_short=c_short, short_length=short_length, step=sample_step)
+    return minimize_energy(vertex_energy_tables(cands, q, cell=cell, c_move=0.05), edges, tables).states
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_bounded_solve_gives_the_whole_tables_minimum(seed, monkeypatch):
+    """adjust_planar_graph solves with the pairs off the axes' deviation bounded by 0,
+    and again with an edge's true table wherever the minimum used a bounded entry: the
+    same states as a solve with every table whole. Among the cases, edges that no
+    candidate pair can align (their smaller extent beyond the window's reach but
+    within T) make it solve again."""
+    import lidar2city.regularize.snake as snake
+
+    calls = []
+    real = snake.edge_energy_tables
+    monkeypatch.setattr(snake, "edge_energy_tables", lambda *a, **k: calls.append(k.get("bound")) or real(*a, **k))
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(4, 9))
+    xy = np.cumsum(rng.uniform(2.0, 6.0, (n, 2)) * rng.choice([-1, 1], (n, 2)), axis=0)
+    xy[::2, 1] = xy[1::2, 1][: len(xy[::2])] if n % 2 == 0 else xy[::2, 1]
+    xy += rng.normal(0, 0.25, xy.shape)
+    edges = np.array([(i, i + 1) for i in range(n - 1)] + ([(n - 1, 0)] if seed % 2 else []))
+    # apart, an edge on the grid 1.5 m off an axis over 8 m: T = 2.5 m makes every pair
+    # of window 1 (0.5 m per end) adjustable and none aligned: the minimum pays its
+    # direction energy, a bounded entry
+    start = np.round(xy.max(axis=0) * 2) / 2 + 20.0
+    xy = np.vstack([xy, start, start + [8.0, 1.5]])
+    edges = np.vstack([edges, [[n, n + 1]]])
+    opts = dict(cell=0.5, window=int(rng.integers(1, 3)), direction=0.0, t_adjust=2.5)
+    new, info = adjust_planar_graph(xy, edges, c_short=0.0, **opts)
+    states = _solve_with_true_tables(xy, edges, **opts)
+    np.testing.assert_array_equal(info["states"], states)
+    assert calls[0] is True
+    if opts["window"] == 1:
+        assert len(calls) >= 2 and all(c is None for c in calls[1:])  # solved again

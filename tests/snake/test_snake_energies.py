@@ -235,3 +235,73 @@ def test_sparser_deviation_samples_stay_close_and_exact_on_the_data():
         assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.99
     with pytest.raises(InputError):
         edge_energy_tables(cands, edges, r, step=0.0, **kw)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_deviation_sums_do_not_depend_on_which_pairs_are_summed_together(seed):
+    """The trapezoid sums of whole raster distances are exact integers rounded once:
+    a pair's deviation is the same double whether computed among all of u's and v's
+    candidates, among a few, or alone (not so with BLAS sums of weighted samples,
+    whose rounding depends on a row's place in the matrix and on the CPU's kernels)."""
+    rng = np.random.default_rng(seed)
+    xy, edges = _random_graph(rng, 6, 10, 30.0)
+    seg = np.stack([xy[edges[:, 0]], xy[edges[:, 1]]], axis=1)
+    r = distance_raster(seg, margin=5)
+    cands = candidate_positions(xy, 3)
+    for u, v in edges:
+        step = float(rng.choice([1.0, 2.0]))
+        whole = deviation_energy(cands[u], cands[v], r, cell=0.5, step=step)
+        # with the longest pair among them (it sets the number of samples)
+        i, j = np.unravel_index(np.argmax(np.hypot(*(cands[v][None] - cands[u][:, None]).transpose(2, 0, 1))),
+                                whole.shape)
+        rows = np.append(rng.choice(len(cands[u]), 5, replace=False), i)
+        part = deviation_energy(cands[u][rows], cands[v], r, cell=0.5, step=step)
+        assert part.tobytes() == whole[rows].tobytes()
+        k = int(rng.integers(len(cands[v])))
+        pair = deviation_energy(cands[u][[i, i]], cands[v][[j, k]], r, cell=0.5, step=step)
+        assert pair[0, 0] == whole[i, j] and pair[1, 1] == whole[i, k]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_bounded_tables_are_exact_where_sampled_and_below_where_not(seed):
+    """``bound=True``: the pairs paying the direction energy (weight > 0) keep only
+    C_Dir E_Dir (+ C_Short E_Short), at most their true energy; every other entry is
+    the very double of the whole table."""
+    rng = np.random.default_rng(100 + seed)
+    xy, edges = _random_graph(rng, 9, 16, 25.0)
+    # edges near the axes too, whose pairs off the axis are bounded
+    xy[1] = xy[0] + [rng.uniform(4, 12), rng.uniform(-0.6, 0.6)]
+    xy[2] = xy[1] + [rng.uniform(-0.6, 0.6), rng.uniform(4, 12)]
+    edges = np.unique(np.sort(np.vstack([edges, [[0, 1], [1, 2]]]), axis=1), axis=0)
+    seg = np.stack([xy[edges[:, 0]], xy[edges[:, 1]]], axis=1)
+    window = int(rng.integers(1, 4))
+    cands = candidate_positions(xy, window)
+    r = distance_raster(seg, margin=window + 2, subdivide=int(rng.choice([2, 4])))
+    c_dir = rng.choice([0.0, 1.0, 2.5], size=len(edges)) if seed % 2 else 1.0
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=c_dir, c_dis=1.0, c_short=float(rng.choice([0.0, 0.5])),
+              short_length=1.0, step=float(rng.choice([1.0, 2.0])))
+    true = edge_energy_tables(cands, edges, r, **kw)
+    tables, bounded = edge_energy_tables(cands, edges, r, bound=True, **kw)
+    no_dev = edge_energy_tables(cands, edges, r, **{**kw, "c_dis": 0.0})
+    weights = np.broadcast_to(np.asarray(c_dir, dtype=float), (len(edges),))
+    n_bounded = 0
+    for (u, v), w, t, b, m, z in zip(edges, weights, true, tables, bounded, no_dev, strict=True):
+        assert m.shape == t.shape and b.shape == t.shape
+        assert b[~m].tobytes() == t[~m].tobytes()
+        assert np.all(b[m] <= t[m]) and b[m].tobytes() == z[m].tobytes()
+        pays = (direction_energy(cands[u], cands[v], cell=0.5, t_adjust=1.0) > 0) & (w > 0)
+        assert not np.any(m & ~pays)
+        n_bounded += int(m.sum())
+    assert n_bounded > 0
+
+
+def test_bounded_tables_with_a_fixed_vertex_bound_nothing():
+    xy = np.array([[0.0, 0.0], [10.0, 0.4], [10.2, 5.0]])
+    edges = np.array([(0, 1), (1, 2)])
+    seg = np.stack([xy[edges[:, 0]], xy[edges[:, 1]]], axis=1)
+    r = distance_raster(seg, margin=4)
+    cands = candidate_positions(xy, 2, fixed=[True, False, False])
+    kw = dict(cell=0.5, t_adjust=1.0, c_dir=1.0, c_dis=1.0)
+    tables, bounded = edge_energy_tables(cands, edges, r, bound=True, **kw)
+    for t, b, m in zip(edge_energy_tables(cands, edges, r, **kw), tables, bounded, strict=True):
+        assert not m.any() and t.tobytes() == b.tobytes()

@@ -97,13 +97,28 @@ def _frame_solve(xy, edges, segs, *, cell, window, direction, t_adjust, c_dir, c
     pivot = _grid_pivot(xy, cell) if pivot is None else np.asarray(pivot, dtype=np.float64)
     q = to_frame(xy, direction, pivot) / cell
     seg_q = to_frame(segs, direction, pivot) / cell
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     cands = candidate_positions(q, window, fixed=fixed)
     raster = distance_raster(seg_q, margin=int(window) + 2, subdivide=subdivide)
-    tables = edge_energy_tables(cands, edges, raster, cell=cell, t_adjust=t_adjust,
-                                c_dir=c_dir, c_dis=c_dis, c_short=c_short, short_length=short_length,
-                                step=sample_step)
+    kwargs = dict(cell=cell, t_adjust=t_adjust, c_dis=c_dis, c_short=c_short, short_length=short_length,
+                  step=sample_step)
+    # The deviation of a pair that pays the direction energy (an adjustable edge left
+    # off the axes) is bounded below by 0, not sampled: most pairs of a window, hardly
+    # ever in the minimum. Those tables' minimum is the true energy's minimum as soon
+    # as it uses no bounded entry; otherwise the edges whose bounded entry it used get
+    # their true tables and the graph is solved again (exact; see edge_energy_tables).
+    tables, bounded = edge_energy_tables(cands, edges, raster, c_dir=c_dir, bound=True, **kwargs)
     unary = vertex_energy_tables(cands, q, cell=cell, c_move=c_move)
-    sol = minimize_energy(unary, edges, tables, strategy=strategy)
+    weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
+    while True:
+        sol = minimize_energy(unary, edges, tables, strategy=strategy)
+        s = sol.states
+        used = np.flatnonzero([b[s[u], s[v]] for (u, v), b in zip(edges, bounded, strict=True)])
+        if not len(used):
+            break
+        true = edge_energy_tables(cands, edges[used], raster, c_dir=weights[used], **kwargs)
+        for k, t in zip(used, true, strict=True):
+            tables[k], bounded[k] = t, np.zeros(t.shape, dtype=bool)
     grid = np.array([cands[v][s] for v, s in enumerate(sol.states)]).reshape(-1, 2)
     return grid, pivot, sol
 

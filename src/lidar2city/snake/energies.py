@@ -269,6 +269,25 @@ def _axis_cells(u0, u1, i0, i1, t, size, stride=1):
     return np.take(c.reshape(-1, len(t)), i0[:, None] * len(u1) + i1[None, :], axis=0)
 
 
+def _trapezoid_weights(n: int) -> np.ndarray:
+    """Weights 1, 2, ..., 2, 1 of the trapezoid rule over ``n`` samples, times ``2 (n - 1)``."""
+    w = np.full(n, 2.0)
+    w[[0, -1]] = 1.0
+    return w
+
+
+def _trapezoid(dist, n: int):
+    """Mean of the samples ``dist`` (..., n) by the trapezoid rule (unit interval).
+
+    The samples are whole raster distances: their weighted sum with the integer
+    weights of :func:`_trapezoid_weights` is an exact integer in any order of
+    addition (BLAS kernel, blocking, which rows are summed together), and is
+    rounded once, by the division. So a pair's value does not depend on how many
+    pairs are summed with it, nor on the machine's BLAS kernels.
+    """
+    return (dist @ _trapezoid_weights(n)) / (2 * (n - 1))
+
+
 def deviation_energy(p_u, p_v, raster: DistanceRaster, *, cell: float, step: float = 1.0) -> np.ndarray:
     """E_Dis of every candidate pair (eq. 5), in square metres.
 
@@ -315,9 +334,7 @@ def _deviation(p_u, p_v, e0: _Ends, e1: _Ends, raster: DistanceRaster, *, cell, 
     ix += _axis_cells(e0.uy, e1.uy, e0.iy, e1.iy, t, w)
     dist = np.take(dt.ravel(), ix)  # (d_u, d_v, n), raster cells
     # Trapezoid rule along the segment: integral of distance ds.
-    wts = np.full(n, 1.0 / (n - 1))
-    wts[[0, -1]] *= 0.5
-    return (dist @ wts) * length * (cell / scale) ** 2
+    return _trapezoid(dist, n) * length * (cell / scale) ** 2
 
 
 def edge_energy_tables(
@@ -332,7 +349,8 @@ def edge_energy_tables(
     c_short: float = 0.0,
     short_length: float = 0.0,
     step: float = 1.0,
-) -> list[np.ndarray]:
+    bound: bool = False,
+):
     """``C_Dir E_Dir + C_Dis E_Dis`` (eq. 6) for every edge: the solver's edge tables.
 
     Parameters
@@ -352,10 +370,24 @@ def edge_energy_tables(
     step : float
         Spacing (raster cells) of the deviation's samples along a candidate edge
         (:func:`deviation_energy`); 1 reads every raster cell the edge crosses.
+    bound : bool
+        Also return which entries are lower bounds: where the direction energy
+        of a pair is positive (an adjustable edge left off the axes, weight > 0),
+        its deviation is not sampled and counts 0 (``E_Dis >= 0``), so the entry
+        is ``C_Dir E_Dir (+ C_Short E_Short)``, at most the true energy. Every other
+        entry is the same double as without ``bound``. A minimum of these tables
+        that uses no bounded entry is a minimum of the true energy (every
+        labelling's energy can only have been lowered, and its own is exact): see
+        :func:`lidar2city.regularize.snake.adjust_planar_graph`, which solves
+        again with the true tables of the edges whose bounded entry the minimum
+        used. Only for candidates on one shared window (no fixed vertex): the
+        masks are all False otherwise.
 
     Returns
     -------
     list of ndarray, shape (d_u, d_v) each
+        The tables; with ``bound``, a pair ``(tables, bounded)``, ``bounded`` a
+        list of bool arrays of the same shapes (True: the entry is a lower bound).
     """
     if not (np.isfinite(step) and step > 0):
         raise InputError(f"step must be a positive number of raster cells, got {step}")
@@ -364,8 +396,9 @@ def edge_energy_tables(
                   short_length=short_length, step=step)
     layout = _window_layout(candidates, raster)
     if layout is None or not len(edges):
-        return _edge_tables_general(candidates, edges, raster, **kwargs)
-    return _window_edge_tables(layout, candidates, edges, raster, **kwargs)
+        tables = _edge_tables_general(candidates, edges, raster, **kwargs)
+        return (tables, [np.zeros(t.shape, dtype=bool) for t in tables]) if bound else tables
+    return _window_edge_tables(layout, candidates, edges, raster, bound=bound, **kwargs)
 
 
 def _edge_tables_general(candidates, edges, raster: DistanceRaster, *, cell, t_adjust, c_dir, c_dis,
@@ -445,7 +478,7 @@ def _window_layout(candidates, raster: DistanceRaster) -> _Window | None:
 
 
 def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster, *, cell, t_adjust,
-                        c_dir, c_dis, c_short, short_length, step=1.0):
+                        c_dir, c_dis, c_short, short_length, step=1.0, bound=False):
     """:func:`edge_energy_tables` when every vertex has the same window of grid offsets.
 
     The same IEEE double operations per element as edge by edge
@@ -454,11 +487,12 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
     offsets (exact integers), so its length, direction and jog energies are
     computed once per difference (13 x 13 for a 7 x 7 window, not 49 x 49) and
     looked up; edges with the same number of samples have their deviation
-    sampled together, the candidates of ``u`` in window order. The weighted
-    sums along the samples are still one BLAS matrix-vector product per
-    candidate of ``u`` over the candidates of ``v`` in their own order, exactly
-    as edge by edge (BLAS sums a row differently by its place in the matrix),
-    and their results are then put back in ``u``'s candidate order.
+    sampled together, the candidates of ``u`` in window order, and their
+    results are then put back in ``u``'s candidate order (the sums along the
+    samples are exact integers, whatever is summed together: :func:`_trapezoid`).
+
+    ``bound``: the pairs of positive direction energy (weight > 0) are not
+    sampled (deviation 0, a lower bound); returns ``(tables, bounded)``.
     """
     weights = np.broadcast_to(np.asarray(c_dir, dtype=np.float64), (len(edges),))
     if raster.dt.size <= _SAMPLE_BUDGET:
@@ -472,10 +506,11 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
     pair = (kx[lay.ix[:, None], lay.ix[None, :]] * len(doy) + ky[lay.iy[:, None], lay.iy[None, :]]).ravel()
     use_dir = bool(np.any(weights))
     scratch = _Scratch()  # the samples' buffers, reused by every block of this call
-    out = []
+    out, bounded = [], []
     for b0 in range(0, len(edges), _EDGE_BATCH):
         e_ = edges[b0:b0 + _EDGE_BATCH]
         u_, v_ = e_[:, 0], e_[:, 1]
+        w_ = weights[b0:b0 + _EDGE_BATCH, None, None]
 
         def per_pair(table):  # (k, ndx, ndy) -> (k, d, d)
             return np.take(table.reshape(len(e_), -1), pair, axis=1).reshape(len(e_), d, d)
@@ -485,23 +520,35 @@ def _window_edge_tables(lay: _Window, candidates, edges, raster: DistanceRaster,
         rx = (lay.q[v_, 0, 0] - lay.q[u_, 0, 0])[:, None] + dox * scale
         ry = (lay.q[v_, 0, 1] - lay.q[u_, 0, 1])[:, None] + doy * scale
         length = per_pair(np.hypot(rx[:, :, None], ry[:, None, :]))
-        e = _window_deviation(lay, candidates, e_, raster, length, scratch, cell=cell, step=step)
-        e *= c_dis
         if use_dir or c_short:
             dx = ((lay.pos[v_, 0, 0] - lay.pos[u_, 0, 0])[:, None] + dox)[:, :, None] * cell
             dy = ((lay.pos[v_, 0, 1] - lay.pos[u_, 0, 1])[:, None] + doy)[:, None, :] * cell
             metres = np.hypot(dx, dy)
+        if use_dir:
+            dirs = per_pair(_direction(dx, dy, metres, cell=cell, t_adjust=t_adjust))
+        # the pairs whose deviation is left at its lower bound 0 (bound=True)
+        skip = (dirs > 0.0) & (w_ > 0.0) if bound and use_dir else None
+        e = _window_deviation(lay, candidates, e_, raster, length, scratch, cell=cell, step=step, skip=skip)
+        e *= c_dis
         if use_dir:  # an edge of weight 0 adds 0 * E_Dir = +0.0: its energies unchanged
-            e += weights[b0:b0 + _EDGE_BATCH, None, None] * per_pair(
-                _direction(dx, dy, metres, cell=cell, t_adjust=t_adjust))
+            e += w_ * dirs
         if c_short:
             e += c_short * per_pair(_short(metres, cell=cell, short_length=short_length))
         out += list(e)
-    return out
+        if bound:
+            bounded += list(np.zeros(e.shape, dtype=bool) if skip is None else skip)
+    return (out, bounded) if bound else out
 
 
-def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, length, scratch, *, cell, step):
-    """E_Dis tables (k, d, d) of ``edges`` on a shared window, see :func:`_window_edge_tables`."""
+def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, length, scratch, *, cell, step,
+                      skip=None):
+    """E_Dis tables (k, d, d) of ``edges`` on a shared window, see :func:`_window_edge_tables`.
+
+    ``skip`` (bool, (k, d, d), optional): pairs not sampled, their deviation 0; the
+    others are the same doubles as with none skipped. Where all of an edge's pairs
+    are sampled anyway (an edge too long for one block, or whose pairs to sample do
+    not fall into a few blocks, see :class:`_PairPlan`), ``skip`` is set False.
+    """
     dt, _, scale = raster
     h, w = dt.shape
     u_, v_ = edges[:, 0], edges[:, 1]
@@ -514,7 +561,10 @@ def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, l
         u, v = edges[k]
         dev[k] = _deviation(candidates[u], candidates[v], _ends(candidates[u], raster),
                             _ends(candidates[v], raster), raster, cell=cell, step=step)
+        if skip is not None:
+            skip[k] = False
     grid = lay.ix * ny + lay.iy  # each candidate's cell in the window, x major
+    plan = _PairPlan(lay) if skip is not None and skip.any() else None
     order = np.flatnonzero(~chunked)
     order = order[np.argsort(n[order], kind="stable")]
     for group in np.split(order, np.flatnonzero(np.diff(n[order])) + 1):
@@ -522,29 +572,111 @@ def _window_deviation(lay: _Window, candidates, edges, raster: DistanceRaster, l
             continue
         ns = int(n[group[0]])
         t = np.linspace(0.0, 1.0, ns)
-        wts = np.full(ns, 1.0 / (ns - 1))
-        wts[[0, -1]] *= 0.5
+        wts = _trapezoid_weights(ns)
         per = max(1, _CHUNK // (d * d * ns))
         for s in range(0, len(group), per):
             ks = group[s:s + per]
-            # raster row (column) of every sample, per x (y) of u's candidate and
-            # candidate of v, then every pair's flat index: u's candidates in window
-            # order, v's in their own
-            rows = np.take(_axis_cells_batch(lay.ux[u_[ks]], lay.ux[v_[ks]], t, h, stride=w), lay.ix, axis=2)
-            cols = np.take(_axis_cells_batch(lay.uy[u_[ks]], lay.uy[v_[ks]], t, w), lay.iy, axis=2)
+            # raster row (column) of every sample, per x (y) of u's candidate and of v's
+            rx = _axis_cells_batch(lay.ux[u_[ks]], lay.ux[v_[ks]], t, h, stride=w)
+            cy = _axis_cells_batch(lay.uy[u_[ks]], lay.uy[v_[ks]], t, w)
             sums = np.empty((len(ks), nx, ny, d))
             # the samples of a few of u's candidate x at a time: bounded buffers
-            # (each sum is still one matrix-vector product over v's candidates)
             step_x = max(1, _CHUNK // (len(ks) * ny * d * ns))
-            for i in range(0, nx, step_x):
-                part = rows[:, i:i + step_x]
-                shape = (len(ks), part.shape[1], ny, d, ns)
-                idx = np.add(part[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
-                # every index is inside the raster: 'wrap' is the plain look-up, unbuffered
-                dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
-                np.matmul(dist, wts, out=sums[:, i:i + step_x])
+            wanted = None if plan is None or step_x < nx else plan.wanted(skip[ks])
+            if wanted is None or all(x is None for x in wanted):
+                if skip is not None:
+                    skip[ks] = False
+                # every pair's flat index: u's candidates in window order, v's in their own
+                rows, cols = np.take(rx, lay.ix, axis=2), np.take(cy, lay.iy, axis=2)
+                for i in range(0, nx, step_x):
+                    part = rows[:, i:i + step_x]
+                    shape = (len(ks), part.shape[1], ny, d, ns)
+                    idx = np.add(part[:, :, None], cols[:, None, :], out=scratch("idx", shape, np.intp))
+                    # every index is inside the raster: 'wrap' is the plain look-up, unbuffered
+                    dist = np.take(dt.ravel(), idx, out=scratch("dist", shape, dt.dtype), mode="wrap")
+                    np.matmul(dist, wts, out=sums[:, i:i + step_x])
+                sums /= 2 * (ns - 1)
+            else:
+                # only the wanted pairs' samples are looked up and summed (the sums are
+                # exact integers, whatever pairs are summed together: see _trapezoid)
+                sums[:] = 0.0
+                whole = np.array([x is None for x in wanted])
+                if whole.any():
+                    skip[ks[whole]] = False
+                    rows, cols = np.take(rx[whole], lay.ix, axis=2), np.take(cy[whole], lay.iy, axis=2)
+                    idx = rows[:, :, None] + cols[:, None, :]
+                    sums[whole] = np.take(dt.ravel(), idx, mode="wrap") @ wts
+                for kk, x in enumerate(wanted):
+                    if x is not None:
+                        plan.sample(sums[kk].reshape(-1), rx[kk], cy[kk], x, dt, wts)
+                sums /= 2 * (ns - 1)
             dev[ks] = sums.reshape(len(ks), nx * ny, d)[:, grid] * length[ks] * (cell / scale) ** 2
+    if skip is not None:
+        dev[skip] = 0.0
     return dev
+
+
+class _PairPlan:
+    """The candidate pairs of an edge on a shared window by x pair and y pair.
+
+    A pair of candidates ``(i, j)`` of an edge's ends is an x pair ``p = a nx + a2``
+    (the window x indices of ``i`` and ``j``) and a y pair ``q = b ny + b2``; its
+    samples' raster rows depend on ``p`` only and their columns on ``q`` only. The
+    pairs to sample are split into blocks "these x pairs with those y pairs" (the x
+    pairs wanting the same y pairs together, or the converse, whichever makes fewer
+    blocks: an edge near an axis whose pairs off the axis are not sampled makes one
+    or a few), and each block's indices are one broadcast sum, with no per-pair gather.
+    """
+
+    def __init__(self, lay: _Window):
+        nx, ny, d = len(lay.ox), len(lay.oy), lay.pos.shape[1]
+        inv = np.argsort(lay.ix * ny + lay.iy)  # the candidate at each window cell
+        a, a2 = np.divmod(np.arange(nx * nx), nx)
+        b, b2 = np.divmod(np.arange(ny * ny), ny)
+        cell_u = a[:, None] * ny + b[None, :]
+        v = inv[a2[:, None] * ny + b2[None, :]]
+        self.pair = inv[cell_u] * d + v  # (P, Q): the pair's flat index in (d, d)
+        self.row = cell_u * d + v  # (P, Q): its row among the (nx, ny, d) sums
+
+    def wanted(self, skip):
+        """Blocks ``[(p, q), ...]`` (x pairs, y pairs) holding exactly the pairs not
+        skipped of each edge (``skip``: (k, d, d)), or None for an edge of no such
+        form or none skipped (all its pairs are sampled)."""
+        keep = ~skip.reshape(len(skip), -1)[:, self.pair]  # (k, P, Q)
+        rows, cols = keep.all(axis=2), keep.all(axis=1)  # x pairs (y pairs) wanting all
+        rest = keep & ~rows[:, :, None] & ~cols[:, None, :]
+        rr, cc = rest.any(axis=2), rest.any(axis=1)
+        # the rest a rectangle: as from an edge's aligned pairs (its x or y extent 0)
+        # and its oblique ones (both extents over T)
+        fits = ~keep.all(axis=(1, 2)) & (rest == (rr[:, :, None] & cc[:, None, :])).all(axis=(1, 2))
+        out = []
+        every_q = np.arange(keep.shape[2])
+        for k in range(len(keep)):
+            if not fits[k]:
+                out.append(None)
+                continue
+            p0 = np.flatnonzero(rows[k])
+            blocks = [(p0, every_q)] if len(p0) else []
+            if (rr[k] == ~rows[k]).all():  # the rest's x pairs are all the others: one block
+                blocks.append((np.flatnonzero(rr[k]), np.flatnonzero(cols[k] | cc[k])))
+            else:
+                if cols[k].any():
+                    blocks.append((np.flatnonzero(~rows[k]), np.flatnonzero(cols[k])))
+                if rr[k].any():
+                    blocks.append((np.flatnonzero(rr[k]), np.flatnonzero(cc[k])))
+            out.append(blocks)
+        return out
+
+    def sample(self, out, rx, cy, blocks, dt, wts):
+        """The blocks' pairs' weighted sums of samples (``wts``), into their places
+        in ``out`` (nx ny d: u's window cell, v's candidate)."""
+        ns = len(wts)
+        rx, cy = rx.reshape(-1, ns), cy.reshape(-1, ns)
+        for p, q in blocks:
+            every_p, every_q = len(p) == len(rx), len(q) == len(cy)  # (no gather of all rows)
+            idx = np.add((rx if every_p else rx[p])[:, None, :], (cy if every_q else cy[q])[None, :, :])
+            rows = self.row if every_p else self.row[p]
+            out[rows if every_q else rows[:, q]] = np.take(dt.ravel(), idx, mode="wrap") @ wts
 
 
 class _Scratch:
