@@ -1116,7 +1116,7 @@ def _finish_solid(method, poly, pts, faces, face_labels, planes, ground_z, *, ce
     variants = [(faces, face_labels)]
     if method in ("rims", "arrangement") and cfg.min_edge > 0:
         collapsed, kept = collapse_short_edges(faces, poly, min_length=cfg.min_edge * cell)
-        if len(collapsed) != len(faces) or any(not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
+        if len(collapsed) != len(faces) or any(a is not b and not a.equals_exact(b, 0) for a, b in zip(collapsed, faces)):
             variants.insert(0, (collapsed, face_labels[kept]))
     kw = dict(ground_z=ground_z, pts=pts, spacing=spacing, cfg=cfg, memo={})
     solid, faces, face_labels, planes_f = _variant_solid(variants, planes, **kw)

@@ -16,6 +16,7 @@ straight. No fake walls remain where roofs meet.
 
 from __future__ import annotations
 
+import collections
 import logging
 
 import numpy as np
@@ -207,7 +208,7 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     """
     import shapely
 
-    from .arrangement import _spike_free
+    from .arrangement import _flat_rings, _spike_free
 
     types = edge_types(faces, labels, planes, t_step=t_step, max_shift=max_shift)
     n_int = sum(v["type"] == "intersection" for v in types.values())
@@ -236,18 +237,13 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
                     wall_lines.setdefault(_key(a), []).append((a, b))
     # footprint outline segments are walls too
     union = shapely.union_all(faces)
-    face_count: dict = {}
-    # every face's rings as given (coordinates without the closing vertex) and their keys
-    ring_data = []
-    for f in faces:
-        rings_f = []
-        for ring in [f.exterior, *f.interiors]:
-            coords = np.asarray(ring.coords)[:-1]
-            keys = _ring_keys(coords)
-            rings_f.append((coords, keys))
-            for k in keys:
-                face_count[k] = face_count.get(k, 0) + 1
-        ring_data.append(rings_f)
+    # every face's rings as given (coordinates without the closing vertex, exterior then
+    # holes) and their keys, flat, taken for all faces at once; the rings per face
+    flat_xy, ring_owner, ring_sizes = _flat_rings(faces)
+    flat_keys = _ring_keys(flat_xy) if len(flat_xy) else []
+    ring_sizes = ring_sizes.tolist()
+    rings_per_face = np.bincount(ring_owner, minlength=len(faces)).tolist()
+    face_count = collections.Counter(flat_keys)  # rings holding each vertex key
     redundant = set()  # straight-outline vertices inside one face carry nothing and block moves
     for ring in shapely.get_rings(union):
         c = np.asarray(ring.coords)[:-1]
@@ -311,10 +307,6 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
 
     # every vertex of every ring, flat, with what a rebuild asks of it: moved (its
     # target), an intersection line's interior, redundant
-    flat_keys = [k for rings_f in ring_data for _, keys in rings_f for k in keys]
-    ring_sizes = [len(keys) for rings_f in ring_data for _, keys in rings_f]
-    flat_xy = (np.concatenate([c for rings_f in ring_data for c, _ in rings_f])
-               if flat_keys else np.zeros((0, 2)))
     moved_at = [i for i, k in enumerate(flat_keys) if k in moves]
     if moved_at:
         flat_xy = flat_xy.copy()
@@ -327,9 +319,9 @@ def refine_partition(faces, labels, planes, *, t_step=0.3, max_shift=1.0, snap=0
     def rebuild(drop_interior):
         gone = dropped | interior if drop_interior else dropped
         rings_all, ring_face, r = [], [], 0
-        for fi, rings_f in enumerate(ring_data):
+        for fi, n_rings in enumerate(rings_per_face):
             rings = []
-            for _ in rings_f:
+            for _ in range(n_rings):
                 lo, hi = ring_ends[r] - ring_sizes[r], ring_ends[r]
                 r += 1
                 pts = flat_xy[lo:hi][~gone[lo:hi]]
