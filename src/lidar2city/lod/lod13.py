@@ -51,14 +51,15 @@ def _neighbour_pairs(shape, mask):
 def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
     """Relabel regions with fewer than ``min_cells`` cells into their best neighbour."""
     lab = labels.copy()
+    inside = mask.ravel()
     for _ in range(max_iter):
-        sizes = np.bincount(lab[mask.ravel()], minlength=lab.max() + 1)
+        sizes = np.bincount(lab[inside], minlength=lab.max() + 1)
+        small = sizes < min_cells
+        if not (small & (sizes > 0)).any():  # no small region left (the others are empty)
+            break
         la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
         diff = la != lb
         if not diff.any():
-            break
-        small = sizes < min_cells
-        if not small[np.unique(lab[mask.ravel()])].any():
             break
         # border lengths between label pairs, both directions
         src = np.concatenate([la[diff], lb[diff]])
