@@ -410,6 +410,37 @@ def test_touched_cells_are_the_cells_whose_interior_meets_the_footprint(seed, n,
     assert np.array_equal(_touched_cells(poly, x0, y_top, cell, rows, cols).ravel(), want)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0.25, 0.5, 1.0]),
+       st.sampled_from([0.0, 85123.4, -1e5]), st.booleans())
+def test_touched_cells_on_grid_lines_holes_and_far_origins(seed, cell, origin, hole):
+    """Outlines along grid lines and through cell corners (the margin left to GEOS),
+    holes, and coordinates far from the origin: the same cells as GEOS's box test."""
+    import shapely
+
+    from lidar2city.lod.lod13 import _cell_boxes, _touched_cells
+
+    rng = np.random.default_rng(seed)
+    # a rectilinear outline on multiples of half a cell, with an oblique cut
+    xs = np.sort(rng.choice(np.arange(0, 40) * cell / 2, 4, replace=False))
+    ys = np.sort(rng.choice(np.arange(0, 40) * cell / 2, 4, replace=False))
+    ring = [(xs[0], ys[0]), (xs[3], ys[0]), (xs[3], ys[2]), (xs[2], ys[3]), (xs[0], ys[3])]
+    poly = Polygon([(x + origin, y + origin) for x, y in ring])
+    if hole:
+        poly = poly.difference(box(xs[1] + origin, ys[1] + origin, xs[2] + origin,
+                                   ys[2] + origin).buffer(-cell / 4, join_style="mitre"))
+    if poly.geom_type != "Polygon" or not poly.is_valid or poly.is_empty:
+        return
+    x0, y0, x1, y1 = poly.bounds
+    x0, y0 = np.floor(x0 / cell) * cell - cell, np.floor(y0 / cell) * cell - cell
+    cols, rows = int(np.ceil((x1 - x0) / cell)) + 1, int(np.ceil((y1 - y0) / cell)) + 1
+    y_top = y0 + rows * cell
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    boxes = _cell_boxes(r, c, x0, y_top, cell)
+    want = shapely.intersects(poly, boxes) & ~shapely.touches(poly, boxes)
+    assert np.array_equal(_touched_cells(poly, x0, y_top, cell, rows, cols).ravel(), want)
+
+
 def test_points_needed_scale_with_the_measured_density():
     """lod1.min_points was a fixed count: a 6 m2 shed of a 2 pts/m2 survey (Delft
     thinned) holds about 6-9 building points and got no model. A footprint needs

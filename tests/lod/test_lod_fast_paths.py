@@ -1,10 +1,12 @@
 """The LoD1.3 fast paths give what the plain computations they replace give."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lidar2city._components import component_labels
+from lidar2city.lod import lod13
 from lidar2city.lod.lod13 import _merge_by_height, _neighbour_pairs
 
 
@@ -37,8 +39,8 @@ def _merge_by_height_plain(labels, pairs, mask, hv, step, percentile=70.0):
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 30), cols=st.integers(1, 30),
        decimals=st.sampled_from([0, 1, 3]), scale=st.sampled_from([3.0, 10.0, 20.0]),
-       step=st.sampled_from([1.0, 2.0, 4.0]))
-def test_merge_by_height_is_the_plain_merge(seed, rows, cols, decimals, scale, step):
+       step=st.sampled_from([1.0, 2.0, 4.0]), few=st.sampled_from([0, 3, 200]))
+def test_merge_by_height_is_the_plain_merge(seed, rows, cols, decimals, scale, step, few):
     # rounded heights: many equal gaps, so the tie order is exercised
     rng = np.random.default_rng(seed)
     mask = rng.random((rows, cols)) < 0.9
@@ -46,8 +48,11 @@ def test_merge_by_height_is_the_plain_merge(seed, rows, cols, decimals, scale, s
     pairs = _neighbour_pairs((rows, cols), mask)
     ok = np.abs(hv[pairs[:, 0]] - hv[pairs[:, 1]]) <= 1.0
     lab = component_labels(rows * cols, pairs[ok, 0], pairs[ok, 1])
-    np.testing.assert_array_equal(_merge_by_height(lab, pairs, mask, hv, step),
-                                  _merge_by_height_plain(lab, pairs, mask, hv, step))
+    # ``few``: the most regions measured in Python lists (more go to the arrays' loop)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(lod13, "_LIST_REGIONS", few)
+        got = _merge_by_height(lab, pairs, mask, hv, step)
+    np.testing.assert_array_equal(got, _merge_by_height_plain(lab, pairs, mask, hv, step))
 
 
 def _prisms_of(rng, parts, hole):

@@ -15,6 +15,8 @@ footprint, so the parts tile it exactly: no gap, no overlap, shared walls.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["height_regions", "height_parts"]
@@ -49,14 +51,15 @@ def _neighbour_pairs(shape, mask):
 def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
     """Relabel regions with fewer than ``min_cells`` cells into their best neighbour."""
     lab = labels.copy()
+    inside = mask.ravel()
     for _ in range(max_iter):
-        sizes = np.bincount(lab[mask.ravel()], minlength=lab.max() + 1)
+        sizes = np.bincount(lab[inside], minlength=lab.max() + 1)
+        small = sizes < min_cells
+        if not (small & (sizes > 0)).any():  # no small region left (the others are empty)
+            break
         la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
         diff = la != lb
         if not diff.any():
-            break
-        small = sizes < min_cells
-        if not small[np.unique(lab[mask.ravel()])].any():
             break
         # border lengths between label pairs, both directions
         src = np.concatenate([la[diff], lb[diff]])
@@ -90,6 +93,11 @@ def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
     return lab
 
 
+#: Most regions for which :func:`_merge_by_height` measures them one by one in Python (a
+#: merge measures again those between the two merged in label order); more go to arrays
+_LIST_REGIONS = 200
+
+
 def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     """Merge neighbouring regions whose heights differ by less than ``step``.
 
@@ -104,6 +112,98 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     the same merges in the same order as re-measuring everything after each
     merge, at a fraction of the cost.
     """
+    import heapq
+    from bisect import bisect_left
+
+    lab = labels.copy()
+    la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
+    diff = la != lb
+    if not diff.any():
+        return lab
+    n_lab = int(lab.max()) + 1
+    cells = np.flatnonzero(mask.ravel())
+    k, z = lab[cells], hv[cells]
+    order = np.lexsort((z, k))
+    k, z = k[order], z[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    if len(starts) > _LIST_REGIONS:
+        return _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile)
+    # a few regions of a few hundred cells: Python lists, no array set-up per merge
+    regions = k[starts].tolist()  # ascending
+    sizes = np.diff(np.r_[starts, len(k)]).tolist()
+    first = starts.tolist()  # each region's run in ``z``
+    z = z.tolist()
+    last = len(z) - 1
+    frac = percentile / 100.0
+    height = [0.0] * n_lab
+
+    def measure(i):
+        # linear-interpolated percentile of region i's sorted heights (np.percentile's
+        # arithmetic on the whole array: its position in ``z`` enters the sum, so a region
+        # whose run moves is measured again)
+        pos = first[i] + (sizes[i] - 1) * frac
+        lo = math.floor(pos)
+        hi = min(lo + 1, last)
+        return z[lo] + (z[hi] - z[lo]) * (pos - lo)
+
+    for i, v in enumerate(regions):
+        height[v] = measure(i)
+    # region adjacency (low label, high label)
+    key = np.unique(np.minimum(la[diff], lb[diff]).astype(np.int64) * n_lab
+                    + np.maximum(la[diff], lb[diff]))
+    nbrs: dict = {v: set() for v in regions}
+    heap = []
+    for a, b in zip((key // n_lab).tolist(), (key % n_lab).tolist(), strict=True):
+        nbrs[a].add(b)
+        nbrs[b].add(a)
+        heap.append((abs(height[a] - height[b]), a, b))
+    heapq.heapify(heap)
+    target = np.arange(n_lab)
+    while heap:
+        gap, a, b = heapq.heappop(heap)
+        if b not in nbrs.get(a, ()) or abs(height[a] - height[b]) != gap:
+            continue  # stale: a region merged away or a height changed since
+        if gap >= step:
+            break
+        # b joins a (a < b): its cells move into a's run of sorted heights; the runs
+        # between shift by b's size, those after it stay where they were
+        target[b] = a
+        for c in nbrs.pop(b):
+            nbrs[c].discard(b)
+            if c != a:
+                nbrs[c].add(a)
+                nbrs[a].add(c)
+        ia, ib = bisect_left(regions, a), bisect_left(regions, b)
+        sa, ea = first[ia], first[ia] + sizes[ia]
+        sb, eb = first[ib], first[ib] + sizes[ib]
+        z[sa:eb] = sorted(z[sa:ea] + z[sb:eb]) + z[ea:sb]  # two sorted runs: merged
+        grown = sizes[ib]
+        sizes[ia] += grown
+        del sizes[ib], regions[ib], first[ib]
+        changed = {a}
+        for i in range(ia, ib):
+            if i > ia:
+                first[i] += grown
+            v = regions[i]
+            new = measure(i)
+            if new != height[v]:
+                changed.add(v)
+            height[v] = new
+        for v in changed:
+            for c in nbrs[v]:
+                heapq.heappush(heap, (abs(height[v] - height[c]), min(v, c), max(v, c)))
+    # every merged label to its final region
+    for _ in range(n_lab):
+        nxt = target[target]
+        if np.array_equal(nxt, target):
+            break
+        target = nxt
+    return target[lab]
+
+
+def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0):
+    """:func:`_merge_by_height` on arrays: the measures of every region vectorised, for
+    rasters of many regions (the same merges in the same order)."""
     import heapq
 
     lab = labels.copy()
@@ -189,29 +289,59 @@ def _cell_boxes(r, c, x0, y_top, cell):
     return shapely.box(x0 + c * cell, y_top - (r + 1) * cell, x0 + (c + 1) * cell, y_top - r * cell)
 
 
-def _near_outline(footprint, x, y, reach):
-    """Whether each point ``(x, y)`` lies within ``reach`` of an edge of ``footprint``'s
-    rings (a polygon), measured in plan, all edges at once."""
+def _outline_crossings(footprint, x0, y_top, cell, rows, cols, eps):
+    """Cells of the raster whose open square the outline of ``footprint`` (a polygon:
+    every ring) surely crosses, and those it may cross: two boolean arrays (rows * cols,).
+
+    Sure: an edge meets the square shrunk by ``eps``; may: an edge meets the square
+    grown by ``eps`` (the doubles cannot tell within that margin; GEOS decides). Each
+    edge ``a + t (b - a)``, ``0 <= t <= 1``, is clipped to the closed squares of the
+    cells around its bounding box (Liang-Barsky: the ``t`` interval inside the x slab,
+    inside the y slab, and [0, 1]), all the (cell, edge) pairs at once.
+    """
     import shapely
 
-    if len(x) == 0:
-        return np.zeros(0, dtype=bool)
+    sure = np.zeros(rows * cols, dtype=bool)
+    may = np.zeros(rows * cols, dtype=bool)
     rings = shapely.get_rings(footprint)
     c, ring = shapely.get_coordinates(rings, return_index=True)
     same = ring[1:] == ring[:-1]  # consecutive vertices of one ring: an edge
     a, b = c[:-1][same], c[1:][same]
-    ab = b - a
-    ll = np.einsum("ij,ij->i", ab, ab)
-    ll[ll == 0] = 1.0
-    out = np.empty(len(x), dtype=bool)
-    step = max(1, (1 << 16) // max(len(a), 1))  # point-edge pairs at a time
-    for s0 in range(0, len(x), step):
-        dx = x[s0:s0 + step, None] - a[:, 0]
-        dy = y[s0:s0 + step, None] - a[:, 1]
-        t = np.clip((dx * ab[:, 0] + dy * ab[:, 1]) / ll, 0.0, 1.0)
-        ex, ey = dx - t * ab[:, 0], dy - t * ab[:, 1]
-        out[s0:s0 + step] = (ex * ex + ey * ey).min(axis=1) <= reach * reach
-    return out
+    if not len(a):
+        return sure, may
+    # the cells around each edge's bounding box (a cell more each side: rounding, eps)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    cspan = np.floor((np.concatenate([lo[:, 0], hi[:, 0]]) - x0) / cell).astype(np.int64)
+    rspan = np.floor((y_top - np.concatenate([hi[:, 1], lo[:, 1]])) / cell).astype(np.int64)
+    cspan = np.minimum(np.maximum(cspan + np.repeat([-1, 1], len(a)), 0), cols - 1)
+    rspan = np.minimum(np.maximum(rspan + np.repeat([-1, 1], len(a)), 0), rows - 1)
+    c0, c1 = cspan[:len(a)], cspan[len(a):]
+    r0, r1 = rspan[:len(a)], rspan[len(a):]
+    nc, count = c1 - c0 + 1, (c1 - c0 + 1) * (r1 - r0 + 1)
+    e = np.repeat(np.arange(len(a)), count)
+    j = np.arange(len(e)) - np.repeat(np.cumsum(count) - count, count)
+    r, col = r0[e] + j // nc[e], c0[e] + j % nc[e]
+    xl, xh = x0 + col * cell, x0 + (col + 1) * cell  # the cells' boxes (:func:`_cell_boxes`)
+    yl, yh = y_top - (r + 1) * cell, y_top - r * cell
+    ae, d = a[e], (b - a)[e]
+    flat = d == 0.0  # parallel to an axis: in that slab or not, for every t
+    inv = 1.0 / np.where(flat, 1.0, d)
+
+    def meets(grow):
+        t0, t1 = np.zeros(len(e)), np.ones(len(e))
+        for k, low, high in ((0, xl - grow, xh + grow), (1, yl - grow, yh + grow)):
+            ta, tb = (low - ae[:, k]) * inv[:, k], (high - ae[:, k]) * inv[:, k]
+            inside = (low <= ae[:, k]) & (ae[:, k] <= high)
+            np.maximum(t0, np.where(flat[:, k], np.where(inside, -np.inf, np.inf),
+                                    np.minimum(ta, tb)), out=t0)
+            np.minimum(t1, np.where(flat[:, k], np.where(inside, np.inf, -np.inf),
+                                    np.maximum(ta, tb)), out=t1)
+        return t0 <= t1
+
+    key = r * cols + col
+    sure[key[meets(-eps)]] = True
+    may[key[meets(eps)]] = True
+    return sure, may
 
 
 def _touched_cells(footprint, x0, y_top, cell, rows, cols):
@@ -222,19 +352,22 @@ def _touched_cells(footprint, x0, y_top, cell, rows, cols):
     shapely.prepare(footprint)
     # a cell whose centre is in the footprint's interior meets it there; only the others
     # (along the outline) need the test on the cell's square
-    cx, cy = x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell
-    hit = shapely.contains_xy(footprint, cx, cy)
-    rest = np.flatnonzero(~hit)
-    # a cell whose centre is outside meets the interior only where the outline crosses
-    # it: the outline comes within half the cell's diagonal of its centre (with a margin
-    # for rounding; the cells farther cannot meet the footprint)
-    near = _near_outline(footprint, cx[rest], cy[rest], cell * (0.5 * np.sqrt(2.0) + 1e-6))
-    hit[rest[~near]] = False
-    rest = rest[near]
-    boxes = _cell_boxes(r[rest], c[rest], x0, y_top, cell)
-    meets = shapely.intersects(footprint, boxes)
-    meets[meets] &= ~shapely.touches(footprint, boxes[meets])
-    hit[rest] = meets
+    hit = shapely.contains_xy(footprint, x0 + (c + 0.5) * cell, y_top - (r + 0.5) * cell)
+    # a cell whose centre is not in the interior meets the interior exactly where the
+    # outline crosses its open square (the square is connected and holds a point outside
+    # or on the outline; the interior comes arbitrarily close to every outline point).
+    # Decided from the doubles where an edge is clearly in or clearly out of the square,
+    # by GEOS (on the cell's box: the same coordinates) where an edge passes within a
+    # small margin of the square's sides (an edge along a grid line, a vertex on a corner)
+    scale = max(abs(x0), abs(y_top), abs(x0 + cols * cell), abs(y_top - rows * cell), cell)
+    sure, may = _outline_crossings(footprint, x0, y_top, cell, rows, cols, 1e-9 * scale)
+    ask = np.flatnonzero(may & ~sure & ~hit)
+    hit |= sure
+    if len(ask):
+        boxes = _cell_boxes(r[ask], c[ask], x0, y_top, cell)
+        meets = shapely.intersects(footprint, boxes)
+        meets[meets] &= ~shapely.touches(footprint, boxes[meets])
+        hit[ask] = meets
     return hit.reshape(rows, cols)
 
 

@@ -290,8 +290,11 @@ def _refit(xyz, labels, n_labels, trim, prev=None):
 
     ``prev``: optional ``(labels, planes)`` of an earlier segmentation of the same points;
     a facet with the very point set of one of those keeps its plane (the same arithmetic
-    on the same points in the same order), and only the others are fitted.
+    on the same points in the same order), and only the others are fitted; the same
+    labels (``planes`` an earlier result of this function for them) give those planes.
     """
+    if prev is not None and n_labels == len(prev[1]) and np.array_equal(labels, prev[0]):
+        return prev[1].copy()  # no facet changed since (``prev`` as this function fitted it)
     planes = np.zeros((n_labels, 3))
     todo = labels >= 0
     if prev is not None:
@@ -419,6 +422,9 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     cos = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) if len(pairs) else np.zeros(0)
     n_touch = len(pairs)
+    # each facet's points, ascending (as a mask selects them)
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
     if coplanar:
         # facets apart from each other on one plane (the sides of a parapet rim, pieces of a
         # facet cut by clutter) are one facet too. A narrow strip's fitted orientation says
@@ -432,47 +438,47 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         rms = _union_rms(xyz, labels, n_labels, ii[far], jj[far], mom)
         fit = rms <= dist_tol / 2
         far, rms = far[fit], rms[fit]
-        # and one of the two planes (the better supported) carries the other's points: two
-        # level strips at different heights fit one tilted plane, but neither carries the other;
-        # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
-        # each facet's points (ascending, as a mask selects them), median height and level
-        # spread, once per facet rather than once per candidate pair
-        order = np.argsort(labels, kind="stable")
-        bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
-        facet: dict = {}
+        if len(far):  # else no coplanar candidate: nothing to measure
+            # and one of the two planes (the better supported) carries the other's points: two
+            # level strips at different heights fit one tilted plane, but neither carries the other;
+            # a narrow strip's fitted tilt is poorly known, so level pieces at one height are one plane
+            # each facet's points (ascending, as a mask selects them), median height and level
+            # spread, once per facet rather than once per candidate pair
+            facet: dict = {}
 
-        def points_of(k):
-            if k not in facet:
-                p = xyz[order[bounds[k]:bounds[k + 1]]]
-                zk = median(p[:, 2])
-                facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
-            return facet[k]
+            def points_of(k):
+                if k not in facet:
+                    p = xyz[order[bounds[k]:bounds[k + 1]]]
+                    zk = median(p[:, 2])
+                    facet[k] = (p, zk, np.sqrt(np.mean((p[:, 2] - zk) ** 2)))
+                return facet[k]
 
-        fi, fj = ii[far], jj[far]
-        half = dist_tol / 2
-        zmed, spread = np.zeros(n_labels), np.zeros(n_labels)
-        for k in np.unique(np.concatenate([fi, fj])).tolist():
-            _, zmed[k], spread[k] = points_of(k)
-        ok = (np.abs(zmed[fi] - zmed[fj]) <= half) & (spread[fi] <= half) & (spread[fj] <= half)
-        # else the median distance of each facet's points to the other's plane, for both
-        # facets of every such pair: per facet, one matrix against all its partners' planes
-        rest = np.flatnonzero(~ok)
-        own, other = np.concatenate([fi[rest], fj[rest]]), np.concatenate([fj[rest], fi[rest]])
-        med = np.empty(len(own))
-        for a in np.unique(own).tolist():
-            sel = np.flatnonzero(own == a)
-            pa = points_of(a)[0]
-            step = max(1, _MEDIAN_CHUNK // max(len(pa), 1))
-            for s0 in range(0, len(sel), step):
-                part = sel[s0:s0 + step]
-                med[part] = _column_medians(_point_plane_dist(pa, planes[other[part]]))
-        # min() of the two medians as Python takes it (the first unless the second is less)
-        mi, mj = med[:len(rest)], med[len(rest):]
-        ok[rest] = np.where(mj < mi, mj, mi) <= half
-        far, rms = far[ok], rms[ok]
-        pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
-        cos = np.concatenate([cos, cos_merge - 1.0 - rms])
+            fi, fj = ii[far], jj[far]
+            half = dist_tol / 2
+            zmed, spread = np.zeros(n_labels), np.zeros(n_labels)
+            for k in np.unique(np.concatenate([fi, fj])).tolist():
+                _, zmed[k], spread[k] = points_of(k)
+            ok = (np.abs(zmed[fi] - zmed[fj]) <= half) & (spread[fi] <= half) & (spread[fj] <= half)
+            # else the median distance of each facet's points to the other's plane, for both
+            # facets of every such pair: per facet, one matrix against all its partners' planes
+            rest = np.flatnonzero(~ok)
+            own, other = np.concatenate([fi[rest], fj[rest]]), np.concatenate([fj[rest], fi[rest]])
+            med = np.empty(len(own))
+            for a in np.unique(own).tolist():
+                sel = np.flatnonzero(own == a)
+                pa = points_of(a)[0]
+                step = max(1, _MEDIAN_CHUNK // max(len(pa), 1))
+                for s0 in range(0, len(sel), step):
+                    part = sel[s0:s0 + step]
+                    med[part] = _column_medians(_point_plane_dist(pa, planes[other[part]]))
+            # min() of the two medians as Python takes it (the first unless the second is less)
+            mi, mj = med[:len(rest)], med[len(rest):]
+            ok[rest] = np.where(mj < mi, mj, mi) <= half
+            far, rms = far[ok], rms[ok]
+            pairs = np.vstack([pairs, np.column_stack([ii[far], jj[far]])]).astype(np.int64)
+            cos = np.concatenate([cos, cos_merge - 1.0 - rms])
     parent = list(range(n_labels))
+    merged = False
 
     def find(a):
         while parent[a] != a:
@@ -481,8 +487,6 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
         return a
 
     # the points of each merged group (ascending), kept with its root
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n_labels + 1))
     group = {k: order[bounds[k]:bounds[k + 1]] for k in range(n_labels)}
     # large facets: a union whose moments put its RMS far over the limit fails the exact
     # test too (the moments' rounding is ~1e-10 of it where the plane is well posed), so
@@ -512,8 +516,11 @@ def _merge(xyz, labels, planes, nbrs, dist_tol, cos_merge, coplanar=True):
             parent[b] = a
             group[a] = members
             del group[b]
+            merged = True
             if screen:
                 gmom[a] = union
+    if not merged:  # every facet its own root: the labels as they were
+        return np.where(labels >= 0, labels, -1).astype(np.int64, copy=False), n_labels
     roots = np.array([find(x) for x in range(n_labels)])
     uniq, new = np.unique(roots, return_inverse=True)
     out = np.where(labels >= 0, new[labels.clip(0)], -1)
