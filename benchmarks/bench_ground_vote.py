@@ -26,7 +26,8 @@ script:
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
    objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
    each ISPRS sample out in turn, and then the ``above`` of :data:`ABOVE`
-   (:func:`fit_above`); it prints the held-out sample's type I / type II /
+   (:func:`fit_above`), the walls anchored as ``smrf_vote``'s default
+   (:data:`~lidar2city.ground.VOTE_ANCHOR`); it prints the held-out sample's type I / type II /
    total error with the veto, the total without it and with the veto and
    ``above``, the rule of each fold, their mean and maximum (the
    leave-one-out figures);
@@ -34,7 +35,8 @@ script:
    decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
    :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
    are);
-4. scores ``smrf_vote`` with its defaults, without its veto and with
+4. scores ``smrf_vote`` with its defaults, without its veto, without its
+   wall anchor and ``above`` (the defaults until session 16) and with
    ``above`` 3 m against ``smrf_segments`` on the seven samples, the
    synthetic terrains and the small tile with a building of
    ``bench_ground_segments.py``, then on the scenes of
@@ -128,6 +130,8 @@ from bench_ground import arg_parser, load, reference_paths, speed, synthetic_sce
 from bench_ground_segments import small_tile  # noqa: E402
 from lidar2city.ground import (  # noqa: E402
     VETO_SLOPE,
+    VOTE_ABOVE,
+    VOTE_ANCHOR,
     VOTE_RULE,
     VOTE_VETO,
     GroundConfig,
@@ -280,7 +284,7 @@ def with_rise(xyz, features, clear, cache, key):
     if clear == VOTE_RULE["clear"]:
         return features
     if (key, clear) not in cache:
-        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0][:, -1]
+        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0][:, -1]
         cache[key, clear] = np.column_stack([features[:, :-1], rise])
     return cache[key, clear]
 
@@ -1323,12 +1327,12 @@ def main():
     if args.fit_held_out_kinds:
         scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
                    for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
-    # the three ratios, the wall distance, the ratio to the veto's fourth surface and the
-    # walls' rise within the default clear
+    # the three ratios, the wall distance (walls anchored as smrf_vote's default), the ratio
+    # to the veto's fourth surface and the walls' rise within the default clear
     clear = VOTE_RULE["clear"]
-    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0]
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0]
              for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear)[0], s.ground)
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0], s.ground)
            for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
     xyz_of = {n: xyz for n, (xyz, _) in samples.items()} | {
@@ -1337,11 +1341,13 @@ def main():
 
     print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
           f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
-          f"synthetic terrains); the held-out errors with the veto, the total without it, and "
-          f"with the veto and `above` (among {', '.join(f'{v:g}' for v in ABOVE)} m)")
+          f"synthetic terrains; walls anchored at {VOTE_ANCHOR:g}, smrf_vote's default); the "
+          f"held-out errors with the veto, the total without it, with the veto and `above` "
+          f"(among {', '.join(f'{v:g}' for v in ABOVE)} m), and with the veto and the default "
+          f"`above` {VOTE_ABOVE:g} m (smrf_vote's defaults)")
     print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10} "
-          f"{'above %':>8}  rule")
-    held = {"veto": [], "no veto": [], "veto + above": []}
+          f"{'above %':>8} {'default above %':>16}  rule")
+    held = {"veto": [], "no veto": [], "veto + above": [], "defaults": []}
     for name, (_, ref) in samples.items():
         sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
         rule, tree = fit_rule(sets)
@@ -1359,9 +1365,12 @@ def main():
             above = fit_above(risen, rule, veto)[0]
             f_held = with_rise(xyz_of[name], feats[name], rule["clear"], rise_cache, name)
             up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
+            held["defaults"].append(ground_errors(
+                vote_rule(f_held, **rule, veto=veto, above=VOTE_ABOVE), ref)["total"])
         held["veto + above"].append(up["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f}  "
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f} "
+              f"{100 * held['defaults'][-1] if rule is not None else np.nan:>16.2f}  "
               f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto, above=above))}")
     for k, v in held.items():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
@@ -1387,6 +1396,7 @@ def main():
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
         "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None),
+        "smrf_vote no anchor, no above": lambda xyz: smrf_vote(xyz, wall_anchor=None, above=None),
         f"smrf_vote above {ABOVE_SHOWN:g}": lambda xyz: smrf_vote(xyz, above=ABOVE_SHOWN)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
