@@ -12,8 +12,9 @@ error of each method on the synthetic terrains of
 ``lidar2city ground`` on ``DIR/isprs/sites/CSite4_orig-utm.laz`` as a fresh
 process against plainly reading and writing the same file with laspy (best
 of ``--repeat`` runs each) and prints the ratio, for each method and for
-``smrf_vote`` with its ``veto`` off, with ``above`` 3 m and with ``connect`` 3
-(:data:`SPEED_VARIANTS`), with the load average and the threads the filter's
+``smrf_vote`` with its ``veto`` off, with ``above`` 3 m, with ``connect`` 3, the
+ring, the wall anchor 3 and without the wall anchor and ``above`` (the default until
+session 16) (:data:`SPEED_VARIANTS`), with the load average and the threads the filter's
 grid passes would take at that load (two on an idle two-core machine, one on a
 busy one).
 
@@ -198,8 +199,9 @@ SPEED_VARIANTS = {"smrf_vote, veto off": ("smrf_vote", "veto = inf"),
                   "smrf_vote, ring 1.25": ("smrf_vote", "ring = 1.25"),
                   "smrf_vote, ring 1.25 dilation": ("smrf_vote", 'ring = 1.25\n'
                                                     'ring_neighbourhood = "dilation"'),
-                  "smrf_vote, wall_anchor 2": ("smrf_vote", "wall_anchor = 2.0"),
-                  "smrf_vote, wall_anchor 3": ("smrf_vote", "wall_anchor = 3.0")}
+                  "smrf_vote, wall_anchor 3": ("smrf_vote", "wall_anchor = 3.0"),
+                  "smrf_vote, no anchor, no above (the default until session 16)": (
+                      "smrf_vote", "wall_anchor = 1.0\nabove = inf")}
 
 
 def speed(site, repeat, methods=("smrf", "smrf_refined", "smrf_segments", "smrf_vote"),

@@ -5,6 +5,7 @@ Usage::
     python benchmarks/bench_ground_vote.py [--data DIR] [--repeat 3] [--no-speed] [--pairs]
         [--cues [--only-cues NAME,NAME]] [--uphill] [--ring] [--terrain]
         [--wall-slopes 1,1.5,2,3] [--wall-anchors 1.5,2,2.5,3] [--walls]
+        [--roughness] [--above-fixed 4,6,8,inf [--above-anchors off,2,2.5]]
         [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
 
@@ -25,7 +26,8 @@ script:
    then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
    objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
    each ISPRS sample out in turn, and then the ``above`` of :data:`ABOVE`
-   (:func:`fit_above`); it prints the held-out sample's type I / type II /
+   (:func:`fit_above`), the walls anchored as ``smrf_vote``'s default
+   (:data:`~lidar2city.ground.VOTE_ANCHOR`); it prints the held-out sample's type I / type II /
    total error with the veto, the total without it and with the veto and
    ``above``, the rule of each fold, their mean and maximum (the
    leave-one-out figures);
@@ -33,7 +35,8 @@ script:
    decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
    :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
    are);
-4. scores ``smrf_vote`` with its defaults, without its veto and with
+4. scores ``smrf_vote`` with its defaults, without its veto, without its
+   wall anchor and ``above`` (the defaults until session 16) and with
    ``above`` 3 m against ``smrf_segments`` on the seven samples, the
    synthetic terrains and the small tile with a building of
    ``bench_ground_segments.py``, then on the scenes of
@@ -60,7 +63,9 @@ script:
    point of the 3x3 cells around, how far the point is raised above the
    ground on both sides in its second most raised direction
    (:func:`raised_all_sides`), the cloth simulation filter's call when its
-   package is installed, the tolerance ratio to a TIN densified from the
+   package is installed, the local roughness of the 16 or 8 nearest points
+   about their plane and the vertical spread of a 1.5-spacing column
+   (:func:`knn_roughness`, :func:`column_spread`), the tolerance ratio to a TIN densified from the
    points all four surfaces call ground (:func:`seeded_tin_ratio`), how high
    the point's surface patch stands over the ground on its uphill side
    (:func:`uphill_steps`: median and low quantile, against the ground
@@ -93,7 +98,13 @@ script:
    holds on each sample and held-out kind (cells mostly reference ground,
    regions, what the anchor leaves out) and the default rule's error with
    the walls as marked, with every wall cell holding reference ground taken
-   out (an oracle), and anchored (:func:`wall_anatomy`);
+   out (an oracle), and anchored (:func:`wall_anatomy`); with ``--roughness``,
+   whether a point-level roughness cue (:func:`knn_roughness`, :func:`column_spread`)
+   tells the vegetation the wall anchor frees from the ground it frees, and the
+   leave-one-out of the anchor with a roughness veto (:func:`roughness_check`);
+   with ``--above-fixed``, the leave-one-out of the rule and veto with ``above``
+   fixed at each value given, beside each wall anchor of ``--above-anchors``, and
+   with the pair chosen per fold (:func:`above_loo`);
 10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
@@ -119,6 +130,8 @@ from bench_ground import arg_parser, load, reference_paths, speed, synthetic_sce
 from bench_ground_segments import small_tile  # noqa: E402
 from lidar2city.ground import (  # noqa: E402
     VETO_SLOPE,
+    VOTE_ABOVE,
+    VOTE_ANCHOR,
     VOTE_RULE,
     VOTE_VETO,
     GroundConfig,
@@ -138,7 +151,7 @@ from lidar2city.ground._grid import (  # noqa: E402
     sample_bilinear,
 )
 from lidar2city.ground.vote_filter import _distance_to  # noqa: E402
-from lidar2city.ground.connect_filter import surface_patches  # noqa: E402
+from lidar2city.ground.connect_filter import _spacing, surface_patches  # noqa: E402
 from lidar2city.ground.ring_plane import ring_ratios  # noqa: E402
 from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
@@ -161,7 +174,8 @@ ANATOMY_WORST = 2
 #: ``smrf_vote``'s ``veto`` option, at ``VETO_SLOPE`` 0.4) and the depth of its trees.
 CUES = ("segments 0.4 ratio", "wall distance", "height above lowest 3x3",
         "raised on all sides", "cloth (CSF) ground", "seeded TIN ratio", "uphill step",
-        "lowest uphill step", "uphill step to ground", "lowest uphill step to ground")
+        "lowest uphill step", "uphill step to ground", "lowest uphill step to ground",
+        "roughness 16-NN", "roughness 8-NN", "column spread")
 #: reach (m) of the ``raised on all sides`` cue.
 RAISED_REACH = 12.0
 CUE_DEPTH = 3
@@ -170,6 +184,14 @@ VETO = (0.6, 0.7, 0.8, 1.0, 1.2, 1.6, np.inf)
 #: rises (m) of ``smrf_vote``'s ``above`` option :func:`fit_above` chooses among (inf: off).
 ABOVE = (1.0, 2.0, 3.0, 4.0, 6.0, np.inf)
 ANATOMY_WALL = 5.0
+#: neighbours of :func:`knn_roughness` (the ``--cues`` and ``--roughness`` checks) and the
+#: plan reach (point spacings) of :func:`column_spread`.
+ROUGH_K = 16
+COLUMN_REACH = 1.5
+#: ``--roughness``: the wall anchor it frees walls with, and the roughness vetoes (point
+#: spacings; a point freed by the anchor stays near its walls when rougher) it tries.
+ROUGH_ANCHOR = 3.0
+ROUGH_VETOES = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
 #: the ``above`` (m) scored beside the defaults on the seven samples and the held-out kinds.
 ABOVE_SHOWN = 3.0
 
@@ -262,7 +284,7 @@ def with_rise(xyz, features, clear, cache, key):
     if clear == VOTE_RULE["clear"]:
         return features
     if (key, clear) not in cache:
-        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0][:, -1]
+        rise = vote_features(xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0][:, -1]
         cache[key, clear] = np.column_stack([features[:, :-1], rise])
     return cache[key, clear]
 
@@ -367,6 +389,42 @@ def height_above_lowest(xyz, cell=1.0):
     pad = np.pad(low, 1, constant_values=np.inf)
     around = np.minimum.reduce([pad[i:i + h, j:j + w] for i in range(3) for j in range(3)])
     return xyz[:, 2] - around[ij[:, 0], ij[:, 1]]
+
+
+def knn_roughness(xyz, k=ROUGH_K):
+    """Each point's local roughness, in point spacings: the root of the smallest eigenvalue
+    of the covariance of its ``k`` nearest points in 3-D (itself left out), over the spacing
+    of :func:`~lidar2city.ground.connect_filter._spacing` (a plane's residual spread: ~0 on
+    smooth terrain, however steep; large in a bush or a tree crown, or across an edge)."""
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(xyz).query(xyz, k=k + 1)
+    nbr = xyz[idx[:, 1:]]
+    centred = nbr - nbr.mean(axis=1, keepdims=True)
+    smallest = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", centred, centred) / k)[:, 0]
+    return np.sqrt(np.maximum(smallest, 0.0)) / _spacing(xyz)
+
+
+def column_spread(xyz, reach=COLUMN_REACH):
+    """The vertical spread (highest minus lowest z) of the points within ``reach`` point
+    spacings of each point in plan, in spacings (a 1-3 m column at these surveys' spacing:
+    the returns of a bush or a tree over the ground under it)."""
+    from scipy.spatial import cKDTree
+
+    sp = _spacing(xyz)
+    near = cKDTree(xyz[:, :2]).query_ball_point(xyz[:, :2], reach * sp)
+    return np.array([np.ptp(xyz[i, 2]) for i in near]) / sp
+
+
+def auc(high, low):
+    """The probability that a value of ``high`` exceeds one of ``low`` (ties half): 1 when a
+    cue separates them perfectly, 0.5 when it does not at all; nan when either is empty."""
+    if len(high) == 0 or len(low) == 0:
+        return np.nan
+    from scipy.stats import rankdata
+
+    ranks = rankdata(np.concatenate([high, low]))
+    return (ranks[:len(high)].sum() - len(high) * (len(high) + 1) / 2) / (len(high) * len(low))
 
 
 def raised_all_sides(xyz, cell=1.0, reach=RAISED_REACH):
@@ -911,6 +969,166 @@ def giveback_loo(samples, scenes, feats, syn, grid, unit, variants, what):
               f"{'; '.join(kinds_line)}")
 
 
+def roughness_check(samples, scenes):
+    """Print whether a point-level roughness cue tells the vegetation the ``wall_anchor``
+    frees (samp51's bushes, which must stay object) from the ground it frees (samp61's
+    embankments), and the leave-one-out of the anchor with a roughness veto
+    (``--roughness``; session 16).
+
+    First, per sample, the points the anchor (:data:`ROUGH_ANCHOR`) changes from object
+    to ground, each fold's rule and veto fitted on the six others + synthetic terrains
+    with and without it (reference object / ground), and how well each cue
+    (:func:`knn_roughness` with 16 and 8 neighbours, :func:`column_spread`) separates
+    them (:func:`auc`: freed objects rougher than freed ground; pooled over the seven);
+    then the same on the points near the lenient surface (ratio <= 1) in the rule's far
+    branch that the default calls object (what any freeing of walls could give back),
+    and samp11's type I points against its right objects. Then ``setting_loo`` with the
+    anchor, and with the anchor whose freed walls still count for a point rougher than
+    each of :data:`ROUGH_VETOES`: its wall distance is then the unanchored one."""
+    names = {"roughness 16-NN": lambda xyz: knn_roughness(xyz, 16),
+             "roughness 8-NN": lambda xyz: knn_roughness(xyz, 8),
+             "column spread": column_spread}
+    cache = {}
+
+    def feats_of(xyz, anchor):
+        key = (id(xyz), anchor)
+        if key not in cache:
+            cache[key] = vote_features(xyz, fourth=VETO_SLOPE, anchor=anchor)[0]
+        return cache[key]
+
+    def rough_of(xyz):
+        key = (id(xyz), "rough")
+        if key not in cache:
+            cache[key] = knn_roughness(xyz)
+        return cache[key]
+
+    syn = {a: [(feats_of(sc.xyz, a), sc.ground, 1.0 / len(scenes)) for sc in scenes.values()]
+           for a in (None, ROUGH_ANCHOR)}
+    pooled = {k: {"freed": ([], []), "near lenient": ([], []), "samp11": ([], [])}
+              for k in names}
+    print(f"\nroughness: points the wall anchor {ROUGH_ANCHOR:g} frees (object -> ground; each "
+          f"fold's rule and veto), reference object / ground; cue AUC (freed objects rougher "
+          f"than freed ground) per sample")
+    for name, (xyz, ref) in samples.items():
+        pred = {}
+        for a in (None, ROUGH_ANCHOR):
+            sets = [(feats_of(samples[n][0], a), samples[n][1], 1.0) for n in samples
+                    if n != name] + syn[a]
+            rule, _ = fit_rule(sets)
+            veto = fit_veto(sets, rule)[0]
+            pred[a] = vote_rule(feats_of(xyz, a), **rule, veto=veto)
+        f = feats_of(xyz, None)
+        freed = pred[ROUGH_ANCHOR] & ~pred[None]
+        candidate = (f[:, 1] <= 1.0) & (f[:, 0] > VOTE_RULE["near"]) & ~pred[None] & \
+            np.isfinite(f[:, 0])
+        cue = {k: fn(xyz) for k, fn in names.items()}
+        line = (f"{name:<8} freed {int((freed & ~ref).sum()):4d} / {int((freed & ref).sum()):4d}"
+                f"; near lenient {int((candidate & ~ref).sum()):5d} / "
+                f"{int((candidate & ref).sum()):5d}:")
+        for k, v in cue.items():
+            pooled[k]["freed"][0].append(v[freed & ~ref])
+            pooled[k]["freed"][1].append(v[freed & ref])
+            pooled[k]["near lenient"][0].append(v[candidate & ~ref])
+            pooled[k]["near lenient"][1].append(v[candidate & ref])
+            if name == "samp11":
+                wrong = ~pred[None] & np.isfinite(f[:, 0])
+                pooled[k]["samp11"][0].append(v[wrong & ~ref])
+                pooled[k]["samp11"][1].append(v[wrong & ref])
+            line += (f" {k} {auc(v[freed & ~ref], v[freed & ref]):.2f} / "
+                     f"{auc(v[candidate & ~ref], v[candidate & ref]):.2f}")
+        print(line)
+    for k, sets in pooled.items():
+        print(f"{k:<16} pooled AUC: " + "; ".join(
+            f"{what} {auc(np.concatenate(o), np.concatenate(g)):.2f} (object {sum(map(len, o))},"
+            f" ground {sum(map(len, g))})" for what, (o, g) in sets.items()))
+
+    def vetoed(t):
+        def features(xyz):
+            f = feats_of(xyz, ROUGH_ANCHOR).copy()
+            f[:, 3] = np.where(rough_of(xyz) > t, feats_of(xyz, None)[:, 3], f[:, 3])
+            return f
+        return features
+
+    settings = {"wall anchor off": lambda xyz: feats_of(xyz, None),
+                f"wall anchor {ROUGH_ANCHOR:g}": lambda xyz: feats_of(xyz, ROUGH_ANCHOR)}
+    settings |= {f"anchor {ROUGH_ANCHOR:g}, roughness veto {t:g}": vetoed(t)
+                 for t in ROUGH_VETOES}
+    return setting_loo(samples, scenes, settings, "the anchor and its roughness veto")
+
+
+def above_loo(samples, scenes, aboves, anchors=(None,)):
+    """Print the leave-one-out of ``smrf_vote``'s rule and veto (fitted per fold on the six
+    others + synthetic terrains) with its ``above`` fixed at each of ``aboves`` (m; inf:
+    off) and its ``wall_anchor`` at each of ``anchors`` (None: off), the rise measured
+    within each fold's ``clear``; then each pair fitted on all seven: the seven, the
+    synthetic terrains of TERRAIN_KINDS and the scenes of HELD_OUT_KINDS (total error %)
+    (``--above-fixed``, ``--above-anchors``; session 16: ``above`` frees the ground between
+    the large buildings of ``steep_town``)."""
+    kinds = {f"{k}@{s:g}m": make_terrain(k, spacing=s, seed=1)
+             for k in HELD_OUT_KINDS for s in (1.0, 2.5)}
+    cache = {}
+
+    def feats_of(xyz, anchor, clear=VOTE_RULE["clear"]):
+        key = (id(xyz), anchor, clear)
+        if key not in cache:
+            cache[key] = vote_features(xyz, fourth=VETO_SLOPE, anchor=anchor, rise=clear)[0]
+        return cache[key]
+
+    def fitted(anchor, names):
+        sets = [(feats_of(samples[n][0], anchor), samples[n][1], 1.0) for n in names]
+        sets += [(feats_of(sc.xyz, anchor), sc.ground, 1.0 / len(scenes))
+                 for sc in scenes.values()]
+        rule, _ = fit_rule(sets)
+        return rule, fit_veto(sets, rule)[0]
+
+    def scored(xyz, truth, anchor, rule, veto, above):
+        f = feats_of(xyz, anchor, rule["clear"])
+        return ground_errors(vote_rule(f, **rule, veto=veto, above=None if np.isinf(above)
+                                       else above), truth)["total"]
+
+    print(f"\nleave-one-out with `above` fixed (m) and the wall anchor, the rule and veto fitted "
+          f"per fold; then fitted on all seven: the seven, synthetic terrains, held-out kinds "
+          f"(total %)")
+    def objective(anchor, names, rule, veto, above):
+        """The fit's objective (mean point error, the synthetic terrains as one sample)."""
+        own = [scored(samples[n][0], samples[n][1], anchor, rule, veto, above) for n in names]
+        syn = np.mean([1.0 - np.mean(vote_rule(
+            feats_of(sc.xyz, anchor, rule["clear"]), **rule, veto=veto,
+            above=None if np.isinf(above) else above) == sc.ground) for sc in scenes.values()])
+        return (sum(own) + syn) / (len(own) + 1)
+
+    chosen, line = [], []
+    for anchor in anchors:
+        folds = {n: fitted(anchor, [m for m in samples if m != n]) for n in samples}
+        rule, veto = fitted(anchor, list(samples))
+        for above in aboves:
+            held = [scored(xyz, ref, anchor, *folds[n], above)
+                    for n, (xyz, ref) in samples.items()]
+            for (n, (xyz, ref)), e in zip(samples.items(), held):
+                o = objective(anchor, [m for m in samples if m != n], *folds[n], above)
+                chosen.append((n, o, e, f"anchor {anchor if anchor is not None else 'off'}, "
+                                        f"above {above:g}"))
+            seven = [scored(xyz, ref, anchor, rule, veto, above) for xyz, ref in samples.values()]
+            synth = [scored(sc.xyz, sc.ground, anchor, rule, veto, above)
+                     for k, sc in scenes.items() if k.split("@")[0] in TERRAIN_KINDS]
+            kind = " ".join(f"{k} {100 * scored(sc.xyz, sc.ground, anchor, rule, veto, above):.2f}"
+                            for k, sc in kinds.items())
+            print(f"anchor {anchor if anchor is not None else 'off'}, above {above:g}: "
+                  f"leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} % "
+                  f"({' '.join(f'{100 * v:.2f}' for v in held)}); fitted on all seven "
+                  f"({show_rule(rule)}, veto {veto:g}) {100 * np.mean(seven):.2f} % "
+                  f"({' '.join(f'{100 * v:.2f}' for v in seven)}), synthetic terrains "
+                  f"{100 * np.mean(synth):.2f} %; {kind}")
+    held = []
+    for n in samples:
+        _, _, e, label = min((c for c in chosen if c[0] == n), key=lambda c: c[1])
+        held.append(e)
+        line.append(f"{n} {100 * e:.2f} ({label})")
+    print(f"the pair chosen per fold (lowest objective on the six others + synthetic "
+          f"terrains): leave-one-out {100 * np.mean(held):.2f} %, max {100 * np.max(held):.2f} "
+          f"%: {'; '.join(line)}")
+
+
 def cloth_ground(xyz):
     """1 for the points the cloth simulation filter (``bench_ground_bounds.csf``, rigidness 2)
     calls ground, else 0; NaN everywhere when the package is not installed."""
@@ -954,7 +1172,10 @@ def cues(samples, scenes, feats, syn, only=None):
               "uphill step to ground": lambda xyz, f: np.minimum(
                   uphill_steps(xyz, f, on_ground=True)[0], 1e6),
               "lowest uphill step to ground": lambda xyz, f: np.minimum(
-                  uphill_steps(xyz, f, on_ground=True)[1], 1e6)}
+                  uphill_steps(xyz, f, on_ground=True)[1], 1e6),
+              "roughness 16-NN": lambda xyz, f: knn_roughness(xyz, 16),
+              "roughness 8-NN": lambda xyz, f: knn_roughness(xyz, 8),
+              "column spread": lambda xyz, f: column_spread(xyz)}
     chosen = tuple(c for c in CUES if only is None or c in only)
 
     def cue_columns(xyz, f):
@@ -1086,6 +1307,14 @@ def main():
                          "and these (comma-separated, e.g. 1.5,2,2.5,3)")
     ap.add_argument("--walls", action="store_true",
                     help="what the wall mark holds and what wall_anchor takes out of it")
+    ap.add_argument("--roughness", action="store_true",
+                    help="a roughness cue on the points the wall anchor frees, and its veto")
+    ap.add_argument("--above-fixed", default=None, metavar="METRES",
+                    help="leave-one-out with smrf_vote's above fixed at each of these "
+                         "(comma-separated, inf: off)")
+    ap.add_argument("--above-anchors", default=None, metavar="SLOPES",
+                    help="with --above-fixed: wall anchors to pair with (comma-separated, "
+                         "off: none)")
     ap.add_argument("--terrain", action="store_true",
                     help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
@@ -1098,12 +1327,12 @@ def main():
     if args.fit_held_out_kinds:
         scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
                    for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
-    # the three ratios, the wall distance, the ratio to the veto's fourth surface and the
-    # walls' rise within the default clear
+    # the three ratios, the wall distance (walls anchored as smrf_vote's default), the ratio
+    # to the veto's fourth surface and the walls' rise within the default clear
     clear = VOTE_RULE["clear"]
-    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear)[0]
+    feats = {n: vote_features(xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0]
              for n, (xyz, _) in samples.items()}
-    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear)[0], s.ground)
+    syn = [(vote_features(s.xyz, fourth=VETO_SLOPE, rise=clear, anchor=VOTE_ANCHOR)[0], s.ground)
            for s in scenes.values()]
     syn_set = [(r, g, 1.0 / len(syn)) for r, g in syn]
     xyz_of = {n: xyz for n, (xyz, _) in samples.items()} | {
@@ -1112,11 +1341,13 @@ def main():
 
     print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
           f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
-          f"synthetic terrains); the held-out errors with the veto, the total without it, and "
-          f"with the veto and `above` (among {', '.join(f'{v:g}' for v in ABOVE)} m)")
+          f"synthetic terrains; walls anchored at {VOTE_ANCHOR:g}, smrf_vote's default); the "
+          f"held-out errors with the veto, the total without it, with the veto and `above` "
+          f"(among {', '.join(f'{v:g}' for v in ABOVE)} m), and with the veto and the default "
+          f"`above` {VOTE_ABOVE:g} m (smrf_vote's defaults)")
     print(f"{'sample':<8} {'type I %':>9} {'type II %':>10} {'total %':>8} {'no veto %':>10} "
-          f"{'above %':>8}  rule")
-    held = {"veto": [], "no veto": [], "veto + above": []}
+          f"{'above %':>8} {'default above %':>16}  rule")
+    held = {"veto": [], "no veto": [], "veto + above": [], "defaults": []}
     for name, (_, ref) in samples.items():
         sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
         rule, tree = fit_rule(sets)
@@ -1134,9 +1365,12 @@ def main():
             above = fit_above(risen, rule, veto)[0]
             f_held = with_rise(xyz_of[name], feats[name], rule["clear"], rise_cache, name)
             up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
+            held["defaults"].append(ground_errors(
+                vote_rule(f_held, **rule, veto=veto, above=VOTE_ABOVE), ref)["total"])
         held["veto + above"].append(up["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
-              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f}  "
+              f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f} "
+              f"{100 * held['defaults'][-1] if rule is not None else np.nan:>16.2f}  "
               f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto, above=above))}")
     for k, v in held.items():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
@@ -1162,6 +1396,7 @@ def main():
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
         "smrf_vote no veto": lambda xyz: smrf_vote(xyz, veto=None),
+        "smrf_vote no anchor, no above": lambda xyz: smrf_vote(xyz, wall_anchor=None, above=None),
         f"smrf_vote above {ABOVE_SHOWN:g}": lambda xyz: smrf_vote(xyz, above=ABOVE_SHOWN)}
     print(f"\n{'sample':<8} " + " ".join(f"{m + ' ' + c:>20}" for m in methods
                                          for c in ("I", "II", "total")))
@@ -1196,6 +1431,12 @@ def main():
         wall_slope_loo(samples, scenes, [float(v) for v in args.wall_slopes.split(",")])
     if args.walls:
         wall_anatomy(samples)
+    if args.roughness:
+        roughness_check(samples, scenes)
+    if args.above_fixed:
+        above_loo(samples, scenes, [float(v) for v in args.above_fixed.split(",")],
+                  [None if v == "off" else float(v)
+                   for v in (args.above_anchors or "off").split(",")])
     if args.wall_anchors:
         wall_anchor_loo(samples, scenes, [float(v) for v in args.wall_anchors.split(",")])
     if args.pairs:

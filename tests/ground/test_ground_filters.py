@@ -350,10 +350,12 @@ def test_any_small_cloud_gives_a_mask(n, extent, seed, method):
 def test_isprs_mean_total_error_target(data):
     """Mean total error over the ISPRS samples, one parameter set (the defaults).
 
-    Measured: smrf_vote 3.04 % (max 8.01 %, samp11; 3.07 % and 7.87 % without its veto),
-    smrf_segments 3.34 % (kappa 89.9 %, max 7.25 %), smrf_refined 3.54 % (kappa 89.4 %),
-    SMRF 3.56 % (kappa 89.3 %), PMF 4.57 %. Leave-one-sample-out: smrf_vote 3.19 %
-    (bench_ground_vote.py --cues; 3.42 % with its slopes chosen per fold too, --pairs),
+    Measured: smrf_vote 2.99 % (max 7.99 %, samp11; kappa 90.8 %; 3.04 % and 8.01 %
+    without its wall anchor and ``above``, the defaults until session 16; 3.07 % and 7.87 %
+    without those and its veto), smrf_segments 3.34 % (kappa 89.9 %, max 7.25 %),
+    smrf_refined 3.54 % (kappa 89.4 %), SMRF 3.56 % (kappa 89.3 %), PMF 4.57 %.
+    Leave-one-sample-out: smrf_vote 3.17 % (bench_ground_vote.py; 3.19 % without the
+    anchor and ``above``; 3.42 % with its slopes chosen per fold too, --pairs),
     smrf_segments 3.57 %, smrf_refined 3.67 %, SMRF 3.88 % (bench_ground.py --loo).
     """
     import laspy

@@ -13,7 +13,7 @@ on the ISPRS samples and synthetic terrains; the default of
 :class:`GroundConfig`, lowest on leave-one-sample-out and on the synthetic
 terrains), ``"pmf"`` (Zhang et al. 2003) and ``"ptd"`` (progressive TIN
 densification, Axelsson 2000; not the default: leave-one-sample-out 5.44 %
-against ``smrf_vote``'s 3.19 %, ``benchmarks/bench_ground.py --loo
+against ``smrf_vote``'s 3.17 %, ``benchmarks/bench_ground.py --loo
 --loo-methods ptd``). All set low
 outliers aside first (:func:`low_outliers`). :func:`dtm_from_ground` grids ground points
 into a gap-free terrain model and :func:`height_above_ground` reads it back
@@ -39,7 +39,15 @@ from .ring_plane import RING_NEIGHBOURHOODS, ring_ratios
 from .segment_filter import anchored_objects, smrf_segments, terrain_segments
 from .smrf_filter import smrf, smrf_surface
 from .tin_filter import ptd
-from .vote_filter import VETO_SLOPE, VOTE_RULE, VOTE_VETO, smrf_vote, vote_features
+from .vote_filter import (
+    VETO_SLOPE,
+    VOTE_ABOVE,
+    VOTE_ANCHOR,
+    VOTE_RULE,
+    VOTE_VETO,
+    smrf_vote,
+    vote_features,
+)
 
 __all__ = [
     "GROUND_METHODS",
@@ -56,6 +64,8 @@ __all__ = [
     "connect_ground",
     "surface_patches",
     "ring_ratios",
+    "VOTE_ABOVE",
+    "VOTE_ANCHOR",
     "VOTE_RULE",
     "VOTE_VETO",
     "VETO_SLOPE",
@@ -139,10 +149,11 @@ class GroundConfig:
     veto: float | None = field(0.8, "smrf_vote: a point near the strict surface is object when "
                                     "its height off smrf_segments' slope-0.4 surface exceeds "
                                     "this many tolerances (the fitted value); inf: no veto")
-    above: float | None = field(None, "smrf_vote: a point off the strict surfaces but within "
-                                      "tolerance of the lenient one is ground also near walls when "
-                                      "every wall within 15 m rises more than this (m) over it "
-                                      "(ground at the foot of buildings); default none")
+    above: float | None = field(VOTE_ABOVE, "smrf_vote: a point off the strict surfaces but "
+                                            "within tolerance of the lenient one is ground also "
+                                            "near walls when every wall within 15 m rises more "
+                                            "than this (m) over it (ground at the foot of "
+                                            "buildings); inf: off")
     connect: int | None = field(None, "smrf_vote: rounds of segment connectivity on its mask "
                                       "(smooth patches running on from its ground given to it, "
                                       "patches raised all round and pits taken away); default "
@@ -155,11 +166,11 @@ class GroundConfig:
         "box", "smrf_vote with ring: the ground around a patch its plane is fitted to, the "
         "patch's bounding box grown by 3, 6, 12, 24 m (box) or the cells within that reach of "
         "its own cells (dilation)")
-    wall_anchor: float | None = field(None, "smrf_vote: a region the opening cuts steeper than "
-                                            "45 degrees counts as a wall only when one of its "
-                                            "cells is cut at this slope too (rise/run, e.g. 2: "
-                                            "a building's step, not an embankment); default "
-                                            "none: every such region")
+    wall_anchor: float | None = field(VOTE_ANCHOR, "smrf_vote: a region the opening cuts "
+                                                   "steeper than 45 degrees counts as a wall "
+                                                   "only when one of its cells is cut at this "
+                                                   "slope too (rise/run: a building's step, not "
+                                                   "an embankment); 1 or less: every such region")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
