@@ -98,6 +98,25 @@ def _merge_small(labels, pairs, mask, min_cells, max_iter=20):
 _LIST_REGIONS = 200
 
 
+def _height_runs(labels, pairs, mask, hv):
+    """The set-up :func:`_merge_by_height` and :func:`_merge_by_height_arrays` share:
+    ``(lab, la, lb, diff, n_lab, k, z, starts)``, the masked cells' labels ``k``
+    and heights ``z`` sorted by region then height, ``starts`` each region's first
+    position; None when no pair of neighbours holds two labels."""
+    lab = labels.copy()
+    la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
+    diff = la != lb
+    if not diff.any():
+        return None
+    n_lab = int(lab.max()) + 1
+    cells = np.flatnonzero(mask.ravel())
+    k, z = lab[cells], hv[cells]
+    order = np.lexsort((z, k))
+    k, z = k[order], z[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    return lab, la, lb, diff, n_lab, k, z, starts
+
+
 def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     """Merge neighbouring regions whose heights differ by less than ``step``.
 
@@ -115,19 +134,12 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     import heapq
     from bisect import bisect_left
 
-    lab = labels.copy()
-    la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
-    diff = la != lb
-    if not diff.any():
-        return lab
-    n_lab = int(lab.max()) + 1
-    cells = np.flatnonzero(mask.ravel())
-    k, z = lab[cells], hv[cells]
-    order = np.lexsort((z, k))
-    k, z = k[order], z[order]
-    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    runs = _height_runs(labels, pairs, mask, hv)
+    if runs is None:
+        return labels.copy()
+    lab, la, lb, diff, n_lab, k, z, starts = runs
     if len(starts) > _LIST_REGIONS:
-        return _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile)
+        return _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile, runs=runs)
     # a few regions of a few hundred cells: Python lists, no array set-up per merge
     regions = k[starts].tolist()  # ascending
     sizes = np.diff(np.r_[starts, len(k)]).tolist()
@@ -201,22 +213,16 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     return target[lab]
 
 
-def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0):
+def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0, runs=None):
     """:func:`_merge_by_height` on arrays: the measures of every region vectorised, for
-    rasters of many regions (the same merges in the same order)."""
+    rasters of many regions (the same merges in the same order); ``runs`` is
+    :func:`_height_runs` of the same arguments when the caller has it."""
     import heapq
 
-    lab = labels.copy()
-    la, lb = lab[pairs[:, 0]], lab[pairs[:, 1]]
-    diff = la != lb
-    if not diff.any():
-        return lab
-    n_lab = int(lab.max()) + 1
-    cells = np.flatnonzero(mask.ravel())
-    k, z = lab[cells], hv[cells]
-    order = np.lexsort((z, k))
-    k, z = k[order], z[order]
-    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    runs = _height_runs(labels, pairs, mask, hv) if runs is None else runs
+    if runs is None:
+        return labels.copy()
+    lab, la, lb, diff, n_lab, k, z, starts = runs
     regions = k[starts]  # ascending
     sizes = np.diff(np.r_[starts, len(k)])
     frac = percentile / 100.0
