@@ -117,6 +117,44 @@ def _height_runs(labels, pairs, mask, hv):
     return lab, la, lb, diff, n_lab, k, z, starts
 
 
+def _neighbour_heap(la, lb, diff, n_lab, regions, height):
+    """The regions' adjacency (``nbrs``: label -> set of labels) from the pairs of
+    neighbouring cells whose labels ``la``, ``lb`` differ (``diff``), and the heap of
+    the neighbouring pairs ``(gap, low label, high label)`` by their height gap."""
+    import heapq
+
+    key = np.unique(np.minimum(la[diff], lb[diff]).astype(np.int64) * n_lab
+                    + np.maximum(la[diff], lb[diff]))
+    nbrs: dict = {int(v): set() for v in regions}
+    heap = []
+    for a, b in zip((key // n_lab).tolist(), (key % n_lab).tolist(), strict=True):
+        nbrs[a].add(b)
+        nbrs[b].add(a)
+        heap.append((abs(float(height[a]) - float(height[b])), a, b))
+    heapq.heapify(heap)
+    return nbrs, heap
+
+
+def _join(nbrs, a, b) -> None:
+    """Region ``b`` merged into ``a``: ``b``'s neighbours become ``a``'s."""
+    for c in nbrs.pop(b):
+        nbrs[c].discard(b)
+        if c != a:
+            nbrs[c].add(a)
+            nbrs[a].add(c)
+
+
+def _final_labels(target, lab):
+    """Every label of ``lab`` to the region it was merged into at last (``target``:
+    each label to the one it joined, or itself)."""
+    for _ in range(len(target)):
+        nxt = target[target]
+        if np.array_equal(nxt, target):
+            break
+        target = nxt
+    return target[lab]
+
+
 def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
     """Merge neighbouring regions whose heights differ by less than ``step``.
 
@@ -160,16 +198,7 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
 
     for i, v in enumerate(regions):
         height[v] = measure(i)
-    # region adjacency (low label, high label)
-    key = np.unique(np.minimum(la[diff], lb[diff]).astype(np.int64) * n_lab
-                    + np.maximum(la[diff], lb[diff]))
-    nbrs: dict = {v: set() for v in regions}
-    heap = []
-    for a, b in zip((key // n_lab).tolist(), (key % n_lab).tolist(), strict=True):
-        nbrs[a].add(b)
-        nbrs[b].add(a)
-        heap.append((abs(height[a] - height[b]), a, b))
-    heapq.heapify(heap)
+    nbrs, heap = _neighbour_heap(la, lb, diff, n_lab, regions, height)
     target = np.arange(n_lab)
     while heap:
         gap, a, b = heapq.heappop(heap)
@@ -180,11 +209,7 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         # b joins a (a < b): its cells move into a's run of sorted heights; the runs
         # between shift by b's size, those after it stay where they were
         target[b] = a
-        for c in nbrs.pop(b):
-            nbrs[c].discard(b)
-            if c != a:
-                nbrs[c].add(a)
-                nbrs[a].add(c)
+        _join(nbrs, a, b)
         ia, ib = bisect_left(regions, a), bisect_left(regions, b)
         sa, ea = first[ia], first[ia] + sizes[ia]
         sb, eb = first[ib], first[ib] + sizes[ib]
@@ -204,13 +229,7 @@ def _merge_by_height(labels, pairs, mask, hv, step, percentile=70.0):
         for v in changed:
             for c in nbrs[v]:
                 heapq.heappush(heap, (abs(height[v] - height[c]), min(v, c), max(v, c)))
-    # every merged label to its final region
-    for _ in range(n_lab):
-        nxt = target[target]
-        if np.array_equal(nxt, target):
-            break
-        target = nxt
-    return target[lab]
+    return _final_labels(target, lab)
 
 
 def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0, runs=None):
@@ -242,16 +261,7 @@ def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0, runs
         return first, changed
 
     first, _ = measure()
-    # region adjacency (low label, high label)
-    key = np.unique(np.minimum(la[diff], lb[diff]).astype(np.int64) * n_lab
-                    + np.maximum(la[diff], lb[diff]))
-    nbrs: dict = {int(v): set() for v in regions}
-    heap = []
-    for a, b in zip((key // n_lab).tolist(), (key % n_lab).tolist(), strict=True):
-        nbrs[a].add(b)
-        nbrs[b].add(a)
-        heap.append((abs(float(height[a]) - float(height[b])), a, b))
-    heapq.heapify(heap)
+    nbrs, heap = _neighbour_heap(la, lb, diff, n_lab, regions, height)
     target = np.arange(n_lab)
     while heap:
         gap, a, b = heapq.heappop(heap)
@@ -261,11 +271,7 @@ def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0, runs
             break
         # b joins a (a < b): its cells move into a's run of sorted heights
         target[b] = a
-        for c in nbrs.pop(b):
-            nbrs[c].discard(b)
-            if c != a:
-                nbrs[c].add(a)
-                nbrs[a].add(c)
+        _join(nbrs, a, b)
         ia, ib = np.searchsorted(regions, (a, b))
         sa, ea = first[ia], first[ia] + sizes[ia]
         sb, eb = first[ib], first[ib] + sizes[ib]
@@ -279,13 +285,7 @@ def _merge_by_height_arrays(labels, pairs, mask, hv, step, percentile=70.0, runs
             for c in nbrs[v]:
                 new_gap = abs(float(height[v]) - float(height[c]))
                 heapq.heappush(heap, (new_gap, min(v, c), max(v, c)))
-    # every merged label to its final region
-    for _ in range(n_lab):
-        nxt = target[target]
-        if np.array_equal(nxt, target):
-            break
-        target = nxt
-    return target[lab]
+    return _final_labels(target, lab)
 
 
 def _cell_boxes(r, c, x0, y_top, cell):
