@@ -29,6 +29,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from replay_common import data_dir, least_pass, recording, time_parts  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 #: parts of ``_height_labels`` timed inclusive (names in ``lidar2city.lod.lod13``)
 PARTS = ("_touched_cells", "_cell_medians", "_merge_by_height", "_merge_small",
@@ -45,74 +48,36 @@ def capture(data: Path, out: Path):
     d = data / "delft"
     cloud = read_points(str(d / "ahn3_cropped_1.laz"), crs="EPSG:28992")
     fps = load_footprints(str(d / "footprints_bgt.gpkg"), cloud)
-    calls = []
-    f = lod13._height_labels
-
-    def recorder(*a, **k):
-        calls.append(pickle.dumps((a, k)))
-        return f(*a, **k)
-
-    lod13._height_labels = recorder
+    calls = recording(lod13, ["_height_labels"])["_height_labels"]
     reconstruct_buildings(cloud, fps, config=Lod1Config(lods=("1.2", "1.3")))
     with open(out, "wb") as fh:
         pickle.dump(calls, fh)
 
 
+def _label_digest(res, h):
+    import numpy as np
+
+    for labels, x0, y_top in res:
+        h.update(np.ascontiguousarray(labels, dtype=np.int64).tobytes())
+        h.update(repr((float(x0), float(y_top))).encode())
+
+
 def timed(cache: Path, repeat: int, result: Path):
     """Least CPU of a replay and its parts' CPU in that pass, and the labels' digest (child)."""
     import collections
-    import hashlib
-    import time
 
-    import numpy as np
     import scipy.ndimage  # noqa: F401 - the pipeline's imports, not timed
     import shapely  # noqa: F401
 
     import lidar2city.lod.lod13 as lod13
 
     acc: collections.Counter = collections.Counter()
-    for name in PARTS:
-        f = getattr(lod13, name, None)
-        if f is None:
-            continue
-
-        def wrap(f=f, key=name):
-            def g(*a, **k):
-                t = time.process_time()
-                try:
-                    return f(*a, **k)
-                finally:
-                    acc[key] += time.process_time() - t
-            return g
-
-        setattr(lod13, name, wrap())
+    time_parts([f"lod.lod13:{name}" for name in PARTS], ("lod.lod13",), acc)
     with open(cache, "rb") as fh:
         raw = pickle.load(fh)
-    best, parts, digest = float("inf"), {}, None
-    for _ in range(repeat):
-        calls = [pickle.loads(r) for r in raw]
-        acc.clear()
-        t = time.process_time()
-        res = [lod13._height_labels(*a, **k) for a, k in calls]
-        cpu = time.process_time() - t
-        if cpu < best:
-            best, parts = cpu, dict(acc)
-        if digest is None:
-            h = hashlib.md5()
-            for labels, x0, y_top in res:
-                h.update(np.ascontiguousarray(labels, dtype=np.int64).tobytes())
-                h.update(repr((float(x0), float(y_top))).encode())
-            digest = h.hexdigest()
+    best, parts, digest = least_pass(lod13._height_labels, raw, repeat, acc, _label_digest)
     with open(result, "wb") as fh:
         pickle.dump((best, parts, digest, len(raw)), fh)
-
-
-def data_dir(arg):
-    if arg:
-        return Path(arg)
-    if os.environ.get("LIDAR2CITY_DATA"):
-        return Path(os.environ["LIDAR2CITY_DATA"])
-    return ROOT.parent / "shared" / "data"
 
 
 def _child(src, *args):

@@ -30,13 +30,14 @@ machine.
 from __future__ import annotations
 
 import argparse
-import os
 import pickle
-import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from replay_common import (  # noqa: E402
+    compare_stages, data_dir, least_pass, print_stages, recording, time_parts)
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("_finish_solid", "check_solid")
@@ -55,16 +56,7 @@ def capture(data: Path, out: Path, traced: bool):
     import lidar2city.roof.building as building
     from lidar2city.cli.main import cli
 
-    calls = {name: [] for name in STAGES}
-
-    def recorder(name, f):
-        def g(*a, **k):
-            calls[name].append(pickle.dumps((a, k)))  # before the call: it may change them
-            return f(*a, **k)
-        return g
-
-    for name in STAGES:
-        setattr(building, name, recorder(name, getattr(building, name)))
+    calls = recording(building, STAGES)
     d = data / "delft"
     given = [] if traced else ["--footprints", str(d / "footprints_bgt.gpkg")]
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,38 +67,9 @@ def capture(data: Path, out: Path, traced: bool):
         pickle.dump(calls, f)
 
 
-def _digest(out, h):
-    import numpy as np
-    import shapely
-
-    if isinstance(out, np.ndarray):
-        h.update(str(out.dtype).encode())
-        h.update(np.ascontiguousarray(out).tobytes())
-    elif isinstance(out, shapely.Geometry):
-        h.update(shapely.to_wkb(out))
-    elif hasattr(out, "vertices") and hasattr(out, "surfaces"):  # a Solid
-        _digest(np.asarray(out.vertices), h)
-        for s in out.surfaces:
-            _digest([np.asarray(r) for r in getattr(s, "rings", s)], h)
-            h.update(repr(getattr(s, "semantic", None)).encode())
-    elif isinstance(out, (list, tuple)):
-        h.update(b"(%d" % len(out))
-        for o in out:
-            _digest(o, h)
-    elif isinstance(out, dict):
-        for k, v in out.items():
-            h.update(repr(k).encode())
-            _digest(v, h)
-    else:
-        h.update(repr(out).encode())
-
-
 def timed(cache: Path, repeat: int, result: Path):
     """Least CPU per stage and its parts' CPU in that pass, and the answers' digests (child)."""
     import collections
-    import hashlib
-    import importlib
-    import time
 
     import scipy.ndimage  # noqa: F401 - the pipeline's imports, not timed
     import scipy.spatial  # noqa: F401
@@ -115,52 +78,13 @@ def timed(cache: Path, repeat: int, result: Path):
     import lidar2city.roof.building as building
 
     acc: collections.Counter = collections.Counter()
-    mods = [importlib.import_module(f"lidar2city.{m}") for m in
-            ("roof.building", "roof.refine", "roof.arrangement", "roof.solid", "lod.mesh",
-             "validate.solid")]
     stage_fns = {name: getattr(building, name) for name in STAGES}
-    for item in PARTS:
-        mname, fname = item.split(":")
-        try:
-            mod = importlib.import_module(f"lidar2city.{mname}")
-        except ImportError:
-            continue
-        f = getattr(mod, fname, None)
-        if f is None:
-            continue
-
-        def wrap(f=f, key=fname):
-            def g(*a, **k):
-                t = time.process_time()
-                try:
-                    return f(*a, **k)
-                finally:
-                    acc[key] += time.process_time() - t
-            return g
-
-        g = wrap()
-        for m in mods:  # every module that calls it by this name
-            if getattr(m, fname, None) is f:
-                setattr(m, fname, g)
+    time_parts(PARTS, ("roof.building", "roof.refine", "roof.arrangement", "roof.solid",
+                       "lod.mesh", "validate.solid"), acc)
     with open(cache, "rb") as fh:
         raw = pickle.load(fh)
-    out = {}
-    for name in STAGES:
-        f = stage_fns[name]
-        best, parts, digest = float("inf"), {}, None
-        for _ in range(repeat):
-            calls = [pickle.loads(c) for c in raw[name]]
-            acc.clear()
-            t = time.process_time()
-            res = [f(*a, **k) for a, k in calls]
-            cpu = time.process_time() - t
-            if cpu < best:
-                best, parts = cpu, dict(acc)
-            if digest is None:
-                h = hashlib.md5()
-                _digest(res, h)
-                digest = h.hexdigest()
-        out[name] = (best, parts, digest, len(raw[name]))
+    out = {name: (*least_pass(stage_fns[name], raw[name], repeat, acc), len(raw[name]))
+           for name in STAGES}
     with open(result, "wb") as fh:
         pickle.dump(out, fh)
 
@@ -182,52 +106,16 @@ def main():
         else:
             timed(Path(a), args.repeat, Path(b))
         return
-    data = Path(args.data or os.environ.get("LIDAR2CITY_DATA") or ROOT.parent / "shared" / "data")
     kind = "traced" if args.traced else "footprints"
     cache = Path(args.cache or Path(tempfile.gettempdir()) / f"solid_replay_{kind}.pkl")
-    me = str(Path(__file__).resolve())
     trees = [str(ROOT / "src"), *[str(Path(o).resolve()) for o in args.others]]
-
-    def child(src, *argv):
-        env = dict(os.environ, PYTHONPATH=src)
-        subprocess.run([sys.executable, me, *(["--traced"] if args.traced else []),
-                        "--repeat", str(args.repeat), "--child", *argv], env=env, check=True,
-                       stdout=subprocess.DEVNULL)
-
-    if not cache.exists():
-        child(trees[0], "capture", str(data), str(cache))
-    best: dict = {}
-    loads = [os.getloadavg()[0]]
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(args.rounds):
-            for i, src in enumerate(trees):
-                res = Path(tmp) / f"{i}_{r}.pkl"
-                child(src, "timed", str(cache), str(res))
-                loads.append(os.getloadavg()[0])
-                with open(res, "rb") as fh:
-                    got = pickle.load(fh)
-                for name, (cpu, parts, digest, n) in got.items():
-                    old = best.get((i, name))
-                    if old is None or cpu < old[0]:
-                        best[(i, name)] = (cpu, parts, digest, n)
+    best, loads = compare_stages(Path(__file__).resolve(), trees, STAGES, cache=cache,
+                                 capture_args=(data_dir(args.data),), repeat=args.repeat,
+                                 rounds=args.rounds,
+                                 flags=["--traced"] if args.traced else [])
     print(f"Delft, {kind}: partition to solid replayed, least CPU s of {args.repeat} passes x "
           f"{args.rounds} rounds per tree; load {min(loads):.1f}-{max(loads):.1f}")
-    for i, src in enumerate(trees):
-        total = sum(best[(i, s)][0] for s in STAGES)
-        print(f"[{i}] {src}: stages {total:.3f} CPU s"
-              + ("" if i == 0 else f"; [0] / [{i}] = {sum(best[(0, s)][0] for s in STAGES) / total:.3f}"))
-        for s in STAGES:
-            cpu, parts, digest, n = best[(i, s)]
-            ratio = "" if i == 0 else f" ([0] / [{i}] = {best[(0, s)][0] / cpu:.3f})"
-            print(f"  {s}: {n} calls {cpu:.3f}{ratio}  digest {digest[:12]}")
-            for p, t in sorted(parts.items(), key=lambda kv: -kv[1]):
-                print(f"      {p:24s} {t:.3f}")
-    same = all(best[(i, s)][2] == best[(0, s)][2] for i in range(len(trees)) for s in STAGES)
-    print("same outputs in every tree:", same)
-    if len(trees) > 1:
-        print("stage CPU of [0] over the others' (median over trees):",
-              {s: round(statistics.median(best[(0, s)][0] / best[(i, s)][0]
-                                          for i in range(1, len(trees))), 3) for s in STAGES})
+    print_stages(best, trees, STAGES)
 
 
 if __name__ == "__main__":
