@@ -21,7 +21,6 @@ Wall-clock timers are not used: on a shared machine only CPU seconds compare.
 
 from __future__ import annotations
 
-import argparse
 import os
 import pickle
 import subprocess
@@ -30,7 +29,8 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from replay_common import data_dir, least_pass, recording, time_parts  # noqa: E402
+from replay_common import (  # noqa: E402
+    data_dir, least_pass, recording, replay_parser, time_parts)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: parts of ``_height_labels`` timed inclusive (names in ``lidar2city.lod.lod13``)
@@ -86,13 +86,7 @@ def _child(src, *args):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("others", nargs="*", help="src folders of other trees to compare with")
-    ap.add_argument("--data")
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--cache")
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    ap = replay_parser(__doc__, traced=False)
     args = ap.parse_args()
     if args.child:
         kind, a, b = args.child

@@ -29,7 +29,6 @@ machine.
 
 from __future__ import annotations
 
-import argparse
 import pickle
 import sys
 import tempfile
@@ -37,7 +36,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from replay_common import (  # noqa: E402
-    compare_stages, data_dir, least_pass, print_stages, recording, time_parts)
+    capture_delft, compare_stages, data_dir, least_pass, print_stages, replay_parser,
+    time_parts)
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("_finish_solid", "check_solid")
@@ -54,17 +54,8 @@ PARTS = (
 def capture(data: Path, out: Path, traced: bool):
     """Record the stages' calls of one Delft reconstruct (child process)."""
     import lidar2city.roof.building as building
-    from lidar2city.cli.main import cli
 
-    calls = recording(building, STAGES)
-    d = data / "delft"
-    given = [] if traced else ["--footprints", str(d / "footprints_bgt.gpkg")]
-    with tempfile.TemporaryDirectory() as tmp:
-        cli.main(["reconstruct", str(d / "ahn3_cropped_1.laz"), *given, "--lod", "1.2", "--lod",
-                  "1.3", "--lod", "2.2", "--workers", "1", "-o", str(Path(tmp) / "out.city.json")],
-                 standalone_mode=False)
-    with open(out, "wb") as f:
-        pickle.dump(calls, f)
+    capture_delft(building, STAGES, data, out, traced)
 
 
 def timed(cache: Path, repeat: int, result: Path):
@@ -90,14 +81,7 @@ def timed(cache: Path, repeat: int, result: Path):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("others", nargs="*", help="src folders of other trees to compare with")
-    ap.add_argument("--data")
-    ap.add_argument("--traced", action="store_true", help="the run without footprints")
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--cache")
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    ap = replay_parser(__doc__)
     args = ap.parse_args()
     if args.child:
         mode, a, b = args.child

@@ -10,6 +10,7 @@ compare. A wrapper costs ~1 us per wrapped call, alike in every tree.
 
 from __future__ import annotations
 
+import argparse
 import os
 import pickle
 import statistics
@@ -19,6 +20,21 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def replay_parser(doc, *, traced=True) -> argparse.ArgumentParser:
+    """The options every replay benchmark takes: other trees' ``src`` folders, ``--data``,
+    (``--traced``,) ``--repeat``, ``--rounds``, ``--cache`` and the hidden ``--child``."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("others", nargs="*", help="src folders of other trees to compare with")
+    ap.add_argument("--data")
+    if traced:
+        ap.add_argument("--traced", action="store_true", help="the run without footprints")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--cache")
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    return ap
 
 
 def data_dir(arg=None) -> Path:
@@ -40,6 +56,23 @@ def recording(module, names) -> dict:
     for name in names:
         setattr(module, name, recorder(name, getattr(module, name)))
     return calls
+
+
+def capture_delft(module, names, data: Path, out: Path, traced: bool) -> None:
+    """Record the calls of the functions ``names`` of ``module`` in one ``reconstruct`` of
+    the Delft tile (LoD 1.2 + 1.3 + 2.2 in one process, with its BGT footprints or, when
+    ``traced``, without them) and pickle them to ``out`` (run it in a child process)."""
+    from lidar2city.cli.main import cli
+
+    calls = recording(module, names)
+    d = Path(data) / "delft"
+    given = [] if traced else ["--footprints", str(d / "footprints_bgt.gpkg")]
+    with tempfile.TemporaryDirectory() as tmp:
+        cli.main(["reconstruct", str(d / "ahn3_cropped_1.laz"), *given, "--lod", "1.2", "--lod",
+                  "1.3", "--lod", "2.2", "--workers", "1", "-o", str(Path(tmp) / "out.city.json")],
+                 standalone_mode=False)
+    with open(out, "wb") as f:
+        pickle.dump(calls, f)
 
 
 def digest(out, h) -> None:
