@@ -70,7 +70,9 @@ script:
    default pair (0.1, 0.3) was chosen among these by looking at all seven
    samples' leave-one-out, so this nested figure is the honest one for the
    whole procedure; printed without and with the ``veto`` (chosen per fold
-   too, :func:`fit_veto`) (a few minutes more);
+   too, :func:`fit_veto`), the rule fitted by ``--fit`` ``unit`` or
+   ``greedy`` (session 13's nesting: walls not anchored, no ``above``)
+   (a few minutes more);
 7. with ``--anatomy``, where ``smrf_vote``'s errors are on its two worst
    samples: type I and type II points, the share of them each candidate of
    step 5 has right, the share within 5 m of a wall and their median ratio
@@ -288,6 +290,16 @@ def fit_unit(sets, keys, xyz_of, cache):
     """No threshold fitted: ``near``, ``steep`` and ``plain`` at SMRF's own test (ratio 1);
     then ``clear``, the veto and ``above`` as :func:`fit_sequence` (what fitting the three
     thresholds buys)."""
+    rule, tree = fit_unit_rule(sets)
+    veto = fit_veto(sets, rule)[0]
+    risen = [(with_rise(xyz_of[k], f, rule["clear"], cache, k), g, w)
+             for k, (f, g, w) in zip(keys, sets)]
+    return rule, tree, veto, fit_above(risen, rule, veto)[0]
+
+
+def fit_unit_rule(sets):
+    """The ``unit`` rule (thresholds 1) and its ``clear`` fitted on ``sets`` as by
+    :func:`fit_rule`; returns ``(rule, tree)``."""
     rule = dict.fromkeys(NAMES, 1.0)
     total = sum(w for _, _, w in sets)
 
@@ -295,11 +307,7 @@ def fit_unit(sets, keys, xyz_of, cache):
         return sum(w * np.mean(vote_rule(f, **rule, clear=clear) != g) for f, g, w in sets) / total
 
     rule["clear"] = float(min(CLEAR, key=objective))
-    veto = fit_veto(sets, rule)[0]
-    risen = [(with_rise(xyz_of[k], f, rule["clear"], cache, k), g, w)
-             for k, (f, g, w) in zip(keys, sets)]
-    tree = (0, 1.0, (1, 1.0, True, False), (2, 1.0, True, False))
-    return rule, tree, veto, fit_above(risen, rule, veto)[0]
+    return rule, (0, 1.0, (1, 1.0, True, False), (2, 1.0, True, False))
 
 
 def fit_selected(sets, keys, xyz_of, cache, among=None, log=None):
@@ -382,9 +390,13 @@ def score(rule, tree, features):
     return predict(tree, features[:, :3]) if rule is None else vote_rule(features, **rule)
 
 
-def nested_pairs(samples, scenes):
+def nested_pairs(samples, scenes, how="greedy"):
     """Print the leave-one-out with the slope pair chosen per fold (see ``--pairs``), without
-    and with ``smrf_vote``'s ``veto`` (chosen per fold too, as by :func:`fit_veto`)."""
+    and with ``smrf_vote``'s ``veto`` (chosen per fold too, as by :func:`fit_veto`); the rule
+    fitted as by :func:`fit_rule` (``how`` "greedy") or :func:`fit_unit_rule` ("unit")."""
+    if how not in ("greedy", "unit"):
+        raise SystemExit("--pairs takes --fit greedy or unit")
+    fit = fit_unit_rule if how == "unit" else fit_rule
     feats = {}
     for pair in PAIRS:
         feats[pair] = ({n: vote_features(xyz, slopes=pair, fourth=VETO_SLOPE)[0]
@@ -392,13 +404,14 @@ def nested_pairs(samples, scenes):
                        [(vote_features(s.xyz, slopes=pair, fourth=VETO_SLOPE)[0], s.ground,
                          1.0 / len(scenes)) for s in scenes.values()])
     print("\nleave-one-out with the slope pair chosen per fold among "
-          f"{', '.join(str(p) for p in PAIRS)}, without and with the veto (chosen per fold)")
+          f"{', '.join(str(p) for p in PAIRS)}, without and with the veto (chosen per fold; "
+          f"fit {how!r}, walls not anchored, no above)")
     held = {"no veto": [], "veto": []}
     for name, (_, ref) in samples.items():
         best = dict.fromkeys(held)
         for pair, (real, syn) in feats.items():
             sets = [(real[n], samples[n][1], 1.0) for n in samples if n != name] + syn
-            rule, tree = fit_rule(sets)
+            rule, tree = fit(sets)
             objective = sum(w * np.mean(score(rule, tree, f) != g) for f, g, w in sets)
             if best["no veto"] is None or objective < best["no veto"][0]:
                 best["no veto"] = (objective, pair, score(rule, tree, real[name]), "")
@@ -1640,7 +1653,7 @@ def main():
     if args.wall_anchors:
         wall_anchor_loo(samples, scenes, [float(v) for v in args.wall_anchors.split(",")])
     if args.pairs:
-        nested_pairs(samples, scenes)
+        nested_pairs(samples, scenes, "unit" if args.fit == "unit" else "greedy")
     if not args.no_speed:
         speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat,
               methods=("smrf_segments", "smrf_vote"))
