@@ -7,7 +7,7 @@ Usage::
         [--wall-slopes 1,1.5,2,3] [--wall-anchors 1.5,2,2.5,3] [--walls]
         [--roughness] [--above-fixed 4,6,8,inf [--above-anchors off,2,2.5]]
         [--anatomy [PNG_DIR]]
-        [--fit-held-out-kinds]
+        [--fit-held-out-kinds] [--fit {greedy,coded,bagged,grid,grid-bagged,unit,selected}]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -19,22 +19,40 @@ script:
 1. computes the features of every point of the ISPRS reference samples in
    ``DIR/isprs/reference`` and of the synthetic terrains of
    :mod:`lidar2city.synthetic_terrain` (1 m and 2.5 m spacing);
-2. fits the rule (:func:`fit_rule`): a depth-2 decision tree on the three
-   ratios (:func:`fit_tree`: each split the threshold, among 48 quantiles of
-   the pooled ratios, that minimises the weighted point error, every sample
-   weighted equally and the synthetic terrains together as one more sample),
-   then the wall distance ``clear`` of :data:`CLEAR` that minimises the same
-   objective, then the ``veto`` of :data:`VETO` (:func:`fit_veto`), leaving
-   each ISPRS sample out in turn, and then the ``above`` of :data:`ABOVE`
-   (:func:`fit_above`), the walls anchored as ``smrf_vote``'s default
-   (:data:`~lidar2city.ground.VOTE_ANCHOR`); it prints the held-out sample's type I / type II /
-   total error with the veto, the total without it and with the veto and
-   ``above``, the rule of each fold, their mean and maximum (the
-   leave-one-out figures);
-3. fits it on all seven and prints the rule: its thresholds, rounded to two
-   decimals, are :data:`lidar2city.ground.VOTE_RULE` and its veto
+2. fits the rule by the procedure of ``--fit`` (:data:`FITS`,
+   :func:`fit_procedure`), leaving each ISPRS sample out in turn (the whole
+   procedure, any bagging or choice among procedures included, runs on the
+   six others + the synthetic terrains). The objective is always the
+   weighted point error, every sample weighted equally and the synthetic
+   terrains together as one more sample. ``unit`` (the default since
+   session 17): the three thresholds at SMRF's own test, ratio 1, then the
+   wall distance ``clear`` of :data:`CLEAR` that minimises the objective,
+   then the ``veto`` of :data:`VETO` (:func:`fit_veto`), then the ``above``
+   of :data:`ABOVE` (:func:`fit_above`), the walls anchored as
+   ``smrf_vote``'s default (:data:`~lidar2city.ground.VOTE_ANCHOR`).
+   ``greedy`` (the default until session 16): first a depth-2 decision tree
+   on the three ratios (:func:`fit_rule`, :func:`fit_tree`: each split the
+   threshold, among 48 quantiles of the pooled ratios, that minimises the
+   objective), thresholds rounded to two decimals, then the same three
+   steps; ``coded``: the tree forced to the coded rule's shape, its three
+   thresholds chosen together (:func:`fit_coded`); ``bagged``: ``coded``
+   on every subset of the training samples that leaves
+   :data:`BAG_LEAVE` out, the median of each parameter
+   (:func:`fit_bagged`); ``grid`` and ``grid-bagged``: the same with the
+   thresholds among :data:`RATIO_GRID` rather than the pooled quantiles
+   (which are 0.48, 1.14, 1.91 for ``near`` between 0.3 and 3, and move
+   with the training samples); ``selected``: the procedure among the six
+   others with the lowest leave-one-out on the training samples, then fitted
+   on them (:func:`fit_selected`: the choice of procedure nested too; a few
+   minutes). It prints the held-out sample's type I / type II / total error
+   with the veto, the total without it and with the veto and ``above``, and
+   with the veto and the default ``above``, the rule of each fold, their
+   mean and maximum (the leave-one-out figures);
+3. fits it on all seven and prints the rule: its thresholds are
+   :data:`lidar2city.ground.VOTE_RULE` and its veto
    :data:`lidar2city.ground.VOTE_VETO` (the script says whether they still
-   are);
+   are; with a rule that differs, its errors on the seven, the synthetic
+   terrains and the held-out kinds, :func:`fitted_rule_check`);
 4. scores ``smrf_vote`` with its defaults, without its veto, without its
    wall anchor and ``above`` (the defaults until session 16) and with
    ``above`` 3 m against ``smrf_segments`` on the seven samples, the
@@ -52,7 +70,9 @@ script:
    default pair (0.1, 0.3) was chosen among these by looking at all seven
    samples' leave-one-out, so this nested figure is the honest one for the
    whole procedure; printed without and with the ``veto`` (chosen per fold
-   too, :func:`fit_veto`) (a few minutes more);
+   too, :func:`fit_veto`), the rule fitted by ``--fit`` ``unit`` or
+   ``greedy`` (session 13's nesting: walls not anchored, no ``above``)
+   (a few minutes more);
 7. with ``--anatomy``, where ``smrf_vote``'s errors are on its two worst
    samples: type I and type II points, the share of them each candidate of
    step 5 has right, the share within 5 m of a wall and their median ratio
@@ -118,6 +138,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -194,16 +215,25 @@ ROUGH_ANCHOR = 3.0
 ROUGH_VETOES = (0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
 #: the ``above`` (m) scored beside the defaults on the seven samples and the held-out kinds.
 ABOVE_SHOWN = 3.0
+#: the fitting procedures of ``--fit`` (see the module's docstring, step 2); the default,
+#: ``unit``, is the one ``selected`` chooses in every fold and on all seven (session 17).
+FITS = ("greedy", "coded", "bagged", "grid", "grid-bagged", "unit", "selected")
+BAG_LEAVE = 2
+#: the thresholds the ``grid`` procedures choose among (tolerance ratios; SMRF's own test is 1).
+RATIO_GRID = np.round(np.arange(0.2, 3.05, 0.1), 2)
 
 
-def fit_rule(sets):
+def fit_rule(sets, coded=False, grid=None):
     """:data:`VOTE_RULE` fitted on ``sets`` (as :func:`fit_tree`): the tree, then ``clear``.
 
     Returns the rule (dict, thresholds rounded to two decimals), or None when
     the tree has not the shape of the coded rule (its one-line form is then
-    printed by the caller).
+    printed by the caller). ``coded``: the tree has the coded rule's shape,
+    its three thresholds chosen together (:func:`fit_coded`, among the values of ``grid``
+    when given), not greedily.
     """
-    tree = fit_tree([(f[:, :3], g, w) for f, g, w in sets])
+    ratios = [(f[:, :3], g, w) for f, g, w in sets]
+    tree = fit_coded(ratios, grid) if coded else fit_tree(ratios)
     rule = rule_of(tree)
     if rule is None:
         return None, tree
@@ -215,14 +245,158 @@ def fit_rule(sets):
     return dict(rule, clear=float(min(CLEAR, key=objective))), tree
 
 
+def fit_sequence(sets, keys, xyz_of, cache, coded=False, grid=None):
+    """The whole fit of one procedure on ``sets`` of ``(features (N, 6), ground, weight)``
+    (``keys``: the sets' keys in ``xyz_of``, for the walls' rise within another ``clear``):
+    the tree and ``clear`` (:func:`fit_rule`), then the veto (:func:`fit_veto`), then
+    ``above`` (:func:`fit_above`), one after the other. Returns ``(rule, tree, veto, above)``;
+    ``rule`` None (and no veto or above) when the tree has not the coded shape."""
+    rule, tree = fit_rule(sets, coded=coded, grid=grid)
+    if rule is None:
+        return None, tree, None, None
+    veto = fit_veto(sets, rule)[0]
+    risen = [(with_rise(xyz_of[k], f, rule["clear"], cache, k), g, w)
+             for k, (f, g, w) in zip(keys, sets)]
+    return rule, tree, veto, fit_above(risen, rule, veto)[0]
+
+
+def fit_bagged(sets, keys, xyz_of, cache, leave=None, grid=None):
+    """:func:`fit_sequence` (coded shape) on every subset of ``sets`` that leaves out
+    ``leave`` (default :data:`BAG_LEAVE`) of the weight-1 sets (the ISPRS samples; the
+    synthetic terrains, whose weights sum to 1, stay in every subset), and the median of each
+    parameter over the subsets: a rule robust to which samples it saw.
+
+    The median of each of ``near``, ``steep``, ``plain``, ``clear``, ``veto`` and ``above``
+    (the lower median when the number of subsets is even, so that it is one of the fitted
+    values; ``clear``, ``veto`` and ``above`` are ordered grids, inf last). Returns
+    ``(rule, tree, veto, above)`` as :func:`fit_sequence`, ``tree`` that of the median
+    thresholds.
+    """
+    leave = BAG_LEAVE if leave is None else leave
+    real = [i for i, (_, _, w) in enumerate(sets) if w == 1.0]
+    fits = []
+    for drop in combinations(real, leave):
+        kept = [i for i in range(len(sets)) if i not in drop]
+        rule, _, veto, above = fit_sequence([sets[i] for i in kept], [keys[i] for i in kept],
+                                            xyz_of, cache, coded=True, grid=grid)
+        fits.append(dict(rule, veto=veto, above=above))
+    med = {k: float(sorted(f[k] for f in fits)[(len(fits) - 1) // 2]) for k in fits[0]}
+    rule = {k: med[k] for k in ("near", "steep", "plain", "clear")}
+    tree = (0, rule["near"], (1, rule["steep"], True, False), (2, rule["plain"], True, False))
+    return rule, tree, med["veto"], med["above"]
+
+
+def fit_unit(sets, keys, xyz_of, cache):
+    """No threshold fitted: ``near``, ``steep`` and ``plain`` at SMRF's own test (ratio 1);
+    then ``clear``, the veto and ``above`` as :func:`fit_sequence` (what fitting the three
+    thresholds buys)."""
+    rule, tree = fit_unit_rule(sets)
+    veto = fit_veto(sets, rule)[0]
+    risen = [(with_rise(xyz_of[k], f, rule["clear"], cache, k), g, w)
+             for k, (f, g, w) in zip(keys, sets)]
+    return rule, tree, veto, fit_above(risen, rule, veto)[0]
+
+
+def fit_unit_rule(sets):
+    """The ``unit`` rule (thresholds 1) and its ``clear`` fitted on ``sets`` as by
+    :func:`fit_rule`; returns ``(rule, tree)``."""
+    rule = dict.fromkeys(NAMES, 1.0)
+    total = sum(w for _, _, w in sets)
+
+    def objective(clear):
+        return sum(w * np.mean(vote_rule(f, **rule, clear=clear) != g) for f, g, w in sets) / total
+
+    rule["clear"] = float(min(CLEAR, key=objective))
+    return rule, (0, 1.0, (1, 1.0, True, False), (2, 1.0, True, False))
+
+
+def fit_selected(sets, keys, xyz_of, cache, among=None, log=None):
+    """The procedure of ``among`` (default: every other one of :data:`FITS`) with the lowest
+    leave-one-out mean total error over the weight-1 sets of ``sets`` (each left out in turn,
+    the synthetic terrains always fitted on), then fitted on all of ``sets``: choosing the
+    procedure by its leave-one-out, nested, so that an outer leave-one-out scores the choice
+    too. ``log``: a list the inner figures are appended to."""
+    among = tuple(f for f in FITS if f != "selected") if among is None else among
+    real = [i for i, (_, _, w) in enumerate(sets) if w == 1.0]
+    inner = {}
+    for how in among:
+        errs = []
+        for i in real:
+            kept = [j for j in range(len(sets)) if j != i]
+            rule, tree, veto, above = fit_procedure(how, [sets[j] for j in kept],
+                                                    [keys[j] for j in kept], xyz_of, cache)
+            f, g, _ = sets[i]
+            if rule is None:
+                errs.append(np.mean(predict(tree, f[:, :3]) != g))
+                continue
+            f = with_rise(xyz_of[keys[i]], f, rule["clear"], cache, keys[i])
+            errs.append(np.mean(vote_rule(f, **rule, veto=veto, above=above) != g))
+        inner[how] = float(np.mean(errs))
+    best = min(among, key=inner.get)
+    if log is not None:
+        log.append((best, inner))
+    return fit_procedure(best, sets, keys, xyz_of, cache)
+
+
+def fit_procedure(how, sets, keys, xyz_of, cache):
+    """The rule, veto and above fitted on ``sets`` by the procedure ``how`` of :data:`FITS`."""
+    if how == "selected":
+        log = []
+        fitted = fit_selected(sets, keys, xyz_of, cache, log=log)
+        best, inner = log[0]
+        print(f"  [selected {best}; inner leave-one-out: "
+              f"{', '.join(f'{k} {100 * v:.2f} %' for k, v in inner.items())}]")
+        return fitted
+    grid = RATIO_GRID if how.startswith("grid") else None
+    if how == "unit":
+        return fit_unit(sets, keys, xyz_of, cache)
+    if how.endswith("bagged"):
+        return fit_bagged(sets, keys, xyz_of, cache, grid=grid)
+    return fit_sequence(sets, keys, xyz_of, cache, coded=how != "greedy", grid=grid)
+
+
+def fitted_rule_check(samples, scenes, feats, syn, xyz_of, cache, rule, veto, above):
+    """Print a rule fitted on all seven that is not the coded default: its errors on the
+    seven, the synthetic terrains of TERRAIN_KINDS and the held-out kinds, with the ``above``
+    fitted and with the default :data:`~lidar2city.ground.VOTE_ABOVE`."""
+    print("that rule and veto (type I / type II / total %), with the fitted above, then with "
+          f"the default above {VOTE_ABOVE:g}:")
+    kinds = {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
+             for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
+    rows = [(n, xyz_of[n], feats[n], ref) for n, (_, ref) in samples.items()]
+    rows += [(k, xyz_of[i], f, g) for i, (k, (f, g)) in enumerate(zip(scenes, syn))]
+    rows += [(k, s.xyz, vote_features(s.xyz, fourth=VETO_SLOPE, rise=VOTE_RULE["clear"],
+                                      anchor=VOTE_ANCHOR)[0], s.ground) for k, s in kinds.items()]
+    totals = {}
+    for k, xyz, f, ref in rows:
+        f = with_rise(xyz, f, rule["clear"], cache, ("check", k))
+        es = [ground_errors(vote_rule(f, **rule, veto=veto, above=a), ref) for a in
+              (above, VOTE_ABOVE)]
+        totals[k] = [e["total"] for e in es]
+        if k in samples or k in kinds:
+            print(f"  {k:<20} " + "   ".join(" ".join(f"{100 * e[c]:6.2f}" for c in
+                                                   ("type_i", "type_ii", "total")) for e in es))
+    for what, ks in (("the seven", list(samples)),
+                     (f"the {sum(k.split('@')[0] in TERRAIN_KINDS for k in scenes)} synthetic "
+                      "terrains", [k for k in scenes if k.split("@")[0] in TERRAIN_KINDS])):
+        v = np.array([totals[k] for k in ks])
+        print(f"  mean total on {what}: {100 * v[:, 0].mean():.2f} % (fitted above), "
+              f"{100 * v[:, 1].mean():.2f} % (above {VOTE_ABOVE:g}); max "
+              f"{100 * v[:, 0].max():.2f} / {100 * v[:, 1].max():.2f} %")
+
+
 def score(rule, tree, features):
     """Ground mask of a fitted rule (or of its tree when it has not the coded shape)."""
     return predict(tree, features[:, :3]) if rule is None else vote_rule(features, **rule)
 
 
-def nested_pairs(samples, scenes):
+def nested_pairs(samples, scenes, how="greedy"):
     """Print the leave-one-out with the slope pair chosen per fold (see ``--pairs``), without
-    and with ``smrf_vote``'s ``veto`` (chosen per fold too, as by :func:`fit_veto`)."""
+    and with ``smrf_vote``'s ``veto`` (chosen per fold too, as by :func:`fit_veto`); the rule
+    fitted as by :func:`fit_rule` (``how`` "greedy") or :func:`fit_unit_rule` ("unit")."""
+    if how not in ("greedy", "unit"):
+        raise SystemExit("--pairs takes --fit greedy or unit")
+    fit = fit_unit_rule if how == "unit" else fit_rule
     feats = {}
     for pair in PAIRS:
         feats[pair] = ({n: vote_features(xyz, slopes=pair, fourth=VETO_SLOPE)[0]
@@ -230,13 +404,14 @@ def nested_pairs(samples, scenes):
                        [(vote_features(s.xyz, slopes=pair, fourth=VETO_SLOPE)[0], s.ground,
                          1.0 / len(scenes)) for s in scenes.values()])
     print("\nleave-one-out with the slope pair chosen per fold among "
-          f"{', '.join(str(p) for p in PAIRS)}, without and with the veto (chosen per fold)")
+          f"{', '.join(str(p) for p in PAIRS)}, without and with the veto (chosen per fold; "
+          f"fit {how!r}, walls not anchored, no above)")
     held = {"no veto": [], "veto": []}
     for name, (_, ref) in samples.items():
         best = dict.fromkeys(held)
         for pair, (real, syn) in feats.items():
             sets = [(real[n], samples[n][1], 1.0) for n in samples if n != name] + syn
-            rule, tree = fit_rule(sets)
+            rule, tree = fit(sets)
             objective = sum(w * np.mean(score(rule, tree, f) != g) for f, g, w in sets)
             if best["no veto"] is None or objective < best["no veto"][0]:
                 best["no veto"] = (objective, pair, score(rule, tree, real[name]), "")
@@ -1234,6 +1409,44 @@ def fit_tree(sets, depth=DEPTH):
     return _grow(x, y, w, depth, edges)
 
 
+def fit_coded(sets, grid=None):
+    """The coded rule's tree (``near <= a ? (steep <= b ? G : O) : (plain <= c ? G : O)``) on
+    ``sets`` as :func:`fit_tree` (the same objective), its three thresholds chosen together to
+    minimise the objective exactly, not one split at a time, among the quantile edges of
+    :func:`fit_tree` or, with ``grid``, among its values (the same for every ratio and every
+    training set)."""
+    x = np.vstack([np.minimum(r, 1e6) for r, _, _ in sets])
+    y = np.concatenate([g for _, g, _ in sets]).astype(float)
+    w = np.concatenate([np.full(len(g), wt / len(g)) for _, g, wt in sets])
+    edges = ([np.unique(np.quantile(x[:, j], QUANTILES)) for j in range(x.shape[1])]
+             if grid is None else [np.asarray(grid, dtype=float)] * x.shape[1])
+    bins = [np.searchsorted(e, x[:, j]) for j, e in enumerate(edges)]
+    rows = len(edges[0]) + 1
+
+    def tables(j):
+        """Weighted ground and object counts per (near bin, bin of ratio j)."""
+        cols = len(edges[j]) + 1
+        at = bins[0] * cols + bins[j]
+        return [np.bincount(at, weights=v, minlength=rows * cols).reshape(rows, cols)
+                for v in (w * y, w * (1 - y))]
+
+    def error(pos, neg):
+        """Per near threshold (rows) and threshold on ratio j (columns): ground called object
+        above the column's threshold plus object called ground at or below it."""
+        cp, cn = np.cumsum(pos, axis=1)[:, :-1], np.cumsum(neg, axis=1)[:, :-1]
+        return cn + (pos.sum(axis=1)[:, None] - cp)
+
+    pos, neg = tables(1)
+    left = error(np.cumsum(pos, axis=0)[:-1], np.cumsum(neg, axis=0)[:-1])
+    pos, neg = tables(2)
+    right = error(pos.sum(axis=0) - np.cumsum(pos, axis=0)[:-1],
+                  neg.sum(axis=0) - np.cumsum(neg, axis=0)[:-1])
+    total = left.min(axis=1) + right.min(axis=1)
+    k = int(np.flatnonzero(total <= total.min() + 1e-12)[0])
+    return (0, float(edges[0][k]), (1, float(edges[1][int(np.argmin(left[k]))]), True, False),
+            (2, float(edges[2][int(np.argmin(right[k]))]), True, False))
+
+
 def _grow(x, y, w, depth, edges):
     pos, neg = float(w @ y), float(w @ (1 - y))
     leaf = pos > neg
@@ -1290,6 +1503,9 @@ def main():
     ap = arg_parser(__doc__)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-speed", action="store_true")
+    ap.add_argument("--fit", choices=FITS, default="unit",
+                    help="the fitting procedure of the leave-one-out and of the rule on all "
+                         "seven (see FITS)")
     ap.add_argument("--pairs", action="store_true")
     ap.add_argument("--fit-held-out-kinds", action="store_true",
                     help="fit on the scenes of HELD_OUT_KINDS too (no longer held out)")
@@ -1339,7 +1555,15 @@ def main():
         k: s.xyz for k, s in enumerate(scenes.values())}
     rise_cache = {}
 
-    print(f"leave-one-out, depth-{DEPTH} tree over the ratios, then the wall distance, then the "
+    how = {"unit": "the three thresholds at 1 (SMRF's test)",
+           "greedy": f"a greedy depth-{DEPTH} tree over the ratios",
+           "coded": "the coded tree's thresholds fitted together",
+           "bagged": f"the coded tree bagged over the leave-{BAG_LEAVE}-out subsets",
+           "grid": "the coded tree on RATIO_GRID",
+           "grid-bagged": f"the coded tree on RATIO_GRID bagged over the leave-{BAG_LEAVE}-out "
+                          "subsets",
+           "selected": "the procedure chosen by its inner leave-one-out"}[args.fit]
+    print(f"leave-one-out, fit {args.fit!r}: {how}, then the wall distance, then the "
           f"veto among {', '.join(f'{v:g}' for v in VETO)} (fitted on the six other samples + "
           f"synthetic terrains; walls anchored at {VOTE_ANCHOR:g}, smrf_vote's default); the "
           f"held-out errors with the veto, the total without it, with the veto and `above` "
@@ -1350,19 +1574,15 @@ def main():
     held = {"veto": [], "no veto": [], "veto + above": [], "defaults": []}
     for name, (_, ref) in samples.items():
         sets = [(feats[n], samples[n][1], 1.0) for n in samples if n != name] + syn_set
-        rule, tree = fit_rule(sets)
+        keys = [n for n in samples if n != name] + list(range(len(syn)))
+        rule, tree, veto, above = fit_procedure(args.fit, sets, keys, xyz_of, rise_cache)
         plain = ground_errors(score(rule, tree, feats[name]), ref)
-        veto = None if rule is None else fit_veto(sets, rule)[0]
         e = plain if rule is None else ground_errors(vote_rule(feats[name], **rule, veto=veto),
                                                      ref)
         held["veto"].append(e["total"])
         held["no veto"].append(plain["total"])
-        above, up = None, e
+        up = e
         if rule is not None:
-            keys = [n for n in samples if n != name] + list(range(len(syn)))
-            risen = [(with_rise(xyz_of[k], f, rule["clear"], rise_cache, k), g, w)
-                     for k, (f, g, w) in zip(keys, sets)]
-            above = fit_above(risen, rule, veto)[0]
             f_held = with_rise(xyz_of[name], feats[name], rule["clear"], rise_cache, name)
             up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
             held["defaults"].append(ground_errors(
@@ -1376,22 +1596,15 @@ def main():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
               f"max {100 * np.max(v):.2f} %")
     sets = [(feats[n], samples[n][1], 1.0) for n in samples] + syn_set
-    rule, tree = fit_rule(sets)
-    veto = None if rule is None else fit_veto(sets, rule)[0]
-    above = None if rule is None or rule["clear"] != clear else fit_above(sets, rule, veto)[0]
-    print(f"fitted on all seven: {show(tree) if rule is None else show_rule(rule)}, veto {veto}, "
-          f"above {above}; "
+    keys = list(samples) + list(range(len(syn)))
+    rule, tree, veto, above = fit_procedure(args.fit, sets, keys, xyz_of, rise_cache)
+    print(f"fitted on all seven ({args.fit}): "
+          f"{show(tree) if rule is None else show_rule(rule)}, veto {veto}, above {above}; "
           f"{'VOTE_RULE matches' if rule == VOTE_RULE else f'VOTE_RULE {VOTE_RULE} differs'}; "
-          f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}")
+          f"{'VOTE_VETO matches' if veto == VOTE_VETO else f'VOTE_VETO {VOTE_VETO} differs'}; "
+          f"{'VOTE_ABOVE matches' if above == VOTE_ABOVE else f'VOTE_ABOVE {VOTE_ABOVE} differs'}")
     if rule is not None and (rule != VOTE_RULE or veto != VOTE_VETO):
-        mine = {n: ground_errors(vote_rule(feats[n], **rule, veto=veto), ref)["total"]
-                for n, (_, ref) in samples.items()}
-        worst = max(mine, key=mine.get)
-        kinds = [ground_errors(vote_rule(f, **rule, veto=veto), g)["total"]
-                 for k, (f, g) in zip(scenes, syn) if k.split("@")[0] in TERRAIN_KINDS]
-        print(f"that rule and veto: mean total {100 * np.mean(list(mine.values())):.2f} % on the "
-              f"seven ({worst} {100 * mine[worst]:.2f} %), {100 * np.mean(kinds):.2f} % on the "
-              f"{len(kinds)} synthetic terrains of TERRAIN_KINDS")
+        fitted_rule_check(samples, scenes, feats, syn, xyz_of, rise_cache, rule, veto, above)
 
     methods = {"smrf_segments": lambda xyz: smrf_segments(
         xyz, **GroundConfig(method="smrf_segments").method_params()), "smrf_vote": smrf_vote,
@@ -1440,7 +1653,7 @@ def main():
     if args.wall_anchors:
         wall_anchor_loo(samples, scenes, [float(v) for v in args.wall_anchors.split(",")])
     if args.pairs:
-        nested_pairs(samples, scenes)
+        nested_pairs(samples, scenes, "unit" if args.fit == "unit" else "greedy")
     if not args.no_speed:
         speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat,
               methods=("smrf_segments", "smrf_vote"))

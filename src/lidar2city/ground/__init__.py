@@ -146,9 +146,10 @@ class GroundConfig:
                                              "if the opening also cuts one of its cells at this "
                                              "slope (rise/run), e.g. 0.4 with slope 0.1; default "
                                              "none: no such test")
-    veto: float | None = field(0.8, "smrf_vote: a point near the strict surface is object when "
-                                    "its height off smrf_segments' slope-0.4 surface exceeds "
-                                    "this many tolerances (the fitted value); inf: no veto")
+    veto: float | None = field(VOTE_VETO, "smrf_vote: a point near the strict surface is "
+                                          "object when its height off smrf_segments' slope-0.4 "
+                                          "surface exceeds this many tolerances (the fitted "
+                                          "value); inf: no veto")
     above: float | None = field(VOTE_ABOVE, "smrf_vote: a point off the strict surfaces but "
                                             "within tolerance of the lenient one is ground also "
                                             "near walls when every wall within 15 m rises more "
