@@ -8,8 +8,8 @@ Usage::
         [--roughness] [--above-fixed 4,6,8,inf [--above-anchors off,2,2.5]]
         [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds]
-        [--fill SHARE [--fill-where o|f|of] [--fill-value nearest|max|min|limited]
-         [--fill-marks]] [--forced-shape] [--fine-edges]
+        [--fill SHARE [--fill-where o|f|of]
+         [--fill-value nearest|max|min|limited|gated [--fill-gate M]] [--fill-marks]] [--forced-shape] [--fine-edges]
         [--syn-spacings 1,1.5,2,2.5,3,3.5] [--syn-seeds N]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
@@ -115,8 +115,9 @@ script:
    :func:`~lidar2city.ground.segment_filter._segment_surfaces` (``--fill-where``:
    the opening's input, the final surfaces or both; ``--fill-value``: the
    nearest point's height, the higher / lower of it and the harmonic
-   inpainting's, or the nearest height continued by its slope-limited
-   gradient; ``--fill-marks``: the walls marked on the filled opening too),
+   inpainting's, the nearest height continued by its slope-limited
+   gradient, or the nearest height only where it is more than ``--fill-gate``
+   m off the harmonic inpainting's; ``--fill-marks``: the walls marked on the filled opening too),
    and prints the CPU seconds of ``smrf_vote`` with and without the fill on
    the samples where it acts. The scenes of
    :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` are scored at each
@@ -1244,12 +1245,15 @@ def cues(samples, scenes, feats, syn, only=None):
               f"{worst} itself: total {100 * wrong:.2f} %")
 
 
-def use_fill(share, where="o", value="nearest", marks=False):
+def use_fill(share, where="o", value="nearest", marks=False, gate=None):
     """Make every ``smrf_vote`` and ``vote_features`` of this script use ``fill=share`` (and
     the private variants of :func:`~lidar2city.ground.segment_filter._segment_surfaces`:
     where the fill applies, the heights it gives, whether the walls see it)."""
     import lidar2city.ground.vote_filter as vf
-    from lidar2city.ground import segment_filter
+    from lidar2city.ground import segment_filter, smrf_filter
+
+    if gate is not None:
+        smrf_filter.FILL_GATE = gate
 
     global smrf_vote, vote_features, FILL_SHARE
     FILL_SHARE = share
@@ -1262,6 +1266,13 @@ def use_fill(share, where="o", value="nearest", marks=False):
 
 #: the library's functions, whatever :func:`use_fill` binds the names to; the share in use.
 _SMRF_VOTE, _VOTE_FEATURES, FILL_SHARE = smrf_vote, vote_features, VOTE_FILL
+
+
+def smrf_filter_gate():
+    """The gate (m) of the "gated" fill in use."""
+    from lidar2city.ground import smrf_filter
+
+    return smrf_filter.FILL_GATE
 
 
 def fill_speed(samples, repeat):
@@ -1435,6 +1446,9 @@ def main():
     ap.add_argument("--fill-value", default="nearest", choices=FILL_VALUES,
                     help="with --fill: the nearest point's height, or the higher / lower of it "
                          "and the harmonic inpainting's")
+    ap.add_argument("--fill-gate", type=float, default=None, metavar="METRES",
+                    help="with --fill-value gated: the least difference from the harmonic "
+                         "inpainting that a filled cell takes (default FILL_GATE)")
     ap.add_argument("--fill-marks", action="store_true",
                     help="with --fill: the walls from the filled opening too (default: from "
                          "the opening without the fill)")
@@ -1455,7 +1469,7 @@ def main():
     FORCED_SHAPE = args.forced_shape
     FINE_EDGES = FINE_GRID if args.fine_edges else ()
     if args.fill is not None:
-        use_fill(args.fill, args.fill_where, args.fill_value, args.fill_marks)
+        use_fill(args.fill, args.fill_where, args.fill_value, args.fill_marks, args.fill_gate)
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
     if args.syn_spacings is None and args.syn_seeds == 1:
         scenes = synthetic_scenes()
@@ -1469,7 +1483,9 @@ def main():
           f"{' (thresholds among quantiles and 0.1-2 by 0.05)' if FINE_EDGES else ''}; "
           f"{len(scenes)} synthetic terrains; smrf_vote's fill {FILL_SHARE:g} spacings "
           + ("(its default)" if args.fill is None else
-             f"({args.fill_where}, {args.fill_value}, walls "
+             f"({args.fill_where}, {args.fill_value}"
+             f"{'' if args.fill_value != 'gated' else ' ' + format(smrf_filter_gate(), 'g') + ' m'}"
+             f", walls "
              f"{'filled' if args.fill_marks else 'unfilled'})"))
     if args.fit_held_out_kinds:
         scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)

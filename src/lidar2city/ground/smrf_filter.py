@@ -131,7 +131,13 @@ def _opening_marks(zfilled, *, cell, window, extend, shape, slopes):
 #: cell's ("nearest"), or the higher ("max") or lower ("min") of that and the harmonic
 #: inpainting's, or the nearest cell's height continued by its slope-limited gradient
 #: ("limited").
-FILL_VALUES = ("nearest", "max", "min", "limited")
+FILL_VALUES = ("nearest", "max", "min", "limited", "gated")
+
+#: "gated" of :data:`FILL_VALUES`: only the cells whose nearest height is more than this
+#: (m) off the harmonic inpainting's take it (a step, not the staircase of a slope), the
+#: others are left to the inpainting (``bench_ground_vote.py --fill-value gated
+#: --fill-gate``: no better than the plain nearest fill, ``benchmarks/HISTORY.md``).
+FILL_GATE = 0.25
 
 
 def _minmod(a, b):
@@ -177,6 +183,9 @@ def _filled(grid, radius, where=None, value="nearest", step=1.0):
         out = grid.copy()
         out[r, c] = grid[sr, sc] - grow[sr, sc] * drs[r, c] - gcol[sr, sc] * dcs[r, c]
         return out
+    if value == "gated":
+        take = new & (np.abs(near - smooth) > np.float32(FILL_GATE))
+        return np.where(take, near, grid).astype(grid.dtype)
     op = np.fmax if value == "max" else np.fmin
     return np.where(new, op(near, smooth), grid).astype(grid.dtype)
 
