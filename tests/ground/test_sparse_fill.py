@@ -130,3 +130,40 @@ def test_fill_in_the_ground_config():
     assert "fill" not in GroundConfig(method="smrf", fill=1.0).method_params()
     with pytest.raises(ConfigError, match="ground.fill"):
         GroundConfig(fill=-1.0)
+
+
+def test_fill_variants_of_the_benchmark():
+    """The private variants ``bench_ground_vote.py`` measures: "limited" continues a plane
+    from the nearest cell by the plane's own slope (so it fills a plane exactly, away from
+    the last known row and column, beyond which the inpainting is flat), "max" /
+    "min" bound the nearest height by the harmonic inpainting's, "gated" with a gate above
+    every difference fills nothing; unknown variants raise InputError."""
+    from lidar2city.ground.smrf_filter import _filled, _smrf_grids
+
+    rows, cols = np.mgrid[0:20, 0:24].astype(np.float32)
+    plane = 0.3 * rows - 0.2 * cols
+    grid = plane.copy()
+    grid[(rows % 3 != 0) | (cols % 3 != 0)] = np.nan
+    done = ~np.isnan(_filled(grid, 1.5))
+    inside = done.copy()
+    inside[16:, :] = inside[:, 19:] = False
+    limited = _filled(grid, 1.5, value="limited", step=3)
+    np.testing.assert_allclose(limited[inside], plane[inside], atol=1e-4)
+    near = _filled(grid, 1.5)
+    assert np.abs(near[inside] - plane[inside]).max() > 0.15
+    high, low = _filled(grid, 1.5, value="max"), _filled(grid, 1.5, value="min")
+    assert (high[done] >= near[done]).all() and (low[done] <= near[done]).all()
+    assert (high[done] >= low[done]).all()
+    np.testing.assert_array_equal(np.isnan(high), np.isnan(near))
+    from lidar2city.ground import smrf_filter
+
+    gate = smrf_filter.FILL_GATE
+    try:
+        smrf_filter.FILL_GATE = 1e6
+        np.testing.assert_array_equal(_filled(grid, 1.5, value="gated"), grid)
+    finally:
+        smrf_filter.FILL_GATE = gate
+    xyz = make_terrain("terraces", spacing=2.5, seed=1).xyz
+    for bad in ({"fill_value": "mean"}, {"fill_where": "x"}):
+        with pytest.raises(InputError, match=next(iter(bad))):
+            _smrf_grids(xyz, cell=1.0, slope=0.1, window=24.0, fill_radius=1.5, **bad)
