@@ -8,6 +8,9 @@ Usage::
         [--roughness] [--above-fixed 4,6,8,inf [--above-anchors off,2,2.5]]
         [--anatomy [PNG_DIR]]
         [--fit-held-out-kinds] [--fit {greedy,coded,bagged,grid,grid-bagged,unit,selected}]
+        [--fill SHARE [--fill-where o|f|of]
+         [--fill-value nearest|max|min|limited|gated [--fill-gate M]] [--fill-marks]] [--forced-shape] [--fine-edges]
+        [--syn-spacings 1,1.5,2,2.5,3,3.5] [--syn-seeds N]
 
 ``smrf_vote`` (:mod:`lidar2city.ground.vote_filter`) judges each point from
 its tolerance ratios to three provisional surfaces of one SMRF opening
@@ -125,7 +128,25 @@ script:
    with ``--above-fixed``, the leave-one-out of the rule and veto with ``above``
    fixed at each value given, beside each wall anchor of ``--above-anchors``, and
    with the pair chosen per fold (:func:`above_loo`);
-10. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
+10. ``smrf_vote``'s ``fill`` (session 17; its default
+   :data:`~lidar2city.ground.VOTE_FILL`): ``--fill SHARE`` runs all of the
+   above with another share (0: off, the default until session 16) and the
+   private variants of
+   :func:`~lidar2city.ground.segment_filter._segment_surfaces` (``--fill-where``:
+   the opening's input, the final surfaces or both; ``--fill-value``: the
+   nearest point's height, the higher / lower of it and the harmonic
+   inpainting's, the nearest height continued by its slope-limited
+   gradient, or the nearest height only where it is more than ``--fill-gate``
+   m off the harmonic inpainting's; ``--fill-marks``: the walls marked on the filled opening too),
+   and prints the CPU seconds of ``smrf_vote`` with and without the fill on
+   the samples where it acts. The scenes of
+   :data:`~lidar2city.synthetic_terrain.HELD_OUT_KINDS` are scored at each
+   spacing of :data:`~lidar2city.synthetic_terrain.HELD_OUT_SPACINGS`. The
+   fitting procedure has options of its own for this check: ``--forced-shape``
+   fits the thresholds of the coded rule's shape instead of a free tree,
+   ``--fine-edges`` tries thresholds 0.1, 0.15, ... 2 besides the quantiles,
+   ``--syn-spacings`` / ``--syn-seeds`` fit on more synthetic terrains;
+11. unless ``--no-speed``, times ``lidar2city ground`` with both methods (and
    ``smrf_vote`` without its veto) on ``DIR/isprs/sites/CSite4_orig-utm.laz``
    against reading and writing it with laspy (best of ``--repeat``,
    interleaved).
@@ -135,6 +156,7 @@ About a minute plus the speed runs.
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import time
@@ -153,6 +175,7 @@ from lidar2city.ground import (  # noqa: E402
     VETO_SLOPE,
     VOTE_ABOVE,
     VOTE_ANCHOR,
+    VOTE_FILL,
     VOTE_RULE,
     VOTE_VETO,
     GroundConfig,
@@ -171,13 +194,19 @@ from lidar2city.ground._grid import (  # noqa: E402
     running_extreme,
     sample_bilinear,
 )
+from lidar2city.ground.smrf_filter import FILL_VALUES, FILL_WHERE  # noqa: E402
 from lidar2city.ground.vote_filter import _distance_to  # noqa: E402
 from lidar2city.ground.connect_filter import _spacing, surface_patches  # noqa: E402
 from lidar2city.ground.ring_plane import ring_ratios  # noqa: E402
 from lidar2city.ground.tin_filter import seeded_tin  # noqa: E402
 from lidar2city.ground.vote_filter import vote_rule  # noqa: E402
 from lidar2city.metrics.ground import ground_errors  # noqa: E402
-from lidar2city.synthetic_terrain import HELD_OUT_KINDS, TERRAIN_KINDS, make_terrain  # noqa: E402
+from lidar2city.synthetic_terrain import (  # noqa: E402
+    HELD_OUT_KINDS,
+    HELD_OUT_SPACINGS,
+    TERRAIN_KINDS,
+    make_terrain,
+)
 
 NAMES = ("near", "steep", "plain")  # the three ratios, in the order of vote_features
 DEPTH = 2
@@ -473,7 +502,7 @@ def held_out_kinds(rule_above, fitted=False):
           f"defaults, likewise)")
     ptd_params = GroundConfig(method="ptd").method_params()
     for kind in HELD_OUT_KINDS:
-        for spacing in (1.0, 2.5):
+        for spacing in HELD_OUT_SPACINGS:
             scene = make_terrain(kind, spacing=spacing, seed=1)
             line = f"{kind + '@' + format(spacing, 'g') + 'm':<20}"
             for pred in (smrf_vote(scene.xyz), smrf_vote(scene.xyz, above=rule_above),
@@ -1391,6 +1420,57 @@ def cues(samples, scenes, feats, syn, only=None):
               f"{worst} itself: total {100 * wrong:.2f} %")
 
 
+def use_fill(share, where="o", value="nearest", marks=False, gate=None):
+    """Make every ``smrf_vote`` and ``vote_features`` of this script use ``fill=share`` (and
+    the private variants of :func:`~lidar2city.ground.segment_filter._segment_surfaces`:
+    where the fill applies, the heights it gives, whether the walls see it)."""
+    import lidar2city.ground.vote_filter as vf
+    from lidar2city.ground import segment_filter, smrf_filter
+
+    if gate is not None:
+        smrf_filter.FILL_GATE = gate
+
+    global smrf_vote, vote_features, FILL_SHARE
+    FILL_SHARE = share
+    vf._segment_surfaces = functools.partial(segment_filter._segment_surfaces,
+                                             fill_where=where, fill_value=value,
+                                             fill_marks=marks)
+    smrf_vote = functools.partial(_SMRF_VOTE, fill=share)
+    vote_features = functools.partial(_VOTE_FEATURES, fill=share)
+
+
+#: the library's functions, whatever :func:`use_fill` binds the names to; the share in use.
+_SMRF_VOTE, _VOTE_FEATURES, FILL_SHARE = smrf_vote, vote_features, VOTE_FILL
+
+
+def smrf_filter_gate():
+    """The gate (m) of the "gated" fill in use."""
+    from lidar2city.ground import smrf_filter
+
+    return smrf_filter.FILL_GATE
+
+
+def fill_speed(samples, repeat):
+    """Print the CPU seconds of ``smrf_vote`` with and without its fill on each ISPRS sample
+    whose point spacing makes the fill act (best of ``repeat``, interleaved)."""
+    from lidar2city.ground.smrf_filter import _minimum_grid, _point_spacing
+
+    print(f"\nCPU seconds of smrf_vote with fill={FILL_SHARE:g} and without (best of {repeat}, "
+          f"interleaved), on the samples where the fill acts")
+    for name, (xyz, _) in samples.items():
+        spacing = _point_spacing(_minimum_grid(xyz, cell=1.0)[2], 1.0, len(xyz))
+        if FILL_SHARE * spacing < 1.0:
+            continue
+        best = {"fill": np.inf, "off": np.inf}
+        for _ in range(repeat):
+            for key, fn in (("off", functools.partial(_SMRF_VOTE, fill=None)), ("fill", smrf_vote)):
+                t0 = time.process_time()
+                fn(xyz)
+                best[key] = min(best[key], time.process_time() - t0)
+        print(f"{name:<8} spacing {spacing:.2f} m: {best['fill']:.3f} s with the fill, "
+              f"{best['off']:.3f} s without ({best['fill'] / best['off']:.2f}x)")
+
+
 def show_rule(rule):
     return ", ".join(f"{k}={v:g}" for k, v in rule.items())
 
@@ -1406,6 +1486,10 @@ def fit_tree(sets, depth=DEPTH):
     y = np.concatenate([g for _, g, _ in sets]).astype(float)
     w = np.concatenate([np.full(len(g), wt / len(g)) for _, g, wt in sets])
     edges = [np.unique(np.quantile(x[:, j], QUANTILES)) for j in range(x.shape[1])]
+    if FINE_EDGES:
+        edges = [np.union1d(e, FINE_EDGES) for e in edges]
+    if FORCED_SHAPE and depth == 2 and x.shape[1] == 3:
+        return _grow_forced(x, y, w, edges)
     return _grow(x, y, w, depth, edges)
 
 
@@ -1445,6 +1529,39 @@ def fit_coded(sets, grid=None):
     k = int(np.flatnonzero(total <= total.min() + 1e-12)[0])
     return (0, float(edges[0][k]), (1, float(edges[1][int(np.argmin(left[k]))]), True, False),
             (2, float(edges[2][int(np.argmin(right[k]))]), True, False))
+#: ``--forced-shape``: :func:`fit_tree` fits the thresholds of the coded rule's shape
+#: (``near ? (steep ? G : O) : (plain ? G : O)``) instead of a free depth-2 tree.
+FORCED_SHAPE = False
+
+#: ``--fine-edges``: thresholds :func:`fit_tree` tries besides the quantiles of the pooled
+#: ratios (these crowd near 0, where most ground points are: between 0.2 and 1.6 the
+#: ``near`` split has three candidates, and a fold can jump between them).
+FINE_EDGES = ()
+FINE_GRID = tuple(np.round(np.arange(0.1, 2.0001, 0.05), 2))
+
+
+def _lower_split(x, y, w, e):
+    """The error and threshold of the best split of one feature whose lower side is ground."""
+    b = np.searchsorted(e, x)
+    cp = np.cumsum(np.bincount(b, weights=w * y, minlength=len(e) + 1))[:-1]
+    cn = np.cumsum(np.bincount(b, weights=w * (1 - y), minlength=len(e) + 1))[:-1]
+    err = cn + (float(w @ y) - cp)
+    k = int(np.argmin(err))
+    return float(err[k]), float(e[k])
+
+
+def _grow_forced(x, y, w, edges):
+    """The tree of the coded rule's shape with the least weighted error (every ``near``
+    threshold of ``edges`` tried, each branch's threshold the best for it)."""
+    best = None
+    for t0 in edges[0]:
+        m = x[:, 0] <= t0
+        el, tl = _lower_split(x[m, 1], y[m], w[m], edges[1])
+        er, tr = _lower_split(x[~m, 2], y[~m], w[~m], edges[2])
+        if best is None or el + er < best[0] - 1e-12:
+            best = (el + er, float(t0), tl, tr)
+    _, t0, tl, tr = best
+    return (0, t0, (1, tl, True, False), (2, tr, True, False))
 
 
 def _grow(x, y, w, depth, edges):
@@ -1535,11 +1652,55 @@ def main():
                     help="leave-one-out of the rule with the terrain-structure give-backs")
     ap.add_argument("--only-cues", default=None, metavar="NAMES",
                     help="with --cues: only these cues (comma-separated names of CUES)")
+    ap.add_argument("--fill", type=float, default=None, metavar="SHARE",
+                    help="everything with smrf_vote's fill (empty cells within SHARE point "
+                         "spacings of a point take its cell's height before the inpainting)")
+    ap.add_argument("--fill-where", default="o", choices=FILL_WHERE,
+                    help="with --fill: the opening's input (o), the final surfaces (f) or both")
+    ap.add_argument("--fill-value", default="nearest", choices=FILL_VALUES,
+                    help="with --fill: the nearest point's height, or the higher / lower of it "
+                         "and the harmonic inpainting's")
+    ap.add_argument("--fill-gate", type=float, default=None, metavar="METRES",
+                    help="with --fill-value gated: the least difference from the harmonic "
+                         "inpainting that a filled cell takes (default FILL_GATE)")
+    ap.add_argument("--fill-marks", action="store_true",
+                    help="with --fill: the walls from the filled opening too (default: from "
+                         "the opening without the fill)")
+    ap.add_argument("--forced-shape", action="store_true",
+                    help="fit the coded rule's shape (near ? steep : plain) instead of a free "
+                         "depth-2 tree")
+    ap.add_argument("--fine-edges", action="store_true",
+                    help="fit thresholds among 0.1, 0.15, ... 2 too, not only among quantiles")
+    ap.add_argument("--syn-spacings", default=None, metavar="METRES",
+                    help="spacings of the synthetic terrains fitted on (comma-separated; "
+                         "default 1,2.5)")
+    ap.add_argument("--syn-seeds", type=int, default=1, metavar="N",
+                    help="seeds 1..N of each synthetic terrain fitted on (default 1)")
     ap.add_argument("--anatomy", nargs="?", const=True, default=None, metavar="PNG_DIR",
                     help="where smrf_vote's errors are on its worst samples (maps to PNG_DIR)")
     args = ap.parse_args()
+    global FORCED_SHAPE, FINE_EDGES
+    FORCED_SHAPE = args.forced_shape
+    FINE_EDGES = FINE_GRID if args.fine_edges else ()
+    if args.fill is not None:
+        use_fill(args.fill, args.fill_where, args.fill_value, args.fill_marks, args.fill_gate)
     samples = {p.name.split("-")[0]: load(p) for p in reference_paths(args.data)}
-    scenes = synthetic_scenes()
+    if args.syn_spacings is None and args.syn_seeds == 1:
+        scenes = synthetic_scenes()
+    else:
+        spacings = [1.0, 2.5] if args.syn_spacings is None else [
+            float(v) for v in args.syn_spacings.split(",")]
+        scenes = {f"{kind}@{spacing:g}m#{seed}": make_terrain(kind, spacing=spacing, seed=seed)
+                  for kind in TERRAIN_KINDS for spacing in spacings
+                  for seed in range(1, args.syn_seeds + 1)}
+    print(f"rule fitted as {'the coded shape' if FORCED_SHAPE else 'a free depth-2 tree'}"
+          f"{' (thresholds among quantiles and 0.1-2 by 0.05)' if FINE_EDGES else ''}; "
+          f"{len(scenes)} synthetic terrains; smrf_vote's fill {FILL_SHARE:g} spacings "
+          + ("(its default)" if args.fill is None else
+             f"({args.fill_where}, {args.fill_value}"
+             f"{'' if args.fill_value != 'gated' else ' ' + format(smrf_filter_gate(), 'g') + ' m'}"
+             f", walls "
+             f"{'filled' if args.fill_marks else 'unfilled'})"))
     if args.fit_held_out_kinds:
         scenes |= {f"{kind}@{spacing:g}m": make_terrain(kind, spacing=spacing, seed=1)
                    for kind in HELD_OUT_KINDS for spacing in (1.0, 2.5)}
@@ -1654,6 +1815,8 @@ def main():
         wall_anchor_loo(samples, scenes, [float(v) for v in args.wall_anchors.split(",")])
     if args.pairs:
         nested_pairs(samples, scenes, "unit" if args.fit == "unit" else "greedy")
+    if FILL_SHARE > 0:
+        fill_speed(samples, args.repeat)
     if not args.no_speed:
         speed(args.data / "isprs" / "sites" / "CSite4_orig-utm.laz", args.repeat,
               methods=("smrf_segments", "smrf_vote"))

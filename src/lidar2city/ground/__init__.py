@@ -43,6 +43,7 @@ from .vote_filter import (
     VETO_SLOPE,
     VOTE_ABOVE,
     VOTE_ANCHOR,
+    VOTE_FILL,
     VOTE_RULE,
     VOTE_VETO,
     smrf_vote,
@@ -66,6 +67,7 @@ __all__ = [
     "ring_ratios",
     "VOTE_ABOVE",
     "VOTE_ANCHOR",
+    "VOTE_FILL",
     "VOTE_RULE",
     "VOTE_VETO",
     "VETO_SLOPE",
@@ -172,6 +174,12 @@ class GroundConfig:
                                                    "only when one of its cells is cut at this "
                                                    "slope too (rise/run: a building's step, not "
                                                    "an embankment); 1 or less: every such region")
+    fill: float | None = field(VOTE_FILL, "smrf_vote: on sparse surveys the empty cells of its "
+                                          "minimum surface within this many point spacings of a "
+                                          "point take that point's cell height before the "
+                                          "inpainting of the opening's input, so a terrace "
+                                          "crest stays a step (acts from 2 m spacing at 0.5); "
+                                          "0: off")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -217,6 +225,8 @@ class GroundConfig:
             raise ConfigError(f"ground.ring: must be > 0, got {self.ring!r}")
         if self.wall_anchor is not None and not self.wall_anchor > 0:
             raise ConfigError(f"ground.wall_anchor: must be > 0, got {self.wall_anchor!r}")
+        if self.fill is not None and not self.fill >= 0:
+            raise ConfigError(f"ground.fill: must be >= 0, got {self.fill!r}")
         if self.ring_neighbourhood not in RING_NEIGHBOURHOODS:
             raise ConfigError(f"ground.ring_neighbourhood: {self.ring_neighbourhood!r} is not one "
                               f"of {', '.join(RING_NEIGHBOURHOODS)}")

@@ -21,6 +21,7 @@ __all__ = [
     "min_surface",
     "centre_surface",
     "inpaint",
+    "nearest_fill",
     "running_extreme",
     "erode_square",
     "dilate_square",
@@ -152,6 +153,86 @@ def centre_surface(xyz, spec: GridSpec) -> np.ndarray:
         & (det > 0.25 * vxx * vyy)
     out = np.where(spread, at_centre, mean)
     return out.reshape(spec.shape)
+
+
+def nearest_fill(grid, radius: float, where=None) -> np.ndarray:
+    """``grid`` with each NaN cell within ``radius`` cells of a known cell given the value of
+    the nearest known cell (a Voronoi fill of the near empty cells).
+
+    Distances are Euclidean between cell centres; a cell equally near several
+    known cells takes the first of its offsets in the order (squared
+    distance, row offset, column offset), so the result is deterministic.
+    Only cells of ``where`` (all NaN cells when None) are filled; the values
+    spread are those of the known cells of ``grid`` only (never of cells
+    filled here). On a grid finer than the point spacing this keeps a step
+    in the terrain a step for an inpainting that follows (empty cells beside
+    a wall take the height of the side they are on), instead of a ramp from
+    the last low point to the first high one.
+
+    Parameters
+    ----------
+    grid : ndarray, shape (H, W), float
+    radius : float
+        Farthest fill, in cells (>= 0; below 1 nothing is filled).
+    where : ndarray of bool, shape (H, W), optional
+        The empty cells that may be filled.
+
+    Returns
+    -------
+    ndarray, shape (H, W)
+        A new array of the same dtype.
+
+    Raises
+    ------
+    InputError
+        Negative or non-finite ``radius``, or ``where`` of another shape.
+    """
+    return _nearest_fill(grid, radius, where)[0]
+
+
+def _nearest_fill(grid, radius, where=None):
+    """:func:`nearest_fill` and, per cell, the row and column offsets (int8 arrays) from it
+    to the known cell its value comes from (0 where nothing was filled)."""
+    if not (isinstance(radius, (int, float, np.integer, np.floating)) and np.isfinite(radius)
+            and radius >= 0):
+        raise InputError(f"radius must be a finite number >= 0, got {radius!r}")
+    grid = np.asarray(grid)
+    out = grid.copy()
+    known = np.isfinite(grid)
+    todo = ~known
+    if where is not None:
+        where = np.asarray(where, dtype=bool)
+        if where.shape != grid.shape:
+            raise InputError(f"where has shape {where.shape}, the grid {grid.shape}")
+        todo &= where
+    reach = int(np.floor(radius))
+    drs = np.zeros(grid.shape, dtype=np.int8)
+    dcs = np.zeros(grid.shape, dtype=np.int8)
+    if reach < 1 or not todo.any() or not known.any():
+        return out, drs, dcs
+    if reach > 127:
+        raise InputError(f"radius must be below 128 cells, got {radius!r}")
+    h, w = grid.shape
+    offsets = sorted((dr * dr + dc * dc, dr, dc) for dr in range(-reach, reach + 1)
+                     for dc in range(-reach, reach + 1)
+                     if 0 < dr * dr + dc * dc <= radius * radius)
+    for _, dr, dc in offsets:
+        # target cells [r0:r1, c0:c1] take the source cells shifted by (dr, dc)
+        r0, r1 = max(0, -dr), min(h, h - dr)
+        c0, c1 = max(0, -dc), min(w, w - dc)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        t = todo[r0:r1, c0:c1]
+        take = t & known[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+        if not take.any():
+            continue
+        np.copyto(out[r0:r1, c0:c1], grid[r0 + dr:r1 + dr, c0 + dc:c1 + dc], where=take)
+        drs[r0:r1, c0:c1][take] = dr
+        dcs[r0:r1, c0:c1][take] = dc
+        t &= ~take  # a view of todo: these cells are done
+        if not todo.any():
+            break
+    return out, drs, dcs
 
 
 def _every_other(start: int, n: int) -> slice:

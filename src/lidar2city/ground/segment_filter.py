@@ -10,7 +10,14 @@ import numpy as np
 from .._components import component_labels
 from ..errors import InputError
 from ._grid import inpaint, thread_map
-from .smrf_filter import _checked_outliers, _minimum_grid, _near_surface, _smrf_grids
+from .smrf_filter import (
+    _checked_outliers,
+    _filled,
+    _minimum_grid,
+    _near_surface,
+    _point_spacing,
+    _smrf_grids,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -292,7 +299,8 @@ def _check_segment_params(*, raised, min_cells):
 
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
-                      strong_slope=None, also=(), marks=(), then=None):
+                      strong_slope=None, also=(), marks=(), then=None, fill=None,
+                      fill_where="o", fill_value="nearest", fill_marks=False):
     """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
@@ -303,14 +311,28 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     With ``then``, a function of the grid returning a function of a surface, each
     surface is replaced by ``then(spec)(surface)``, computed right after it. The
     surfaces (their inpainting and ``then``) are computed on threads
-    (:func:`~lidar2city.ground._grid.thread_map`)."""
+    (:func:`~lidar2city.ground._grid.thread_map`).
+
+    With ``fill`` (a share of the point spacing), the empty cells of the minimum surface
+    within ``fill`` spacings of a filled cell take the nearest one's height before the
+    inpainting of the opening's input (``fill_where`` "o", the default) and/or of every
+    surface ("f"; "of": both); ``fill_value`` as in
+    :func:`~lidar2city.ground.smrf_filter._smrf_grids`. The ``marks`` come from the
+    opening of the minimum surface inpainted without the fill (a second opening series)
+    unless ``fill_marks``."""
     pts = xyz[~out]
     more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
     minimum = _minimum_grid(pts, cell=cell)  # one minimum surface for every step
+    _, base, zmin = minimum
+    # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
+    spacing = _point_spacing(zmin, cell, len(pts))
+    radius = 0.0 if fill is None else fill * spacing / cell
+    fills = {"fill_radius": radius, "fill_where": fill_where, "fill_value": fill_value,
+             "fill_step": spacing / cell,
+             "unfilled_more": 0 if fill_marks else len(marks)}
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
                                                 exclude=out, extend=extend, more=more,
-                                                minimum=minimum, lazy=True)
-    _, base, zmin = minimum
+                                                minimum=minimum, lazy=True, **fills)
     filled = ~np.isnan(zmin)
     terrain_share = float((filled & ~objects).sum() / filled.sum())
     if extend > 0 and terrain_share < 0.5:
@@ -318,19 +340,15 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            more=more, minimum=minimum, lazy=True)
+                            more=more, minimum=minimum, lazy=True, **fills)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
             surface, objects, _, extra = plain
     marked, extra = extra[:len(marks)], extra[len(marks):]
     strong = None if strong_slope is None else extra.pop(0)
-    # point spacing: 1 / sqrt(density) over the occupied cells of a grid of about 5 m
-    coarse = max(1, int(round(5.0 / cell)))
-    occupied = np.count_nonzero(filled) if coarse == 1 else np.count_nonzero(
-        ~np.isnan(_block_lowest(zmin, objects, coarse)[0]))
-    spacing = np.sqrt(occupied * (coarse * cell) ** 2 / len(pts))
     block = max(1, int(np.floor(spacing / cell + 0.5)))
+    final = (radius if "f" in fill_where else 0.0, fill_value, spacing / cell)
     surface = functools.cache(surface)  # plain SMRF's: needed twice when nothing is given back
     tasks = []  # a function of no argument per surface
     masks = [objects, *extra]
@@ -343,9 +361,10 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         logger.debug("smrf_segments: %d of %d object cells given back (segmentation cell %g m)",
                      int(given.sum()), int(obj.sum()), cell * block)
         if given.any():
-            tasks.append(functools.partial(_inpainted, zmin, kept | ~filled, base))
+            tasks.append(functools.partial(_inpainted, zmin, kept | ~filled, base, *final))
         else:
-            tasks.append(surface if k == 0 else functools.partial(_inpainted, zmin, obj, base))
+            tasks.append(surface if k == 0 else functools.partial(_inpainted, zmin, obj, base,
+                                                                  *final))
     if also:
         tasks.append(surface)
     after = (lambda s: s) if then is None else then(spec)
@@ -353,6 +372,11 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     return (surfaces, spec, marked, (zmin, base)) if marks else (surfaces, spec)
 
 
-def _inpainted(zmin, objects, base):
-    """The minimum surface without ``objects``, inpainted, in metres (SMRF's ``ZIpro``)."""
-    return inpaint(np.where(objects, np.float32(np.nan), zmin)).astype(np.float64) + base
+def _inpainted(zmin, objects, base, fill_radius=0.0, fill_value="nearest", fill_step=1.0):
+    """The minimum surface without ``objects``, inpainted, in metres (SMRF's ``ZIpro``); with
+    ``fill_radius`` (cells) of 1 or more its empty cells within that radius of a kept cell
+    are filled first (:func:`~lidar2city.ground.smrf_filter._filled`)."""
+    grid = np.where(objects, np.float32(np.nan), zmin)
+    if fill_radius >= 1:
+        grid = _filled(grid, fill_radius, np.isnan(zmin), fill_value, fill_step)
+    return inpaint(grid).astype(np.float64) + base

@@ -11,6 +11,7 @@ from ._grid import (
     bilinear_weights,
     gradient_magnitude,
     grid_spec,
+    _nearest_fill,
     inpaint,
     min_surface,
     open_disk_series,
@@ -75,13 +76,134 @@ def _minimum_grid(pts, *, cell, bounds=None):
     return spec, base, min_surface(pts, spec, base=base, dtype=np.float32)
 
 
+def _point_spacing(zmin, cell, n):
+    """The point spacing (m) of ``n`` points whose minimum surface on cells of ``cell`` m is
+    ``zmin`` (NaN where empty): ``1 / sqrt(density)`` over the occupied cells of a grid of
+    about 5 m (a sparse survey's empty cells between points do not count, its gaps do)."""
+    coarse = max(1, int(round(5.0 / cell)))
+    filled = ~np.isnan(zmin)
+    if coarse == 1:
+        occupied = np.count_nonzero(filled)
+    else:
+        h, w = filled.shape
+        hc, wc = -(-h // coarse), -(-w // coarse)
+        padded = np.zeros((hc * coarse, wc * coarse), dtype=bool)
+        padded[:h, :w] = filled
+        occupied = np.count_nonzero(padded.reshape(hc, coarse, wc, coarse).any(axis=(1, 3)))
+    return float(np.sqrt(occupied * (coarse * cell) ** 2 / n))
+
+
+#: where the ``fill`` of :func:`_smrf_grids` applies: the opening's input ("o"), the final
+#: (provisional) surfaces ("f"), or both ("of").
+FILL_WHERE = ("o", "f", "of")
+
+
+def _check_fill(fill):
+    """``fill`` (a share of the point spacing, or None) validated."""
+    if fill is not None and not (
+            isinstance(fill, (int, float, np.integer, np.floating)) and not isinstance(fill, bool)
+            and np.isfinite(fill) and fill >= 0):
+        raise InputError(f"fill must be a finite number >= 0 or None, got {fill!r}")
+
+
+def _opening_marks(zfilled, *, cell, window, extend, shape, slopes):
+    """The cells SMRF's progressive opening of ``zfilled`` (the inpainted minimum surface,
+    continued ``extend`` m across the edges) judges object at each slope of ``slopes``, and
+    the last opening; cropped to ``shape``."""
+    max_radius = max(int(np.ceil(window / cell)), 1)
+    pad = min(int(np.ceil(extend / cell)), *(n - 1 for n in shape))
+    if pad > 0:
+        zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
+    masks = [np.zeros(zfilled.shape, dtype=bool) for _ in slopes]
+    last = zfilled
+    for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
+        step = last - opened
+        for mask, s in zip(masks, slopes):
+            mask |= step > np.float32(s * radius * cell)
+        last = opened
+    if pad > 0:
+        last = last[pad:-pad, pad:-pad]
+        masks = [mask[pad:-pad, pad:-pad] for mask in masks]
+    return masks, last
+
+
+#: the heights :func:`_filled` gives the empty cells near points: the nearest point's
+#: cell's ("nearest"), or the higher ("max") or lower ("min") of that and the harmonic
+#: inpainting's, or the nearest cell's height continued by its slope-limited gradient
+#: ("limited").
+FILL_VALUES = ("nearest", "max", "min", "limited", "gated")
+
+#: "gated" of :data:`FILL_VALUES`: only the cells whose nearest height is more than this
+#: (m) off the harmonic inpainting's take it (a step, not the staircase of a slope), the
+#: others are left to the inpainting (``bench_ground_vote.py --fill-value gated
+#: --fill-gate``: no better than the plain nearest fill, ``benchmarks/HISTORY.md``).
+FILL_GATE = 0.25
+
+
+def _minmod(a, b):
+    """The smaller in magnitude of ``a`` and ``b`` where they have the same sign, else 0."""
+    return np.where(a * b > 0, np.where(np.abs(a) < np.abs(b), a, b), 0).astype(a.dtype)
+
+
+def _limited_gradient(smooth, step):
+    """Per cell of ``smooth`` (H, W), its gradient along rows and columns (height per cell)
+    as the minmod of its one-sided differences over ``step`` cells (edges: the one side):
+    the slope of a plane, 0 at a crest or a foot where the two sides disagree."""
+    out = []
+    for axis in (0, 1):
+        n = smooth.shape[axis]
+        k = max(1, min(int(step), n - 1)) if n > 1 else 0
+        if k == 0:
+            out.append(np.zeros_like(smooth))
+            continue
+        s = np.moveaxis(smooth, axis, 0)
+        diff = (s[k:] - s[:-k]) / np.float32(k)  # diff[i] = (s[i + k] - s[i]) / k
+        fwd = np.empty_like(s)
+        bwd = np.empty_like(s)
+        fwd[:-k], fwd[-k:] = diff, diff[-1]
+        bwd[k:], bwd[:k] = diff, diff[0]
+        out.append(np.moveaxis(_minmod(fwd, bwd), 0, axis))
+    return out
+
+
+def _filled(grid, radius, where=None, value="nearest", step=1.0):
+    """``grid`` with its empty cells (of ``where``) within ``radius`` cells of a known cell
+    filled as ``value`` of :data:`FILL_VALUES` says
+    (:func:`~lidar2city.ground._grid.nearest_fill`); ``step``: the point spacing in cells
+    (the reach of the one-sided differences of "limited")."""
+    near, drs, dcs = _nearest_fill(grid, radius, where)
+    if value == "nearest":
+        return near
+    new = np.isnan(grid) & ~np.isnan(near)
+    smooth = inpaint(grid)
+    if value == "limited":
+        grow, gcol = _limited_gradient(smooth, int(round(step)))
+        r, c = np.nonzero(new)
+        sr, sc = r + drs[r, c], c + dcs[r, c]
+        out = grid.copy()
+        out[r, c] = grid[sr, sc] - grow[sr, sc] * drs[r, c] - gcol[sr, sc] * dcs[r, c]
+        return out
+    if value == "gated":
+        take = new & (np.abs(near - smooth) > np.float32(FILL_GATE))
+        return np.where(take, near, grid).astype(grid.dtype)
+    op = np.fmax if value == "max" else np.fmin
+    return np.where(new, op(near, smooth), grid).astype(grid.dtype)
+
+
 def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0.0,
-                more=(), minimum=None, lazy=False):
+                more=(), minimum=None, lazy=False, fill_radius=0.0, fill_where="o",
+                fill_value="nearest", unfilled_more=0, fill_step=1.0):
     """:func:`smrf_surface` and, from the same opening series, the cells judged object
     at each slope of ``more`` (a list of masks). ``minimum``: :func:`_minimum_grid` of the
     points (those not excluded), when the caller holds it. With ``lazy`` the surface is
     a function of no argument that computes it (its inpainting left to the caller, e.g.
-    to run beside others')."""
+    to run beside others'). With ``fill_radius`` (cells) of 1 or more, the empty cells of
+    the minimum surface within that radius of a filled one take the nearest one's height
+    (:func:`~lidar2city.ground._grid.nearest_fill`; or as ``fill_value`` of
+    :data:`FILL_VALUES` says) before the inpainting of the opening's input (``fill_where``
+    holds "o") and of the provisional surface (it holds "f"); then the first
+    ``unfilled_more`` masks of ``more`` come from an opening of the minimum surface
+    inpainted without the fill (a second opening series)."""
     xyz = _check_xyz(xyz)
     _check_positive(cell=cell, slope=slope, window=window)
     if not (isinstance(extend, (int, float, np.integer, np.floating)) and extend >= 0):
@@ -89,27 +211,27 @@ def _smrf_grids(xyz, *, cell, slope, window, exclude=None, bounds=None, extend=0
     if minimum is None:
         pts = xyz if exclude is None else xyz[~np.asarray(exclude, dtype=bool)]
         minimum = _minimum_grid(pts, cell=cell, bounds=bounds)
+    if fill_where not in FILL_WHERE:
+        raise InputError(f"fill_where must be one of {', '.join(FILL_WHERE)}, got {fill_where!r}")
+    if fill_value not in FILL_VALUES:
+        raise InputError(f"fill_value must be one of {', '.join(FILL_VALUES)}, "
+                         f"got {fill_value!r}")
     spec, base, zmin = minimum
     empty = np.isnan(zmin)
-    zfilled = inpaint(zmin)
-    max_radius = max(int(np.ceil(window / cell)), 1)
-    pad = min(int(np.ceil(extend / cell)), *(n - 1 for n in spec.shape))
-    if pad > 0:
-        zfilled = np.pad(zfilled, pad, mode="reflect", reflect_type="odd")
-    objects = np.zeros(zfilled.shape, dtype=bool)
-    extra = [np.zeros(zfilled.shape, dtype=bool) for _ in more]
-    last = zfilled
-    for radius, opened in open_disk_series(zfilled, range(1, max_radius + 1)):
-        step = last - opened
-        objects |= step > np.float32(slope * radius * cell)
-        for mask, s in zip(extra, more):
-            mask |= step > np.float32(s * radius * cell)
-        last = opened
-    if pad > 0:
-        objects = objects[pad:-pad, pad:-pad]
-        last = last[pad:-pad, pad:-pad]
-        extra = [mask[pad:-pad, pad:-pad] for mask in extra]
+    filling = fill_radius >= 1
+    opening_filled = filling and "o" in fill_where
+    series = dict(cell=cell, window=window, extend=extend, shape=spec.shape)
+    if opening_filled:
+        zfilled = inpaint(_filled(zmin, fill_radius, value=fill_value, step=fill_step))
+        (objects, *extra), last = _opening_marks(zfilled, slopes=(slope, *more), **series)
+        if unfilled_more:
+            extra[:unfilled_more] = _opening_marks(inpaint(zmin), slopes=more[:unfilled_more],
+                                                   **series)[0]
+    else:
+        (objects, *extra), last = _opening_marks(inpaint(zmin), slopes=(slope, *more), **series)
     provisional = np.where(objects | empty, np.float32(np.nan), zmin)
+    if filling and "f" in fill_where:
+        provisional = _filled(provisional, fill_radius, empty, fill_value, fill_step)
     if np.isnan(provisional).all():
         # every cell judged object (pathological input): fall back to the opening
         logger.warning("SMRF judged every cell object; using the opened surface")
