@@ -385,7 +385,7 @@ def test_ring_wanted_points_keep_their_ratios(neighbourhood):
     assert np.isfinite(part).sum() < np.isfinite(full).sum()
     expected = rule | ((full <= 1.25) & (f[:, 1] <= 1.0) & ~out)
     got = smrf_vote(scene.xyz, ring=1.25, ring_neighbourhood=neighbourhood, wall_anchor=None,
-                    above=None)
+                    above=None, large=None)
     np.testing.assert_array_equal(got, expected)
     with pytest.raises(InputError, match="wanted"):
         ring_ratios(scene.xyz, agreed, wanted=wanted[:-1])
@@ -441,10 +441,11 @@ def test_anchor_at_most_the_wall_slope_is_no_anchor():
 
     for kind, spacing in (("terraced_slope", 1.0), ("steep_town", 2.5)):
         scene = make_terrain(kind, spacing=spacing, seed=1)
-        off = smrf_vote(scene.xyz, wall_anchor=None)
-        assert (smrf_vote(scene.xyz, wall_anchor=2.0) != off).any()
+        off = smrf_vote(scene.xyz, wall_anchor=None, large=None)
+        assert (smrf_vote(scene.xyz, wall_anchor=2.0, large=None) != off).any()
         for anchor in (0.5, WALL_SLOPE):
-            np.testing.assert_array_equal(smrf_vote(scene.xyz, wall_anchor=anchor), off)
+            np.testing.assert_array_equal(
+                smrf_vote(scene.xyz, wall_anchor=anchor, large=None), off)
 
 
 def test_defaults_free_terrace_risers_and_ground_between_tall_buildings():

@@ -292,7 +292,7 @@ def _check_segment_params(*, raised, min_cells):
 
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
-                      strong_slope=None, also=(), marks=(), then=None):
+                      strong_slope=None, also=(), marks=(), then=None, large=None):
     """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
@@ -303,13 +303,14 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     With ``then``, a function of the grid returning a function of a surface, each
     surface is replaced by ``then(spec)(surface)``, computed right after it. The
     surfaces (their inpainting and ``then``) are computed on threads
-    (:func:`~lidar2city.ground._grid.thread_map`)."""
+    (:func:`~lidar2city.ground._grid.thread_map`). ``large``: as in
+    :func:`~lidar2city.ground.smrf_filter._smrf_grids` (objects wider than the window)."""
     pts = xyz[~out]
     more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
     minimum = _minimum_grid(pts, cell=cell)  # one minimum surface for every step
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
                                                 exclude=out, extend=extend, more=more,
-                                                minimum=minimum, lazy=True)
+                                                minimum=minimum, lazy=True, large=large)
     _, base, zmin = minimum
     filled = ~np.isnan(zmin)
     terrain_share = float((filled & ~objects).sum() / filled.sum())
@@ -318,7 +319,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            more=more, minimum=minimum, lazy=True)
+                            more=more, minimum=minimum, lazy=True, large=large)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
