@@ -21,7 +21,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["HELD_OUT_KINDS", "HELD_OUT_SPACINGS", "TERRAIN_KINDS", "TerrainScene", "make_terrain"]
+__all__ = ["HELD_OUT_KINDS", "HELD_OUT_SPACINGS", "LARGE_KINDS", "TERRAIN_KINDS",
+           "TerrainScene", "make_terrain"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,6 +153,25 @@ def _steep_town(xy, rng):
                             (40, 33, 97, 64, 16.0), (2, 67, 50, 97, 12.0), (54, 68, 97, 97, 10.0)])
 
 
+def _large_hall(xy, rng):
+    # 240 m on a 3 % slope: a hall 120 m x 70 m (12 m high), a low wide hall 130 m x 100 m
+    # (6 m), a block round a 30 m x 40 m courtyard (15 m) and three houses
+    return _town(xy, 0.03, [(20, 20, 140, 90, 12.0), (20, 120, 150, 220, 6.0),
+                            (170, 30, 230, 45, 15.0), (170, 85, 230, 100, 15.0),
+                            (170, 45, 185, 85, 15.0), (215, 45, 230, 85, 15.0),
+                            (175, 130, 190, 145, 7.0), (200, 160, 215, 175, 8.0),
+                            (170, 190, 185, 205, 6.0)])
+
+
+def _mesa(xy, rng):
+    # terrain only, 240 m on a 2 % slope: a flat-topped hill 90 m across whose flanks drop
+    # 15 m at 56 degrees, and a bench 8 m high along the east edge behind a vertical step
+    r = np.hypot(xy[:, 0] - 100.0, xy[:, 1] - 120.0)
+    z = 0.02 * xy[:, 1] + 15.0 * np.clip((55.0 - r) / 10.0, 0.0, 1.0)
+    z = z + np.where(xy[:, 0] > 200.0, 8.0, 0.0)
+    return z, np.ones(len(xy), dtype=bool)
+
+
 _KINDS = {
     "hillside": _hillside,
     "terraces": _terraces,
@@ -162,7 +182,12 @@ _KINDS = {
     "town_on_slope": _town_on_slope,
     "terraced_slope": _terraced_slope,
     "steep_town": _steep_town,
+    "large_hall": _large_hall,
+    "mesa": _mesa,
 }
+
+#: tile side (m) of the kinds whose scenes are larger than 100 m.
+_SIZES = {"large_hall": 240.0, "mesa": 240.0}
 
 #: the kinds of scene the filters' parameters are chosen on (``benchmarks/bench_ground*.py``).
 TERRAIN_KINDS = ("hillside", "terraces", "cliff", "embankment", "bridge", "forest",
@@ -177,10 +202,16 @@ HELD_OUT_KINDS = ("terraced_slope", "steep_town")
 #: survey, and sparse ones up to that of ISPRS site 5 (2-3.5 m).
 HELD_OUT_SPACINGS = (1.0, 1.5, 2.5, 3.5)
 
+#: kinds of :func:`~lidar2city.ground.large.large_objects`' benchmark, in no fit:
+#: roofs wider than SMRF's window (``large_hall``) and terrain that looks like them
+#: (``mesa``).
+LARGE_KINDS = ("large_hall", "mesa")
+
 
 def make_terrain(kind: str, *, spacing: float = 1.0, seed: int = 0,
                  noise: float = 0.05) -> TerrainScene:
-    """A synthetic 100 m x 100 m tile of terrain ``kind`` with its ground truth.
+    """A synthetic 100 m x 100 m tile (240 m for :data:`LARGE_KINDS`) of terrain ``kind``
+    with its ground truth.
 
     Parameters
     ----------
@@ -194,7 +225,10 @@ def make_terrain(kind: str, *, spacing: float = 1.0, seed: int = 0,
         :data:`HELD_OUT_KINDS`: ``terraced_slope`` (a 20 % hillside cut
         into benches by vertical walls 1.5-4 m high, a house on one) and
         ``steep_town`` (large buildings on a 22 % slope, 3-5 m of ground
-        between them).
+        between them); and :data:`LARGE_KINDS`: ``large_hall`` (halls
+        of 120 m x 70 m and 130 m x 100 m, a block round a courtyard) and
+        ``mesa`` (terrain: a flat-topped hill with 56° flanks, a bench
+        behind a vertical step at the edge).
     spacing : float
         Mean point spacing (metres).
     seed : int
@@ -224,7 +258,7 @@ def make_terrain(kind: str, *, spacing: float = 1.0, seed: int = 0,
     if not noise >= 0:
         raise InputError(f"noise must be >= 0, got {noise!r}")
     rng = np.random.default_rng(seed)
-    xy = _scan(rng, 100.0, spacing)
+    xy = _scan(rng, _SIZES.get(kind, 100.0), spacing)
     z, ground = _KINDS[kind](xy, rng)
     z = z + rng.normal(0.0, noise, len(z))
     return TerrainScene(kind, np.column_stack([xy, z]), ground)

@@ -463,10 +463,11 @@ def test_anchor_at_most_the_wall_slope_is_no_anchor():
 
     for kind, spacing in (("terraced_slope", 1.0), ("steep_town", 2.5)):
         scene = make_terrain(kind, spacing=spacing, seed=1)
-        off = smrf_vote(scene.xyz, wall_anchor=None)
-        assert (smrf_vote(scene.xyz, wall_anchor=2.0) != off).any()
+        off = smrf_vote(scene.xyz, wall_anchor=None, large=None)
+        assert (smrf_vote(scene.xyz, wall_anchor=2.0, large=None) != off).any()
         for anchor in (0.5, WALL_SLOPE):
-            np.testing.assert_array_equal(smrf_vote(scene.xyz, wall_anchor=anchor), off)
+            np.testing.assert_array_equal(
+                smrf_vote(scene.xyz, wall_anchor=anchor, large=None), off)
 
 
 def test_defaults_free_terrace_risers_and_ground_between_tall_buildings():
@@ -476,11 +477,13 @@ def test_defaults_free_terrace_risers_and_ground_between_tall_buildings():
     (1 m: 0.00 % both). Each option alone moves only one of them: the anchor the risers,
     ``above`` the ground between the buildings. Measured without the session-17 ``fill``,
     which then (its default) takes both kinds at 2.5 m further down: terraced_slope 6.25 ->
-    2.50 %, steep_town 1.81 -> 1.19 % (bench_ground_vote.py --fill 0 against the default)."""
+    2.50 %, steep_town 1.81 -> 1.19 % (bench_ground_vote.py --fill 0 against the default);
+    all without session 17's ``large``."""
     assert (VOTE_ANCHOR, VOTE_ABOVE) == (2.0, 6.0)
 
     def total(kind, spacing, **options):
         options.setdefault("fill", None)
+        options.setdefault("large", None)  # session 17's large roofs: tests/ground/test_large.py
         scene = make_terrain(kind, spacing=spacing, seed=1)
         return ground_errors(smrf_vote(scene.xyz, **options), scene.ground)["total"]
 

@@ -32,6 +32,7 @@ from ..config import field
 from ..errors import ConfigError, InputError
 from .connect_filter import connect_ground, surface_patches
 from .dtm import Dtm, dtm_from_ground, height_above_ground
+from .large import LARGE_REACH, large_objects
 from .outliers import low_outliers
 from .pmf_filter import pmf, pmf_windows
 from .refined_filter import smrf_refined
@@ -65,6 +66,8 @@ __all__ = [
     "connect_ground",
     "surface_patches",
     "ring_ratios",
+    "large_objects",
+    "LARGE_REACH",
     "VOTE_ABOVE",
     "VOTE_ANCHOR",
     "VOTE_FILL",
@@ -180,6 +183,10 @@ class GroundConfig:
                                           "inpainting of the opening's input, so a terrace "
                                           "crest stays a step (acts from 2 m spacing at 0.5); "
                                           "0: off")
+    large: float | None = field(LARGE_REACH, "smrf, smrf_vote: radius (m) up to which objects "
+                                             "wider than the window (large roofs, which the "
+                                             "opening leaves in the terrain) are looked for on "
+                                             "a 4 m grid; inf: off")
     seed_cell: float = field(20.0, "ptd: seed grid cell (m), about the largest building")
     seed_tolerance: float = field(3.0, "ptd: a seed this far (m) above its neighbours' plane "
                                        "is dropped")
@@ -223,6 +230,8 @@ class GroundConfig:
             raise ConfigError(f"ground.above: must be > 0, got {self.above!r}")
         if self.ring is not None and not self.ring > 0:
             raise ConfigError(f"ground.ring: must be > 0, got {self.ring!r}")
+        if self.large is not None and not self.large > 0:
+            raise ConfigError(f"ground.large: must be > 0, got {self.large!r}")
         if self.wall_anchor is not None and not self.wall_anchor > 0:
             raise ConfigError(f"ground.wall_anchor: must be > 0, got {self.wall_anchor!r}")
         if self.fill is not None and not self.fill >= 0:

@@ -300,7 +300,7 @@ def _check_segment_params(*, raised, min_cells):
 
 def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, min_cells,
                       strong_slope=None, also=(), marks=(), then=None, fill=None,
-                      fill_where="o", fill_value="nearest", fill_marks=False):
+                      fill_where="o", fill_value="nearest", fill_marks=False, large=None):
     """Steps 2-4 of :func:`smrf_segments` from one opening series: the provisional surface
     at ``slope`` (with ``strong_slope`` hysteresis when given) followed by, for each slope of
     ``also``, the surface with the object cells at that slope given back likewise and then
@@ -319,7 +319,8 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
     surface ("f"; "of": both); ``fill_value`` as in
     :func:`~lidar2city.ground.smrf_filter._smrf_grids`. The ``marks`` come from the
     opening of the minimum surface inpainted without the fill (a second opening series)
-    unless ``fill_marks``."""
+    unless ``fill_marks``. ``large``: as in
+    :func:`~lidar2city.ground.smrf_filter._smrf_grids` (objects wider than the window)."""
     pts = xyz[~out]
     more = (*marks, *also) if strong_slope is None else (*marks, strong_slope, *also)
     minimum = _minimum_grid(pts, cell=cell)  # one minimum surface for every step
@@ -332,7 +333,8 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
              "unfilled_more": 0 if fill_marks else len(marks)}
     surface, objects, spec, extra = _smrf_grids(xyz, cell=cell, slope=slope, window=window,
                                                 exclude=out, extend=extend, more=more,
-                                                minimum=minimum, lazy=True, **fills)
+                                                minimum=minimum, lazy=True, large=large,
+                                                **fills)
     filled = ~np.isnan(zmin)
     terrain_share = float((filled & ~objects).sum() / filled.sum())
     if extend > 0 and terrain_share < 0.5:
@@ -340,7 +342,7 @@ def _segment_surfaces(xyz, out, *, cell, slope, window, extend, jump, raised, mi
         # larger than them that can make the whole tile object: keep SMRF's own edges
         # when they leave more than twice as much terrain
         plain = _smrf_grids(xyz, cell=cell, slope=slope, window=window, exclude=out,
-                            more=more, minimum=minimum, lazy=True, **fills)
+                            more=more, minimum=minimum, lazy=True, large=large, **fills)
         if terrain_share < 0.5 * float((filled & ~plain[1]).sum() / filled.sum()):
             logger.debug("smrf_segments: edge extension left %.0f %% terrain; not extended",
                          100 * terrain_share)
