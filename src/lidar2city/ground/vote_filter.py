@@ -54,8 +54,9 @@ WALL_REACH = 40.0
 #: ratios, and these thresholds at 1) by their leave-one-out on the six other samples: it
 #: chooses these in every fold and on all seven; leave-one-out 3.02 % (max 8.08 %, samp11)
 #: against 3.17 % for the fitted tree, on all seven 2.98 % against 2.99 %, synthetic terrains
-#: 0.65 % against 0.67 % (``benchmarks/HISTORY.md``, session 17). The script prints these
-#: numbers (``--fit unit``, its default).
+#: 0.65 % against 0.67 % (before :data:`VOTE_FILL` and ``large``; with them 2.97 %, 2.94 %
+#: and 0.26 %; ``benchmarks/HISTORY.md``, session 17). The script prints these numbers
+#: (``--fit unit``, its default).
 VOTE_RULE = {"near": 1.0, "steep": 1.0, "plain": 1.0, "clear": 15.0}
 
 #: SMRF slope of the fourth surface of the ``veto`` option of :func:`smrf_vote` (segments
@@ -87,10 +88,10 @@ VOTE_ANCHOR = 2.0
 #: and the inpainting ramps from the last low point to the first high one across a
 #: retaining wall, so that the opening cuts the crest row of each bench. The walls are
 #: marked on the opening without the fill. ``benchmarks/bench_ground_vote.py --fill 0``
-#: against ``--fill 0.5``: leave-one-out 3.16 -> 3.11 % (free tree), 3.17 -> 3.17 % (the
-#: coded shape forced); with the current rule samp51 2.52 -> 2.12 %, samp61 1.74 -> 1.84 %,
-#: the other samples unchanged; synthetic terrains 0.67 -> 0.27 %; the held-out kinds at
-#: 2.5 / 3.5 m: ``terraced_slope`` 6.25 / 8.92 -> 2.50 / 1.19 %, ``steep_town`` 1.81 / 1.78
+#: against the default, with the other session-17 defaults (:data:`VOTE_RULE` at 1,
+#: ``large``): leave-one-out 3.02 -> 2.97 % (samp51 2.29 -> 1.87 %, samp61 2.06 -> 2.12 %,
+#: the other samples unchanged); synthetic terrains 0.64 -> 0.26 %; the held-out kinds at
+#: 2.5 / 3.5 m: ``terraced_slope`` 6.00 / 8.56 -> 2.50 / 1.07 %, ``steep_town`` 0.25 / 1.55
 #: -> 1.19 / 0.71 % (``benchmarks/HISTORY.md``, session 17).
 VOTE_FILL = 0.5
 
@@ -394,7 +395,7 @@ outlier_depth
         walls (``clear``, ``wall_anchor``) are marked on the opening without
         the fill (with it, the fill's steps on steep embankments become
         walls). With a 1 m cell and 0.5 it acts from 2 m spacing. Default
-        :data:`VOTE_FILL`; None or 0: off (the default until session 16).
+        :data:`VOTE_FILL`; None or 0: off (the default until session 17).
         ``bench_ground_vote.py --fill 0.5`` against ``--fill 0``: see
         :data:`VOTE_FILL`; ~1.4x the CPU time on a sparse sample (a second
         opening series), nothing on a dense one.
@@ -405,10 +406,10 @@ outlier_depth
         (:func:`~lidar2city.ground.large.large_objects`) and are object
         in every surface. Default :data:`~lidar2city.ground.large.LARGE_REACH`
         (roofs up to 200 m across); None: off (the default until session 17,
-        when such roofs were called ground). None of the seven ISPRS samples
-        and none of the synthetic terrains holds such an object; on the ISPRS
-        sites the held-out samples were cut from it takes large roofs out of
-        the ground (``benchmarks/bench_ground_large.py``).
+        when such roofs were called ground). It changes nothing on the seven
+        ISPRS samples and, of the synthetic terrains, only ``town_on_slope``
+        at 2.5 m; on the ISPRS sites the held-out samples were cut from it
+        takes large roofs out of the ground (``benchmarks/bench_ground_large.py``).
 
     Returns
     -------
