@@ -1489,7 +1489,7 @@ def fit_tree(sets, depth=DEPTH):
     if FINE_EDGES:
         edges = [np.union1d(e, FINE_EDGES) for e in edges]
     if FORCED_SHAPE and depth == 2 and x.shape[1] == 3:
-        return _grow_forced(x, y, w, edges)
+        return _coded_tree(x, y, w, edges)
     return _grow(x, y, w, depth, edges)
 
 
@@ -1504,6 +1504,13 @@ def fit_coded(sets, grid=None):
     w = np.concatenate([np.full(len(g), wt / len(g)) for _, g, wt in sets])
     edges = ([np.unique(np.quantile(x[:, j], QUANTILES)) for j in range(x.shape[1])]
              if grid is None else [np.asarray(grid, dtype=float)] * x.shape[1])
+    return _coded_tree(x, y, w, edges)
+
+
+def _coded_tree(x, y, w, edges):
+    """The coded rule's tree with the least weighted error over points ``x`` (N, 3) of
+    ground ``y`` and weight ``w``, its thresholds among ``edges`` (one array per ratio),
+    found exactly by cumulative tables (:func:`fit_coded`; ``--forced-shape``)."""
     bins = [np.searchsorted(e, x[:, j]) for j, e in enumerate(edges)]
     rows = len(edges[0]) + 1
 
@@ -1538,30 +1545,6 @@ FORCED_SHAPE = False
 #: ``near`` split has three candidates, and a fold can jump between them).
 FINE_EDGES = ()
 FINE_GRID = tuple(np.round(np.arange(0.1, 2.0001, 0.05), 2))
-
-
-def _lower_split(x, y, w, e):
-    """The error and threshold of the best split of one feature whose lower side is ground."""
-    b = np.searchsorted(e, x)
-    cp = np.cumsum(np.bincount(b, weights=w * y, minlength=len(e) + 1))[:-1]
-    cn = np.cumsum(np.bincount(b, weights=w * (1 - y), minlength=len(e) + 1))[:-1]
-    err = cn + (float(w @ y) - cp)
-    k = int(np.argmin(err))
-    return float(err[k]), float(e[k])
-
-
-def _grow_forced(x, y, w, edges):
-    """The tree of the coded rule's shape with the least weighted error (every ``near``
-    threshold of ``edges`` tried, each branch's threshold the best for it)."""
-    best = None
-    for t0 in edges[0]:
-        m = x[:, 0] <= t0
-        el, tl = _lower_split(x[m, 1], y[m], w[m], edges[1])
-        er, tr = _lower_split(x[~m, 2], y[~m], w[~m], edges[2])
-        if best is None or el + er < best[0] - 1e-12:
-            best = (el + er, float(t0), tl, tr)
-    _, t0, tl, tr = best
-    return (0, t0, (1, tl, True, False), (2, tr, True, False))
 
 
 def _grow(x, y, w, depth, edges):
