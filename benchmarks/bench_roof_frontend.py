@@ -34,15 +34,12 @@ from __future__ import annotations
 
 import pickle
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from replay_common import (  # noqa: E402
-    capture_delft, compare_stages, data_dir, least_pass, print_stages, replay_parser,
-    time_parts)
+    capture_delft, least_pass, replay_parser, stage_replay, time_parts)
 
-ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("segment_planes", "roof_lines", "arrangement_partition", "refine_partition")
 #: module (under lidar2city) : function, timed inclusive of what it calls
 PARTS = (
@@ -108,26 +105,11 @@ def main():
     ap.add_argument("--set", action="append", default=[], metavar="STAGE:NAME=VALUE",
                     help="replay STAGE's calls in this tree with keyword NAME set to VALUE")
     args = ap.parse_args()
-    if args.child:
-        mode, a, b = args.child
-        if mode == "capture":
-            capture(Path(a), Path(b), args.traced)
-        else:
-            timed(Path(a), args.repeat, Path(b), args.set)
-        return
-    kind = "traced" if args.traced else "footprints"
-    cache = Path(args.cache or Path(tempfile.gettempdir()) / f"roof_frontend_{kind}.pkl")
-    trees = [str(ROOT / "src"), *[str(Path(o).resolve()) for o in args.others]]
-    best, loads = compare_stages(Path(__file__).resolve(), trees, STAGES, cache=cache,
-                                 capture_args=(data_dir(args.data),), repeat=args.repeat,
-                                 rounds=args.rounds,
-                                 flags=["--traced"] if args.traced else [],
-                                 first_flags=[f"--set={s}" for s in args.set])
-    print(f"Delft, {kind}: roof front end replayed, least CPU s of {args.repeat} passes x "
-          f"{args.rounds} rounds per tree; load {min(loads):.1f}-{max(loads):.1f}"
-          + (f"; [0] replayed with {', '.join(args.set)}" if args.set else ""))
-    print_stages(best, trees, STAGES)
-
+    stage_replay(args, __file__, STAGES, title="roof front end replayed",
+                 cache_stem="roof_frontend", capture=capture,
+                 timed=lambda cache, repeat, result: timed(cache, repeat, result, args.set),
+                 first_flags=[f"--set={s}" for s in args.set],
+                 note=f"; [0] replayed with {', '.join(args.set)}" if args.set else "")
 
 if __name__ == "__main__":
     main()

@@ -31,15 +31,12 @@ from __future__ import annotations
 
 import pickle
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from replay_common import (  # noqa: E402
-    capture_delft, compare_stages, data_dir, least_pass, print_stages, replay_parser,
-    time_parts)
+    capture_delft, least_pass, replay_parser, stage_replay, time_parts)
 
-ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("_finish_solid", "check_solid")
 #: module (under lidar2city) : function, timed inclusive of what it calls
 PARTS = (
@@ -83,24 +80,8 @@ def timed(cache: Path, repeat: int, result: Path):
 def main():
     ap = replay_parser(__doc__)
     args = ap.parse_args()
-    if args.child:
-        mode, a, b = args.child
-        if mode == "capture":
-            capture(Path(a), Path(b), args.traced)
-        else:
-            timed(Path(a), args.repeat, Path(b))
-        return
-    kind = "traced" if args.traced else "footprints"
-    cache = Path(args.cache or Path(tempfile.gettempdir()) / f"solid_replay_{kind}.pkl")
-    trees = [str(ROOT / "src"), *[str(Path(o).resolve()) for o in args.others]]
-    best, loads = compare_stages(Path(__file__).resolve(), trees, STAGES, cache=cache,
-                                 capture_args=(data_dir(args.data),), repeat=args.repeat,
-                                 rounds=args.rounds,
-                                 flags=["--traced"] if args.traced else [])
-    print(f"Delft, {kind}: partition to solid replayed, least CPU s of {args.repeat} passes x "
-          f"{args.rounds} rounds per tree; load {min(loads):.1f}-{max(loads):.1f}")
-    print_stages(best, trees, STAGES)
-
+    stage_replay(args, __file__, STAGES, title="partition to solid replayed",
+                 cache_stem="solid_replay", capture=capture, timed=timed)
 
 if __name__ == "__main__":
     main()

@@ -33,15 +33,14 @@ import hashlib
 import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_speed import ROOT, data_dir  # noqa: E402
+from bench_speed_pairs import run  # noqa: E402
 
 CHILD = r'''
 import sys
@@ -53,20 +52,6 @@ from lidar2city.cli.main import main
 sys.argv = ["lidar2city", *sys.argv[2:]]
 main()
 '''
-
-
-def run(cmd, env) -> tuple[float, float]:
-    """``(wall seconds, user + system CPU seconds)`` of one child and the processes it
-    waited for (fails loudly)."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace")
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"{' '.join(map(str, cmd))} failed:\n{err}")
-    return wall, usage.ru_utime + usage.ru_stime
 
 
 def make_clip(tile: Path, folder: Path, size: float = 75.0) -> list:

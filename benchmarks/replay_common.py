@@ -214,3 +214,28 @@ def print_stages(best, trees, stages) -> None:
         print("stage CPU of [0] over the others' (median over trees):",
               {s: round(statistics.median(best[(0, s)][0] / best[(i, s)][0]
                                           for i in range(1, len(trees))), 3) for s in stages})
+
+
+def stage_replay(args, script, stages, *, title, cache_stem, capture, timed, first_flags=(),
+                 note=""):
+    """The main of a stage replay benchmark (options of :func:`replay_parser`): as a child,
+    ``capture(data, cache, traced)`` or ``timed(cache, repeat, result)``; else every tree's
+    passes (:func:`compare_stages`, the capture cached in ``cache_stem_{kind}.pkl``) and
+    their table (:func:`print_stages`) under a line naming ``title`` and the loads."""
+    if args.child:
+        mode, a, b = args.child
+        if mode == "capture":
+            capture(Path(a), Path(b), args.traced)
+        else:
+            timed(Path(a), args.repeat, Path(b))
+        return
+    kind = "traced" if args.traced else "footprints"
+    cache = Path(args.cache or Path(tempfile.gettempdir()) / f"{cache_stem}_{kind}.pkl")
+    trees = [str(ROOT / "src"), *[str(Path(o).resolve()) for o in args.others]]
+    best, loads = compare_stages(Path(script).resolve(), trees, stages, cache=cache,
+                                 capture_args=(data_dir(args.data),), repeat=args.repeat,
+                                 rounds=args.rounds, flags=["--traced"] if args.traced else [],
+                                 first_flags=first_flags)
+    print(f"Delft, {kind}: {title}, least CPU s of {args.repeat} passes x {args.rounds} rounds "
+          f"per tree; load {min(loads):.1f}-{max(loads):.1f}{note}")
+    print_stages(best, trees, stages)
