@@ -1731,10 +1731,12 @@ def main():
             up = ground_errors(vote_rule(f_held, **rule, veto=veto, above=above), ref)
             held["defaults"].append(ground_errors(
                 vote_rule(f_held, **rule, veto=veto, above=VOTE_ABOVE), ref)["total"])
+        else:  # a tree without the rule's shape has no veto or above: its own score
+            held["defaults"].append(plain["total"])
         held["veto + above"].append(up["total"])
         print(f"{name:<8} {100 * e['type_i']:>9.2f} {100 * e['type_ii']:>10.2f} "
               f"{100 * e['total']:>8.2f} {100 * plain['total']:>10.2f} {100 * up['total']:>8.2f} "
-              f"{100 * held['defaults'][-1] if rule is not None else np.nan:>16.2f}  "
+              f"{100 * held['defaults'][-1]:>16.2f}  "
               f"{show(tree) if rule is None else show_rule(dict(rule, veto=veto, above=above))}")
     for k, v in held.items():
         print(f"smrf_vote leave-one-out ({k}) mean total {100 * np.mean(v):.2f} %, "
